@@ -1,0 +1,1 @@
+"""anodize runtime."""

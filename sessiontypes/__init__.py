@@ -1,0 +1,32 @@
+"""sessiontypes: the ``.proto`` language of anodize.
+
+Parse, check and project multiparty session types; print them canonically;
+compile local types to state machines; generate typed endpoint code.
+
+    >>> import sessiontypes
+    >>> module = sessiontypes.loads("global P = A -> B : ping. B -> A : pong")
+    >>> print(module.globals["P"].project("A"))
+    !B(ping).?B(pong)
+"""
+
+from .check import ProtocolModule
+from .errors import (
+    Diagnostic,
+    ProjectionError,
+    ProtocolCheckError,
+    ProtocolError,
+    ProtocolSyntaxError,
+    UnknownRoleError,
+)
+from .fsm import StateMachine, Transition
+from .global_types import GlobalType
+from .loader import load, loads
+from .local_types import LocalType
+from .location import Location
+from .sorts import Message, Sort
+
+__all__ = [
+    "load", "loads", "ProtocolModule", "GlobalType", "LocalType", "StateMachine", "Transition",
+    "Message", "Sort", "Location", "Diagnostic", "ProtocolError", "ProtocolSyntaxError",
+    "ProtocolCheckError", "ProjectionError", "UnknownRoleError",
+]

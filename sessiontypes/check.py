@@ -1,0 +1,256 @@
+"""Well-formedness of a parsed file (LANGUAGE.md section 6), all errors at once.
+
+:func:`check_file` resolves every declaration (see :mod:`sessiontypes.resolve`),
+checks roles, parallel channels and projectability, and returns the checked
+:class:`ProtocolModule` together with every diagnostic found.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+from . import global_types as g
+from . import local_types as lt
+from . import syntax as s
+from .deep import run_deep
+from .errors import Diagnostic, ProjectionError
+from .location import Location
+from .resolve import Reporter, SortTable, _Walk, resolve_global, resolve_local
+from .sorts import BUILTIN_SORTS, Sort
+
+__all__ = ["ProtocolModule", "check_file"]
+
+
+@dataclass(frozen=True)
+class ProtocolModule:
+    """A checked protocol file.
+
+    Attributes:
+        path: where it was read from.
+        globals: the global types, by name, in file order.
+        locals: the ``local`` declarations, by name, in file order.
+        sorts: the declared sorts, by name.
+        warnings: diagnostics that did not stop the file from being accepted.
+    """
+
+    path: str
+    globals: dict[str, g.GlobalType]
+    locals: dict[str, lt.LocalType]
+    sorts: dict[str, Sort]
+    warnings: tuple[Diagnostic, ...] = field(default=())
+
+
+def check_file(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
+    """Check a parsed file; return the module and its diagnostics (errors and warnings).
+
+    The module is meaningful only when no diagnostic is an error.
+    """
+    return run_deep(_check, source)
+
+
+def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
+    reporter = Reporter(source)
+    by_kind = _declarations(source, reporter)
+    types: dict[str, s.TypeDecl] = by_kind["type"]  # type: ignore[assignment]
+    globals_: dict[str, s.GlobalDecl] = by_kind["global"]  # type: ignore[assignment]
+    locals_: dict[str, s.LocalDecl] = by_kind["local"]  # type: ignore[assignment]
+    sorts = SortTable(types, reporter)
+    names = {kind: set(decls) for kind, decls in by_kind.items()}
+
+    global_walk = _Walk(reporter, sorts, globals_, "global", names["local"] | names["type"])
+    global_types: dict[str, g.GlobalType] = {}
+    for decl in globals_.values():
+        before = len(reporter.diagnostics)
+        body = resolve_global(decl, global_walk)
+        roles = _check_roles(decl, body, reporter)
+        _check_parallel_global(body, reporter)
+        global_type = g.GlobalType(decl.name.text, roles, body, decl.location, sorts.defined(),
+                                   source.lines)
+        global_types[decl.name.text] = global_type
+        if not _has_error(reporter.diagnostics[before:]):
+            _check_projectable(global_type, reporter)
+
+    local_walk = _Walk(reporter, sorts, locals_, "local", names["global"] | names["type"])
+    local_types: dict[str, lt.LocalType] = {}
+    for ldecl in locals_.values():
+        body_l = resolve_local(ldecl, local_walk)
+        _check_local_forms(ldecl, body_l, reporter)
+        _check_parallel_local(body_l, reporter)
+        role = ldecl.role.text if ldecl.role else None
+        local_types[ldecl.name.text] = lt.LocalType(ldecl.name.text, role, body_l, "", ldecl.location)
+
+    for name, decl in types.items():
+        if name not in sorts.used:
+            reporter.warning(decl.name.location, f"type {name} is declared but never used")
+
+    diagnostics = _sorted_unique(reporter.diagnostics)
+    module = ProtocolModule(source.path, global_types, local_types, sorts.defined(),
+                            tuple(d for d in diagnostics if d.severity == "warning"))
+    return module, diagnostics
+
+
+def _declarations(source: s.SourceFile, reporter: Reporter) -> dict[str, dict[str, s.Declaration]]:
+    """Split declarations by kind, reporting duplicates and redefined builtins."""
+    by_kind: dict[str, dict[str, s.Declaration]] = {"type": {}, "global": {}, "local": {}}
+    first: dict[str, s.Declaration] = {}
+    for decl in source.declarations:
+        name = decl.name
+        if name.text in first:
+            where = first[name.text].name.location
+            reporter.error(name.location, f"duplicate declaration '{name.text}'; "
+                           f"first declared at {where.line}:{where.column}")
+            continue
+        if isinstance(decl, s.TypeDecl) and name.text in BUILTIN_SORTS:
+            reporter.error(name.location, f"type {name.text} redefines the builtin sort "
+                           f"{BUILTIN_SORTS[name.text]}")
+            continue
+        first[name.text] = decl
+        kind = {s.TypeDecl: "type", s.GlobalDecl: "global", s.LocalDecl: "local"}[type(decl)]
+        by_kind[kind][name.text] = decl
+    return by_kind
+
+
+def _check_roles(decl: s.GlobalDecl, body: g.GlobalTerm, reporter: Reporter) -> tuple[str, ...]:
+    """Roles in print order; reports undeclared, unused and repeated roles."""
+    occurring = _roles_in_order(body)
+    if decl.roles is None:
+        return tuple(occurring)
+    declared: list[str] = []
+    for role in decl.roles:
+        if role.text in declared:
+            reporter.error(role.location, f"role {role.text} is listed twice in global {decl.name.text}")
+            continue
+        declared.append(role.text)
+        if role.text not in occurring:
+            reporter.error(role.location, f"role {role.text} is declared in global "
+                           f"{decl.name.text} but never occurs")
+    for role, location in occurring.items():
+        if role not in declared:
+            reporter.error(location, f"role {role} is not declared in global {decl.name.text}"
+                           f"({', '.join(declared)})")
+    return tuple(declared)
+
+
+def _roles_in_order(term: g.GlobalTerm) -> dict[str, Location]:
+    """Every role with the location of its first occurrence, in order of first occurrence."""
+    found: dict[str, Location] = {}
+
+    def visit(node: g.GlobalTerm) -> None:
+        while True:
+            match node:
+                case g.Choice(sender=sender, receiver=receiver, branches=branches, location=location):
+                    found.setdefault(sender, location)
+                    found.setdefault(receiver, location)
+                    for branch in branches[1:]:
+                        visit(branch.continuation)
+                    node = branches[0].continuation
+                    if len(branches) > 1:  # keep source order: first branch before the others
+                        visit(node)
+                        return
+                case g.Rec(body=body):
+                    node = body
+                case g.Parallel(branches=parts):
+                    for part in parts:
+                        visit(part)
+                    return
+                case _:
+                    return
+
+    visit(term)
+    return found
+
+
+def _channels(term: g.GlobalTerm) -> set[tuple[str, str]]:
+    match term:
+        case g.Choice(sender=sender, receiver=receiver, branches=branches):
+            out = {(sender, receiver)}
+            for b in branches:
+                out |= _channels(b.continuation)
+            return out
+        case g.Rec(body=body):
+            return _channels(body)
+        case g.Parallel(branches=parts):
+            return set().union(*(_channels(p) for p in parts))
+    return set()
+
+
+def _check_parallel_global(term: g.GlobalTerm, reporter: Reporter) -> None:
+    """Parallel branches must not share a directed channel."""
+    match term:
+        case g.Choice(branches=branches):
+            for b in branches:
+                _check_parallel_global(b.continuation, reporter)
+        case g.Rec(body=body):
+            _check_parallel_global(body, reporter)
+        case g.Parallel(branches=parts, location=location):
+            _report_shared([_channels(p) for p in parts], location, reporter,
+                           lambda c: f"{c[0]} -> {c[1]}")
+            for part in parts:
+                _check_parallel_global(part, reporter)
+
+
+def _report_shared(channel_sets: list[set[tuple[str, str]]], location: Location,
+                   reporter: Reporter, show: object) -> None:
+    for i, first in enumerate(channel_sets):
+        for j in range(i + 1, len(channel_sets)):
+            for channel in sorted(first & channel_sets[j]):
+                reporter.error(location, f"parallel branches {i + 1} and {j + 1} share the channel "
+                               f"{show(channel)}; each channel must belong to one branch")  # type: ignore[operator]
+
+
+def _local_channels(term: lt.LocalTerm) -> set[tuple[str, str]]:
+    match term:
+        case lt.Send(peer=peer, continuation=cont):
+            return {("!", peer or "")} | _local_channels(cont)
+        case lt.Recv(peer=peer, continuation=cont):
+            return {("?", peer or "")} | _local_channels(cont)
+        case lt.Select(peer=peer, branches=branches) | lt.Offer(peer=peer, branches=branches):
+            arrow = "!" if isinstance(term, lt.Select) else "?"
+            return {(arrow, peer or "")}.union(*(_local_channels(b.continuation) for b in branches))
+        case lt.Rec(body=body):
+            return _local_channels(body)
+        case lt.Parallel(branches=parts):
+            return set().union(*(_local_channels(p) for p in parts))
+    return set()
+
+
+def _check_parallel_local(term: lt.LocalTerm, reporter: Reporter) -> None:
+    match term:
+        case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
+            _check_parallel_local(cont, reporter)
+        case lt.Select(branches=branches) | lt.Offer(branches=branches):
+            for b in branches:
+                _check_parallel_local(b.continuation, reporter)
+        case lt.Rec(body=body):
+            _check_parallel_local(body, reporter)
+        case lt.Parallel(branches=parts, location=location):
+            _report_shared([_local_channels(p) for p in parts], location, reporter,
+                           lambda c: ("sending to " if c[0] == "!" else "receiving from ") + (c[1] or "the peer"))
+            for part in parts:
+                _check_parallel_local(part, reporter)
+
+
+def _check_local_forms(decl: s.LocalDecl, body: lt.LocalTerm, reporter: Reporter) -> None:
+    """A local type is binary (no peers) or multiparty (every action names a peer), not both."""
+    peers = {peer for _, peer in _local_channels(body)}
+    if "" in peers and len(peers) > 1:
+        reporter.error(decl.name.location, f"local {decl.name.text} mixes the binary form (no peer) "
+                       "with the multiparty form (!Peer(msg)); use one of them")
+
+
+def _check_projectable(global_type: g.GlobalType, reporter: Reporter) -> None:
+    for role in global_type.roles:
+        try:
+            global_type.project(role)
+        except ProjectionError as error:
+            reporter.error(error.location, error.message)
+
+
+def _has_error(diagnostics: Iterable[Diagnostic]) -> bool:
+    return any(d.severity == "error" for d in diagnostics)
+
+
+def _sorted_unique(diagnostics: list[Diagnostic]) -> list[Diagnostic]:
+    unique = dict.fromkeys(diagnostics)  # inlined declarations report their errors once per use
+    return sorted(unique, key=lambda d: (d.location.line, d.location.column))

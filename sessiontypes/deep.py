@@ -1,0 +1,93 @@
+"""Run recursive passes over deeply nested types without exhausting the stack.
+
+A sequence of n interactions is a term nested n deep, and every pass over it
+(resolution, projection, printing, equality) recurses that deep. Python's
+default limits (1,000 frames, 8 MiB of C stack) stop near 1,000
+interactions. :func:`run_deep` runs a pass on a helper thread with a large
+stack and, while any such pass runs, a raised recursion limit. Beyond
+``MAX_DEPTH`` nesting levels the pass reports a :class:`ProtocolError`
+instead of crashing.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections.abc import Callable
+from typing import TypeVar
+
+from .errors import ProtocolError
+
+__all__ = ["run_deep", "NestingTooDeepError", "MAX_DEPTH"]
+
+T = TypeVar("T")
+
+MAX_DEPTH = 250_000              # nesting levels a pass may reach
+_STACK_BYTES = 2 << 30          # virtual reservation; only touched pages are used
+_RECURSION_LIMIT = MAX_DEPTH * 4  # a level costs a few frames (match arms, __eq__)
+
+_state = threading.local()
+_guard = threading.Lock()
+_active = 0
+_saved_limit = sys.getrecursionlimit()
+
+
+class NestingTooDeepError(ProtocolError):
+    """Raised when a protocol nests deeper than :data:`MAX_DEPTH` levels."""
+
+    def __str__(self) -> str:
+        return (f"error: protocol nested too deeply (more than about {MAX_DEPTH} levels); "
+                "split it into declarations")
+
+
+def run_deep(function: Callable[..., T], *args: object) -> T:
+    """Call ``function(*args)`` where deep recursion is safe; return its result.
+
+    Exceptions propagate to the caller unchanged, except ``RecursionError``
+    which becomes :class:`NestingTooDeepError`.
+    """
+    if getattr(_state, "deep", False):
+        return function(*args)
+    outcome: list[tuple[bool, object]] = []
+
+    def target() -> None:
+        _state.deep = True
+        try:
+            outcome.append((True, function(*args)))
+        except RecursionError:
+            outcome.append((False, NestingTooDeepError()))
+        except BaseException as error:  # handed to the caller below
+            outcome.append((False, error))
+
+    _enter()
+    try:
+        previous = threading.stack_size(_STACK_BYTES)
+        try:
+            worker = threading.Thread(target=target, name="sessiontypes-deep", daemon=True)
+            worker.start()
+        finally:
+            threading.stack_size(previous)
+        worker.join()
+    finally:
+        _leave()
+    ok, value = outcome[0]
+    if ok:
+        return value  # type: ignore[return-value]
+    raise value  # type: ignore[misc]
+
+
+def _enter() -> None:
+    global _active, _saved_limit
+    with _guard:
+        if _active == 0:
+            _saved_limit = sys.getrecursionlimit()
+            sys.setrecursionlimit(max(_saved_limit, _RECURSION_LIMIT))
+        _active += 1
+
+
+def _leave() -> None:
+    global _active
+    with _guard:
+        _active -= 1
+        if _active == 0:
+            sys.setrecursionlimit(_saved_limit)

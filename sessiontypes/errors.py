@@ -1,0 +1,199 @@
+"""The closed family of errors a protocol author can cause.
+
+Every user error is a :class:`ProtocolError`; a bug in this package raises
+anything else. Facts live in fields; the text is built in ``__str__`` in the
+form ``path:line:col: error: <what>`` followed by the source line and a caret.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Literal
+
+from .location import Location
+
+__all__ = [
+    "Diagnostic",
+    "ProtocolError",
+    "ProtocolSyntaxError",
+    "ProtocolCheckError",
+    "ProjectionError",
+    "UnknownRoleError",
+]
+
+Severity = Literal["error", "warning"]
+
+
+@dataclass(frozen=True, slots=True)
+class Diagnostic:
+    """One message about a place in a protocol source.
+
+    Attributes:
+        severity: ``"error"`` or ``"warning"``.
+        location: where the problem is.
+        message: what is wrong, in words (no location, no trailing period).
+        source_line: the text of the offending line ("" when unknown).
+    """
+
+    severity: Severity
+    location: Location
+    message: str
+    source_line: str = ""
+
+    def __str__(self) -> str:
+        head = f"{self.location}: {self.severity}: {self.message}"
+        if not self.source_line or self.location.line <= 0:
+            return head
+        return f"{head}\n{caret_block(self.source_line, self.location.column)}"
+
+
+def caret_block(source_line: str, column: int) -> str:
+    """Return ``source_line`` and below it a ``^`` under ``column`` (1-based)."""
+    line = source_line.rstrip("\n").expandtabs(1)
+    pad = " " * max(column - 1, 0)
+    return f"    {line}\n    {pad}^"
+
+
+class ProtocolError(Exception):
+    """Root of every error caused by protocol text or its use (not a bug)."""
+
+
+class ProtocolSyntaxError(ProtocolError):
+    """Raised when protocol text does not follow the grammar.
+
+    Attributes:
+        location: where parsing stopped.
+        got: a description of what was found there.
+        expected: descriptions of what would have been accepted, sorted.
+        source_line: the offending line of text.
+        hint: an extra sentence for a common mistake, or "".
+    """
+
+    def __init__(
+        self,
+        location: Location,
+        got: str,
+        expected: Iterable[str],
+        source_line: str = "",
+        hint: str = "",
+    ) -> None:
+        self.location = location
+        self.got = got
+        self.expected = tuple(expected)
+        self.source_line = source_line
+        self.hint = hint
+        super().__init__(str(self))
+
+    @property
+    def message(self) -> str:
+        """The error text without the location and caret."""
+        text = f"unexpected {self.got}"
+        if self.expected:
+            text += f"; expected {_one_of(self.expected)}"
+        if self.hint:
+            text += f" ({self.hint})"
+        return text
+
+    @property
+    def diagnostics(self) -> tuple[Diagnostic, ...]:
+        return (Diagnostic("error", self.location, self.message, self.source_line),)
+
+    def __str__(self) -> str:
+        return str(self.diagnostics[0])
+
+
+class ProtocolCheckError(ProtocolError):
+    """Raised when protocol text parses but is not well formed.
+
+    Attributes:
+        diagnostics: every error found (and any warnings), in source order.
+    """
+
+    def __init__(self, diagnostics: Iterable[Diagnostic]) -> None:
+        self.diagnostics = tuple(diagnostics)
+        super().__init__(str(self))
+
+    @property
+    def errors(self) -> tuple[Diagnostic, ...]:
+        return tuple(d for d in self.diagnostics if d.severity == "error")
+
+    def __str__(self) -> str:
+        return "\n".join(str(d) for d in self.errors)
+
+
+class ProjectionError(ProtocolError):
+    """Raised when a global type has no projection onto a role (merge fails).
+
+    Attributes:
+        protocol: the global type's name.
+        role: the role being projected.
+        location: the choice whose branches do not merge.
+        left, right: the canonical prints of the two local behaviours.
+        labels: the labels of the two branches that disagree.
+        reason: why they do not merge.
+        source_line: the text of the choice's line.
+    """
+
+    def __init__(
+        self,
+        protocol: str,
+        role: str,
+        location: Location,
+        labels: tuple[str, str],
+        left: str,
+        right: str,
+        reason: str,
+        source_line: str = "",
+    ) -> None:
+        self.protocol = protocol
+        self.role = role
+        self.location = location
+        self.labels = labels
+        self.left = left
+        self.right = right
+        self.reason = reason
+        self.source_line = source_line
+        super().__init__(str(self))
+
+    @property
+    def message(self) -> str:
+        first, second = self.labels
+        return (
+            f"global {self.protocol} is not projectable onto role {self.role}: "
+            f"branches '{first}' and '{second}' give {self.role} different behaviours "
+            f"that do not merge ({self.reason}): {self.left} versus {self.right}"
+        )
+
+    @property
+    def diagnostics(self) -> tuple[Diagnostic, ...]:
+        return (Diagnostic("error", self.location, self.message, self.source_line),)
+
+    def __str__(self) -> str:
+        return str(self.diagnostics[0])
+
+
+def _one_of(items: tuple[str, ...]) -> str:
+    if len(items) == 1:
+        return items[0]
+    return "one of " + ", ".join(items)
+
+
+class UnknownRoleError(ProtocolError, KeyError):
+    """Raised when a role is asked of a global type that does not have it.
+
+    Attributes:
+        protocol: the global type's name.
+        role: the role asked for.
+        roles: the roles the global type has.
+    """
+
+    def __init__(self, protocol: str, role: str, roles: tuple[str, ...]) -> None:
+        self.protocol = protocol
+        self.role = role
+        self.roles = roles
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        return (f"error: global {self.protocol} has no role {self.role}; "
+                f"expected one of {', '.join(self.roles) or '(no roles)'}")

@@ -1,0 +1,238 @@
+"""Local type to deterministic state machine: what run-time monitors execute.
+
+Each send, receive or choice of the local type is one state; ``mu`` and
+variables become edges back; ``end`` is a state with no transitions. A
+parallel composition is a *fork* state holding one machine per branch: each
+branch is monitored on its own, and the fork is finished when every branch
+is. Stepping is one dictionary look-up: ``table[state][(action, peer, label)]``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from . import local_types as lt
+from .deep import run_deep
+from .location import Location
+from .sorts import Sort
+
+__all__ = ["Action", "Transition", "StateMachine", "build_state_machine", "build_term_machine"]
+
+Action = Literal["send", "recv"]
+Key = tuple[Action, "str | None", str]
+
+
+@dataclass(frozen=True, slots=True)
+class Transition:
+    """One allowed action and the state it leads to."""
+
+    action: Action
+    peer: str | None
+    label: str
+    sort: Sort | None
+    target: int
+    location: Location = field(compare=False)
+
+    def __str__(self) -> str:
+        arrow = "!" if self.action == "send" else "?"
+        sort = f"({self.sort.spelling})" if self.sort else ""
+        return f"{arrow}{self.peer or ''}{'.' if self.peer else ''}{self.label}{sort}"
+
+
+@dataclass(frozen=True, eq=False)
+class StateMachine:
+    """A deterministic machine for one role (or one parallel branch of it).
+
+    Attributes:
+        role: the role it describes (None if unknown).
+        protocol: the global type it was projected from ("" if none).
+        initial: the start state.
+        table: for each state, the allowed actions keyed by ``(action, peer, label)``.
+        forks: for each fork state, the machines of its parallel branches.
+        terms: for each state, the local type that remains from it.
+    """
+
+    role: str | None
+    protocol: str
+    initial: int
+    table: tuple[dict[Key, Transition], ...]
+    forks: dict[int, tuple[StateMachine, ...]]
+    terms: tuple[lt.LocalTerm, ...] = field(repr=False)
+
+    @property
+    def states(self) -> range:
+        return range(len(self.table))
+
+    def is_final(self, state: int) -> bool:
+        """No action is left in ``state`` (a fork is final when its branches are)."""
+        return not self.table[state] and state not in self.forks
+
+    def step(self, state: int, action: Action, peer: str | None, label: str) -> Transition | None:
+        """The transition for that action from ``state``, or None if not allowed."""
+        return self.table[state].get((action, peer, label))
+
+    def expected(self, state: int) -> list[Transition]:
+        """The actions allowed in ``state``, sorted."""
+        return sorted(self.table[state].values(), key=lambda t: (t.action, t.peer or "", t.label))
+
+    def describe(self, state: int) -> str:
+        """The remaining local type at ``state`` (its canonical print)."""
+        return str(self.terms[state])
+
+    # ---- export ----
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "role": self.role,
+            "protocol": self.protocol,
+            "initial": self.initial,
+            "states": [
+                {
+                    "id": state,
+                    "final": self.is_final(state),
+                    "type": self.describe(state),
+                    "transitions": [
+                        {"action": t.action, "peer": t.peer, "label": t.label,
+                         "sort": t.sort.spelling if t.sort else None, "target": t.target,
+                         "location": str(t.location)}
+                        for t in self.expected(state)
+                    ],
+                    **({"fork": [m.to_dict() for m in self.forks[state]]} if state in self.forks else {}),
+                }
+                for state in self.states
+            ],
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2, ensure_ascii=False)
+
+    def to_networkx(self) -> Any:
+        """A ``networkx.MultiDiGraph``; fork branches are nested with prefixed node names."""
+        import networkx as nx
+
+        graph = nx.MultiDiGraph(name=f"{self.protocol} {self.role or ''}".strip())
+        self._add_to(graph, "")
+        return graph
+
+    def _add_to(self, graph: Any, prefix: str) -> None:
+        for state in self.states:
+            node = f"{prefix}s{state}"
+            shape = "doublecircle" if self.is_final(state) else "circle"
+            if state in self.forks:
+                shape = "box"
+            graph.add_node(node, label=f"{prefix}{state}", shape=shape,
+                           initial=(state == self.initial and not prefix))
+            for t in self.expected(state):
+                graph.add_edge(node, f"{prefix}s{t.target}", label=str(t))
+            for index, branch in enumerate(self.forks.get(state, ()), start=1):
+                inner = f"{prefix}{state}.{index}."
+                branch._add_to(graph, inner)
+                graph.add_edge(node, f"{inner}s{branch.initial}", label=f"|| branch {index}", style="dashed")
+
+    def to_dot(self) -> str:
+        from networkx.drawing.nx_pydot import to_pydot
+
+        graph = self.to_networkx()
+        start = "__start"
+        graph.add_node(start, shape="point", label="")
+        graph.add_edge(start, f"s{self.initial}", label="")
+        for _, data in graph.nodes(data=True):
+            data.pop("initial", None)
+            if "label" in data:
+                data["label"] = _quote(str(data["label"]))
+        for _, _, data in graph.edges(data=True):
+            data["label"] = _quote(str(data.get("label", "")))
+        dot = to_pydot(graph)
+        dot.set_rankdir("LR")
+        return str(dot.to_string())
+
+
+def _quote(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def build_state_machine(local_type: lt.LocalType) -> StateMachine:
+    """Compile a named local type to its state machine."""
+    return build_term_machine(local_type.body, local_type.role, local_type.protocol)
+
+
+def build_term_machine(term: lt.LocalTerm, role: str | None = None, protocol: str = "") -> StateMachine:
+    """Compile a local type term to its state machine."""
+    return run_deep(lambda: _Builder(role, protocol).build(term))
+
+
+class _Builder:
+    def __init__(self, role: str | None, protocol: str) -> None:
+        self.role = role
+        self.protocol = protocol
+        self.table: list[dict[Key, Transition]] = []
+        self.terms: list[lt.LocalTerm] = []
+        self.forks: dict[int, tuple[StateMachine, ...]] = {}
+        self.ids: dict[tuple[int, int], int] = {}
+        self.end: int | None = None
+        self.envs: list[dict[str, int]] = []  # kept alive: their ids key self.ids
+        self.pending: list[tuple[lt.LocalTerm, dict[str, int], int]] = []
+
+    def build(self, term: lt.LocalTerm) -> StateMachine:
+        initial = self.state_of(term, {})
+        while self.pending:  # a work list, not recursion: sequences may be very long
+            node, env, state = self.pending.pop()
+            self.fill(node, env, state)
+        return StateMachine(self.role, self.protocol, initial, tuple(self.table), self.forks,
+                            tuple(self.terms))
+
+    def new_state(self, term: lt.LocalTerm) -> int:
+        self.table.append({})
+        self.terms.append(term)
+        return len(self.table) - 1
+
+    def state_of(self, term: lt.LocalTerm, env: dict[str, int]) -> int:
+        """The state where ``term`` starts (allocated, and queued to fill, on first sight)."""
+        match term:
+            case lt.Rec():
+                # Filling is deferred, so the variables can be bound once the body's
+                # state exists and before any transition back to it is made.
+                env = dict(env)
+                self.envs.append(env)
+                names = []
+                while isinstance(term, lt.Rec):
+                    names.append(term.var)
+                    term = term.body
+                state = self.state_of(term, env)
+                for name in names:
+                    env[name] = state
+                return state
+            case lt.Var(name=name):
+                return env[name]
+            case lt.End():
+                if self.end is None:
+                    self.end = self.new_state(term)
+                return self.end
+        key = (id(term), id(env))
+        state = self.ids.get(key)
+        if state is None:
+            state = self.new_state(term)
+            self.ids[key] = state
+            self.pending.append((term, env, state))
+        return state
+
+    def fill(self, term: lt.LocalTerm, env: dict[str, int], state: int) -> None:
+        match term:
+            case lt.Send(peer=peer, message=message, continuation=cont, location=location):
+                self.add(state, "send", peer, message.label, message.sort, self.state_of(cont, env), location)
+            case lt.Recv(peer=peer, message=message, continuation=cont, location=location):
+                self.add(state, "recv", peer, message.label, message.sort, self.state_of(cont, env), location)
+            case lt.Select(peer=peer, branches=branches) | lt.Offer(peer=peer, branches=branches):
+                action: Action = "send" if isinstance(term, lt.Select) else "recv"
+                for b in branches:
+                    self.add(state, action, peer, b.message.label, b.message.sort,
+                             self.state_of(b.continuation, env), b.location)
+            case lt.Parallel(branches=parts):
+                self.forks[state] = tuple(_Builder(self.role, self.protocol).build(p) for p in parts)
+            case _:
+                raise AssertionError(f"unexpected local term {term!r}")
+
+    def add(self, state: int, action: Action, peer: str | None, label: str, sort: Sort | None,
+            target: int, location: Location) -> None:
+        self.table[state][(action, peer, label)] = Transition(action, peer, label, sort, target, location)

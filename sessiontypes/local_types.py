@@ -1,0 +1,205 @@
+"""Local types: one role's view of a protocol.
+
+Terms: :class:`Send` / :class:`Recv` (one message), :class:`Select` (this
+role chooses, ``+``) / :class:`Offer` (the peer chooses, ``&``), :class:`Rec`,
+:class:`Var`, :class:`End`, :class:`Parallel`. A choice with one branch is
+always built as a :class:`Send` or :class:`Recv` (see :func:`select` and
+:func:`offer`), so each behaviour has exactly one representation. ``peer`` is
+``None`` in the binary form of Fig. 1 (one implicit peer).
+
+``str()`` of any term is its canonical print (LANGUAGE.md section 5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Union
+
+from .location import NOWHERE, Location
+from .sorts import Message
+
+if TYPE_CHECKING:
+    from .fsm import StateMachine
+
+__all__ = [
+    "Branch", "Send", "Recv", "Select", "Offer", "Rec", "Var", "End", "Parallel",
+    "LocalTerm", "LocalType", "select", "offer",
+]
+
+
+class _Printable:
+    __slots__ = ()
+
+    def __str__(self) -> str:
+        from .printer import print_local
+
+        return print_local(self)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Branch(_Printable):
+    """One labelled alternative of a choice and what follows it.
+
+    ``location`` is that of the global interaction it was projected from (or
+    of the local text it was parsed from).
+    """
+
+    message: Message
+    continuation: LocalTerm
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"Branch({self.message!r}, {self.continuation!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Send(_Printable):
+    """``!peer(message).continuation``."""
+
+    peer: str | None
+    message: Message
+    continuation: LocalTerm
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"Send({str(self)!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Recv(_Printable):
+    """``?peer(message).continuation``."""
+
+    peer: str | None
+    message: Message
+    continuation: LocalTerm
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"Recv({str(self)!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Select(_Printable):
+    """``+peer{branches}``: internal choice, at least two branches."""
+
+    peer: str | None
+    branches: tuple[Branch, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"Select({str(self)!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Offer(_Printable):
+    """``&peer{branches}``: external choice, at least two branches."""
+
+    peer: str | None
+    branches: tuple[Branch, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"Offer({str(self)!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Rec(_Printable):
+    """``mu var. body``."""
+
+    var: str
+    body: LocalTerm
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"Rec({str(self)!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Var(_Printable):
+    """A recursion variable."""
+
+    name: str
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"Var({self.name!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class End(_Printable):
+    """``end``."""
+
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return "End()"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class Parallel(_Printable):
+    """``(T1 || T2 || ...)``: independent branches on disjoint channels."""
+
+    branches: tuple[LocalTerm, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"Parallel({str(self)!r})"
+
+
+LocalTerm = Union[Send, Recv, Select, Offer, Rec, Var, End, Parallel]
+
+
+def select(peer: str | None, branches: tuple[Branch, ...], location: Location = NOWHERE) -> LocalTerm:
+    """Build an internal choice; one branch gives a :class:`Send`."""
+    if len(branches) == 1:
+        only = branches[0]
+        return Send(peer, only.message, only.continuation, only.location)
+    return Select(peer, branches, location)
+
+
+def offer(peer: str | None, branches: tuple[Branch, ...], location: Location = NOWHERE) -> LocalTerm:
+    """Build an external choice; one branch gives a :class:`Recv`."""
+    if len(branches) == 1:
+        only = branches[0]
+        return Recv(peer, only.message, only.continuation, only.location)
+    return Offer(peer, branches, location)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LocalType:
+    """A named local type: a projection of a global type, or a ``local`` declaration.
+
+    Attributes:
+        name: the ``local`` declaration's name, or the role's name for a projection.
+        role: the role this type describes (``None`` if a ``local`` declaration
+            does not say ``at ROLE``).
+        body: the local type term.
+        protocol: the global type it was projected from ("" for declarations).
+        location: where it was declared (or the global's declaration).
+    """
+
+    name: str
+    role: str | None
+    body: LocalTerm
+    protocol: str = ""
+    location: Location = NOWHERE
+
+    def fsm(self) -> StateMachine:
+        """Compile to a deterministic state machine (see :mod:`sessiontypes.fsm`)."""
+        from .fsm import build_state_machine
+
+        return build_state_machine(self)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, LocalType):
+            return NotImplemented
+        return (self.name, self.role, self.body, self.protocol) == (
+            other.name, other.role, other.body, other.protocol)
+
+    def __hash__(self) -> int:
+        return hash((self.name, self.role, self.body, self.protocol))
+
+    def __str__(self) -> str:
+        from .printer import print_local
+
+        return print_local(self.body)

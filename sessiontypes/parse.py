@@ -1,0 +1,289 @@
+"""Text to surface syntax. The only module that imports lark.
+
+:func:`parse_file` returns a :class:`~sessiontypes.syntax.SourceFile` whose
+nodes carry locations; bad text raises :class:`ProtocolSyntaxError` with the
+line, a caret, and what was expected in words (never lark's token names).
+"""
+
+from __future__ import annotations
+
+import threading
+from importlib import resources
+from typing import Any
+
+import lark
+from lark import Token, Transformer
+
+from . import syntax as s
+from .errors import ProtocolSyntaxError
+from .location import Location
+
+__all__ = ["parse_file"]
+
+# What each terminal is called in an error message.
+TERMINAL_WORDS: dict[str, str] = {
+    "NAME": "a name", "STRING": 'a string such as "module:Class"',
+    "TYPE": "'type'", "GLOBAL": "'global'", "LOCAL": "'local'", "AT": "'at'",
+    "MU": "'mu'", "REC": "'rec'", "MU_SYMBOL": "'μ'", "END": "'end'", "BOTTOM": "'⊥'",
+    "ARROW": "'->'", "PLUS": "'+'", "OPLUS": "'⊕'", "AMP": "'&'", "BANG": "'!'",
+    "QUERY": "'?'", "PAR": "'||'", "LPAR": "'('", "RPAR": "')'", "LBRACE": "'{'",
+    "RBRACE": "'}'", "COMMA": "','", "COLON": "':'", "DOT": "'.'", "EQ": "'='",
+    "SEMI": "';'", "$END": "end of file",
+}
+# Alternative spellings of one token: name only the ASCII one in "expected".
+_SYNONYMS = {"REC": "MU", "MU_SYMBOL": "MU", "BOTTOM": "END", "OPLUS": "PLUS"}
+
+
+_KEYWORDS = {"TYPE", "GLOBAL", "LOCAL", "AT", "MU", "REC", "END"}
+
+
+def _location(path: str, token: Token) -> Location:
+    return Location(path, token.line or 0, token.column or 0)
+
+
+def _tokens(children: list[Any], kind: str) -> list[Token]:
+    return [c for c in children if isinstance(c, Token) and c.type == kind]
+
+
+def _nodes(children: list[Any]) -> list[Any]:
+    return [c for c in children if not isinstance(c, Token)]
+
+
+class _Builder(Transformer[Token, Any]):
+    """Turns lark's parse events into :mod:`sessiontypes.syntax` nodes."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.path = "<string>"
+
+    def _name(self, token: Token) -> s.Name:
+        return s.Name(str(token), _location(self.path, token))
+
+    def _loc(self, children: list[Any]) -> Location:
+        first = children[0]
+        if isinstance(first, Token):
+            return _location(self.path, first)
+        if isinstance(first, s.Name):
+            return first.location
+        return first.location  # type: ignore[no-any-return]
+
+    # keywords with several spellings: keep the token for its location
+    def mu(self, children: list[Any]) -> Token:
+        return children[0]  # type: ignore[no-any-return]
+
+    end = plus = mu
+
+    # ---- messages ----
+    def msg_paren(self, children: list[Any]) -> s.MessageSyntax:
+        names = _tokens(children, "NAME")
+        sort = self._name(names[1]) if len(names) > 1 else None
+        return s.MessageSyntax(self._name(names[0]), sort, parens=True)
+
+    def msg_bare(self, children: list[Any]) -> s.MessageSyntax:
+        return s.MessageSyntax(self._name(children[0]), None, parens=False)
+
+    # ---- global ----
+    def ginteraction(self, children: list[Any]) -> s.GInteraction:
+        sender, receiver = _tokens(children, "NAME")
+        nodes = _nodes(children)
+        branch = s.GBranchSyntax(nodes[0], nodes[1] if len(nodes) > 1 else None)
+        return s.GInteraction(self._name(sender), self._name(receiver), (branch,), False,
+                              _location(self.path, sender))
+
+    def gchoice(self, children: list[Any]) -> s.GInteraction:
+        sender, receiver = _tokens(children, "NAME")
+        return s.GInteraction(self._name(sender), self._name(receiver),
+                              tuple(_nodes(children)), True, _location(self.path, sender))
+
+    def gbranch_msg(self, children: list[Any]) -> s.GBranchSyntax:
+        nodes = _nodes(children)
+        return s.GBranchSyntax(nodes[0], nodes[1] if len(nodes) > 1 else None)
+
+    def gbranch_label(self, children: list[Any]) -> s.GBranchSyntax:
+        label = self._name(children[0])
+        return s.GBranchSyntax(s.MessageSyntax(label, None, parens=True), children[2])
+
+    def grec(self, children: list[Any]) -> s.GRec:
+        return s.GRec(self._name(children[1]), children[3], _location(self.path, children[0]))
+
+    def gref(self, children: list[Any]) -> s.GRef:
+        return s.GRef(self._name(children[0]))
+
+    def gend(self, children: list[Any]) -> s.GEnd:
+        return s.GEnd(_location(self.path, children[0]))
+
+    def gparen(self, children: list[Any]) -> Any:
+        return children[1]
+
+    def gpar(self, children: list[Any]) -> s.GParallel:
+        return s.GParallel(tuple(_nodes(children)), _location(self.path, children[0]))
+
+    # ---- local ----
+    def _action(self, children: list[Any], direction: str, binary: bool) -> s.LAction:
+        names = _tokens(children, "NAME")
+        nodes = _nodes(children)
+        if binary:
+            peer = None
+            message = s.MessageSyntax(self._name(names[0]), None, parens=False)
+            rest = nodes
+        else:
+            peer = self._name(names[0])
+            message, rest = nodes[0], nodes[1:]
+        return s.LAction(direction, peer, message, rest[0] if rest else None,  # type: ignore[arg-type]
+                         _location(self.path, children[0]))
+
+    def lsend(self, children: list[Any]) -> s.LAction:
+        return self._action(children, "!", binary=False)
+
+    def lrecv(self, children: list[Any]) -> s.LAction:
+        return self._action(children, "?", binary=False)
+
+    def lsend_binary(self, children: list[Any]) -> s.LAction:
+        return self._action(children, "!", binary=True)
+
+    def lrecv_binary(self, children: list[Any]) -> s.LAction:
+        return self._action(children, "?", binary=True)
+
+    def _choice(self, children: list[Any], kind: str) -> s.LChoice:
+        peers = _tokens(children, "NAME")
+        peer = self._name(peers[0]) if peers else None
+        return s.LChoice(kind, peer, tuple(_nodes(children)),  # type: ignore[arg-type]
+                         _location(self.path, children[0]))
+
+    def lselect(self, children: list[Any]) -> s.LChoice:
+        return self._choice(children, "+")
+
+    def loffer(self, children: list[Any]) -> s.LChoice:
+        return self._choice(children, "&")
+
+    def lbranch_msg(self, children: list[Any]) -> s.LBranchSyntax:
+        nodes = _nodes(children)
+        return s.LBranchSyntax(nodes[0], nodes[1] if len(nodes) > 1 else None)
+
+    def lbranch_label(self, children: list[Any]) -> s.LBranchSyntax:
+        label = self._name(children[0])
+        return s.LBranchSyntax(s.MessageSyntax(label, None, parens=True), children[2])
+
+    def lrec(self, children: list[Any]) -> s.LRec:
+        return s.LRec(self._name(children[1]), children[3], _location(self.path, children[0]))
+
+    def lref(self, children: list[Any]) -> s.LRef:
+        return s.LRef(self._name(children[0]))
+
+    def lend(self, children: list[Any]) -> s.LEnd:
+        return s.LEnd(_location(self.path, children[0]))
+
+    lparen = gparen
+
+    def lpar(self, children: list[Any]) -> s.LParallel:
+        return s.LParallel(tuple(_nodes(children)), _location(self.path, children[0]))
+
+    # ---- declarations ----
+    def type_decl(self, children: list[Any]) -> s.TypeDecl:
+        keyword, name, _, string = children
+        target = str(string)[1:-1].encode().decode("unicode_escape")
+        return s.TypeDecl(self._name(name), target, _location(self.path, keyword))
+
+    def roles(self, children: list[Any]) -> tuple[s.Name, ...]:
+        return tuple(self._name(t) for t in _tokens(children, "NAME"))
+
+    def global_decl(self, children: list[Any]) -> s.GlobalDecl:
+        keyword, name = children[0], children[1]
+        roles = children[2] if isinstance(children[2], tuple) else None
+        return s.GlobalDecl(self._name(name), roles, children[-1], _location(self.path, keyword))
+
+    def local_decl(self, children: list[Any]) -> s.LocalDecl:
+        names = _tokens(children, "NAME")
+        role = self._name(names[1]) if len(names) > 1 else None
+        return s.LocalDecl(self._name(names[0]), role, children[-1],
+                           _location(self.path, children[0]))
+
+    def start(self, children: list[Any]) -> tuple[s.Declaration, ...]:
+        return tuple(_nodes(children))
+
+
+_builder = _Builder()
+_parser = lark.Lark(
+    resources.files(__package__).joinpath("grammar.lark").read_text(encoding="utf-8"),
+    parser="lalr",
+    lexer="basic",
+    transformer=_builder,
+    maybe_placeholders=False,
+)
+# The builder knows the current file's path; one parse at a time uses it.
+_lock = threading.Lock()
+
+
+def parse_file(text: str, path: str = "<string>") -> s.SourceFile:
+    """Parse protocol ``text`` (read from ``path``) into surface syntax.
+
+    Raises:
+        ProtocolSyntaxError: the text does not follow the grammar.
+    """
+    lines = tuple(text.splitlines())
+    with _lock:
+        _builder.path = path
+        try:
+            declarations = _parser.parse(text)
+        except lark.exceptions.UnexpectedInput as error:
+            raise _syntax_error(error, text, lines, path) from None
+    return s.SourceFile(path, lines, declarations)
+
+
+def _syntax_error(
+    error: lark.exceptions.UnexpectedInput, text: str, lines: tuple[str, ...], path: str
+) -> ProtocolSyntaxError:
+    def line_of(number: int) -> str:
+        return lines[number - 1] if 0 < number <= len(lines) else ""
+
+    if isinstance(error, lark.exceptions.UnexpectedCharacters):
+        char = text[error.pos_in_stream] if error.pos_in_stream < len(text) else ""
+        location = Location(path, error.line, error.column)
+        hint = ""
+        if text.startswith("/*", error.pos_in_stream):
+            got, hint = "'/*'", "this comment is never closed with '*/'"
+        elif char == '"':
+            got, hint = "'\"'", "this string is never closed"
+        else:
+            got = f"character {char!r}"
+        expected = _describe(error.allowed or ())
+        return ProtocolSyntaxError(location, got, expected, line_of(error.line), hint)
+
+    assert isinstance(error, lark.exceptions.UnexpectedToken), error
+    token = error.token
+    if token.type == "$END":
+        last = len(lines) or 1
+        location = Location(path, last, len(line_of(last)) + 1)
+        got = "end of file"
+    else:
+        location = _location(path, token)
+        got = f"'{token}'"
+    # LALR's expected set may name tokens this exact spot cannot take; ask the parser.
+    try:
+        acceptable = set(error.interactive_parser.accepts()) or set(error.expected)
+    except Exception:  # defensive: fall back to LALR's own set
+        acceptable = set(error.expected)
+    return ProtocolSyntaxError(location, got, _describe(acceptable), line_of(location.line),
+                               _hint(token, acceptable))
+
+
+def _describe(terminals: Any) -> list[str]:
+    names = {_SYNONYMS.get(t, t) for t in terminals}
+    return sorted(TERMINAL_WORDS.get(t, t.lower()) for t in names)
+
+
+def _hint(token: Token, expected: set[str]) -> str:
+    """A sentence for mistakes people make often, else ""."""
+    if token.type in _KEYWORDS and "NAME" in expected:
+        return f"'{token}' is a keyword and cannot be a name"
+    if token.type == "NAME" and expected <= {"TYPE", "GLOBAL", "LOCAL", "SEMI", "$END"}:
+        return "interactions are sequenced with '.', and ';' ends a declaration"
+    if token.type == "NAME" and "DOT" in expected:
+        return "interactions are sequenced with '.'"
+    if token.type == "NAME" and "COLON" in expected:
+        return "write 'Sender -> Receiver : label'"
+    if token.type == "ARROW" and "EQ" in expected:
+        return "a declaration starts 'global Name = ...'"
+    if token.type in {"BANG", "QUERY", "PLUS", "AMP"} and "NAME" in expected and "LBRACE" not in expected:
+        return "'!', '?', '+' and '&' belong in local types"
+    return ""

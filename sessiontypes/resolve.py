@@ -1,0 +1,298 @@
+"""Surface syntax to core types: names, sorts and equation-style recursion.
+
+Resolution and the name-related checks of LANGUAGE.md section 6 happen in
+one walk, so every problem is reported once with its location:
+unknown sorts, unbound names, unguarded recursion, a recursion variable used
+inside a parallel composition it encloses, a role sending to itself,
+duplicate labels. Problems go to a :class:`Reporter`; the walk continues so
+that one run reports all of them.
+
+Equation-style recursion (``ATM = ... ATM'``, ``ATM' = ... ATM``) is expanded
+into ``mu``: a reference to a declaration that is not being expanded inlines
+its body, wrapped in ``mu Name.`` when the body refers back to it.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+from . import global_types as g
+from . import local_types as lt
+from . import syntax as s
+from .errors import Diagnostic
+from .location import Location
+from .sorts import BUILTIN_SORTS, Message, Sort, builtin_sort
+
+__all__ = ["Reporter", "SortTable", "resolve_global", "resolve_local"]
+
+_TARGET = re.compile(
+    r"^(?:[A-Za-z_][\w]*(?:\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*"
+    r"|ros:[A-Za-z_]\w*/(?:msg|srv|action)/[A-Za-z_]\w*)$"
+)
+
+
+@dataclass
+class Reporter:
+    """Collects diagnostics for one source file."""
+
+    source: s.SourceFile
+    diagnostics: list[Diagnostic] = field(default_factory=list)
+
+    def error(self, location: Location, message: str) -> None:
+        self.diagnostics.append(
+            Diagnostic("error", location, message, self.source.line(location.line)))
+
+    def warning(self, location: Location, message: str) -> None:
+        self.diagnostics.append(
+            Diagnostic("warning", location, message, self.source.line(location.line)))
+
+
+class SortTable:
+    """The builtin sorts and the file's ``type`` declarations; records uses."""
+
+    def __init__(self, declarations: Mapping[str, s.TypeDecl], reporter: Reporter) -> None:
+        self.declared = dict(declarations)
+        self.used: set[str] = set()
+        self.reporter = reporter
+        for decl in declarations.values():
+            if not _TARGET.match(decl.target):
+                reporter.error(decl.name.location,
+                               f"type {decl.name.text} is bound to {decl.target!r}; expected "
+                               "\"module:QualifiedName\" or \"ros:package/msg/Name\"")
+
+    def is_sort(self, name: str) -> bool:
+        return name in BUILTIN_SORTS or name in self.declared
+
+    def sort(self, name: s.Name) -> Sort | None:
+        """The sort called ``name``; reports an unknown sort and returns None."""
+        if name.text in BUILTIN_SORTS:
+            return builtin_sort(name.text)
+        decl = self.declared.get(name.text)
+        if decl is None:
+            self.reporter.error(name.location, f"unknown sort '{name.text}'; expected a builtin "
+                                "sort (int, nat, bool, str, float, bytes) or a declared type")
+            return None
+        self.used.add(name.text)
+        return Sort(name.text, name.text, decl.target)
+
+    def message(self, syntax: s.MessageSyntax) -> Message:
+        """Apply the abbreviation rule: a bare sort name labels a value of that sort."""
+        if syntax.parens:
+            sort = self.sort(syntax.sort) if syntax.sort else None
+            return Message(syntax.label.text, sort)
+        if self.is_sort(syntax.label.text):
+            return Message(syntax.label.text, self.sort(syntax.label))
+        return Message(syntax.label.text)
+
+    def defined(self) -> dict[str, Sort]:
+        return {name: Sort(name, name, d.target) for name, d in self.declared.items()}
+
+
+@dataclass(frozen=True)
+class _Binder:
+    """A name in scope: a ``mu`` variable or a declaration being expanded."""
+
+    name: str
+    depth: int           # interactions on the path when bound (guardedness)
+    parallel_depth: int  # parallel compositions on the path when bound
+    declaration: bool
+
+
+Syntax = TypeVar("Syntax")
+Term = TypeVar("Term")
+
+
+@dataclass
+class _Walk(Generic[Syntax, Term]):
+    """State shared by the global and the local resolver."""
+
+    reporter: Reporter
+    sorts: SortTable
+    declarations: Mapping[str, Syntax]   # the same kind's declarations, by name
+    kind: str                            # "global" or "local"
+    other_kind: set[str]                 # names declared with another kind
+    used_vars: set[str] = field(default_factory=set)
+
+    def lookup(self, name: s.Name, scope: tuple[_Binder, ...], depth: int,
+               parallel_depth: int) -> _Binder | None | str:
+        """The binder of ``name``, or "decl" for a declaration to inline, or None (reported)."""
+        for binder in reversed(scope):
+            if binder.name != name.text:
+                continue
+            if binder.parallel_depth < parallel_depth:
+                self.reporter.error(name.location, f"recursion variable '{name.text}' is used inside "
+                                    "a parallel composition it encloses")
+                return None
+            if binder.depth == depth:
+                self.reporter.error(name.location, f"unguarded recursion: '{name.text}' recurs "
+                                    "with no interaction in between")
+                return None
+            return binder
+        if name.text in self.declarations:
+            return "decl"
+        if name.text in self.other_kind:
+            self.reporter.error(name.location, f"'{name.text}' is not a {self.kind} declaration")
+        else:
+            self.reporter.error(name.location, f"unbound name '{name.text}'")
+        return None
+
+
+def _check_labels(reporter: Reporter, labels: Iterator[s.Name]) -> None:
+    seen: set[str] = set()
+    for label in labels:
+        if label.text in seen:
+            reporter.error(label.location, f"duplicate label '{label.text}' in one choice")
+        seen.add(label.text)
+
+
+def _inline(walk: _Walk[Syntax, Term], name: s.Name, scope: tuple[_Binder, ...], depth: int,
+            parallel_depth: int, body_of: Callable[[Syntax], object],
+            resolve: Callable[..., Term], make_rec: Callable[[str, Term, Location], Term],
+            uses: Callable[[Term, str], bool]) -> Term:
+    """Expand a reference to a declaration in place (equation-style recursion)."""
+    decl = walk.declarations[name.text]
+    # Only the declarations being expanded stay in scope: the referenced body
+    # cannot see the referring body's mu variables.
+    visible = tuple(b for b in scope if b.declaration)
+    for binder in scope:
+        if not binder.declaration and any(v.name == binder.name for v in visible):
+            walk.reporter.error(name.location, f"mu variable '{binder.name}' hides the declaration "
+                                f"'{binder.name}' that '{name.text}' recurs to; rename the variable")
+    binder = _Binder(name.text, depth, parallel_depth, declaration=True)
+    body = resolve(body_of(decl), visible + (binder,), depth, parallel_depth)
+    if uses(body, name.text):
+        return make_rec(name.text, body, name.location)
+    return body
+
+
+# ---- global ------------------------------------------------------------------------
+
+def resolve_global(decl: s.GlobalDecl, walk: _Walk[s.GlobalDecl, g.GlobalTerm]) -> g.GlobalTerm:
+    """Resolve one global declaration (the walk reports problems)."""
+    top = _Binder(decl.name.text, 0, 0, declaration=True)
+    body = _resolve_g(walk, decl.body, (top,), 0, 0)
+    if _uses_g(body, decl.name.text):
+        body = g.Rec(decl.name.text, body, decl.name.location)
+    return body
+
+
+def _resolve_g(walk: _Walk[s.GlobalDecl, g.GlobalTerm], node: s.GSyntax | None,
+               scope: tuple[_Binder, ...], depth: int, parallel_depth: int) -> g.GlobalTerm:
+    match node:
+        case None:
+            return g.End()
+        case s.GEnd(location=location):
+            return g.End(location)
+        case s.GInteraction(sender=sender, receiver=receiver, branches=branches, location=location):
+            if sender.text == receiver.text:
+                walk.reporter.error(receiver.location, f"role {sender.text} sends a message to itself")
+            _check_labels(walk.reporter, (b.message.label for b in branches))
+            return g.Choice(sender.text, receiver.text, tuple(
+                g.Branch(walk.sorts.message(b.message),
+                         _resolve_g(walk, b.continuation, scope, depth + 1, parallel_depth),
+                         b.message.label.location)
+                for b in branches), location)
+        case s.GRec(var=var, body=body, location=location):
+            binder = _Binder(var.text, depth, parallel_depth, declaration=False)
+            return g.Rec(var.text, _resolve_g(walk, body, scope + (binder,), depth, parallel_depth),
+                         location)
+        case s.GParallel(branches=branches, location=location):
+            return g.Parallel(tuple(_resolve_g(walk, b, scope, depth, parallel_depth + 1)
+                                    for b in branches), location)
+        case s.GRef(name=name):
+            found = walk.lookup(name, scope, depth, parallel_depth)
+            if isinstance(found, _Binder):
+                return g.Var(name.text, name.location)
+            if found == "decl":
+                return _inline(walk, name, scope, depth, parallel_depth,
+                               lambda d: d.body, lambda *a: _resolve_g(walk, *a), g.Rec, _uses_g)
+            return g.End(name.location)  # already reported
+    raise AssertionError(f"unexpected global syntax {node!r}")
+
+
+def _uses_g(term: g.GlobalTerm, name: str) -> bool:
+    """Whether ``name`` occurs free in ``term``."""
+    match term:
+        case g.Var(name=n):
+            return n == name
+        case g.Choice(branches=branches):
+            return any(_uses_g(b.continuation, name) for b in branches)
+        case g.Rec(var=var, body=body):
+            return var != name and _uses_g(body, name)
+        case g.Parallel(branches=branches):
+            return any(_uses_g(b, name) for b in branches)
+    return False
+
+
+# ---- local -------------------------------------------------------------------------
+
+def resolve_local(decl: s.LocalDecl, walk: _Walk[s.LocalDecl, lt.LocalTerm]) -> lt.LocalTerm:
+    """Resolve one local declaration (the walk reports problems)."""
+    top = _Binder(decl.name.text, 0, 0, declaration=True)
+    body = _resolve_l(walk, decl.body, (top,), 0, 0)
+    if _uses_l(body, decl.name.text):
+        body = lt.Rec(decl.name.text, body, decl.name.location)
+    return body
+
+
+def _resolve_l(walk: _Walk[s.LocalDecl, lt.LocalTerm], node: s.LSyntax | None,
+               scope: tuple[_Binder, ...], depth: int, parallel_depth: int) -> lt.LocalTerm:
+    match node:
+        case None:
+            return lt.End()
+        case s.LEnd(location=location):
+            return lt.End(location)
+        case s.LAction(direction=direction, peer=peer, message=message, continuation=rest,
+                       location=location):
+            if peer is None and not walk.sorts.is_sort(message.label.text):
+                walk.reporter.error(message.label.location, f"unknown sort '{message.label.text}'; "
+                                    f"the binary form {direction}Sort sends or receives a value of a sort")
+                resolved = Message(message.label.text)
+            else:
+                resolved = walk.sorts.message(message)
+            cont = _resolve_l(walk, rest, scope, depth + 1, parallel_depth)
+            make = lt.Send if direction == "!" else lt.Recv
+            return make(peer.text if peer else None, resolved, cont, location)
+        case s.LChoice(kind=kind, peer=peer, branches=branches, location=location):
+            _check_labels(walk.reporter, (b.message.label for b in branches))
+            resolved_branches = tuple(
+                lt.Branch(walk.sorts.message(b.message),
+                          _resolve_l(walk, b.continuation, scope, depth + 1, parallel_depth),
+                          b.message.label.location)
+                for b in branches)
+            make_choice = lt.select if kind == "+" else lt.offer
+            return make_choice(peer.text if peer else None, resolved_branches, location)
+        case s.LRec(var=var, body=body, location=location):
+            binder = _Binder(var.text, depth, parallel_depth, declaration=False)
+            return lt.Rec(var.text, _resolve_l(walk, body, scope + (binder,), depth, parallel_depth),
+                          location)
+        case s.LParallel(branches=branches, location=location):
+            return lt.Parallel(tuple(_resolve_l(walk, b, scope, depth, parallel_depth + 1)
+                                     for b in branches), location)
+        case s.LRef(name=name):
+            found = walk.lookup(name, scope, depth, parallel_depth)
+            if isinstance(found, _Binder):
+                return lt.Var(name.text, name.location)
+            if found == "decl":
+                return _inline(walk, name, scope, depth, parallel_depth,
+                               lambda d: d.body, lambda *a: _resolve_l(walk, *a), lt.Rec, _uses_l)
+            return lt.End(name.location)
+    raise AssertionError(f"unexpected local syntax {node!r}")
+
+
+def _uses_l(term: lt.LocalTerm, name: str) -> bool:
+    match term:
+        case lt.Var(name=n):
+            return n == name
+        case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
+            return _uses_l(cont, name)
+        case lt.Select(branches=branches) | lt.Offer(branches=branches):
+            return any(_uses_l(b.continuation, name) for b in branches)
+        case lt.Rec(var=var, body=body):
+            return var != name and _uses_l(body, name)
+        case lt.Parallel(branches=branches):
+            return any(_uses_l(b, name) for b in branches)
+    return False

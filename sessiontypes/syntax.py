@@ -1,0 +1,194 @@
+"""Surface syntax: the declarations of a ``.proto`` file as written.
+
+Names are resolved later (:mod:`sessiontypes.resolve`): here a bare name is
+just a :class:`Name` whose meaning (recursion variable, declaration
+reference, sort) depends on context. Every node carries the location of its
+first token, left out of equality.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, Union
+
+from .location import NOWHERE, Location
+
+__all__ = [
+    "Name", "MessageSyntax", "GBranchSyntax", "GInteraction", "GRec", "GRef", "GEnd",
+    "GParallel", "GSyntax", "LBranchSyntax", "LAction", "LChoice", "LRec", "LRef",
+    "LEnd", "LParallel", "LSyntax", "TypeDecl", "GlobalDecl", "LocalDecl",
+    "Declaration", "SourceFile",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class Name:
+    """An identifier and where it was written."""
+
+    text: str
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class MessageSyntax:
+    """``label(Sort)``, ``label()`` or a bare ``NAME`` (abbreviation rule).
+
+    ``parens`` tells the written form apart: with parentheses ``sort`` is the
+    payload (``None`` for ``label()``); without, the meaning of the bare name
+    depends on whether it names a sort.
+    """
+
+    label: Name
+    sort: Name | None
+    parens: bool
+
+
+# ---- global ---------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class GBranchSyntax:
+    """``msg [. G]`` or the label-only form ``label: G``."""
+
+    message: MessageSyntax
+    continuation: GSyntax | None
+
+
+@dataclass(frozen=True, slots=True)
+class GInteraction:
+    """``p -> q : msg [. G]`` (``braced`` false) or ``p -> q : {...}``."""
+
+    sender: Name
+    receiver: Name
+    branches: tuple[GBranchSyntax, ...]
+    braced: bool
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class GRec:
+    var: Name
+    body: GSyntax
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class GRef:
+    """A bare name: a recursion variable or a reference to a global declaration."""
+
+    name: Name
+
+
+@dataclass(frozen=True, slots=True)
+class GEnd:
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class GParallel:
+    branches: tuple[GSyntax, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+GSyntax = Union[GInteraction, GRec, GRef, GEnd, GParallel]
+
+
+# ---- local ----------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class LBranchSyntax:
+    message: MessageSyntax
+    continuation: LSyntax | None
+
+
+@dataclass(frozen=True, slots=True)
+class LAction:
+    """``!peer(msg)``, ``?peer(msg)``, or the binary ``!Sort`` / ``?Sort`` (peer None)."""
+
+    direction: Literal["!", "?"]
+    peer: Name | None
+    message: MessageSyntax
+    continuation: LSyntax | None
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class LChoice:
+    """``+peer{...}`` or ``&peer{...}`` (peer None in binary form)."""
+
+    kind: Literal["+", "&"]
+    peer: Name | None
+    branches: tuple[LBranchSyntax, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class LRec:
+    var: Name
+    body: LSyntax
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class LRef:
+    name: Name
+
+
+@dataclass(frozen=True, slots=True)
+class LEnd:
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class LParallel:
+    branches: tuple[LSyntax, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+LSyntax = Union[LAction, LChoice, LRec, LRef, LEnd, LParallel]
+
+
+# ---- declarations -----------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class TypeDecl:
+    """``type Name = "module:Class"``."""
+
+    name: Name
+    target: str
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class GlobalDecl:
+    """``global Name[(roles)] = G``."""
+
+    name: Name
+    roles: tuple[Name, ...] | None
+    body: GSyntax
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class LocalDecl:
+    """``local Name [at Role] = T``."""
+
+    name: Name
+    role: Name | None
+    body: LSyntax
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+Declaration = Union[TypeDecl, GlobalDecl, LocalDecl]
+
+
+@dataclass(frozen=True, slots=True)
+class SourceFile:
+    """A parsed file: its path, its text split in lines, its declarations."""
+
+    path: str
+    lines: tuple[str, ...]
+    declarations: tuple[Declaration, ...]
+
+    def line(self, number: int) -> str:
+        """Return line ``number`` (1-based), or "" if out of range."""
+        return self.lines[number - 1] if 0 < number <= len(self.lines) else ""

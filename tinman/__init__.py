@@ -1,0 +1,1 @@
+"""TinMan robot system."""
