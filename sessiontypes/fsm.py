@@ -16,7 +16,7 @@ from typing import Any, Literal
 from . import local_types as lt
 from .deep import run_deep
 from .location import Location
-from .sorts import Sort
+from .sorts import Message, Sort
 
 __all__ = ["Action", "Transition", "StateMachine", "build_state_machine", "build_term_machine"]
 
@@ -36,9 +36,12 @@ class Transition:
     location: Location = field(compare=False)
 
     def __str__(self) -> str:
+        """The action in local-type notation: ``!Peer(msg)``, or ``!Sort`` in binary form."""
+        from .printer import print_message
+
         arrow = "!" if self.action == "send" else "?"
-        sort = f"({self.sort.spelling})" if self.sort else ""
-        return f"{arrow}{self.peer or ''}{'.' if self.peer else ''}{self.label}{sort}"
+        message = print_message(Message(self.label, self.sort))
+        return f"{arrow}{self.peer}({message})" if self.peer else f"{arrow}{message}"
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,25 +134,15 @@ class StateMachine:
                 graph.add_edge(node, f"{inner}s{branch.initial}", label=f"|| branch {index}", style="dashed")
 
     def to_dot(self) -> str:
-        from networkx.drawing.nx_pydot import to_pydot
+        """Graphviz DOT text: one node per state, one edge per transition."""
+        from .dot import to_dot
 
         graph = self.to_networkx()
-        start = "__start"
-        graph.add_node(start, shape="point", label="")
-        graph.add_edge(start, f"s{self.initial}", label="")
         for _, data in graph.nodes(data=True):
-            data.pop("initial", None)
-            if "label" in data:
-                data["label"] = _quote(str(data["label"]))
-        for _, _, data in graph.edges(data=True):
-            data["label"] = _quote(str(data.get("label", "")))
-        dot = to_pydot(graph)
-        dot.set_rankdir("LR")
-        return str(dot.to_string())
-
-
-def _quote(text: str) -> str:
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+            data["_initial"] = data.pop("initial")
+        graph.add_node("__start", shape="point", label="")
+        graph.add_edge("__start", f"s{self.initial}")
+        return to_dot(graph, graph.graph["name"], {"rankdir": "LR"})
 
 
 def build_state_machine(local_type: lt.LocalType) -> StateMachine:

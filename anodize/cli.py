@@ -1,0 +1,195 @@
+"""The ``anodize`` command: check, project, fsm, graph.
+
+The only module that prints or exits. Exit status: 0 success, 1 the input
+has errors (printed as ``path:line:col: error: ...``), 2 usage errors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import NoReturn
+
+import sessiontypes
+from sessiontypes import ProtocolError, ProtocolModule
+
+EXIT_OK, EXIT_ERRORS, EXIT_USAGE = 0, 1, 2
+
+
+class UsageError(Exception):
+    """A command line that names something that is not there (exit 2)."""
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit status."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args))
+    except UsageError as error:
+        print(f"anodize {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_USAGE
+    except ProtocolError as error:
+        print(error, file=sys.stderr)
+        return EXIT_ERRORS
+    except OSError as error:
+        print(f"error: {error.filename or ''}: {error.strerror or error}", file=sys.stderr)
+        return EXIT_ERRORS
+    except KeyboardInterrupt:
+        return 130
+    except Exception as error:  # a bug: one line, not a traceback, unless debugging
+        if os.environ.get("ANODIZE_DEBUG"):
+            raise
+        print(f"anodize: internal error: {type(error).__name__}: {error} "
+              "(set ANODIZE_DEBUG=1 for a traceback, and please report it)", file=sys.stderr)
+        return 70
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="anodize", description=(
+        "Multiparty session types for mixed-criticality systems: check protocols, "
+        "project them onto roles, and run them."))
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    check = commands.add_parser("check", help="check .proto files for well-formedness")
+    check.add_argument("files", nargs="+", metavar="FILE")
+    check.set_defaults(run=_check)
+
+    project = commands.add_parser("project", help="print the local type of every role")
+    project.add_argument("file", metavar="FILE")
+    project.add_argument("--global", dest="global_name", metavar="G", help="only this global type")
+    project.add_argument("--role", metavar="R", help="only this role")
+    project.set_defaults(run=_project)
+
+    fsm = commands.add_parser("fsm", help="print a role's state machine (DOT or JSON)")
+    fsm.add_argument("file", metavar="FILE")
+    fsm.add_argument("--global", dest="global_name", metavar="G",
+                     help="the global type (optional when the file has one)")
+    fsm.add_argument("--role", metavar="R", help="the role to project onto")
+    fsm.add_argument("--local", dest="local_name", metavar="L",
+                     help="a 'local' declaration instead of a projection")
+    fsm.add_argument("--format", choices=("dot", "json"), default="dot")
+    fsm.set_defaults(run=_fsm)
+
+    graph = commands.add_parser("graph", help="draw the communication graph of a global type")
+    graph.add_argument("file", metavar="FILE")
+    graph.add_argument("--global", dest="global_name", metavar="G")
+    graph.add_argument("-o", "--output", required=True, metavar="OUT",
+                       help="OUT.dot, OUT.png or OUT.svg")
+    graph.set_defaults(run=_graph)
+    return parser
+
+
+def _load(path: str) -> ProtocolModule:
+    module = sessiontypes.load(path)
+    for warning in module.warnings:
+        print(warning, file=sys.stderr)
+    return module
+
+
+def _check(args: argparse.Namespace) -> int:
+    status = EXIT_OK
+    for path in args.files:
+        try:
+            module = _load(path)
+        except ProtocolError as error:
+            print(error, file=sys.stderr)
+            status = EXIT_ERRORS
+        except OSError as error:
+            print(f"error: {path}: {error.strerror or error}", file=sys.stderr)
+            status = EXIT_ERRORS
+        else:
+            print(f"{path}: ok ({_count(len(module.globals), 'global')}, "
+                  f"{_count(len(module.locals), 'local')})")
+    return status
+
+
+def _count(number: int, noun: str) -> str:
+    return f"{number} {noun}{'' if number == 1 else 's'}"
+
+
+def _pick_globals(module: ProtocolModule, name: str | None) -> list[sessiontypes.GlobalType]:
+    if name is None:
+        return list(module.globals.values())
+    if name not in module.globals:
+        raise UsageError(f"no global {name} in {module.path}; expected one of "
+                         f"{', '.join(module.globals) or '(none)'}")
+    return [module.globals[name]]
+
+
+def _project(args: argparse.Namespace) -> int:
+    module = _load(args.file)
+    chosen = _pick_globals(module, args.global_name)
+    if args.role and not any(args.role in gt.roles for gt in chosen):
+        roles = sorted({r for gt in chosen for r in gt.roles})
+        raise UsageError(f"no role {args.role} in {_names(chosen)}; expected one of {', '.join(roles)}")
+    lines: list[str] = []
+    for gt in chosen:
+        if len(chosen) > 1:
+            lines.append(f"# {gt.name}")
+        for role in gt.roles:
+            if args.role is None or role == args.role:
+                lines.append(f"{role} = {gt.project(role)}")
+    print("\n".join(lines))
+    return EXIT_OK
+
+
+def _names(globals_: list[sessiontypes.GlobalType]) -> str:
+    return ", ".join(f"global {g.name}" for g in globals_) or "the file (it has no global)"
+
+
+def _fsm(args: argparse.Namespace) -> int:
+    module = _load(args.file)
+    if args.local_name:
+        if args.local_name not in module.locals:
+            raise UsageError(f"no local {args.local_name} in {args.file}; expected one of "
+                             f"{', '.join(module.locals) or '(none)'}")
+        machine = module.locals[args.local_name].fsm()
+    else:
+        if args.global_name is None and len(module.globals) != 1:
+            raise UsageError(f"{args.file} has {_count(len(module.globals), 'global')}; "
+                             f"choose one with --global ({', '.join(module.globals)})")
+        (gt,) = _pick_globals(module, args.global_name)
+        if args.role is None:
+            raise UsageError(f"choose a role with --role ({', '.join(gt.roles)})")
+        if args.role not in gt.roles:
+            raise UsageError(f"no role {args.role} in global {gt.name}; expected one of "
+                             f"{', '.join(gt.roles)}")
+        machine = gt.project(args.role).fsm()
+    print(machine.to_json() if args.format == "json" else machine.to_dot())
+    return EXIT_OK
+
+
+def _graph(args: argparse.Namespace) -> int:
+    from sessiontypes.graph import communication_graph, graph_to_dot
+
+    module = _load(args.file)
+    if args.global_name is None and len(module.globals) != 1:
+        raise UsageError(f"{args.file} has {_count(len(module.globals), 'global')}; "
+                         f"choose one with --global ({', '.join(module.globals)})")
+    (gt,) = _pick_globals(module, args.global_name)
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    if suffix not in {".dot", ".png", ".svg"}:
+        raise UsageError(f"cannot write {out}: expected a name ending in .dot, .png or .svg")
+    graph = communication_graph(gt)
+    if suffix == ".dot":
+        out.write_text(graph_to_dot(graph) + "\n", encoding="utf-8")
+    else:
+        from .drawing import draw_communication_graph
+
+        draw_communication_graph(graph, out)
+    print(f"wrote {out}")
+    return EXIT_OK
+
+
+def run() -> NoReturn:
+    """Console-script entry point."""
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    run()
