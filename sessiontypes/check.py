@@ -139,9 +139,9 @@ def _roles_in_order(term: g.GlobalTerm) -> dict[str, Location]:
     def visit(node: g.GlobalTerm) -> None:
         while True:
             match node:
-                case g.Choice(sender=sender, receiver=receiver, branches=branches, location=location):
-                    found.setdefault(sender, location)
-                    found.setdefault(receiver, location)
+                case g.Choice(sender=sender, receiver=receiver, branches=branches):
+                    found.setdefault(sender, node.location)
+                    found.setdefault(receiver, node.receiver_location)
                     for branch in branches[1:]:
                         visit(branch.continuation)
                     node = branches[0].continuation

@@ -42,6 +42,7 @@ class Choice:
     receiver: str
     branches: tuple[Branch, ...]
     location: Location = field(default=NOWHERE, compare=False, repr=False)
+    receiver_location: Location = field(default=NOWHERE, compare=False, repr=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,6 +100,8 @@ class GlobalType:
     location: Location = NOWHERE
     sorts: Mapping[str, Sort] = field(default_factory=dict, repr=False)
     source_lines: tuple[str, ...] = field(default=(), repr=False)
+    # Projections are pure functions of the type; the check computes them all once.
+    cached_projections: dict[str, LocalType] = field(default_factory=dict, init=False, repr=False)
 
     def project(self, role: str) -> LocalType:
         """Return the local type of ``role``.

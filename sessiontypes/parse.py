@@ -7,12 +7,16 @@ line, a caret, and what was expected in words (never lark's token names).
 
 from __future__ import annotations
 
+import bisect
+import re
 import threading
+from collections.abc import Iterator
 from importlib import resources
 from typing import Any
 
 import lark
 from lark import Token, Transformer
+from lark.lexer import Lexer
 
 from . import syntax as s
 from .errors import ProtocolSyntaxError
@@ -202,11 +206,58 @@ class _Builder(Transformer[Token, Any]):
         return tuple(_nodes(children))
 
 
+# One regular expression for every token; lark's general lexer is several times
+# slower and lexing dominated parse time. Names equal to a keyword are keywords.
+_TOKEN = re.compile(r"""
+    (?:\s+|//[^\n]*|/\*(?:[^*]|\*(?!/))*\*/)*    # skipped: white space, comments
+    (?:
+      (?P<NAME>[A-Za-z_][A-Za-z0-9_]*'*)
+    | (?P<STRING>"(?:[^"\\\n]|\\.)*")
+    | (?P<ARROW>->|→)
+    | (?P<PAR>\|\|)
+    | (?P<PUNCT>[(){},:.=;!?&+⊕μ⊥])
+    | (?P<BAD>.)
+    | \Z                                           # trailing skipped text
+    )
+""", re.VERBOSE | re.DOTALL)
+_PUNCTUATION = {
+    "(": "LPAR", ")": "RPAR", "{": "LBRACE", "}": "RBRACE", ",": "COMMA", ":": "COLON",
+    ".": "DOT", "=": "EQ", ";": "SEMI", "!": "BANG", "?": "QUERY", "&": "AMP", "+": "PLUS",
+    "⊕": "OPLUS", "μ": "MU_SYMBOL", "⊥": "BOTTOM",
+}
+_KEYWORD_TYPES = {"type": "TYPE", "global": "GLOBAL", "local": "LOCAL", "at": "AT",
+                  "mu": "MU", "rec": "REC", "end": "END"}
+
+
+class _FastLexer(Lexer):
+    """Tokens for the grammar's terminals; an unknown character becomes a BAD
+    token, which the parser rejects with the set of tokens it expected there."""
+
+    def __init__(self, lexer_conf: Any) -> None:
+        pass
+
+    def lex(self, data: str) -> Iterator[Token]:  # type: ignore[override]
+        newlines = [i for i, char in enumerate(data) if char == "\n"]
+        for match in _TOKEN.finditer(data):
+            kind = match.lastgroup
+            if kind is None:  # only skipped text was left
+                continue
+            start = match.start(kind)
+            value = match.group(kind)
+            if kind == "NAME":
+                kind = _KEYWORD_TYPES.get(value, "NAME")
+            elif kind == "PUNCT":
+                kind = _PUNCTUATION[value]
+            line = bisect.bisect_left(newlines, start)
+            line_start = newlines[line - 1] + 1 if line else 0
+            yield Token(kind, value, start, line + 1, start - line_start + 1)  # type: ignore[arg-type]
+
+
 _builder = _Builder()
 _parser = lark.Lark(
     resources.files(__package__).joinpath("grammar.lark").read_text(encoding="utf-8"),
     parser="lalr",
-    lexer="basic",
+    lexer=_FastLexer,
     transformer=_builder,
     maybe_placeholders=False,
 )
@@ -251,6 +302,21 @@ def _syntax_error(
 
     assert isinstance(error, lark.exceptions.UnexpectedToken), error
     token = error.token
+    # LALR's expected set may name tokens this exact spot cannot take; ask the parser.
+    try:
+        acceptable = set(error.interactive_parser.accepts()) or set(error.expected)
+    except Exception:  # defensive: fall back to LALR's own set
+        acceptable = set(error.expected)
+    if token.type == "BAD":
+        location = _location(path, token)
+        hint = ""
+        if text.startswith("/*", token.start_pos or 0):
+            got, hint = "'/*'", "this comment is never closed with '*/'"
+        elif str(token) == '"':
+            got, hint = "'\"'", "this string is never closed on its line"
+        else:
+            got = f"character {str(token)!r}"
+        return ProtocolSyntaxError(location, got, _describe(acceptable), line_of(location.line), hint)
     if token.type == "$END":
         last = len(lines) or 1
         location = Location(path, last, len(line_of(last)) + 1)
@@ -258,11 +324,6 @@ def _syntax_error(
     else:
         location = _location(path, token)
         got = f"'{token}'"
-    # LALR's expected set may name tokens this exact spot cannot take; ask the parser.
-    try:
-        acceptable = set(error.interactive_parser.accepts()) or set(error.expected)
-    except Exception:  # defensive: fall back to LALR's own set
-        acceptable = set(error.expected)
     return ProtocolSyntaxError(location, got, _describe(acceptable), line_of(location.line),
                                _hint(token, acceptable))
 

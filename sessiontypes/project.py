@@ -37,11 +37,16 @@ def project_global(global_type: g.GlobalType, role: str) -> lt.LocalType:
         UnknownRoleError: ``role`` is not one of ``global_type.roles``.
         ProjectionError: some choice's branches do not merge for ``role``.
     """
+    cached = global_type.cached_projections.get(role)
+    if cached is not None:
+        return cached
     if role not in global_type.roles:
         raise UnknownRoleError(global_type.name, role, global_type.roles)
     projector = _Projector(global_type.name, role, global_type.source_lines)
     body = run_deep(projector.project, global_type.body)
-    return lt.LocalType(role, role, body, global_type.name, global_type.location)
+    local = lt.LocalType(role, role, body, global_type.name, global_type.location)
+    global_type.cached_projections[role] = local
+    return local
 
 
 def project(term: g.GlobalTerm, role: str, protocol: str = "<global>") -> lt.LocalTerm:
@@ -57,6 +62,16 @@ class _Projector:
     _occurs: dict[int, bool] = field(default_factory=dict)
 
     def project(self, term: g.GlobalTerm) -> lt.LocalTerm:
+        role = self.role
+        # Fast path: most interactions of a large protocol do not involve the role.
+        while (isinstance(term, g.Choice) and len(term.branches) == 1
+               and term.sender != role and term.receiver != role):
+            term = term.branches[0].continuation
+        if isinstance(term, g.Choice) and len(term.branches) == 1:
+            only = term.branches[0]
+            make = lt.Send if term.sender == role else lt.Recv
+            peer = term.receiver if term.sender == role else term.sender
+            return make(peer, only.message, self.project(only.continuation), term.location)
         match term:
             case g.End(location=location):
                 return lt.End(location)
@@ -214,7 +229,7 @@ def _sort_name(message: Message) -> str:
 
 def _difference(left: lt.LocalTerm, right: lt.LocalTerm) -> str:
     kinds = {lt.Send: "a send", lt.Select: "a choice it makes", lt.Recv: "a receive",
-             lt.Offer: "a choice it receives", lt.End: "the end", lt.Var: "a loop back",
+             lt.Offer: "a choice it receives", lt.End: "end", lt.Var: "a loop back",
              lt.Parallel: "a parallel composition"}
     a, b = kinds.get(type(left), "?"), kinds.get(type(right), "?")
     if a == b:

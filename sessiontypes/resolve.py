@@ -194,7 +194,7 @@ def _resolve_g(walk: _Walk[s.GlobalDecl, g.GlobalTerm], node: s.GSyntax | None,
                 g.Branch(walk.sorts.message(b.message),
                          _resolve_g(walk, b.continuation, scope, depth + 1, parallel_depth),
                          b.message.label.location)
-                for b in branches), location)
+                for b in branches), location, receiver.location)
         case s.GRec(var=var, body=body, location=location):
             binder = _Binder(var.text, depth, parallel_depth, declaration=False)
             return g.Rec(var.text, _resolve_g(walk, body, scope + (binder,), depth, parallel_depth),
