@@ -26,9 +26,16 @@ class UsageError(Exception):
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status."""
     parser = _parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:  # argparse has printed the usage message
+        return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
     try:
         return int(args.run(args))
+    except BrokenPipeError:  # the reader went away (e.g. '| head'): stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_ERRORS
     except UsageError as error:
         print(f"anodize {args.command}: error: {error}", file=sys.stderr)
         return EXIT_USAGE
@@ -120,12 +127,26 @@ def _pick_globals(module: ProtocolModule, name: str | None) -> list[sessiontypes
     return [module.globals[name]]
 
 
+def _one_global(module: ProtocolModule, name: str | None) -> sessiontypes.GlobalType:
+    if name is None:
+        if not module.globals:
+            raise UsageError(f"{module.path} declares no global type")
+        if len(module.globals) > 1:
+            raise UsageError(f"{module.path} has {_count(len(module.globals), 'global')}; "
+                             f"choose one with --global ({', '.join(module.globals)})")
+    (chosen,) = _pick_globals(module, name)
+    return chosen
+
+
 def _project(args: argparse.Namespace) -> int:
     module = _load(args.file)
     chosen = _pick_globals(module, args.global_name)
-    if args.role and not any(args.role in gt.roles for gt in chosen):
-        roles = sorted({r for gt in chosen for r in gt.roles})
-        raise UsageError(f"no role {args.role} in {_names(chosen)}; expected one of {', '.join(roles)}")
+    if args.role:
+        if not any(args.role in gt.roles for gt in chosen):
+            roles = dict.fromkeys(r for gt in chosen for r in gt.roles)
+            raise UsageError(f"no role {args.role} in {_names(chosen)}; expected one of "
+                             f"{', '.join(roles)}")
+        chosen = [gt for gt in chosen if args.role in gt.roles]
     lines: list[str] = []
     for gt in chosen:
         if len(chosen) > 1:
@@ -133,7 +154,8 @@ def _project(args: argparse.Namespace) -> int:
         for role in gt.roles:
             if args.role is None or role == args.role:
                 lines.append(f"{role} = {gt.project(role)}")
-    print("\n".join(lines))
+    if lines:
+        print("\n".join(lines))
     return EXIT_OK
 
 
@@ -149,10 +171,7 @@ def _fsm(args: argparse.Namespace) -> int:
                              f"{', '.join(module.locals) or '(none)'}")
         machine = module.locals[args.local_name].fsm()
     else:
-        if args.global_name is None and len(module.globals) != 1:
-            raise UsageError(f"{args.file} has {_count(len(module.globals), 'global')}; "
-                             f"choose one with --global ({', '.join(module.globals)})")
-        (gt,) = _pick_globals(module, args.global_name)
+        gt = _one_global(module, args.global_name)
         if args.role is None:
             raise UsageError(f"choose a role with --role ({', '.join(gt.roles)})")
         if args.role not in gt.roles:
@@ -167,10 +186,7 @@ def _graph(args: argparse.Namespace) -> int:
     from sessiontypes.graph import communication_graph, graph_to_dot
 
     module = _load(args.file)
-    if args.global_name is None and len(module.globals) != 1:
-        raise UsageError(f"{args.file} has {_count(len(module.globals), 'global')}; "
-                         f"choose one with --global ({', '.join(module.globals)})")
-    (gt,) = _pick_globals(module, args.global_name)
+    gt = _one_global(module, args.global_name)
     out = Path(args.output)
     suffix = out.suffix.lower()
     if suffix not in {".dot", ".png", ".svg"}:

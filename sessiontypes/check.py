@@ -137,17 +137,16 @@ def _roles_in_order(term: g.GlobalTerm) -> dict[str, Location]:
     found: dict[str, Location] = {}
 
     def visit(node: g.GlobalTerm) -> None:
-        while True:
+        while True:  # a loop along sequences: they can be very long
             match node:
                 case g.Choice(sender=sender, receiver=receiver, branches=branches):
                     found.setdefault(sender, node.location)
                     found.setdefault(receiver, node.receiver_location)
-                    for branch in branches[1:]:
-                        visit(branch.continuation)
-                    node = branches[0].continuation
-                    if len(branches) > 1:  # keep source order: first branch before the others
-                        visit(node)
+                    if len(branches) > 1:
+                        for branch in branches:
+                            visit(branch.continuation)
                         return
+                    node = branches[0].continuation
                 case g.Rec(body=body):
                     node = body
                 case g.Parallel(branches=parts):

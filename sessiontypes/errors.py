@@ -88,9 +88,10 @@ class ProtocolSyntaxError(ProtocolError):
     @property
     def message(self) -> str:
         """The error text without the location and caret."""
-        text = f"unexpected {self.got}"
+        text = "syntax error"
         if self.expected:
             text += f"; expected {_one_of(self.expected)}"
+        text += f", got {self.got}"
         if self.hint:
             text += f" ({self.hint})"
         return text
@@ -106,6 +107,8 @@ class ProtocolSyntaxError(ProtocolError):
 class ProtocolCheckError(ProtocolError):
     """Raised when protocol text parses but is not well formed.
 
+    ``str()`` shows every diagnostic, warnings included, in source order.
+
     Attributes:
         diagnostics: every error found (and any warnings), in source order.
     """
@@ -119,7 +122,7 @@ class ProtocolCheckError(ProtocolError):
         return tuple(d for d in self.diagnostics if d.severity == "error")
 
     def __str__(self) -> str:
-        return "\n".join(str(d) for d in self.errors)
+        return "\n".join(str(d) for d in self.diagnostics)
 
 
 class ProjectionError(ProtocolError):

@@ -147,7 +147,8 @@ class StateMachine:
 
 def build_state_machine(local_type: lt.LocalType) -> StateMachine:
     """Compile a named local type to its state machine."""
-    return build_term_machine(local_type.body, local_type.role, local_type.protocol)
+    # A 'local' declaration has no protocol; its own name identifies the machine.
+    return build_term_machine(local_type.body, local_type.role, local_type.protocol or local_type.name)
 
 
 def build_term_machine(term: lt.LocalTerm, role: str | None = None, protocol: str = "") -> StateMachine:

@@ -335,6 +335,8 @@ def _describe(terminals: Any) -> list[str]:
 
 def _hint(token: Token, expected: set[str]) -> str:
     """A sentence for mistakes people make often, else ""."""
+    if token.type in {"TYPE", "GLOBAL", "LOCAL"} and "MU" in expected:
+        return "the declaration before it is incomplete"
     if token.type in _KEYWORDS and "NAME" in expected:
         return f"'{token}' is a keyword and cannot be a name"
     if token.type == "NAME" and expected <= {"TYPE", "GLOBAL", "LOCAL", "SEMI", "$END"}:

@@ -22,7 +22,9 @@ def print_message(message: Message) -> str:
     """``Sort``, ``label(Sort)`` or ``label``."""
     if message.sort is None:
         # 'int' alone would read back as label int carrying an int.
-        return f"{message.label}()" if message.label in BUILTIN_SORTS else message.label
+        if message.empty_parens or message.label in BUILTIN_SORTS:
+            return f"{message.label}()"
+        return message.label
     if message.label == message.sort.spelling:
         return message.label
     return f"{message.label}({message.sort.spelling})"

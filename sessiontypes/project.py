@@ -78,12 +78,11 @@ class _Projector:
             case g.Var(name=name, location=location):
                 return lt.Var(name, location)
             case g.Rec(var=var, body=body, location=location):
+                if not self.occurs(body):
+                    return self._absent_loop(term)
                 projected = self.project(body)
                 if isinstance(projected, lt.Var) and projected.name == var:
                     return lt.End(location)
-                if not self.occurs(body):
-                    # Only 'end' or an outer loop's variable can remain here.
-                    return projected
                 return lt.Rec(var, projected, location)
             case g.Parallel(branches=branches, location=location):
                 kept = tuple(p for p in (self.project(b) for b in branches)
@@ -132,6 +131,63 @@ class _Projector:
             self.protocol, self.role, location,
             (branches[other].message.label, branches[index].message.label),
             str(projections[other]), str(projections[index]), reason, line)
+
+    def _absent_loop(self, loop: g.Rec) -> lt.LocalTerm:
+        """Project a loop the role takes no part in.
+
+        For the role the loop is silent; what matters is where it can leave to:
+        ``end``, or an outer loop's variable (then the role goes on with that
+        loop; answering ``end`` would cut the outer loop short). If it can leave
+        to two different places the role cannot tell which, and the type is not
+        projectable.
+        """
+        exits: dict[str, g.Choice | None] = {}
+        self._collect_exits(loop.body, frozenset((loop.var,)), None, exits)
+        if len(exits) > 1:
+            raise self._blame_exits(loop, exits)
+        if not exits or "end" in exits:
+            return lt.End(loop.location)
+        (name,) = exits
+        return lt.Var(name, loop.location)
+
+    def _collect_exits(self, term: g.GlobalTerm, bound: frozenset[str], choice: g.Choice | None,
+                       exits: dict[str, g.Choice | None]) -> None:
+        while True:
+            match term:
+                case g.End() | g.Parallel():  # a parallel composition ends when its branches do
+                    exits.setdefault("end", choice)
+                    return
+                case g.Var(name=name):
+                    if name not in bound:
+                        exits.setdefault(name, choice)
+                    return
+                case g.Rec(var=var, body=body):
+                    bound, term = bound | {var}, body
+                case g.Choice(branches=branches):
+                    if len(branches) > 1:
+                        for branch in branches:
+                            self._collect_exits(branch.continuation, bound, term, exits)
+                        return
+                    term = branches[0].continuation
+                case _:
+                    raise AssertionError(f"unexpected global term {term!r}")
+
+    def _blame_exits(self, loop: g.Rec, exits: dict[str, g.Choice | None]) -> ProjectionError:
+        (first, _), (second, choice) = list(exits.items())[:2]
+        location = choice.location if choice else loop.location
+        labels = ("?", "?")
+        if choice is not None:  # name the branches of the choice that leads to each exit
+            labels = tuple(next((b.message.label for b in choice.branches
+                                 if self._leads_to(b.continuation, name)), "?")
+                           for name in (first, second))  # type: ignore[assignment]
+        line = self.source_lines[location.line - 1] if 0 < location.line <= len(self.source_lines) else ""
+        return ProjectionError(self.protocol, self.role, location, labels, first, second,
+                               f"{self.role} takes no part in the loop and cannot tell how it ends", line)
+
+    def _leads_to(self, term: g.GlobalTerm, exit_name: str) -> bool:
+        found: dict[str, g.Choice | None] = {}
+        self._collect_exits(term, frozenset(), None, found)
+        return exit_name in found
 
     def occurs(self, term: g.GlobalTerm) -> bool:
         """Whether the role sends or receives anywhere in ``term``."""

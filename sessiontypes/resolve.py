@@ -81,8 +81,9 @@ class SortTable:
     def message(self, syntax: s.MessageSyntax) -> Message:
         """Apply the abbreviation rule: a bare sort name labels a value of that sort."""
         if syntax.parens:
-            sort = self.sort(syntax.sort) if syntax.sort else None
-            return Message(syntax.label.text, sort)
+            if syntax.sort is None:
+                return Message(syntax.label.text, None, self.is_sort(syntax.label.text))
+            return Message(syntax.label.text, self.sort(syntax.sort))
         if self.is_sort(syntax.label.text):
             return Message(syntax.label.text, self.sort(syntax.label))
         return Message(syntax.label.text)
@@ -99,6 +100,15 @@ class _Binder:
     depth: int           # interactions on the path when bound (guardedness)
     parallel_depth: int  # parallel compositions on the path when bound
     declaration: bool
+    visible: bool = True  # False: a mu variable of a body that inlined another declaration
+
+
+class _Capture(Exception):
+    """Internal: a declaration reference would be captured by the mu variable ``name``."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.name = name
 
 
 Syntax = TypeVar("Syntax")
@@ -118,10 +128,21 @@ class _Walk(Generic[Syntax, Term]):
 
     def lookup(self, name: s.Name, scope: tuple[_Binder, ...], depth: int,
                parallel_depth: int) -> _Binder | None | str:
-        """The binder of ``name``, or "decl" for a declaration to inline, or None (reported)."""
+        """The binder of ``name``, or "decl" for a declaration to inline, or None (reported).
+
+        Raises:
+            _Capture: ``name`` means an enclosing declaration, but a ``mu`` of the
+                referring body with the same name sits in between.
+        """
+        hidden = False
         for binder in reversed(scope):
             if binder.name != name.text:
                 continue
+            if not binder.visible:
+                hidden = True
+                continue
+            if hidden:
+                raise _Capture(name.text)
             if binder.parallel_depth < parallel_depth:
                 self.reporter.error(name.location, f"recursion variable '{name.text}' is used inside "
                                     "a parallel composition it encloses")
@@ -154,18 +175,36 @@ def _inline(walk: _Walk[Syntax, Term], name: s.Name, scope: tuple[_Binder, ...],
             uses: Callable[[Term, str], bool]) -> Term:
     """Expand a reference to a declaration in place (equation-style recursion)."""
     decl = walk.declarations[name.text]
-    # Only the declarations being expanded stay in scope: the referenced body
-    # cannot see the referring body's mu variables.
-    visible = tuple(b for b in scope if b.declaration)
-    for binder in scope:
-        if not binder.declaration and any(v.name == binder.name for v in visible):
-            walk.reporter.error(name.location, f"mu variable '{binder.name}' hides the declaration "
-                                f"'{binder.name}' that '{name.text}' recurs to; rename the variable")
+    # The referenced body cannot see the referring body's mu variables; they stay
+    # in the scope, hidden, so that a capture of a declaration name is noticed.
+    visible = tuple(b if b.declaration else _Binder(b.name, b.depth, b.parallel_depth, False, False)
+                    for b in scope)
     binder = _Binder(name.text, depth, parallel_depth, declaration=True)
     body = resolve(body_of(decl), visible + (binder,), depth, parallel_depth)
     if uses(body, name.text):
         return make_rec(name.text, body, name.location)
     return body
+
+
+def _with_mu(walk: _Walk[Syntax, Term], var: str, scope: tuple[_Binder, ...], depth: int,
+             parallel_depth: int, build: Callable[[str, tuple[_Binder, ...]], Term]) -> Term:
+    """Resolve a ``mu var.`` body; rename ``var`` if it would capture a declaration name.
+
+    Renaming happens only when an inlined declaration refers, through ``var``'s
+    name, to an enclosing declaration; otherwise the written name is kept.
+    """
+    name = var
+    while True:
+        mark = len(walk.reporter.diagnostics)
+        try:
+            return build(name, scope + (_Binder(name, depth, parallel_depth, False),))
+        except _Capture as capture:
+            if capture.name != name:
+                raise
+            del walk.reporter.diagnostics[mark:]
+            taken = {b.name for b in scope} | set(walk.declarations)
+            while name in taken:
+                name += "'"
 
 
 # ---- global ------------------------------------------------------------------------
@@ -196,9 +235,9 @@ def _resolve_g(walk: _Walk[s.GlobalDecl, g.GlobalTerm], node: s.GSyntax | None,
                          b.message.label.location)
                 for b in branches), location, receiver.location)
         case s.GRec(var=var, body=body, location=location):
-            binder = _Binder(var.text, depth, parallel_depth, declaration=False)
-            return g.Rec(var.text, _resolve_g(walk, body, scope + (binder,), depth, parallel_depth),
-                         location)
+            return _with_mu(walk, var.text, scope, depth, parallel_depth,
+                            lambda name, inner: g.Rec(name, _resolve_g(walk, body, inner, depth,
+                                                                        parallel_depth), location))
         case s.GParallel(branches=branches, location=location):
             return g.Parallel(tuple(_resolve_g(walk, b, scope, depth, parallel_depth + 1)
                                     for b in branches), location)
@@ -266,9 +305,9 @@ def _resolve_l(walk: _Walk[s.LocalDecl, lt.LocalTerm], node: s.LSyntax | None,
             make_choice = lt.select if kind == "+" else lt.offer
             return make_choice(peer.text if peer else None, resolved_branches, location)
         case s.LRec(var=var, body=body, location=location):
-            binder = _Binder(var.text, depth, parallel_depth, declaration=False)
-            return lt.Rec(var.text, _resolve_l(walk, body, scope + (binder,), depth, parallel_depth),
-                          location)
+            return _with_mu(walk, var.text, scope, depth, parallel_depth,
+                            lambda name, inner: lt.Rec(name, _resolve_l(walk, body, inner, depth,
+                                                                         parallel_depth), location))
         case s.LParallel(branches=branches, location=location):
             return lt.Parallel(tuple(_resolve_l(walk, b, scope, depth, parallel_depth + 1)
                                      for b in branches), location)

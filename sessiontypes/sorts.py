@@ -48,7 +48,13 @@ def builtin_sort(spelling: str) -> Sort:
 
 @dataclass(frozen=True, slots=True)
 class Message:
-    """A label and the sort of the value it carries (``None``: no payload)."""
+    """A label and the sort of the value it carries (``None``: no payload).
+
+    ``empty_parens`` records that a payload-less label was written ``label()``
+    because its name is a sort's; the printer keeps the parentheses so the
+    text reads back the same. It is not part of equality.
+    """
 
     label: str
     sort: Sort | None = None
+    empty_parens: bool = field(default=False, compare=False)
