@@ -1,0 +1,356 @@
+"""The ``anodize`` command line: check, project, fsm, graph.
+
+Most tests run :func:`anodize.cli.main` in-process from the repository root
+(paths in messages are then relative, as a user would type them); one runs
+the installed command in a subprocess.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import pytest
+
+from anodize.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+CORPUS = REPO / "tests" / "sessiontypes" / "corpus"
+PROTOCOLS = sorted(p.relative_to(REPO).as_posix() for p in (REPO / "protocols").glob("*.proto"))
+
+FIG_17 = """\
+Joy = mu t.!Control(Joy).t
+Control = mu t.?Joy(Joy).!Move(Twist).t
+Camera = mu t.!VisOdom(Image).t
+VisOdom = mu t.?Camera(Image).!Visualizer(Pose).!Planner(Pose).t
+Visualizer = mu t.?VisOdom(Pose).t
+Planner = mu t.?VisOdom(Pose).!Move(Path).t
+Move = mu t.?Control(Twist).?Planner(Path).!Gazebo(Twist).t
+Gazebo = mu t.?Move(Twist).t
+"""
+
+TINMAN_ROLES = "Joy, Control, Camera, VisOdom, Visualizer, Planner, Move, Gazebo"
+
+
+@pytest.fixture(autouse=True)
+def _from_repo_root(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(REPO)
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    """Run the CLI in-process; return (exit status, stdout, stderr)."""
+    try:
+        status = main(list(argv))
+    except SystemExit as exit_:  # argparse exits on usage errors
+        status = exit_.code if isinstance(exit_.code, int) else 1
+    out, err = capsys.readouterr()
+    assert "Traceback" not in err
+    return status, out, err
+
+
+# ---- check ---------------------------------------------------------------------------
+
+def test_check_shipped_protocols(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, err = run(capsys, "check", *PROTOCOLS)
+    assert (status, err) == (0, "")
+    assert out.splitlines() == [f"{path}: ok ({_counts(path)})" for path in PROTOCOLS]
+
+
+def _counts(path: str) -> str:
+    import sessiontypes
+
+    module = sessiontypes.load(path)
+    globals_, locals_ = len(module.globals), len(module.locals)
+    return f"{globals_} global{'' if globals_ == 1 else 's'}, {locals_} local{'' if locals_ == 1 else 's'}"
+
+
+def test_check_summary_line(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(capsys, "check", "protocols/atm.proto", "protocols/ring.proto") == (
+        0, "protocols/atm.proto: ok (1 global, 2 locals)\nprotocols/ring.proto: ok (2 globals, 0 locals)\n", "")
+
+
+@pytest.mark.parametrize("proto", sorted((CORPUS / "bad").glob("*.proto")), ids=lambda p: p.stem)
+def test_check_bad_corpus_prints_the_expected_message(
+        capsys: pytest.CaptureFixture[str], proto: Path) -> None:
+    relative = proto.relative_to(REPO).as_posix()
+    expected = proto.with_suffix(".expected").read_text(encoding="utf-8")
+    assert run(capsys, "check", relative) == (1, "", expected)
+
+
+@pytest.mark.parametrize("proto", sorted((CORPUS / "good").glob("*.proto")), ids=lambda p: p.stem)
+def test_check_good_corpus(capsys: pytest.CaptureFixture[str], proto: Path) -> None:
+    relative = proto.relative_to(REPO).as_posix()
+    status, out, err = run(capsys, "check", relative)
+    assert (status, err) == (0, "")
+    assert out.startswith(f"{relative}: ok (")
+
+
+def test_check_reports_every_file_and_fails_if_one_is_bad(capsys: pytest.CaptureFixture[str]) -> None:
+    bad = "tests/sessiontypes/corpus/bad/self_send.proto"
+    status, out, err = run(capsys, "check", "protocols/ring.proto", bad, "protocols/atm.proto")
+    assert status == 1
+    assert out == ("protocols/ring.proto: ok (2 globals, 0 locals)\n"
+                   "protocols/atm.proto: ok (1 global, 2 locals)\n")
+    assert err == (CORPUS / "bad" / "self_send.expected").read_text(encoding="utf-8")
+
+
+def test_unused_type_is_a_warning_and_exit_status_stays_zero(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    proto = tmp_path / "w.proto"
+    proto.write_text('type Unused = "m:Unused"\nglobal P = A -> B : x\n', encoding="utf-8")
+    assert run(capsys, "check", str(proto)) == (
+        0,
+        f"{proto}: ok (1 global, 0 locals)\n",
+        f"{proto}:1:6: warning: type Unused is declared but never used\n"
+        '    type Unused = "m:Unused"\n'
+        "         ^\n",
+    )
+    status, out, err = run(capsys, "project", str(proto))
+    assert (status, out) == (0, "A = !B(x)\nB = ?A(x)\n")
+    assert "warning: type Unused is declared but never used" in err
+
+
+def test_missing_file_is_one_line_and_exit_1(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(capsys, "check", "no/such.proto") == (1, "", "error: no/such.proto: No such file or directory\n")
+    assert run(capsys, "project", "no/such.proto") == (1, "", "error: no/such.proto: No such file or directory\n")
+    status, out, err = run(capsys, "fsm", "no/such.proto", "--role", "A")
+    assert (status, out, err.count("\n")) == (1, "", 1)
+    status, out, err = run(capsys, "graph", "no/such.proto", "-o", "x.dot")
+    assert (status, out, err.count("\n")) == (1, "", 1)
+
+
+def test_a_directory_is_not_a_protocol_file(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, err = run(capsys, "check", "protocols")
+    assert (status, out, err.count("\n")) == (1, "", 1)
+    assert err.startswith("error: protocols: ")
+
+
+def test_a_syntax_error_in_project_exits_1(capsys: pytest.CaptureFixture[str]) -> None:
+    proto = CORPUS / "bad" / "syntax_missing_colon.proto"
+    relative = proto.relative_to(REPO).as_posix()
+    assert run(capsys, "project", relative) == (1, "", proto.with_suffix(".expected").read_text(encoding="utf-8"))
+
+
+# ---- project -------------------------------------------------------------------------
+
+def test_project_tinman_prints_figure_17(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(capsys, "project", "protocols/tinman.proto", "--global", "TinMan") == (0, FIG_17, "")
+
+
+def test_project_several_globals_print_headers(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(capsys, "project", "protocols/ring.proto") == (0, """\
+# Ring
+A = mu t.!B(token(int)).?D(token(int)).t
+B = mu t.?A(token(int)).!C(token(int)).t
+C = mu t.?B(token(int)).!D(token(int)).t
+D = mu t.?C(token(int)).!A(token(int)).t
+# RingStop
+A = mu t.+B{token(int).?D(token(int)).t, stop}
+B = mu t.&A{token(int).!C(token(int)).t, stop.!C(stop)}
+C = mu t.&B{token(int).!D(token(int)).t, stop.!D(stop)}
+D = mu t.&C{token(int).!A(token(int)).t, stop}
+""", "")
+
+
+def test_project_one_global_has_no_header(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(capsys, "project", "protocols/two_buyer.proto") == (0, """\
+B1 = !S(title(str)).?S(quote(int)).!B2(share(int))
+B2 = ?S(quote(int)).?B1(share(int)).+S{ok(str).?S(date(str)), quit}
+S = ?B1(title(str)).!B1(quote(int)).!B2(quote(int)).&B2{ok(str).!B2(date(str)), quit}
+""", "")
+
+
+def test_project_role_filter(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(capsys, "project", "protocols/tinman.proto", "--global", "TinManParallel", "--role", "Move") == (
+        0, "Move = (mu c.?Control(Twist).!Gazebo(Twist).c || mu p.?Planner(Path).p)\n", "")
+    assert run(capsys, "project", "protocols/ring.proto", "--role", "B") == (0, """\
+# Ring
+B = mu t.?A(token(int)).!C(token(int)).t
+# RingStop
+B = mu t.&A{token(int).!C(token(int)).t, stop.!C(stop)}
+""", "")
+
+
+def test_project_unknown_global_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(capsys, "project", "protocols/tinman.proto", "--global", "Nope") == (
+        2, "", "anodize project: error: no global Nope in protocols/tinman.proto; "
+               "expected one of TinMan, TinManParallel\n")
+
+
+def test_project_unknown_role_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+    # The role list fixes the role order for everything that lists roles.
+    assert run(capsys, "project", "protocols/tinman.proto", "--global", "TinMan", "--role", "Nobody") == (
+        2, "", f"anodize project: error: no role Nobody in global TinMan; expected one of {TINMAN_ROLES}\n")
+
+
+# ---- fsm -----------------------------------------------------------------------------
+
+def test_fsm_json(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, err = run(capsys, "fsm", "protocols/stream.proto", "--global", "Stream", "--role", "P",
+                           "--format", "json")
+    assert (status, err) == (0, "")
+    machine = json.loads(out)
+    assert (machine["role"], machine["protocol"], machine["initial"]) == ("P", "Stream", 0)
+    states = {state["id"]: state for state in machine["states"]}
+    assert set(states) == {0, 1}
+    assert states[0]["final"] is False and states[1]["final"] is True
+    assert states[0]["type"] == "+C{data(int).t, stop}"
+    assert [(t["action"], t["peer"], t["label"], t["sort"], t["target"]) for t in states[0]["transitions"]] == [
+        ("send", "C", "data", "int", 0),
+        ("send", "C", "stop", None, 1),
+    ]
+    assert states[0]["transitions"][0]["location"] == "protocols/stream.proto:11:9"
+    assert states[1]["transitions"] == []
+
+
+def test_fsm_dot_is_the_default(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, err = run(capsys, "fsm", "protocols/stream.proto", "--global", "Stream", "--role", "C")
+    assert (status, err) == (0, "")
+    assert out.startswith('digraph "Stream C" {\n')
+    assert out.rstrip().endswith("}")
+    assert '[label="?P(data(int))"]' in out
+    assert run(capsys, "fsm", "protocols/stream.proto", "--global", "Stream", "--role", "C",
+               "--format", "dot")[1] == out
+
+
+def test_fsm_global_optional_when_the_file_has_one(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, _ = run(capsys, "fsm", "protocols/two_buyer.proto", "--role", "B2", "--format", "json")
+    assert status == 0
+    assert json.loads(out)["protocol"] == "TwoBuyer"
+
+
+def test_fsm_of_a_parallel_role_has_a_fork(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, _ = run(capsys, "fsm", "protocols/tinman.proto", "--global", "TinManParallel",
+                         "--role", "Move", "--format", "json")
+    assert status == 0
+    machine = json.loads(out)
+    forks = [state["fork"] for state in machine["states"] if "fork" in state]
+    assert len(forks) == 1 and len(forks[0]) == 2
+
+
+def test_fsm_of_a_local_declaration(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, err = run(capsys, "fsm", "protocols/atm.proto", "--local", "ATM", "--format", "json")
+    assert (status, err) == (0, "")
+    machine = json.loads(out)
+    first = machine["states"][machine["initial"]]
+    assert [(t["action"], t["peer"], t["label"], t["sort"]) for t in first["transitions"]] == [
+        ("recv", None, "Int", "Int")]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["fsm", "protocols/tinman.proto", "--global", "TinMan"],
+     f"anodize fsm: error: choose a role with --role ({TINMAN_ROLES})"),
+    (["fsm", "protocols/tinman.proto", "--role", "Joy"],
+     "anodize fsm: error: protocols/tinman.proto has 2 globals; choose one with --global "
+     "(TinMan, TinManParallel)"),
+    (["fsm", "protocols/tinman.proto", "--global", "TinMan", "--role", "X"],
+     f"anodize fsm: error: no role X in global TinMan; expected one of {TINMAN_ROLES}"),
+    (["fsm", "protocols/tinman.proto", "--global", "Nope", "--role", "Joy"],
+     "anodize fsm: error: no global Nope in protocols/tinman.proto; expected one of TinMan, TinManParallel"),
+    (["fsm", "protocols/atm.proto", "--local", "Nope"],
+     "anodize fsm: error: no local Nope in protocols/atm.proto; expected one of ATM, ATM'"),
+    (["graph", "protocols/tinman.proto", "-o", "x.png"],
+     "anodize graph: error: protocols/tinman.proto has 2 globals; choose one with --global "
+     "(TinMan, TinManParallel)"),
+    (["graph", "protocols/two_buyer.proto", "--global", "Nope", "-o", "x.png"],
+     "anodize graph: error: no global Nope in protocols/two_buyer.proto; expected one of TwoBuyer"),
+])
+def test_usage_errors_name_the_choices(capsys: pytest.CaptureFixture[str], argv: list[str],
+                                       message: str) -> None:
+    assert run(capsys, *argv) == (2, "", message + "\n")
+
+
+# ---- graph ---------------------------------------------------------------------------
+
+def test_graph_dot(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    out_file = tmp_path / "g.dot"
+    assert run(capsys, "graph", "protocols/two_buyer.proto", "-o", str(out_file)) == (0, f"wrote {out_file}\n", "")
+    assert out_file.read_text(encoding="utf-8") == """\
+digraph "TwoBuyer" {
+  "B1" [shape="box", style="rounded"];
+  "B2" [shape="box", style="rounded"];
+  "S" [shape="box", style="rounded"];
+  "B1" -> "S" [label="title(str)"];
+  "B1" -> "B2" [label="share(int)"];
+  "B2" -> "S" [label="ok(str), quit"];
+  "S" -> "B1" [label="quote(int)"];
+  "S" -> "B2" [label="quote(int), date(str)"];
+}
+"""
+
+
+def test_graph_png_and_svg(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    png, svg = tmp_path / "g.png", tmp_path / "g.svg"
+    assert run(capsys, "graph", "protocols/ring.proto", "--global", "Ring", "-o", str(png)) == (
+        0, f"wrote {png}\n", "")
+    assert png.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
+    assert run(capsys, "graph", "protocols/ring.proto", "--global", "Ring", "-o", str(svg))[0] == 0
+    assert b"<svg" in svg.read_bytes()[:2000]
+
+
+def test_graph_bad_suffix_is_a_usage_error(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    out_file = tmp_path / "g.txt"
+    assert run(capsys, "graph", "protocols/two_buyer.proto", "-o", str(out_file)) == (
+        2, "", f"anodize graph: error: cannot write {out_file}: expected a name ending in .dot, .png or .svg\n")
+    assert not out_file.exists()
+
+
+def test_graph_into_a_missing_directory_exits_1(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    out_file = tmp_path / "missing" / "g.dot"
+    assert run(capsys, "graph", "protocols/two_buyer.proto", "-o", str(out_file)) == (
+        1, "", f"error: {out_file}: No such file or directory\n")
+
+
+# ---- argparse usage errors -------------------------------------------------------------
+
+@pytest.mark.parametrize("argv", [
+    [],
+    ["frobnicate"],
+    ["check"],
+    ["project"],
+    ["fsm"],
+    ["graph", "protocols/ring.proto"],
+    ["fsm", "protocols/stream.proto", "--global", "Stream", "--role", "P", "--format", "xml"],
+    ["project", "protocols/ring.proto", "--bogus"],
+])
+def test_missing_or_bad_arguments_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    status, out, err = run(capsys, *argv)
+    assert (status, out) == (2, "")
+    assert err.startswith("usage: anodize")
+    assert "error: " in err
+
+
+# ---- the installed command -------------------------------------------------------------
+
+def _command() -> Sequence[str]:
+    script = Path(sys.executable).parent / "anodize"
+    return [str(script)] if script.exists() else [sys.executable, "-m", "anodize.cli"]
+
+
+def test_installed_command_in_a_subprocess() -> None:
+    env = {**os.environ, "PYTHONIOENCODING": "utf-8"}
+    env.pop("ANODIZE_DEBUG", None)
+    done = subprocess.run([*_command(), "check", *PROTOCOLS], cwd=REPO, capture_output=True,
+                          text=True, env=env, timeout=60)
+    assert (done.returncode, done.stderr) == (0, "")
+    assert len(done.stdout.splitlines()) == len(PROTOCOLS)
+
+    done = subprocess.run([*_command(), "project", "protocols/tinman.proto", "--global", "TinMan"],
+                          cwd=REPO, capture_output=True, text=True, env=env, timeout=60)
+    assert (done.returncode, done.stdout, done.stderr) == (0, FIG_17, "")
+
+    bad = "tests/sessiontypes/corpus/bad/several_errors.proto"
+    done = subprocess.run([*_command(), "check", bad, "no/such.proto"], cwd=REPO, capture_output=True,
+                          text=True, env=env, timeout=60)
+    assert done.returncode == 1
+    assert "Traceback" not in done.stderr
+    assert done.stderr.endswith("error: no/such.proto: No such file or directory\n")
+
+    done = subprocess.run([*_command(), "project"], cwd=REPO, capture_output=True, text=True, env=env,
+                          timeout=60)
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr
