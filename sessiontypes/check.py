@@ -86,7 +86,7 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
 
     diagnostics = _sorted_unique(reporter.diagnostics)
     module = ProtocolModule(source.path, global_types, local_types, sorts.defined(),
-                            tuple(d for d in diagnostics if d.severity == "warning"))
+                            tuple([d for d in diagnostics if d.severity == "warning"]))
     return module, diagnostics
 
 
@@ -170,7 +170,7 @@ def _channels(term: g.GlobalTerm) -> set[tuple[str, str]]:
         case g.Rec(body=body):
             return _channels(body)
         case g.Parallel(branches=parts):
-            return set().union(*(_channels(p) for p in parts))
+            return set().union(*([_channels(p) for p in parts]))
     return set()
 
 
@@ -206,11 +206,11 @@ def _local_channels(term: lt.LocalTerm) -> set[tuple[str, str]]:
             return {("?", peer or "")} | _local_channels(cont)
         case lt.Select(peer=peer, branches=branches) | lt.Offer(peer=peer, branches=branches):
             arrow = "!" if isinstance(term, lt.Select) else "?"
-            return {(arrow, peer or "")}.union(*(_local_channels(b.continuation) for b in branches))
+            return {(arrow, peer or "")}.union(*([_local_channels(b.continuation) for b in branches]))
         case lt.Rec(body=body):
             return _local_channels(body)
         case lt.Parallel(branches=parts):
-            return set().union(*(_local_channels(p) for p in parts))
+            return set().union(*([_local_channels(p) for p in parts]))
     return set()
 
 
@@ -247,7 +247,7 @@ def _check_projectable(global_type: g.GlobalType, reporter: Reporter) -> None:
 
 
 def _has_error(diagnostics: Iterable[Diagnostic]) -> bool:
-    return any(d.severity == "error" for d in diagnostics)
+    return any([d.severity == "error" for d in diagnostics])
 
 
 def _sorted_unique(diagnostics: list[Diagnostic]) -> list[Diagnostic]:

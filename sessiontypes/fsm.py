@@ -223,7 +223,7 @@ class _Builder:
                     self.add(state, action, peer, b.message.label, b.message.sort,
                              self.state_of(b.continuation, env), b.location)
             case lt.Parallel(branches=parts):
-                self.forks[state] = tuple(_Builder(self.role, self.protocol).build(p) for p in parts)
+                self.forks[state] = tuple([_Builder(self.role, self.protocol).build(p) for p in parts])
             case _:
                 raise AssertionError(f"unexpected local term {term!r}")
 

@@ -72,10 +72,10 @@ def _local(term: lt.LocalTerm) -> str:
             tail = f"mu {var}.{_local(body)}"
         case lt.Select(peer=peer, branches=branches) | lt.Offer(peer=peer, branches=branches):
             symbol = "+" if isinstance(term, lt.Select) else "&"
-            inner = ", ".join(_local_branch(b) for b in branches)
+            inner = ", ".join([_local_branch(b) for b in branches])
             tail = f"{symbol}{peer or ''}{{{inner}}}"
         case lt.Parallel(branches=branches):
-            tail = "(" + " || ".join(_local(b) for b in branches) + ")"
+            tail = "(" + " || ".join([_local(b) for b in branches]) + ")"
         case _:
             raise AssertionError(f"unexpected local term {term!r}")
     parts.append(tail)
@@ -105,10 +105,10 @@ def _global(term: g.GlobalTerm) -> str:
         case g.Rec(var=var, body=body):
             tail = f"mu {var}.{_global(body)}"
         case g.Choice(sender=sender, receiver=receiver, branches=branches):
-            inner = ", ".join(_global_branch(b) for b in branches)
+            inner = ", ".join([_global_branch(b) for b in branches])
             tail = f"{sender}->{receiver}:{{{inner}}}"
         case g.Parallel(branches=branches):
-            tail = "(" + " || ".join(_global(b) for b in branches) + ")"
+            tail = "(" + " || ".join([_global(b) for b in branches]) + ")"
         case _:
             raise AssertionError(f"unexpected global term {term!r}")
     parts.append(tail)

@@ -85,8 +85,8 @@ class _Projector:
                     return lt.End(location)
                 return lt.Rec(var, projected, location)
             case g.Parallel(branches=branches, location=location):
-                kept = tuple(p for p in (self.project(b) for b in branches)
-                             if not isinstance(p, lt.End))
+                kept = tuple([p for p in ([self.project(b) for b in branches])
+                             if not isinstance(p, lt.End)])
                 if not kept:
                     return lt.End(location)
                 return kept[0] if len(kept) == 1 else lt.Parallel(kept, location)
@@ -101,7 +101,7 @@ class _Projector:
         raise AssertionError(f"unexpected global term {term!r}")
 
     def _branches(self, branches: tuple[g.Branch, ...], location: Location) -> tuple[lt.Branch, ...]:
-        return tuple(lt.Branch(b.message, self.project(b.continuation), location) for b in branches)
+        return tuple([lt.Branch(b.message, self.project(b.continuation), location) for b in branches])
 
     def _merge_branches(self, branches: tuple[g.Branch, ...], location: Location) -> lt.LocalTerm:
         projections = [self.project(b.continuation) for b in branches]
@@ -142,7 +142,7 @@ class _Projector:
         projectable.
         """
         exits: dict[str, g.Choice | None] = {}
-        self._collect_exits(loop.body, frozenset((loop.var,)), None, exits)
+        self._collect_exits(loop.body, {loop.var: 1}, None, exits)
         if len(exits) > 1:
             raise self._blame_exits(loop, exits)
         if not exits or "end" in exits:
@@ -150,43 +150,55 @@ class _Projector:
         (name,) = exits
         return lt.Var(name, loop.location)
 
-    def _collect_exits(self, term: g.GlobalTerm, bound: frozenset[str], choice: g.Choice | None,
+    def _collect_exits(self, term: g.GlobalTerm, bound: dict[str, int], choice: g.Choice | None,
                        exits: dict[str, g.Choice | None]) -> None:
-        while True:
-            match term:
-                case g.End() | g.Parallel():  # a parallel composition ends when its branches do
-                    exits.setdefault("end", choice)
-                    return
-                case g.Var(name=name):
-                    if name not in bound:
-                        exits.setdefault(name, choice)
-                    return
-                case g.Rec(var=var, body=body):
-                    bound, term = bound | {var}, body
-                case g.Choice(branches=branches):
-                    if len(branches) > 1:
-                        for branch in branches:
-                            self._collect_exits(branch.continuation, bound, term, exits)
+        """Record where ``term`` can leave to; ``bound`` counts the loops entered per name.
+
+        ``bound`` is one mutable counter, entered and left as the walk goes, so deep
+        nests of loops stay linear.
+        """
+        entered: list[str] = []
+        try:
+            while True:
+                match term:
+                    case g.End() | g.Parallel():  # a parallel composition ends when its branches do
+                        exits.setdefault("end", choice)
                         return
-                    term = branches[0].continuation
-                case _:
-                    raise AssertionError(f"unexpected global term {term!r}")
+                    case g.Var(name=name):
+                        if not bound.get(name):
+                            exits.setdefault(name, choice)
+                        return
+                    case g.Rec(var=var, body=body):
+                        bound[var] = bound.get(var, 0) + 1
+                        entered.append(var)
+                        term = body
+                    case g.Choice(branches=branches):
+                        if len(branches) > 1:
+                            for branch in branches:
+                                self._collect_exits(branch.continuation, bound, term, exits)
+                            return
+                        term = branches[0].continuation
+                    case _:
+                        raise AssertionError(f"unexpected global term {term!r}")
+        finally:
+            for var in entered:
+                bound[var] -= 1
 
     def _blame_exits(self, loop: g.Rec, exits: dict[str, g.Choice | None]) -> ProjectionError:
         (first, _), (second, choice) = list(exits.items())[:2]
         location = choice.location if choice else loop.location
         labels = ("?", "?")
         if choice is not None:  # name the branches of the choice that leads to each exit
-            labels = tuple(next((b.message.label for b in choice.branches
+            labels = tuple([next((b.message.label for b in choice.branches
                                  if self._leads_to(b.continuation, name)), "?")
-                           for name in (first, second))  # type: ignore[assignment]
+                           for name in (first, second)])  # type: ignore[assignment]
         line = self.source_lines[location.line - 1] if 0 < location.line <= len(self.source_lines) else ""
         return ProjectionError(self.protocol, self.role, location, labels, first, second,
                                f"{self.role} takes no part in the loop and cannot tell how it ends", line)
 
     def _leads_to(self, term: g.GlobalTerm, exit_name: str) -> bool:
         found: dict[str, g.Choice | None] = {}
-        self._collect_exits(term, frozenset(), None, found)
+        self._collect_exits(term, {}, None, found)
         return exit_name in found
 
     def occurs(self, term: g.GlobalTerm) -> bool:
@@ -196,12 +208,12 @@ class _Projector:
         if cached is None:
             match term:
                 case g.Choice(sender=sender, receiver=receiver, branches=branches):
-                    cached = self.role in (sender, receiver) or any(
-                        self.occurs(b.continuation) for b in branches)
+                    cached = self.role in (sender, receiver) or any([
+                        self.occurs(b.continuation) for b in branches])
                 case g.Rec(body=body):
                     cached = self.occurs(body)
                 case g.Parallel(branches=parts):
-                    cached = any(self.occurs(b) for b in parts)
+                    cached = any([self.occurs(b) for b in parts])
                 case _:
                     cached = False
             self._occurs[key] = cached
@@ -318,7 +330,7 @@ def substitute(term: lt.LocalTerm, name: str, replacement: lt.LocalTerm) -> lt.L
         case lt.Offer(peer=peer, branches=branches, location=location):
             return lt.Offer(peer, _substitute_branches(branches, name, replacement), location)
         case lt.Parallel(branches=parts, location=location):
-            return lt.Parallel(tuple(substitute(p, name, replacement) for p in parts), location)
+            return lt.Parallel(tuple([substitute(p, name, replacement) for p in parts]), location)
         case lt.Rec(var=var, body=body, location=location):
             if var == name:
                 return term
@@ -334,8 +346,8 @@ def substitute(term: lt.LocalTerm, name: str, replacement: lt.LocalTerm) -> lt.L
 
 def _substitute_branches(branches: tuple[lt.Branch, ...], name: str,
                          replacement: lt.LocalTerm) -> tuple[lt.Branch, ...]:
-    return tuple(lt.Branch(b.message, substitute(b.continuation, name, replacement), b.location)
-                 for b in branches)
+    return tuple([lt.Branch(b.message, substitute(b.continuation, name, replacement), b.location)
+                 for b in branches])
 
 
 def free_vars(term: lt.LocalTerm) -> frozenset[str]:
@@ -346,9 +358,9 @@ def free_vars(term: lt.LocalTerm) -> frozenset[str]:
         case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
             return free_vars(cont)
         case lt.Select(branches=branches) | lt.Offer(branches=branches):
-            return frozenset().union(*(free_vars(b.continuation) for b in branches))
+            return frozenset().union(*([free_vars(b.continuation) for b in branches]))
         case lt.Parallel(branches=parts):
-            return frozenset().union(*(free_vars(p) for p in parts))
+            return frozenset().union(*([free_vars(p) for p in parts]))
         case lt.Rec(var=var, body=body):
             return free_vars(body) - {var}
     return frozenset()

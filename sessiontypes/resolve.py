@@ -92,7 +92,7 @@ class SortTable:
         return {name: Sort(name, name, d.target) for name, d in self.declared.items()}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class _Binder:
     """A name in scope: a ``mu`` variable or a declaration being expanded."""
 
@@ -100,7 +100,36 @@ class _Binder:
     depth: int           # interactions on the path when bound (guardedness)
     parallel_depth: int  # parallel compositions on the path when bound
     declaration: bool
-    visible: bool = True  # False: a mu variable of a body that inlined another declaration
+    level: int           # inlining level it was bound at
+    shadowed: _Binder | None  # the binder of the same name it hides
+
+
+class _Scope:
+    """The names in scope, bound and unbound as the walk enters and leaves binders.
+
+    One mutable map from name to innermost binder, so entering a ``mu`` and
+    looking a name up cost O(1) however deep the nesting (a tuple of binders
+    made both linear, and deep protocols quadratic).
+    """
+
+    def __init__(self) -> None:
+        self.top: dict[str, _Binder] = {}
+        # How many declaration bodies are being inlined: a mu variable is visible
+        # only at the level it was bound at (a referenced body cannot see the
+        # referring body's variables); declarations are visible at every level.
+        self.level = 0
+
+    def bind(self, name: str, depth: int, parallel_depth: int, declaration: bool) -> _Binder:
+        """Bring ``name`` into scope; undo with :meth:`unbind` (in a ``finally``)."""
+        binder = _Binder(name, depth, parallel_depth, declaration, self.level, self.top.get(name))
+        self.top[name] = binder
+        return binder
+
+    def unbind(self, binder: _Binder) -> None:
+        if binder.shadowed is None:
+            del self.top[binder.name]
+        else:
+            self.top[binder.name] = binder.shadowed
 
 
 class _Capture(Exception):
@@ -126,7 +155,7 @@ class _Walk(Generic[Syntax, Term]):
     other_kind: set[str]                 # names declared with another kind
     used_vars: set[str] = field(default_factory=set)
 
-    def lookup(self, name: s.Name, scope: tuple[_Binder, ...], depth: int,
+    def lookup(self, name: s.Name, scope: _Scope, depth: int,
                parallel_depth: int) -> _Binder | None | str:
         """The binder of ``name``, or "decl" for a declaration to inline, or None (reported).
 
@@ -134,13 +163,11 @@ class _Walk(Generic[Syntax, Term]):
             _Capture: ``name`` means an enclosing declaration, but a ``mu`` of the
                 referring body with the same name sits in between.
         """
+        binder = scope.top.get(name.text)
         hidden = False
-        for binder in reversed(scope):
-            if binder.name != name.text:
-                continue
-            if not binder.visible:
-                hidden = True
-                continue
+        while binder is not None and not (binder.declaration or binder.level == scope.level):
+            hidden, binder = True, binder.shadowed
+        if binder is not None:
             if hidden:
                 raise _Capture(name.text)
             if binder.parallel_depth < parallel_depth:
@@ -169,25 +196,28 @@ def _check_labels(reporter: Reporter, labels: Iterator[s.Name]) -> None:
         seen.add(label.text)
 
 
-def _inline(walk: _Walk[Syntax, Term], name: s.Name, scope: tuple[_Binder, ...], depth: int,
+def _inline(walk: _Walk[Syntax, Term], name: s.Name, scope: _Scope, depth: int,
             parallel_depth: int, body_of: Callable[[Syntax], object],
             resolve: Callable[..., Term], make_rec: Callable[[str, Term, Location], Term],
             uses: Callable[[Term, str], bool]) -> Term:
     """Expand a reference to a declaration in place (equation-style recursion)."""
     decl = walk.declarations[name.text]
-    # The referenced body cannot see the referring body's mu variables; they stay
-    # in the scope, hidden, so that a capture of a declaration name is noticed.
-    visible = tuple(b if b.declaration else _Binder(b.name, b.depth, b.parallel_depth, False, False)
-                    for b in scope)
-    binder = _Binder(name.text, depth, parallel_depth, declaration=True)
-    body = resolve(body_of(decl), visible + (binder,), depth, parallel_depth)
+    # Not context managers: resuming generators deep in a recursion costs time
+    # proportional to the depth in CPython 3.11, which made deep protocols quadratic.
+    scope.level += 1
+    binder = scope.bind(name.text, depth, parallel_depth, declaration=True)
+    try:
+        body = resolve(body_of(decl), scope, depth, parallel_depth)
+    finally:
+        scope.unbind(binder)
+        scope.level -= 1
     if uses(body, name.text):
         return make_rec(name.text, body, name.location)
     return body
 
 
-def _with_mu(walk: _Walk[Syntax, Term], var: str, scope: tuple[_Binder, ...], depth: int,
-             parallel_depth: int, build: Callable[[str, tuple[_Binder, ...]], Term]) -> Term:
+def _with_mu(walk: _Walk[Syntax, Term], var: str, scope: _Scope, depth: int,
+             parallel_depth: int, build: Callable[[str], Term]) -> Term:
     """Resolve a ``mu var.`` body; rename ``var`` if it would capture a declaration name.
 
     Renaming happens only when an inlined declaration refers, through ``var``'s
@@ -196,30 +226,34 @@ def _with_mu(walk: _Walk[Syntax, Term], var: str, scope: tuple[_Binder, ...], de
     name = var
     while True:
         mark = len(walk.reporter.diagnostics)
+        binder = scope.bind(name, depth, parallel_depth, declaration=False)
         try:
-            return build(name, scope + (_Binder(name, depth, parallel_depth, False),))
+            return build(name)
         except _Capture as capture:
             if capture.name != name:
                 raise
             del walk.reporter.diagnostics[mark:]
-            taken = {b.name for b in scope} | set(walk.declarations)
+            taken = set(scope.top) | set(walk.declarations)
             while name in taken:
                 name += "'"
+        finally:
+            scope.unbind(binder)
 
 
 # ---- global ------------------------------------------------------------------------
 
 def resolve_global(decl: s.GlobalDecl, walk: _Walk[s.GlobalDecl, g.GlobalTerm]) -> g.GlobalTerm:
     """Resolve one global declaration (the walk reports problems)."""
-    top = _Binder(decl.name.text, 0, 0, declaration=True)
-    body = _resolve_g(walk, decl.body, (top,), 0, 0)
+    scope = _Scope()
+    scope.bind(decl.name.text, 0, 0, declaration=True)
+    body = _resolve_g(walk, decl.body, scope, 0, 0)
     if _uses_g(body, decl.name.text):
         body = g.Rec(decl.name.text, body, decl.name.location)
     return body
 
 
 def _resolve_g(walk: _Walk[s.GlobalDecl, g.GlobalTerm], node: s.GSyntax | None,
-               scope: tuple[_Binder, ...], depth: int, parallel_depth: int) -> g.GlobalTerm:
+               scope: _Scope, depth: int, parallel_depth: int) -> g.GlobalTerm:
     match node:
         case None:
             return g.End()
@@ -228,19 +262,19 @@ def _resolve_g(walk: _Walk[s.GlobalDecl, g.GlobalTerm], node: s.GSyntax | None,
         case s.GInteraction(sender=sender, receiver=receiver, branches=branches, location=location):
             if sender.text == receiver.text:
                 walk.reporter.error(receiver.location, f"role {sender.text} sends a message to itself")
-            _check_labels(walk.reporter, (b.message.label for b in branches))
-            return g.Choice(sender.text, receiver.text, tuple(
+            _check_labels(walk.reporter, ([b.message.label for b in branches]))
+            return g.Choice(sender.text, receiver.text, tuple([
                 g.Branch(walk.sorts.message(b.message),
                          _resolve_g(walk, b.continuation, scope, depth + 1, parallel_depth),
                          b.message.label.location)
-                for b in branches), location, receiver.location)
+                for b in branches]), location, receiver.location)
         case s.GRec(var=var, body=body, location=location):
             return _with_mu(walk, var.text, scope, depth, parallel_depth,
-                            lambda name, inner: g.Rec(name, _resolve_g(walk, body, inner, depth,
-                                                                        parallel_depth), location))
+                            lambda name: g.Rec(name, _resolve_g(walk, body, scope, depth,
+                                                                parallel_depth), location))
         case s.GParallel(branches=branches, location=location):
-            return g.Parallel(tuple(_resolve_g(walk, b, scope, depth, parallel_depth + 1)
-                                    for b in branches), location)
+            return g.Parallel(tuple([_resolve_g(walk, b, scope, depth, parallel_depth + 1)
+                                    for b in branches]), location)
         case s.GRef(name=name):
             found = walk.lookup(name, scope, depth, parallel_depth)
             if isinstance(found, _Binder):
@@ -258,11 +292,11 @@ def _uses_g(term: g.GlobalTerm, name: str) -> bool:
         case g.Var(name=n):
             return n == name
         case g.Choice(branches=branches):
-            return any(_uses_g(b.continuation, name) for b in branches)
+            return any([_uses_g(b.continuation, name) for b in branches])
         case g.Rec(var=var, body=body):
             return var != name and _uses_g(body, name)
         case g.Parallel(branches=branches):
-            return any(_uses_g(b, name) for b in branches)
+            return any([_uses_g(b, name) for b in branches])
     return False
 
 
@@ -270,15 +304,16 @@ def _uses_g(term: g.GlobalTerm, name: str) -> bool:
 
 def resolve_local(decl: s.LocalDecl, walk: _Walk[s.LocalDecl, lt.LocalTerm]) -> lt.LocalTerm:
     """Resolve one local declaration (the walk reports problems)."""
-    top = _Binder(decl.name.text, 0, 0, declaration=True)
-    body = _resolve_l(walk, decl.body, (top,), 0, 0)
+    scope = _Scope()
+    scope.bind(decl.name.text, 0, 0, declaration=True)
+    body = _resolve_l(walk, decl.body, scope, 0, 0)
     if _uses_l(body, decl.name.text):
         body = lt.Rec(decl.name.text, body, decl.name.location)
     return body
 
 
 def _resolve_l(walk: _Walk[s.LocalDecl, lt.LocalTerm], node: s.LSyntax | None,
-               scope: tuple[_Binder, ...], depth: int, parallel_depth: int) -> lt.LocalTerm:
+               scope: _Scope, depth: int, parallel_depth: int) -> lt.LocalTerm:
     match node:
         case None:
             return lt.End()
@@ -296,21 +331,21 @@ def _resolve_l(walk: _Walk[s.LocalDecl, lt.LocalTerm], node: s.LSyntax | None,
             make = lt.Send if direction == "!" else lt.Recv
             return make(peer.text if peer else None, resolved, cont, location)
         case s.LChoice(kind=kind, peer=peer, branches=branches, location=location):
-            _check_labels(walk.reporter, (b.message.label for b in branches))
-            resolved_branches = tuple(
+            _check_labels(walk.reporter, ([b.message.label for b in branches]))
+            resolved_branches = tuple([
                 lt.Branch(walk.sorts.message(b.message),
                           _resolve_l(walk, b.continuation, scope, depth + 1, parallel_depth),
                           b.message.label.location)
-                for b in branches)
+                for b in branches])
             make_choice = lt.select if kind == "+" else lt.offer
             return make_choice(peer.text if peer else None, resolved_branches, location)
         case s.LRec(var=var, body=body, location=location):
             return _with_mu(walk, var.text, scope, depth, parallel_depth,
-                            lambda name, inner: lt.Rec(name, _resolve_l(walk, body, inner, depth,
-                                                                         parallel_depth), location))
+                            lambda name: lt.Rec(name, _resolve_l(walk, body, scope, depth,
+                                                                 parallel_depth), location))
         case s.LParallel(branches=branches, location=location):
-            return lt.Parallel(tuple(_resolve_l(walk, b, scope, depth, parallel_depth + 1)
-                                     for b in branches), location)
+            return lt.Parallel(tuple([_resolve_l(walk, b, scope, depth, parallel_depth + 1)
+                                     for b in branches]), location)
         case s.LRef(name=name):
             found = walk.lookup(name, scope, depth, parallel_depth)
             if isinstance(found, _Binder):
@@ -329,9 +364,9 @@ def _uses_l(term: lt.LocalTerm, name: str) -> bool:
         case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
             return _uses_l(cont, name)
         case lt.Select(branches=branches) | lt.Offer(branches=branches):
-            return any(_uses_l(b.continuation, name) for b in branches)
+            return any([_uses_l(b.continuation, name) for b in branches])
         case lt.Rec(var=var, body=body):
             return var != name and _uses_l(body, name)
         case lt.Parallel(branches=branches):
-            return any(_uses_l(b, name) for b in branches)
+            return any([_uses_l(b, name) for b in branches])
     return False
