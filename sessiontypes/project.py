@@ -1,11 +1,8 @@
-"""Projection of a global type onto a role, with full merge (LANGUAGE.md section 5).
+"""Projection of a global type onto a role (LANGUAGE.md section 5).
 
 ``p -> q : {l_i(S_i). G_i}`` projects to ``+q{...}`` on p, ``&p{...}`` on q and,
-on any other role, to the merge of the branches' projections. Merge accepts
-identical types, joins external choices from the same peer branch-wise, and
-unfolds ``mu`` when the two sides differ, remembering the pairs it is already
-merging so that two spellings of one recursive behaviour merge instead of
-looping.
+on any other role, to the merge of the branches' projections
+(:mod:`sessiontypes.merge`).
 """
 
 from __future__ import annotations
@@ -17,17 +14,10 @@ from . import local_types as lt
 from .deep import run_deep
 from .errors import ProjectionError, UnknownRoleError
 from .location import Location
-from .sorts import Message
+from .merge import MergeError, merge
+from .recursion import free_vars, substitute, unfold  # noqa: F401 (re-exported)
 
-__all__ = ["project_global", "project", "merge", "MergeError"]
-
-
-class MergeError(Exception):
-    """Internal: two local types do not merge. ``reason`` says why."""
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(reason)
-        self.reason = reason
+__all__ = ["project_global", "project", "merge", "MergeError", "unfold", "substitute", "free_vars"]
 
 
 def project_global(global_type: g.GlobalType, role: str) -> lt.LocalType:
@@ -218,149 +208,3 @@ class _Projector:
                     cached = False
             self._occurs[key] = cached
         return cached
-
-
-# ---- merge -------------------------------------------------------------------------
-
-def merge(left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
-    """Merge two local types (full merge).
-
-    Raises:
-        MergeError: they do not merge; ``reason`` says why.
-    """
-    return _Merger().merge(left, right)
-
-
-@dataclass
-class _Merger:
-    # pairs being merged -> the variable that stands for their merge, and whether it was used
-    in_progress: dict[tuple[lt.LocalTerm, lt.LocalTerm], list[object]] = field(default_factory=dict)
-
-    def merge(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
-        if left is right or left == right:
-            return left
-        if isinstance(left, lt.Rec) or isinstance(right, lt.Rec):
-            return self._merge_recursive(left, right)
-        if isinstance(left, (lt.Recv, lt.Offer)) and isinstance(right, (lt.Recv, lt.Offer)):
-            return self._merge_offers(left, right)
-        raise MergeError(_difference(left, right))
-
-    def _merge_offers(self, left: lt.Recv | lt.Offer, right: lt.Recv | lt.Offer) -> lt.LocalTerm:
-        if left.peer != right.peer:
-            raise MergeError(f"one receives from {left.peer}, the other from {right.peer}")
-        merged: list[lt.Branch] = []
-        right_branches = {b.message.label: b for b in _offer_branches(right)}
-        for branch in _offer_branches(left):
-            twin = right_branches.pop(branch.message.label, None)
-            if twin is None:
-                merged.append(branch)
-                continue
-            if branch.message != twin.message:
-                raise MergeError(f"label '{branch.message.label}' carries "
-                                 f"{_sort_name(branch.message)} in one and "
-                                 f"{_sort_name(twin.message)} in the other")
-            merged.append(lt.Branch(branch.message, self.merge(branch.continuation, twin.continuation),
-                                    branch.location))
-        merged.extend(right_branches.values())
-        return lt.offer(left.peer, tuple(merged), left.location)
-
-    def _merge_recursive(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
-        key = (left, right)
-        entry = self.in_progress.get(key)
-        if entry is not None:
-            entry[1] = True
-            return lt.Var(str(entry[0]))
-        binder = left if isinstance(left, lt.Rec) else right
-        assert isinstance(binder, lt.Rec)
-        name = binder.var
-        taken = free_vars(left) | free_vars(right)
-        while name in taken:
-            name += "'"
-        entry = [name, False]
-        self.in_progress[key] = entry
-        try:
-            result = self.merge(unfold(left), unfold(right))
-        finally:
-            del self.in_progress[key]
-        return lt.Rec(name, result, binder.location) if entry[1] else result
-
-
-def _offer_branches(term: lt.Recv | lt.Offer) -> tuple[lt.Branch, ...]:
-    if isinstance(term, lt.Recv):
-        return (lt.Branch(term.message, term.continuation, term.location),)
-    return term.branches
-
-
-def _sort_name(message: Message) -> str:
-    return str(message.sort) if message.sort else "nothing"
-
-
-def _difference(left: lt.LocalTerm, right: lt.LocalTerm) -> str:
-    kinds = {lt.Send: "a send", lt.Select: "a choice it makes", lt.Recv: "a receive",
-             lt.Offer: "a choice it receives", lt.End: "end", lt.Var: "a loop back",
-             lt.Parallel: "a parallel composition"}
-    a, b = kinds.get(type(left), "?"), kinds.get(type(right), "?")
-    if a == b:
-        return "only identical behaviours merge unless both receive"
-    return f"{a} cannot merge with {b}"
-
-
-# ---- substitution ------------------------------------------------------------------
-
-def unfold(term: lt.LocalTerm) -> lt.LocalTerm:
-    """``mu t. T`` becomes ``T[mu t. T / t]``; anything else is returned as is."""
-    if not isinstance(term, lt.Rec):
-        return term
-    return substitute(term.body, term.var, term)
-
-
-def substitute(term: lt.LocalTerm, name: str, replacement: lt.LocalTerm) -> lt.LocalTerm:
-    """Replace the free occurrences of variable ``name`` in ``term`` (capture-avoiding)."""
-    match term:
-        case lt.Var(name=n):
-            return replacement if n == name else term
-        case lt.End():
-            return term
-        case lt.Send(peer=peer, message=message, continuation=cont, location=location):
-            return lt.Send(peer, message, substitute(cont, name, replacement), location)
-        case lt.Recv(peer=peer, message=message, continuation=cont, location=location):
-            return lt.Recv(peer, message, substitute(cont, name, replacement), location)
-        case lt.Select(peer=peer, branches=branches, location=location):
-            return lt.Select(peer, _substitute_branches(branches, name, replacement), location)
-        case lt.Offer(peer=peer, branches=branches, location=location):
-            return lt.Offer(peer, _substitute_branches(branches, name, replacement), location)
-        case lt.Parallel(branches=parts, location=location):
-            return lt.Parallel(tuple([substitute(p, name, replacement) for p in parts]), location)
-        case lt.Rec(var=var, body=body, location=location):
-            if var == name:
-                return term
-            if var in free_vars(replacement):
-                fresh = var + "'"
-                while fresh in free_vars(replacement) or fresh in free_vars(body):
-                    fresh += "'"
-                body = substitute(body, var, lt.Var(fresh))
-                var = fresh
-            return lt.Rec(var, substitute(body, name, replacement), location)
-    raise AssertionError(f"unexpected local term {term!r}")
-
-
-def _substitute_branches(branches: tuple[lt.Branch, ...], name: str,
-                         replacement: lt.LocalTerm) -> tuple[lt.Branch, ...]:
-    return tuple([lt.Branch(b.message, substitute(b.continuation, name, replacement), b.location)
-                 for b in branches])
-
-
-def free_vars(term: lt.LocalTerm) -> frozenset[str]:
-    """The recursion variables free in ``term``."""
-    match term:
-        case lt.Var(name=n):
-            return frozenset((n,))
-        case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
-            return free_vars(cont)
-        case lt.Select(branches=branches) | lt.Offer(branches=branches):
-            return frozenset().union(*([free_vars(b.continuation) for b in branches]))
-        case lt.Parallel(branches=parts):
-            return frozenset().union(*([free_vars(p) for p in parts]))
-        case lt.Rec(var=var, body=body):
-            return free_vars(body) - {var}
-    return frozenset()

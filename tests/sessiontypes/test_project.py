@@ -159,3 +159,22 @@ def test_long_sequences_project_without_recursion_errors() -> None:
     assert printed.startswith("!R1(m0).?R6(m6).!R1(m7)")
     involved = sum(1 for i in range(20_000) if i % 7 in (0, 6))
     assert printed.count("m") == involved
+
+
+@pytest.mark.parametrize("second", ["mu u. A -> C : x. u", "mu u. A -> C : x. A -> C : x. u",
+                                    "A -> C : x. mu u. A -> C : x. u"])
+def test_sending_loops_merge_however_they_are_spelled(second: str) -> None:
+    result = projections(f"global G = B -> C : {{l0. mu t. A -> C : x. t, l1. {second}}}")
+    assert result["A"] == "mu t.!C(x).t"
+
+
+def test_equivalence_is_up_to_unfolding_and_renaming() -> None:
+    from sessiontypes.recursion import equivalent
+
+    send = lambda cont: lt.Send("B", Message("x"), cont)  # noqa: E731
+    once = lt.Rec("t", send(lt.Var("t")))
+    twice = lt.Rec("u", send(send(lt.Var("u"))))
+    assert equivalent(once, twice) and equivalent(twice, once)
+    assert equivalent(once, send(once))
+    assert not equivalent(once, send(lt.End()))
+    assert not equivalent(once, lt.Rec("t", lt.Send("B", Message("y"), lt.Var("t"))))

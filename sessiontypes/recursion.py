@@ -1,0 +1,108 @@
+"""Recursion in local types: unfolding, substitution, free variables, equivalence."""
+
+from __future__ import annotations
+
+from . import local_types as lt
+
+__all__ = ["unfold", "substitute", "free_vars", "equivalent"]
+
+
+def unfold(term: lt.LocalTerm) -> lt.LocalTerm:
+    """``mu t. T`` becomes ``T[mu t. T / t]``; anything else is returned as is."""
+    if not isinstance(term, lt.Rec):
+        return term
+    return substitute(term.body, term.var, term)
+
+
+def substitute(term: lt.LocalTerm, name: str, replacement: lt.LocalTerm) -> lt.LocalTerm:
+    """Replace the free occurrences of variable ``name`` in ``term`` (capture-avoiding)."""
+    match term:
+        case lt.Var(name=n):
+            return replacement if n == name else term
+        case lt.End():
+            return term
+        case lt.Send(peer=peer, message=message, continuation=cont, location=location):
+            return lt.Send(peer, message, substitute(cont, name, replacement), location)
+        case lt.Recv(peer=peer, message=message, continuation=cont, location=location):
+            return lt.Recv(peer, message, substitute(cont, name, replacement), location)
+        case lt.Select(peer=peer, branches=branches, location=location):
+            return lt.Select(peer, _substitute_branches(branches, name, replacement), location)
+        case lt.Offer(peer=peer, branches=branches, location=location):
+            return lt.Offer(peer, _substitute_branches(branches, name, replacement), location)
+        case lt.Parallel(branches=parts, location=location):
+            return lt.Parallel(tuple([substitute(p, name, replacement) for p in parts]), location)
+        case lt.Rec(var=var, body=body, location=location):
+            if var == name:
+                return term
+            if var in free_vars(replacement):
+                fresh = var + "'"
+                while fresh in free_vars(replacement) or fresh in free_vars(body):
+                    fresh += "'"
+                body = substitute(body, var, lt.Var(fresh))
+                var = fresh
+            return lt.Rec(var, substitute(body, name, replacement), location)
+    raise AssertionError(f"unexpected local term {term!r}")
+
+
+def _substitute_branches(branches: tuple[lt.Branch, ...], name: str,
+                         replacement: lt.LocalTerm) -> tuple[lt.Branch, ...]:
+    return tuple([lt.Branch(b.message, substitute(b.continuation, name, replacement), b.location)
+                 for b in branches])
+
+
+def free_vars(term: lt.LocalTerm) -> frozenset[str]:
+    """The recursion variables free in ``term``."""
+    match term:
+        case lt.Var(name=n):
+            return frozenset((n,))
+        case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
+            return free_vars(cont)
+        case lt.Select(branches=branches) | lt.Offer(branches=branches):
+            return frozenset().union(*([free_vars(b.continuation) for b in branches]))
+        case lt.Parallel(branches=parts):
+            return frozenset().union(*([free_vars(p) for p in parts]))
+        case lt.Rec(var=var, body=body):
+            return free_vars(body) - {var}
+    return frozenset()
+
+
+def equivalent(left: lt.LocalTerm, right: lt.LocalTerm) -> bool:
+    """Whether two local types describe the same behaviour.
+
+    Equal up to the names of bound variables and to unfolding ``mu`` (so up to
+    how a loop is written); decided coinductively: a pair met again while
+    being compared is assumed equivalent.
+    """
+    return _Equivalence().check(left, right)
+
+
+class _Equivalence:
+    def __init__(self) -> None:
+        self.assumed: set[tuple[lt.LocalTerm, lt.LocalTerm]] = set()
+
+    def check(self, left: lt.LocalTerm, right: lt.LocalTerm) -> bool:
+        if left is right or left == right:
+            return True
+        if isinstance(left, lt.Rec) or isinstance(right, lt.Rec):
+            key = (left, right)
+            if key in self.assumed:
+                return True
+            self.assumed.add(key)
+            return self.check(unfold(left), unfold(right))
+        match left, right:
+            case (lt.Send(), lt.Send()) | (lt.Recv(), lt.Recv()):
+                return (left.peer == right.peer and left.message == right.message  # type: ignore[union-attr]
+                        and self.check(left.continuation, right.continuation))  # type: ignore[union-attr]
+            case (lt.Select(), lt.Select()) | (lt.Offer(), lt.Offer()):
+                if left.peer != right.peer:  # type: ignore[union-attr]
+                    return False
+                theirs = {b.message.label: b for b in right.branches}  # type: ignore[union-attr]
+                ours = left.branches  # type: ignore[union-attr]
+                return len(ours) == len(theirs) and all([
+                    b.message.label in theirs and b.message == theirs[b.message.label].message
+                    and self.check(b.continuation, theirs[b.message.label].continuation)
+                    for b in ours])
+            case (lt.Parallel(branches=ours), lt.Parallel(branches=theirs)):
+                return len(ours) == len(theirs) and all([
+                    self.check(a, b) for a, b in zip(ours, theirs)])
+        return False
