@@ -19,6 +19,7 @@ from lark import Token, Transformer
 from lark.lexer import Lexer
 
 from . import syntax as s
+from .deep import run_deep
 from .errors import ProtocolSyntaxError
 from .location import Location
 
@@ -275,6 +276,10 @@ def parse_file(text: str, path: str = "<string>") -> s.SourceFile:
     Raises:
         ProtocolSyntaxError: the text does not follow the grammar.
     """
+    return run_deep(_parse, text, path)
+
+
+def _parse(text: str, path: str) -> s.SourceFile:
     lines = tuple(text.splitlines())
     with _lock:
         _builder.path = path
