@@ -1,0 +1,280 @@
+"""Monitored endpoints: how a role talks to its peers.
+
+``send`` checks the action against the role's local type *before* the
+message leaves, so a rejected send delivers nothing; ``recv`` checks what
+arrives. A role whose local type is a parallel composition has one monitor
+per branch: after the fork, ``send``/``recv`` are routed to the branch that
+owns the channel, ``recv_any`` waits on whichever incoming channel has a
+message first, and ``fork()`` hands out one endpoint per branch for
+thread-per-branch code. A failed peer fails only the branches it takes
+part in.
+"""
+
+from __future__ import annotations
+
+import queue
+import time
+from typing import Any, NamedTuple
+
+from sessiontypes import StateMachine
+
+from .errors import Action, AnodizeError, PeerFailedError
+from .monitor import Monitor
+from .transport.inproc import STOP, InprocNetwork, PeerFailure
+
+__all__ = ["Message", "Endpoint", "RoleStopped"]
+
+
+class Message(NamedTuple):
+    """What ``recv`` returns: the label and the payload (None when there is none)."""
+
+    label: str
+    payload: Any = None
+
+
+class RoleStopped(BaseException):
+    """Raised inside a role when the run is stopped (its timeout passed).
+
+    A ``BaseException`` so that a role's ``except Exception`` does not swallow it.
+    """
+
+
+class Endpoint:
+    """One role's (or one parallel branch's) view of the session."""
+
+    def __init__(self, role: str, protocol: str, machine: StateMachine, network: InprocNetwork,
+                 monitored: bool = True, peers: tuple[set[str], set[str]] | None = None) -> None:
+        self.role = role
+        self.protocol = protocol
+        self._machine = machine
+        self._network = network
+        self._monitor: Monitor | None = Monitor(machine, protocol, role) if monitored else None
+        sends_to, receives_from = peers if peers is not None else _peers(machine)
+        queues = network.queues
+        self._out = {p: queues[(role, p)] for p in sends_to if (role, p) in queues}
+        self._in = {p: queues[(p, role)] for p in receives_from if (p, role) in queues}
+        self._doorbell = network.doorbells.get(role)
+        self._branches: tuple[Endpoint, ...] | None = None
+        self._send_route: dict[str, Endpoint] = {}
+        self._recv_route: dict[str, Endpoint] = {}
+        self.failed_peer: str | None = None  # set when a peer failure ended this endpoint
+        self._skipped: set[str] = set()  # rung by peers whose messages were not expected yet
+
+    # ---- the protocol's actions ------------------------------------------------------
+    def send(self, to: str, label: str, payload: object = None) -> None:
+        """Send ``label`` (with ``payload``) to role ``to``.
+
+        Raises:
+            ProtocolViolationError: the local type does not allow it now (nothing is sent).
+            PeerFailedError: ``to`` has failed.
+        """
+        if self._forked():
+            return self._branch_for(self._send_route, to, "send", label).send(to, label, payload)
+        failed = self._network.failed.get(to)
+        if failed is not None:
+            raise PeerFailedError(self.role, to, failed)
+        if self._network.stopping:
+            raise RoleStopped()
+        if self._monitor is not None:
+            self._monitor.send(to, label, payload)
+        channel = self._out.get(to)
+        if channel is None:  # only reachable without a monitor
+            raise AnodizeError(f"role {self.role} has no channel to {to}")
+        channel.put(Message(label, payload))
+        self._network.sent[(self.role, to)] += 1
+        self._network.ring(to, self.role)
+
+    def recv(self, frm: str, timeout: float | None = None) -> Message:
+        """Receive the next message from role ``frm``.
+
+        Raises:
+            ProtocolViolationError: this role may not receive from ``frm`` now (blame: this
+                role), or the message is not allowed (blame: ``frm``).
+            PeerFailedError: ``frm`` failed before sending.
+            TimeoutError: nothing arrived within ``timeout`` seconds.
+        """
+        if self._forked():
+            return self._branch_for(self._recv_route, frm, "recv", "").recv(frm, timeout)
+        monitor = self._monitor
+        if monitor is not None and not monitor.expects_from(frm):
+            raise monitor.violation(Action("recv", frm, "*"), blame=self.role)
+        channel = self._in.get(frm)
+        if channel is None:
+            raise AnodizeError(f"role {self.role} has no channel from {frm}")
+        try:
+            item = channel.get(timeout=timeout)
+        except queue.Empty:
+            raise TimeoutError(f"role {self.role}: no message from {frm} within {timeout} s") from None
+        return self._accept(frm, item, channel)
+
+    def recv_any(self, timeout: float | None = None) -> tuple[str, Message]:
+        """Receive from whichever incoming channel, allowed now, has a message first.
+
+        Messages from a peer the local type does not expect yet stay queued.
+
+        Returns:
+            ``(peer, message)``.
+
+        Raises:
+            ProtocolViolationError: no receive is allowed now (blame: this role), or the
+                message is not allowed (blame: the sender).
+            PeerFailedError, TimeoutError: as :meth:`recv`.
+        """
+        if not any(self._expects(peer) for peer in self._all_in()):
+            assert self._monitor is not None
+            raise self._monitor.violation(Action("recv", None, "*"), blame=self.role)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            for peer in [p for p in self._skipped if self._expects(p)]:
+                channel = self._all_in()[peer]
+                if channel.empty():
+                    self._skipped.discard(peer)
+                    continue
+                message = self._take(peer, channel)
+                if channel.empty():  # else more of its messages wait without a ring
+                    self._skipped.discard(peer)
+                return peer, message
+            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
+            peer = self._wait_any(remaining)
+            if not self._expects(peer):
+                self._skipped.add(peer)
+                continue
+            channel = self._all_in()[peer]
+            if channel.empty():  # a stale ring: that message was taken by recv()
+                continue
+            return peer, self._take(peer, channel)
+
+    def _take(self, peer: str, channel: queue.SimpleQueue[object]) -> Message:
+        item = channel.get_nowait()  # only this role's thread(s) read its channels
+        owner = self._recv_route.get(peer, self) if self._forked() else self
+        return owner._accept(peer, item, channel)
+
+    def _expects(self, peer: str) -> bool:
+        if self._forked():
+            branch = self._recv_route.get(peer)
+            return branch is not None and branch._expects(peer)
+        return self._monitor is None or self._monitor.expects_from(peer)
+
+    def fork(self) -> tuple[Endpoint, ...]:
+        """At a parallel composition: one endpoint per branch, in order.
+
+        Raises:
+            ProtocolViolationError: the local type is not at a parallel composition.
+        """
+        if self._branches is None:
+            monitor = self._monitor
+            if monitor is None or not monitor.at_fork:
+                raise (monitor.violation(Action("fork", None, "||"), blame=self.role) if monitor
+                       else AnodizeError("fork() needs a monitored endpoint"))
+            self._start_branches(monitor)
+        assert self._branches is not None
+        return self._branches
+
+    # ---- completion ------------------------------------------------------------------
+    def unfinished(self) -> list[Endpoint]:
+        """Endpoints (this one or its branches) whose local type has not reached ``end``.
+
+        A branch ended by a failed peer is excused.
+        """
+        if self.failed_peer is not None or self._monitor is None:
+            return []
+        if self._branches is not None:
+            return [e for b in self._branches for e in b.unfinished()]
+        return [] if self._monitor.finished else [self]
+
+    def end_violation(self) -> Exception:
+        """The violation for returning before ``end`` (on an unfinished endpoint)."""
+        assert self._monitor is not None
+        return self._monitor.violation(Action("end", None, ""), blame=self.role)
+
+    @property
+    def state(self) -> str:
+        """The current state and the local type that remains (for messages and debugging)."""
+        if self._monitor is None:
+            return "unmonitored"
+        if self._branches is not None:
+            return " || ".join(b.state for b in self._branches)
+        return f"{self._monitor.state} ({self._machine.describe(self._monitor.state)})"
+
+    # ---- internals ---------------------------------------------------------------------
+    def _accept(self, frm: str, item: object, channel: queue.SimpleQueue[object]) -> Message:
+        if isinstance(item, PeerFailure):
+            channel.put(item)  # later receives fail too
+            self.failed_peer = item.peer
+            raise PeerFailedError(self.role, item.peer, item.cause)
+        if item is STOP:
+            channel.put(item)
+            raise RoleStopped()
+        message: Message = item  # type: ignore[assignment]
+        if self._monitor is not None:
+            self._monitor.recv(frm, message.label, message.payload)
+        return message
+
+    def _forked(self) -> bool:
+        if self._branches is not None:
+            return True
+        monitor = self._monitor
+        if monitor is not None and monitor.at_fork:
+            self._start_branches(monitor)
+            return True
+        return False
+
+    def _start_branches(self, monitor: Monitor) -> None:
+        branches = []
+        for machine in self._machine.forks[monitor.state]:
+            sends_to, receives_from = _peers(machine)
+            branch = Endpoint(self.role, self.protocol, machine, self._network, True,
+                              (sends_to, receives_from))
+            branch._doorbell = self._doorbell
+            branches.append(branch)
+            self._send_route.update(dict.fromkeys(sends_to, branch))
+            self._recv_route.update(dict.fromkeys(receives_from, branch))
+        self._branches = tuple(branches)
+
+    def _branch_for(self, routes: dict[str, Endpoint], peer: str, kind: str, label: str) -> Endpoint:
+        branch = routes.get(peer)
+        if branch is None:
+            assert self._monitor is not None
+            raise self._monitor.violation(Action(kind, peer, label or "*"), blame=self.role)
+        return branch
+
+    def _wait_any(self, timeout: float | None) -> str:
+        doorbell = self._doorbell
+        if doorbell is not None:
+            try:
+                return doorbell.get(timeout=timeout)
+            except queue.Empty:
+                raise TimeoutError(f"role {self.role}: no message within {timeout} s") from None
+        # No doorbell (a role without parallel branches): poll its few channels.
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            for peer, channel in self._all_in().items():
+                if self._expects(peer) and not channel.empty():
+                    return peer
+            if deadline is not None and time.monotonic() >= deadline:
+                raise TimeoutError(f"role {self.role}: no message within {timeout} s")
+            time.sleep(0.0005)
+
+    def _all_in(self) -> dict[str, queue.SimpleQueue[object]]:
+        if self._branches is None:
+            return self._in
+        found: dict[str, queue.SimpleQueue[object]] = {}
+        for branch in self._branches:
+            found.update(branch._all_in())
+        return found
+
+
+
+def _peers(machine: StateMachine) -> tuple[set[str], set[str]]:
+    """The roles a machine (with its forks) sends to and receives from."""
+    sends: set[str] = set()
+    recvs: set[str] = set()
+    stack = [machine]
+    while stack:
+        m = stack.pop()
+        for transitions in m.table:
+            for action, peer, _ in transitions:
+                if peer is not None:
+                    (sends if action == "send" else recvs).add(peer)
+        stack.extend(b for branches in m.forks.values() for b in branches)
+    return sends, recvs

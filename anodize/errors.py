@@ -1,0 +1,137 @@
+"""Exceptions a role (or the code that runs a system) can meet.
+
+``AnodizeError`` is the root. Facts live in attributes; the text is built in
+``__str__``. A violation names the protocol, the role, the peer, the state,
+every action the protocol allowed there, the action attempted, who is to
+blame, and where in the ``.proto`` file the interaction is written.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+__all__ = [
+    "AnodizeError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
+    "LinearityError", "Action",
+]
+
+
+class AnodizeError(Exception):
+    """Root of the runtime's errors."""
+
+
+@dataclass(frozen=True, slots=True)
+class Action:
+    """A send or receive as the monitor sees it: ``!B(label)`` / ``?A(label)``."""
+
+    kind: str          # "send" | "recv" | "end" | "fork"
+    peer: str | None
+    label: str
+    payload_type: str | None = None   # the sort (expected) or the Python type (actual)
+
+    def __str__(self) -> str:
+        if self.kind == "end":
+            return "end (the role's function returned)"
+        if self.kind == "fork":
+            return "fork (start parallel branches)"
+        arrow = "!" if self.kind == "send" else "?"
+        message = f"{self.label}({self.payload_type})" if self.payload_type else self.label
+        return f"{arrow}{self.peer}({message})" if self.peer else f"{arrow}{message}"
+
+
+class ProtocolViolationError(AnodizeError):
+    """Raised when an action is not allowed by the role's local type.
+
+    Raised in the role that attempted a forbidden send (blame: that role), in
+    the role that received a forbidden message (blame: the sender), and when a
+    role's function returns before its local type reached ``end`` or a payload
+    does not have the sort the protocol says.
+
+    Attributes:
+        protocol: the global type's name.
+        role: the role whose monitor rejected the action.
+        peer: the other role of the action (None if there is none).
+        state: the monitor's state number and the local type that remained.
+        expected: every action allowed in that state, sorted.
+        actual: the action attempted.
+        blame: the role at fault.
+        location: ``file:line:col`` of the global interaction, where known.
+        reason: a short sentence when the label was right but the payload was not.
+    """
+
+    def __init__(self, protocol: str, role: str, peer: str | None, state: str,
+                 expected: Sequence[Action], actual: Action, blame: str,
+                 location: str = "", reason: str = "") -> None:
+        self.protocol = protocol
+        self.role = role
+        self.peer = peer
+        self.state = state
+        self.expected = tuple(expected)
+        self.actual = actual
+        self.blame = blame
+        self.location = location
+        self.reason = reason
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        expected = ", ".join(str(a) for a in self.expected) or "nothing (the local type has ended)"
+        where = f" ({self.location})" if self.location else ""
+        reason = f": {self.reason}" if self.reason else ""
+        return (f"protocol {self.protocol}, role {self.role}: protocol violation by {self.blame}"
+                f"{reason}; in state {self.state} expected {expected}, got {self.actual}{where}")
+
+
+class PeerFailedError(AnodizeError):
+    """Raised in a role waiting on (or sending to) a peer that crashed or was stopped.
+
+    Attributes:
+        role: the role that was waiting.
+        peer: the role that failed.
+        cause: a description of the peer's failure.
+    """
+
+    def __init__(self, role: str, peer: str, cause: str) -> None:
+        self.role = role
+        self.peer = peer
+        self.cause = cause
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        return f"role {self.role}: peer {self.peer} failed ({self.cause})"
+
+
+class MemoryBoundError(AnodizeError):
+    """Raised (and reported) for a group that exceeded its memory bound.
+
+    Attributes:
+        group: the group's name.
+        bound: the bound in bytes.
+        peak: the highest use measured, in bytes (0 if unknown).
+    """
+
+    def __init__(self, group: str, bound: int, peak: int = 0) -> None:
+        self.group = group
+        self.bound = bound
+        self.peak = peak
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        peak = f", peak {self.peak} bytes" if self.peak else ""
+        return f"group {self.group} exceeded its memory bound of {self.bound} bytes{peak}"
+
+
+class LinearityError(AnodizeError):
+    """Raised when a typed state object of generated code is used a second time.
+
+    Attributes:
+        state: the state class's name.
+    """
+
+    def __init__(self, state: str) -> None:
+        self.state = state
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        return (f"state {self.state} was already used; each state object allows one action, "
+                "continue with the state that action returned")

@@ -1,0 +1,91 @@
+"""The run-time monitor: one role's (or one parallel branch's) state machine.
+
+Every send is checked before anything leaves (the sender is to blame), every
+receive when it arrives (the peer is to blame). A check is one dictionary
+look-up in a table compiled once from the state machine, plus the payload
+check of the transition.
+"""
+
+from __future__ import annotations
+
+from sessiontypes import StateMachine, Transition
+
+from .errors import Action, ProtocolViolationError
+from .payloads import Validator, validator_for
+
+__all__ = ["Monitor"]
+
+# (target state, payload check, the transition it came from)
+_Step = tuple[int, Validator, Transition]
+
+
+class Monitor:
+    """Enforces one state machine; ``state`` is the current state."""
+
+    __slots__ = ("protocol", "role", "machine", "state", "_sends", "_recvs")
+
+    def __init__(self, machine: StateMachine, protocol: str, role: str) -> None:
+        self.protocol = protocol
+        self.role = role
+        self.machine = machine
+        self.state = machine.initial
+        validators: dict[int, Validator] = {}
+        self._sends: list[dict[tuple[str | None, str], _Step]] = []
+        self._recvs: list[dict[tuple[str | None, str], _Step]] = []
+        for transitions in machine.table:
+            sends: dict[tuple[str | None, str], _Step] = {}
+            recvs: dict[tuple[str | None, str], _Step] = {}
+            for (action, peer, label), t in transitions.items():
+                check = validators.setdefault(id(t.sort), validator_for(t.sort))
+                (sends if action == "send" else recvs)[(peer, label)] = (t.target, check, t)
+            self._sends.append(sends)
+            self._recvs.append(recvs)
+
+    def send(self, to: str | None, label: str, payload: object) -> None:
+        """Step on sending; raises ProtocolViolationError blaming this role."""
+        step = self._sends[self.state].get((to, label))
+        if step is None:
+            raise self.violation(Action("send", to, label, _type_name(payload)), blame=self.role)
+        reason = step[1](payload)
+        if reason is not None:
+            raise self.violation(Action("send", to, label, _type_name(payload)), self.role,
+                                 reason, step[2])
+        self.state = step[0]
+
+    def recv(self, frm: str | None, label: str, payload: object) -> None:
+        """Step on receiving; raises ProtocolViolationError blaming the sender."""
+        step = self._recvs[self.state].get((frm, label))
+        if step is None:
+            raise self.violation(Action("recv", frm, label, _type_name(payload)), blame=frm or "the peer")
+        reason = step[1](payload)
+        if reason is not None:
+            raise self.violation(Action("recv", frm, label, _type_name(payload)), frm or "the peer",
+                                 reason, step[2])
+        self.state = step[0]
+
+    @property
+    def at_fork(self) -> bool:
+        return self.state in self.machine.forks
+
+    @property
+    def finished(self) -> bool:
+        return self.machine.is_final(self.state)
+
+    def expects_from(self, peer: str) -> bool:
+        """Whether the current state can receive from ``peer``."""
+        return any(p == peer for p, _ in self._recvs[self.state])
+
+    def violation(self, actual: Action, blame: str, reason: str = "",
+                  transition: Transition | None = None) -> ProtocolViolationError:
+        """Describe ``actual`` against what the current state allows."""
+        expected = [Action(t.action, t.peer, t.label, t.sort.spelling if t.sort else None)
+                    for t in self.machine.expected(self.state)]
+        where = transition or (self.machine.expected(self.state) or [None])[0]
+        location = str(where.location) if where is not None else ""
+        state = f"{self.state} ({self.machine.describe(self.state)})"
+        return ProtocolViolationError(self.protocol, self.role, actual.peer, state, expected, actual,
+                                      blame, location, reason)
+
+
+def _type_name(payload: object) -> str | None:
+    return None if payload is None else type(payload).__name__

@@ -1,0 +1,65 @@
+"""Priorities and CPU affinity for the calling thread, with honest fallbacks.
+
+``priority`` 1..99 asks for SCHED_FIFO at that priority. Where the OS refuses
+(no privilege, or ``ANODIZE_NO_RT=1``), the thread gets a nice value of the
+same rank instead, and the returned description says so: the run report
+never claims real-time scheduling that was not applied.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import threading
+
+__all__ = ["apply_thread_scheduling", "nice_for"]
+
+
+def nice_for(priority: int) -> int:
+    """Map priority 1..99 (higher is more urgent) to nice 19..-20."""
+    return round(19 - (priority - 1) * 39 / 98)
+
+
+def _reason(error: OSError) -> str:
+    return errno.errorcode.get(error.errno or 0, str(error))
+
+
+def apply_thread_scheduling(priority: int | None, cpus: frozenset[int] | None = None) -> str:
+    """Apply ``priority`` and ``cpus`` to the calling thread; describe what was applied.
+
+    Raises:
+        ValueError: ``priority`` is outside 1..99.
+    """
+    notes: list[str] = []
+    if cpus:
+        try:
+            os.sched_setaffinity(0, cpus)  # 0: the calling thread on Linux
+            notes.append(f"cpus {','.join(map(str, sorted(cpus)))}")
+        except OSError as error:
+            notes.append(f"cpus unchanged (affinity refused: {_reason(error)})")
+    if priority is None:
+        described = "SCHED_OTHER (no priority asked)"
+    else:
+        if not 1 <= priority <= 99:
+            raise ValueError(f"priority must be 1..99, got {priority}")
+        described = _apply_priority(priority)
+    return "; ".join([described, *notes])
+
+
+def _apply_priority(priority: int) -> str:
+    if os.environ.get("ANODIZE_NO_RT"):
+        refused = "disabled by ANODIZE_NO_RT"
+    elif not hasattr(os, "sched_setscheduler"):
+        refused = "not supported on this OS"
+    else:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            return f"SCHED_FIFO {priority}"
+        except OSError as error:
+            refused = _reason(error)
+    nice = nice_for(priority)
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+    except OSError as error:
+        return f"unchanged (SCHED_FIFO refused: {refused}; nice {nice} refused: {_reason(error)})"
+    return f"nice {nice} (SCHED_FIFO refused: {refused})"
