@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -15,6 +16,7 @@ from typing import NoReturn
 
 import sessiontypes
 from sessiontypes import ProtocolError, ProtocolModule
+from sessiontypes.codegen import GeneratedModule, generate_modules
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE = 0, 1, 2
 
@@ -65,10 +67,15 @@ def _parser() -> argparse.ArgumentParser:
     check.add_argument("files", nargs="+", metavar="FILE")
     check.set_defaults(run=_check)
 
-    project = commands.add_parser("project", help="print the local type of every role")
+    project = commands.add_parser(
+        "project", help="print the local type of every role, or generate typed endpoint modules")
     project.add_argument("file", metavar="FILE")
     project.add_argument("--global", dest="global_name", metavar="G", help="only this global type")
     project.add_argument("--role", metavar="R", help="only this role")
+    project.add_argument("-o", "--output", dest="output_dir", metavar="DIR",
+                         help="write one typed module <global>_<role>.py per role into DIR")
+    project.add_argument("--check", action="store_true",
+                         help="with -o: write nothing; exit 1 if a module in DIR is stale or missing")
     project.set_defaults(run=_project)
 
     fsm = commands.add_parser("fsm", help="print a role's state machine (DOT or JSON)")
@@ -139,7 +146,13 @@ def _one_global(module: ProtocolModule, name: str | None) -> sessiontypes.Global
 
 
 def _project(args: argparse.Namespace) -> int:
-    module = _load(args.file)
+    if args.check and args.output_dir is None:
+        raise UsageError("--check compares generated modules with DIR: give -o DIR")
+    # sessiontypes.load, with the text kept: generated modules carry its digest.
+    text = Path(args.file).read_text(encoding="utf-8")
+    module = sessiontypes.loads(text, args.file)
+    for warning in module.warnings:
+        print(warning, file=sys.stderr)
     chosen = _pick_globals(module, args.global_name)
     if args.role:
         if not any(args.role in gt.roles for gt in chosen):
@@ -147,6 +160,10 @@ def _project(args: argparse.Namespace) -> int:
             raise UsageError(f"no role {args.role} in {_names(chosen)}; expected one of "
                              f"{', '.join(roles)}")
         chosen = [gt for gt in chosen if args.role in gt.roles]
+    if args.output_dir is not None:
+        targets = [(gt, role) for gt in chosen for role in gt.roles
+                   if args.role is None or role == args.role]
+        return _generate(args, generate_modules(module, text, targets))
     lines: list[str] = []
     for gt in chosen:
         if len(chosen) > 1:
@@ -157,6 +174,38 @@ def _project(args: argparse.Namespace) -> int:
     if lines:
         print("\n".join(lines))
     return EXIT_OK
+
+
+def _generate(args: argparse.Namespace, modules: list[GeneratedModule]) -> int:
+    directory = Path(args.output_dir)
+    if not args.check:
+        directory.mkdir(parents=True, exist_ok=True)
+        for generated in modules:
+            path = directory / generated.filename
+            path.write_bytes(generated.text.encode("utf-8"))  # '\n' on every platform
+            print(f"wrote {path}")
+        return EXIT_OK
+    outdated = []
+    for generated in modules:
+        path = directory / generated.filename
+        try:
+            current = path.read_bytes()
+        except FileNotFoundError:
+            outdated.append(f"{path}: missing")
+            continue
+        if current != generated.text.encode("utf-8"):
+            outdated.append(f"{path}: stale (differs from what {args.file} generates now)")
+    if not outdated:
+        print(f"{directory}: {_count(len(modules), 'generated module')} up to date")
+        return EXIT_OK
+    for line in outdated:
+        print(line, file=sys.stderr)
+    command = ["anodize", "project", args.file, "-o", args.output_dir]
+    command += ["--global", args.global_name] if args.global_name else []
+    command += ["--role", args.role] if args.role else []
+    print(f"{_count(len(outdated), 'module')} out of date; regenerate with: "
+          f"{shlex.join(command)}", file=sys.stderr)
+    return EXIT_ERRORS
 
 
 def _names(globals_: list[sessiontypes.GlobalType]) -> str:
