@@ -52,7 +52,8 @@ class RunReport:
         lines = [f"protocol {self.protocol}: {'ok' if self.ok else 'NOT ok'} in {self.duration:.2f} s"]
         for group in self.groups.values():
             memory = f", peak {group.peak_memory} bytes" if group.peak_memory else ""
-            lines.append(f"  group {group.name}: {group.status} ({group.scheduling}{memory})")
+            note = f"; {group.memory_note}" if group.memory_note else ""
+            lines.append(f"  group {group.name}: {group.status} ({group.scheduling}{memory}{note})")
         for role in self.roles.values():
             if role.status != "done":
                 lines.append(f"  role {role.name}: {role.status}" + (f": {role.error}" if role.error else ""))

@@ -1,0 +1,34 @@
+"""The examples run, and the generated code they use is up to date."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from anodize.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize(("script", "expected"), [
+    ("atm.py", ["C: withdrew 30", "C: withdrawing 500 refused", "C: balance is 70",
+                "protocol ATMSession: ok"]),
+    ("two_buyer.py", ["B2: bought for 30, delivered 2026-12-01", "S: no sale of 'Ulysses'"]),
+])
+def test_example_runs_to_a_good_report(script: str, expected: list[str]) -> None:
+    done = subprocess.run([sys.executable, str(ROOT / "examples" / script)], capture_output=True,
+                          text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 0, done.stdout + done.stderr
+    for line in expected:
+        assert line in done.stdout
+    assert "NOT ok" not in done.stdout
+
+
+@pytest.mark.parametrize("proto", ["protocols/atm.proto", "protocols/two_buyer.proto"])
+def test_generated_example_code_is_up_to_date(proto: str, monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(ROOT)
+    assert main(["project", proto, "-o", "examples/generated", "--check"]) == 0, capsys.readouterr().err
