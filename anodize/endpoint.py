@@ -25,6 +25,9 @@ from .transport.inproc import STOP, InprocNetwork, PeerFailure
 __all__ = ["Message", "Endpoint", "RoleStopped"]
 
 
+_new_tuple = tuple.__new__  # builds a Message without NamedTuple's Python-level __new__
+
+
 class Message(NamedTuple):
     """What ``recv`` returns: the label and the payload (None when there is none)."""
 
@@ -51,8 +54,12 @@ class Endpoint:
         self._monitor: Monitor | None = Monitor(machine, protocol, role) if monitored else None
         sends_to, receives_from = peers if peers is not None else _peers(machine)
         queues = network.queues
-        self._out = {p: queues[(role, p)] for p in sends_to if (role, p) in queues}
+        # Per peer: the channel and the receiver's doorbell (None for most roles).
+        self._out = {p: (queues[(role, p)], network.doorbells.get(p))
+                     for p in sends_to if (role, p) in queues}
         self._in = {p: queues[(p, role)] for p in receives_from if (p, role) in queues}
+        self.sent: dict[str, int] = dict.fromkeys(self._out, 0)
+        self._plain = not machine.forks  # no parallel composition: skip the routing checks
         self._doorbell = network.doorbells.get(role)
         self._branches: tuple[Endpoint, ...] | None = None
         self._send_route: dict[str, Endpoint] = {}
@@ -68,21 +75,24 @@ class Endpoint:
             ProtocolViolationError: the local type does not allow it now (nothing is sent).
             PeerFailedError: ``to`` has failed.
         """
-        if self._forked():
+        if not self._plain and self._forked():
             return self._branch_for(self._send_route, to, "send", label).send(to, label, payload)
-        failed = self._network.failed.get(to)
-        if failed is not None:
-            raise PeerFailedError(self.role, to, failed)
-        if self._network.stopping:
-            raise RoleStopped()
+        if self._network.alarm:
+            failed = self._network.failed.get(to)
+            if failed is not None:
+                raise PeerFailedError(self.role, to, failed)
+            if self._network.stopping:
+                raise RoleStopped()
         if self._monitor is not None:
             self._monitor.send(to, label, payload)
-        channel = self._out.get(to)
-        if channel is None:  # only reachable without a monitor
+        out = self._out.get(to)
+        if out is None:  # only reachable without a monitor
             raise AnodizeError(f"role {self.role} has no channel to {to}")
-        channel.put(Message(label, payload))
-        self._network.sent[(self.role, to)] += 1
-        self._network.ring(to, self.role)
+        channel, doorbell = out
+        channel.put(_new_tuple(Message, (label, payload)))
+        self.sent[to] += 1
+        if doorbell is not None:
+            doorbell.put(self.role)
 
     def recv(self, frm: str, timeout: float | None = None) -> Message:
         """Receive the next message from role ``frm``.
@@ -93,10 +103,10 @@ class Endpoint:
             PeerFailedError: ``frm`` failed before sending.
             TimeoutError: nothing arrived within ``timeout`` seconds.
         """
-        if self._forked():
+        if not self._plain and self._forked():
             return self._branch_for(self._recv_route, frm, "recv", "").recv(frm, timeout)
         monitor = self._monitor
-        if monitor is not None and not monitor.expects_from(frm):
+        if monitor is not None and frm not in monitor.recv_peers[monitor.state]:
             raise monitor.violation(Action("recv", frm, "*"), blame=self.role)
         channel = self._in.get(frm)
         if channel is None:
@@ -187,6 +197,14 @@ class Endpoint:
         assert self._monitor is not None
         return self._monitor.violation(Action("end", None, ""), blame=self.role)
 
+    def sent_counts(self) -> dict[str, int]:
+        """Messages sent per peer, this endpoint's and its branches'."""
+        counts = dict(self.sent)
+        for branch in self._branches or ():
+            for peer, n in branch.sent_counts().items():
+                counts[peer] = counts.get(peer, 0) + n
+        return counts
+
     @property
     def state(self) -> str:
         """The current state and the local type that remains (for messages and debugging)."""
@@ -198,6 +216,10 @@ class Endpoint:
 
     # ---- internals ---------------------------------------------------------------------
     def _accept(self, frm: str, item: object, channel: queue.SimpleQueue[object]) -> Message:
+        if type(item) is Message:
+            if self._monitor is not None:
+                self._monitor.recv(frm, item[0], item[1])  # type: ignore[index]
+            return item  # type: ignore[return-value]
         if isinstance(item, PeerFailure):
             channel.put(item)  # later receives fail too
             self.failed_peer = item.peer

@@ -22,7 +22,8 @@ _Step = tuple[int, Validator, Transition]
 class Monitor:
     """Enforces one state machine; ``state`` is the current state."""
 
-    __slots__ = ("protocol", "role", "machine", "state", "_sends", "_recvs")
+    __slots__ = ("protocol", "role", "machine", "state", "_sends", "_recvs", "recv_peers",
+                 "fork_states")
 
     def __init__(self, machine: StateMachine, protocol: str, role: str) -> None:
         self.protocol = protocol
@@ -40,6 +41,9 @@ class Monitor:
                 (sends if action == "send" else recvs)[(peer, label)] = (t.target, check, t)
             self._sends.append(sends)
             self._recvs.append(recvs)
+        # For each state, the peers it may receive from (checked before blocking).
+        self.recv_peers: list[frozenset[str | None]] = [frozenset(p for p, _ in r) for r in self._recvs]
+        self.fork_states = frozenset(machine.forks)
 
     def send(self, to: str | None, label: str, payload: object) -> None:
         """Step on sending; raises ProtocolViolationError blaming this role."""
@@ -65,7 +69,7 @@ class Monitor:
 
     @property
     def at_fork(self) -> bool:
-        return self.state in self.machine.forks
+        return self.state in self.fork_states
 
     @property
     def finished(self) -> bool:
@@ -73,7 +77,7 @@ class Monitor:
 
     def expects_from(self, peer: str) -> bool:
         """Whether the current state can receive from ``peer``."""
-        return any(p == peer for p, _ in self._recvs[self.state])
+        return peer in self.recv_peers[self.state]
 
     def violation(self, actual: Action, blame: str, reason: str = "",
                   transition: Transition | None = None) -> ProtocolViolationError:

@@ -107,7 +107,8 @@ class System:
         for thread in threads:
             thread.start()
         reports = self._supervise(results, network, len(threads), timeout, grace, started)
-        return self._report(reports, network, time.monotonic() - started)
+        sent = {(role, peer): n for role, ep in endpoints.items() for peer, n in ep.sent_counts().items()}
+        return self._report(reports, network, sent, time.monotonic() - started)
 
     def _supervise(self, results: SimpleQueue[RoleReport], network: InprocNetwork, count: int,
                    timeout: float | None, grace: float, started: float) -> dict[str, RoleReport]:
@@ -138,7 +139,8 @@ class System:
                 reports[role] = RoleReport(role, group, "stopped", None, "")
         return reports
 
-    def _report(self, reports: dict[str, RoleReport], network: InprocNetwork, duration: float) -> RunReport:
+    def _report(self, reports: dict[str, RoleReport], network: InprocNetwork,
+                sent: dict[tuple[str, str], int], duration: float) -> RunReport:
         roles = {r: reports[r] for r in self.global_type.roles}
         groups = {}
         for group in self.groups.values():
@@ -148,7 +150,7 @@ class System:
             note = ("memory bound not enforced: the inproc transport shares one heap "
                     "(use transport='process')" if group.memory else "")
             groups[group.name] = GroupReport(group.name, status, scheduling, None, note)  # type: ignore[arg-type]
-        messages = {f"{a}->{b}": n for (a, b), n in network.sent.items()}
+        messages = {f"{a}->{b}": sent.get((a, b), 0) for a, b in network.queues}
         return RunReport(self.global_type.name, roles, groups, messages, duration)
 
 

@@ -45,7 +45,8 @@ class InprocNetwork:
         self.doorbells: dict[str, SimpleQueue[str]] = {role: SimpleQueue() for role in doorbell_roles}
         self.failed: dict[str, str] = {}
         self.stopping = False
-        self.sent: dict[tuple[str, str], int] = dict.fromkeys(self.queues, 0)
+        # Raised on any failure or stop: senders test this one flag on the fast path.
+        self.alarm = False
         self._lock = threading.Lock()
 
     def fail(self, role: str, cause: str) -> None:
@@ -54,6 +55,7 @@ class InprocNetwork:
             if role in self.failed:
                 return
             self.failed[role] = cause
+            self.alarm = True
         for (sender, receiver), queue in self.queues.items():
             if sender == role:
                 queue.put(PeerFailure(role, cause))
@@ -62,6 +64,7 @@ class InprocNetwork:
     def stop(self) -> None:
         """Wake every waiting receiver with STOP."""
         self.stopping = True
+        self.alarm = True
         for (sender, receiver), queue in self.queues.items():
             queue.put(STOP)
             self.ring(receiver, sender)
