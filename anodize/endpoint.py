@@ -13,6 +13,7 @@ part in.
 from __future__ import annotations
 
 import queue
+import threading
 import time
 from typing import Any, NamedTuple
 
@@ -26,6 +27,7 @@ __all__ = ["Message", "Endpoint", "RoleStopped"]
 
 
 _new_tuple = tuple.__new__  # builds a Message without NamedTuple's Python-level __new__
+_DRAIN_AT = 4096  # doorbell rings left by recv() before they are cleared
 
 
 class Message(NamedTuple):
@@ -60,6 +62,7 @@ class Endpoint:
         self._in = {p: queues[(p, role)] for p in receives_from if (p, role) in queues}
         self.sent: dict[str, int] = dict.fromkeys(self._out, 0)
         self._plain = not machine.forks  # no parallel composition: skip the routing checks
+        self._fork_lock = threading.Lock()
         self._doorbell = network.doorbells.get(role)
         self._branches: tuple[Endpoint, ...] | None = None
         self._send_route: dict[str, Endpoint] = {}
@@ -77,19 +80,21 @@ class Endpoint:
         """
         if not self._plain and self._forked():
             return self._branch_for(self._send_route, to, "send", label).send(to, label, payload)
+        if self._monitor is not None:  # first: a forbidden send is a violation, whatever the peer
+            self._monitor.send(to, label, payload)
         if self._network.alarm:
             failed = self._network.failed.get(to)
             if failed is not None:
                 raise PeerFailedError(self.role, to, failed)
             if self._network.stopping:
                 raise RoleStopped()
-        if self._monitor is not None:
-            self._monitor.send(to, label, payload)
         out = self._out.get(to)
         if out is None:  # only reachable without a monitor
             raise AnodizeError(f"role {self.role} has no channel to {to}")
         channel, doorbell = out
-        channel.put(_new_tuple(Message, (label, payload)))
+        # A plain tuple: the garbage collector stops tracking those, not tuple subclasses,
+        # and a backlog of tracked objects slows every collection.
+        channel.put((label, payload))
         self.sent[to] += 1
         if doorbell is not None:
             doorbell.put(self.role)
@@ -115,7 +120,22 @@ class Endpoint:
             item = channel.get(timeout=timeout)
         except queue.Empty:
             raise TimeoutError(f"role {self.role}: no message from {frm} within {timeout} s") from None
+        if self._doorbell is not None and self._doorbell.qsize() > _DRAIN_AT:
+            self._drain_doorbell()
         return self._accept(frm, item, channel)
+
+    def _drain_doorbell(self) -> None:
+        """Clear rings for messages taken by recv(); ring again for channels still holding some."""
+        doorbell = self._doorbell
+        assert doorbell is not None
+        try:
+            while True:
+                doorbell.get_nowait()
+        except queue.Empty:
+            pass
+        for peer, channel in self._all_in().items():
+            if not channel.empty():
+                doorbell.put(peer)
 
     def recv_any(self, timeout: float | None = None) -> tuple[str, Message]:
         """Receive from whichever incoming channel, allowed now, has a message first.
@@ -173,10 +193,16 @@ class Endpoint:
         """
         if self._branches is None:
             monitor = self._monitor
-            if monitor is None or not monitor.at_fork:
-                raise (monitor.violation(Action("fork", None, "||"), blame=self.role) if monitor
-                       else AnodizeError("fork() needs a monitored endpoint"))
-            self._start_branches(monitor)
+            if monitor is None:
+                forks = list(self._machine.forks)
+                if len(forks) != 1:
+                    raise AnodizeError(f"role {self.role}: without monitors, fork() needs exactly one "
+                                       f"parallel composition in the local type (it has {len(forks)})")
+                self._start_branches(forks[0])
+            elif not monitor.at_fork:
+                raise monitor.violation(Action("fork", None, "||"), blame=self.role)
+            else:
+                self._start_branches(monitor.state)
         assert self._branches is not None
         return self._branches
 
@@ -216,10 +242,10 @@ class Endpoint:
 
     # ---- internals ---------------------------------------------------------------------
     def _accept(self, frm: str, item: object, channel: queue.SimpleQueue[object]) -> Message:
-        if type(item) is Message:
+        if type(item) is tuple:
             if self._monitor is not None:
-                self._monitor.recv(frm, item[0], item[1])  # type: ignore[index]
-            return item  # type: ignore[return-value]
+                self._monitor.recv(frm, item[0], item[1])
+            return _new_tuple(Message, item)  # type: ignore[no-any-return]
         if isinstance(item, PeerFailure):
             channel.put(item)  # later receives fail too
             self.failed_peer = item.peer
@@ -237,21 +263,25 @@ class Endpoint:
             return True
         monitor = self._monitor
         if monitor is not None and monitor.at_fork:
-            self._start_branches(monitor)
+            self._start_branches(monitor.state)
             return True
         return False
 
-    def _start_branches(self, monitor: Monitor) -> None:
-        branches = []
-        for machine in self._machine.forks[monitor.state]:
-            sends_to, receives_from = _peers(machine)
-            branch = Endpoint(self.role, self.protocol, machine, self._network, True,
-                              (sends_to, receives_from))
-            branch._doorbell = self._doorbell
-            branches.append(branch)
-            self._send_route.update(dict.fromkeys(sends_to, branch))
-            self._recv_route.update(dict.fromkeys(receives_from, branch))
-        self._branches = tuple(branches)
+    def _start_branches(self, fork_state: int) -> None:
+        # Branch threads may reach the fork together: build the branches once.
+        with self._fork_lock:
+            if self._branches is not None:
+                return
+            branches = []
+            for machine in self._machine.forks[fork_state]:
+                sends_to, receives_from = _peers(machine)
+                branch = Endpoint(self.role, self.protocol, machine, self._network,
+                                  self._monitor is not None, (sends_to, receives_from))
+                branch._doorbell = self._doorbell
+                branches.append(branch)
+                self._send_route.update(dict.fromkeys(sends_to, branch))
+                self._recv_route.update(dict.fromkeys(receives_from, branch))
+            self._branches = tuple(branches)
 
     def _branch_for(self, routes: dict[str, Endpoint], peer: str, kind: str, label: str) -> Endpoint:
         branch = routes.get(peer)

@@ -11,12 +11,12 @@ from __future__ import annotations
 from sessiontypes import StateMachine, Transition
 
 from .errors import Action, ProtocolViolationError
-from .payloads import Validator, validator_for
+from .payloads import Validator, exact_types_for, validator_for
 
 __all__ = ["Monitor"]
 
-# (target state, payload check, the transition it came from)
-_Step = tuple[int, Validator, Transition]
+# (target state, types accepted at once, full payload check, the transition it came from)
+_Step = tuple[int, frozenset[type], Validator, Transition]
 
 
 class Monitor:
@@ -30,15 +30,18 @@ class Monitor:
         self.role = role
         self.machine = machine
         self.state = machine.initial
-        validators: dict[int, Validator] = {}
+        validators: dict[int, tuple[frozenset[type], Validator]] = {}
         self._sends: list[dict[tuple[str | None, str], _Step]] = []
         self._recvs: list[dict[tuple[str | None, str], _Step]] = []
         for transitions in machine.table:
             sends: dict[tuple[str | None, str], _Step] = {}
             recvs: dict[tuple[str | None, str], _Step] = {}
             for (action, peer, label), t in transitions.items():
-                check = validators.setdefault(id(t.sort), validator_for(t.sort))
-                (sends if action == "send" else recvs)[(peer, label)] = (t.target, check, t)
+                key = id(t.sort)
+                if key not in validators:
+                    validators[key] = (exact_types_for(t.sort), validator_for(t.sort))
+                exact, check = validators[key]
+                (sends if action == "send" else recvs)[(peer, label)] = (t.target, exact, check, t)
             self._sends.append(sends)
             self._recvs.append(recvs)
         # For each state, the peers it may receive from (checked before blocking).
@@ -50,10 +53,11 @@ class Monitor:
         step = self._sends[self.state].get((to, label))
         if step is None:
             raise self.violation(Action("send", to, label, _type_name(payload)), blame=self.role)
-        reason = step[1](payload)
-        if reason is not None:
-            raise self.violation(Action("send", to, label, _type_name(payload)), self.role,
-                                 reason, step[2])
+        if type(payload) not in step[1]:
+            reason = step[2](payload)
+            if reason is not None:
+                raise self.violation(Action("send", to, label, _type_name(payload)), self.role,
+                                     reason, step[3])
         self.state = step[0]
 
     def recv(self, frm: str | None, label: str, payload: object) -> None:
@@ -61,10 +65,11 @@ class Monitor:
         step = self._recvs[self.state].get((frm, label))
         if step is None:
             raise self.violation(Action("recv", frm, label, _type_name(payload)), blame=frm or "the peer")
-        reason = step[1](payload)
-        if reason is not None:
-            raise self.violation(Action("recv", frm, label, _type_name(payload)), frm or "the peer",
-                                 reason, step[2])
+        if type(payload) not in step[1]:
+            reason = step[2](payload)
+            if reason is not None:
+                raise self.violation(Action("recv", frm, label, _type_name(payload)), frm or "the peer",
+                                     reason, step[3])
         self.state = step[0]
 
     @property

@@ -16,7 +16,7 @@ from sessiontypes import Sort
 
 from .errors import AnodizeError
 
-__all__ = ["Validator", "validator_for", "resolve_class"]
+__all__ = ["Validator", "validator_for", "exact_types_for", "resolve_class"]
 
 # A validator returns None when the payload fits, or why it does not.
 Validator = Callable[[object], "str | None"]
@@ -82,3 +82,23 @@ def validator_for(sort: Sort | None) -> Validator:
         return _anything
     cls = resolve_class(sort.target)
     return _of(cls, name=f"{sort.spelling} ({sort.target})")
+
+
+_EXACT: dict[str, frozenset[type]] = {
+    "int": frozenset({int}), "bool": frozenset({bool}), "str": frozenset({str}),
+    "float": frozenset({float, int}), "bytes": frozenset({bytes}),
+}
+
+
+def exact_types_for(sort: Sort | None) -> frozenset[type]:
+    """Types whose instances fit ``sort`` without calling its validator (a fast path).
+
+    Empty when every payload needs the full check (``nat``, which must be >= 0).
+    """
+    if sort is None:
+        return frozenset({type(None)})
+    if sort.target is None:
+        return _EXACT.get(sort.key, frozenset())
+    if sort.target.startswith("ros:"):
+        return frozenset()
+    return frozenset({resolve_class(sort.target)})

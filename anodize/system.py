@@ -190,6 +190,7 @@ def _argument_for(function: Callable[..., Any], endpoint: Endpoint) -> Any:
         raise AnodizeError(f"role function {function.__qualname__} must take one argument "
                            "(an Endpoint or the typed initial state)")
     wanted = hints.get(parameters[0].name)
-    if isinstance(wanted, type) and wanted is not Endpoint and not issubclass(Endpoint, wanted):
+    # Generated state classes hold the endpoint and mark themselves used (see codegen).
+    if isinstance(wanted, type) and hasattr(wanted, "_use") and hasattr(wanted, "_endpoint"):
         return wanted(endpoint)
     return endpoint

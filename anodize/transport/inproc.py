@@ -3,7 +3,8 @@
 Failure and stop are delivered *through* the channels, as sentinels put after
 everything already sent, so a receiver sees every message its peer sent before
 it failed, then the failure: nothing is dropped and nobody waits forever.
-Roles with parallel branches also get a *doorbell*: each message into them
+Messages travel as plain ``(label, payload)`` tuples. Roles with parallel
+branches also get a *doorbell*: each message into them
 rings it with the sender's name, so one thread can wait on whichever channel
 has a message first.
 """

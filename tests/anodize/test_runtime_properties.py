@@ -409,9 +409,6 @@ def test_fork_with_monitors() -> None:
     assert got == {"A": 3, "B": 1, "C": 2}
 
 
-@pytest.mark.xfail(strict=True, reason="runtime bug: Endpoint.fork() raises AnodizeError "
-                   "'fork() needs a monitored endpoint' when monitors=False, so role code for a "
-                   "parallel local type cannot run unmonitored (monitors are not transparent)")
 def test_fork_works_without_monitors() -> None:
     got: dict[str, object] = {}
     system = System(_global(PAR, "P"), monitors=False)
@@ -424,10 +421,6 @@ def test_fork_works_without_monitors() -> None:
 TWO_LOOPS = "global P = ( mu t. A -> B : {x(int). t, q} || mu u. A -> C : {z(int). u, q} )"
 
 
-@pytest.mark.xfail(strict=True, reason="runtime bug: Endpoint._forked()/fork() create the "
-                   "branches without a lock; two threads reaching a fork state at once each "
-                   "build a set of branches, one thread's progress lands in an orphaned branch, "
-                   "and the role is blamed for returning before end")
 @pytest.mark.parametrize("use_fork", [True, False], ids=["fork", "routing"])
 def test_two_threads_may_start_the_branches_at_once(use_fork: bool) -> None:
     """Thread-per-branch code where both threads make the first move of their branch."""
@@ -464,9 +457,6 @@ def test_two_threads_may_start_the_branches_at_once(use_fork: bool) -> None:
     assert failures == []
 
 
-@pytest.mark.xfail(strict=True, reason="runtime bug: system._argument_for takes typing.Any (a "
-                   "class since Python 3.11) for a typed start state and calls Any(endpoint): "
-                   "'Any cannot be instantiated'")
 def test_a_role_function_annotated_any_gets_the_endpoint() -> None:
     def a(ep: Any) -> None:
         ep.send("B", "x")
