@@ -80,8 +80,13 @@ class Endpoint:
         """
         if not self._plain and self._forked():
             return self._branch_for(self._send_route, to, "send", label).send(to, label, payload)
-        if self._monitor is not None:  # first: a forbidden send is a violation, whatever the peer
-            self._monitor.send(to, label, payload)
+        monitor = self._monitor
+        if monitor is not None:  # first: a forbidden send is a violation, whatever the peer
+            # Monitor.send inlined (this is the hot path); it is called only to raise.
+            step = monitor.sends[monitor.state].get((to, label))
+            if step is None or (type(payload) not in step[1] and step[2](payload) is not None):
+                monitor.send(to, label, payload)
+            monitor.state = step[0]  # type: ignore[index]
         if self._network.alarm:
             failed = self._network.failed.get(to)
             if failed is not None:
@@ -122,6 +127,11 @@ class Endpoint:
             raise TimeoutError(f"role {self.role}: no message from {frm} within {timeout} s") from None
         if self._doorbell is not None and self._doorbell.qsize() > _DRAIN_AT:
             self._drain_doorbell()
+        if type(item) is tuple and monitor is not None:  # Monitor.recv inlined, as in send
+            step = monitor.recvs[monitor.state].get((frm, item[0]))
+            if step is not None and (type(item[1]) in step[1] or step[2](item[1]) is None):
+                monitor.state = step[0]
+                return _new_tuple(Message, item)  # type: ignore[no-any-return]
         return self._accept(frm, item, channel)
 
     def _drain_doorbell(self) -> None:

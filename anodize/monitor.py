@@ -20,9 +20,14 @@ _Step = tuple[int, frozenset[type], Validator, Transition]
 
 
 class Monitor:
-    """Enforces one state machine; ``state`` is the current state."""
+    """Enforces one state machine; ``state`` is the current state.
 
-    __slots__ = ("protocol", "role", "machine", "state", "_sends", "_recvs", "recv_peers",
+    ``sends[state]`` / ``recvs[state]`` map ``(peer, label)`` to a step
+    ``(target, exact types, validator, transition)``; the endpoint's hot path
+    reads them directly and calls :meth:`send` / :meth:`recv` only to raise.
+    """
+
+    __slots__ = ("protocol", "role", "machine", "state", "sends", "recvs", "recv_peers",
                  "fork_states")
 
     def __init__(self, machine: StateMachine, protocol: str, role: str) -> None:
@@ -31,8 +36,8 @@ class Monitor:
         self.machine = machine
         self.state = machine.initial
         validators: dict[int, tuple[frozenset[type], Validator]] = {}
-        self._sends: list[dict[tuple[str | None, str], _Step]] = []
-        self._recvs: list[dict[tuple[str | None, str], _Step]] = []
+        self.sends: list[dict[tuple[str | None, str], _Step]] = []
+        self.recvs: list[dict[tuple[str | None, str], _Step]] = []
         for transitions in machine.table:
             sends: dict[tuple[str | None, str], _Step] = {}
             recvs: dict[tuple[str | None, str], _Step] = {}
@@ -42,15 +47,15 @@ class Monitor:
                     validators[key] = (exact_types_for(t.sort), validator_for(t.sort))
                 exact, check = validators[key]
                 (sends if action == "send" else recvs)[(peer, label)] = (t.target, exact, check, t)
-            self._sends.append(sends)
-            self._recvs.append(recvs)
+            self.sends.append(sends)
+            self.recvs.append(recvs)
         # For each state, the peers it may receive from (checked before blocking).
-        self.recv_peers: list[frozenset[str | None]] = [frozenset(p for p, _ in r) for r in self._recvs]
+        self.recv_peers: list[frozenset[str | None]] = [frozenset(p for p, _ in r) for r in self.recvs]
         self.fork_states = frozenset(machine.forks)
 
     def send(self, to: str | None, label: str, payload: object) -> None:
         """Step on sending; raises ProtocolViolationError blaming this role."""
-        step = self._sends[self.state].get((to, label))
+        step = self.sends[self.state].get((to, label))
         if step is None:
             raise self.violation(Action("send", to, label, _type_name(payload)), blame=self.role)
         if type(payload) not in step[1]:
@@ -62,7 +67,7 @@ class Monitor:
 
     def recv(self, frm: str | None, label: str, payload: object) -> None:
         """Step on receiving; raises ProtocolViolationError blaming the sender."""
-        step = self._recvs[self.state].get((frm, label))
+        step = self.recvs[self.state].get((frm, label))
         if step is None:
             raise self.violation(Action("recv", frm, label, _type_name(payload)), blame=frm or "the peer")
         if type(payload) not in step[1]:
