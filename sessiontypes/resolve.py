@@ -153,7 +153,6 @@ class _Walk(Generic[Syntax, Term]):
     declarations: Mapping[str, Syntax]   # the same kind's declarations, by name
     kind: str                            # "global" or "local"
     other_kind: set[str]                 # names declared with another kind
-    used_vars: set[str] = field(default_factory=set)
 
     def lookup(self, name: s.Name, scope: _Scope, depth: int,
                parallel_depth: int) -> _Binder | None | str:

@@ -20,7 +20,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from sessiontypes import global_types as g
-from sessiontypes.sorts import Sort
 
 Event = tuple[str, str, str, "Sort | None"]
 LocalEvent = tuple[str, str, str, "Sort | None"]
