@@ -20,9 +20,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from sessiontypes import global_types as g
+from sessiontypes.sorts import Sort
 
-Event = tuple[str, str, str, "Sort | None"]
-LocalEvent = tuple[str, str, str, "Sort | None"]
+Event = tuple[str, str, str, Sort | None]
+LocalEvent = tuple[str, str, str, Sort | None]
 
 
 class SearchBoundExceeded(Exception):
