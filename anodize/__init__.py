@@ -22,9 +22,10 @@ from .errors import (
 from .group import Group
 from .report import GroupReport, RoleReport, RunReport
 from .system import System
+from .typed import State
 
 __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
     "AnodizeError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
-    "LinearityError", "RoleStopped", "Action",
+    "LinearityError", "RoleStopped", "Action", "State",
 ]

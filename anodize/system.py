@@ -27,6 +27,7 @@ from .group import Group, parse_memory
 from .report import GroupReport, RoleReport, RunReport
 from .sched import apply_thread_scheduling
 from .transport.inproc import InprocNetwork
+from .typed import State
 
 __all__ = ["System"]
 
@@ -190,7 +191,6 @@ def _argument_for(function: Callable[..., Any], endpoint: Endpoint) -> Any:
         raise AnodizeError(f"role function {function.__qualname__} must take one argument "
                            "(an Endpoint or the typed initial state)")
     wanted = hints.get(parameters[0].name)
-    # Generated state classes hold the endpoint and mark themselves used (see codegen).
-    if isinstance(wanted, type) and hasattr(wanted, "_use") and hasattr(wanted, "_endpoint"):
+    if isinstance(wanted, type) and issubclass(wanted, State):  # a generated typed state
         return wanted(endpoint)
     return endpoint
