@@ -20,12 +20,12 @@ from .errors import (
     ProtocolViolationError,
 )
 from .group import Group
-from .report import GroupReport, RoleReport, RunReport
+from .report import GroupReport, GroupStatus, RoleReport, RunReport
 from .system import System
 from .typed import State
 
 __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
     "AnodizeError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
-    "LinearityError", "RoleStopped", "Action", "State",
+    "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
 ]

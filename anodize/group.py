@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import importlib
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Group", "parse_memory"]
+from .errors import AnodizeError
+
+__all__ = ["Group", "parse_memory", "FAILURE_POLICIES", "resolve_function", "reference_of"]
 
 _UNITS = {"": 1, "b": 1, "kb": 10**3, "mb": 10**6, "gb": 10**9,
           "kib": 2**10, "mib": 2**20, "gib": 2**30}
+
+FAILURE_POLICIES = ("stop", "restart", "stop-system")
 
 
 def parse_memory(value: int | str | None) -> int | None:
@@ -19,18 +24,64 @@ def parse_memory(value: int | str | None) -> int | None:
     Raises:
         ValueError: not a size.
     """
-    if value is None or isinstance(value, int):
+    if value is None:
+        return None
+    if isinstance(value, int) and not isinstance(value, bool):
+        if value <= 0:
+            raise ValueError(f"memory bound {value}: expected a positive number of bytes")
         return value
+    if not isinstance(value, str):
+        raise ValueError(f"memory bound {value!r}: expected a size such as 64MiB, 512KiB or 1GB")
     match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([KkMmGg]i?[Bb]|[Bb])?\s*", value)
-    if not match:
+    if not match or float(match.group(1)) <= 0:
         raise ValueError(f"memory bound {value!r}: expected a size such as 64MiB, 512KiB or 1GB")
     number, unit = match.groups()
     return int(float(number) * _UNITS[(unit or "").lower()])
 
 
+def resolve_function(reference: str) -> Callable[..., Any]:
+    """Import the function named by ``"package.module:function"`` (or ``:Class.method``).
+
+    Raises:
+        AnodizeError: malformed, not importable, or not callable.
+    """
+    module_name, colon, qualified = reference.partition(":")
+    if not colon or not module_name or not qualified:
+        raise AnodizeError(f"role function {reference!r}: expected 'module:function'")
+    try:
+        value: Any = importlib.import_module(module_name)
+        for part in qualified.split("."):
+            value = getattr(value, part)
+    except ImportError as error:
+        raise AnodizeError(f"role function {reference!r}: cannot import {module_name}: {error}") from None
+    except AttributeError:
+        raise AnodizeError(f"role function {reference!r}: module {module_name} has no {qualified}") from None
+    if not callable(value):
+        raise AnodizeError(f"role function {reference!r} is not callable")
+    return value  # type: ignore[no-any-return]
+
+
+def reference_of(function: Callable[..., Any] | str) -> str:
+    """``"module:qualname"`` for a module-level function (what another process can import).
+
+    Raises:
+        AnodizeError: a lambda, a nested function or another object with no import path.
+    """
+    if isinstance(function, str):
+        return function
+    module = getattr(function, "__module__", None)
+    qualified = getattr(function, "__qualname__", None)
+    if not module or not qualified or "<" in qualified:
+        raise AnodizeError(
+            f"role function {qualified or function!r} cannot run in another process: it has no "
+            "import path (lambdas and nested functions are shared by closure); define it at "
+            "module level or name it as 'module:function'")
+    return f"{module}:{qualified}"
+
+
 @dataclass
 class Group:
-    """A group of roles run with one priority, memory bound and CPU set.
+    """A group of roles run with one priority, memory bound, CPU set and failure policy.
 
     Create with :meth:`anodize.System.group`; add roles with :meth:`role`.
     """
@@ -39,17 +90,21 @@ class Group:
     priority: int | None = None
     memory: int | None = None
     cpus: frozenset[int] | None = None
-    roles: dict[str, Callable[..., Any]] = field(default_factory=dict)
+    on_failure: str = "stop"
+    max_restarts: int = 3
+    roles: dict[str, Callable[..., Any] | str] = field(default_factory=dict)
     _system: Any = field(default=None, repr=False)
 
-    def role(self, name: str, function: Callable[..., Any]) -> Group:
+    def role(self, name: str, function: Callable[..., Any] | str) -> Group:
         """Run role ``name`` of the global type as ``function(endpoint)`` in this group.
 
         ``function`` takes an :class:`~anodize.Endpoint`, or the generated typed
-        initial state (detected from its annotation). Returns the group, for chaining.
+        initial state (detected from its annotation); it may be given as
+        ``"module:function"``. Returns the group, for chaining.
 
         Raises:
             ValueError: the global type has no such role, or it is already placed.
+            AnodizeError: a ``"module:function"`` that cannot be imported.
         """
         self._system._place(self, name, function)
         self.roles[name] = function
