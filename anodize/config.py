@@ -1,0 +1,360 @@
+"""System files: a protocol, a global type, a transport and the groups that run its roles.
+
+A system file is TOML. Paths in it are relative to the file itself::
+
+    protocol = "../protocols/stream.proto"   # the .proto file (required)
+    global = "Pipeline"                      # the global type's name in it (required)
+    transport = "process"                    # "process" (default) or "inproc"
+    timeout = 10.0                           # seconds; roles still running then are stopped
+    monitors = true                          # run-time protocol checks (default true)
+    pythonpath = ["."]                       # dirs prepended to sys.path (default: the file's dir)
+
+    [groups.control]                         # one table per group (at least one)
+    priority = 90                            # 1..99
+    memory = "64MiB"                         # a bound: bytes, or a size such as "512KiB", "1GB"
+    cpus = [0]                               # the CPUs the group may run on
+    on_failure = "stop"                      # "stop" (default), "restart" or "stop-system"
+    max_restarts = 3                         # with on_failure = "restart" (default 3)
+    roles = { Source = "memory_hog:source", Sink = "memory_hog:sink" }   # role -> "module:function"
+
+Only ``protocol``, ``global``, ``groups`` and each group's ``roles`` are required.
+:func:`load_config` reads and checks a file without importing anything;
+:func:`build_system` loads the protocol, imports the role functions and returns
+an :class:`anodize.System` ready to ``run``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import sessiontypes
+
+from .errors import AnodizeError
+from .group import FAILURE_POLICIES, parse_memory
+from .system import TRANSPORTS, System
+
+__all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
+           "add_pythonpath"]
+
+_TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups")
+_GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles")
+_REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
+_TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
+
+
+class ConfigError(AnodizeError):
+    """Raised for a system file that cannot be read, parsed, or turned into a system.
+
+    Attributes:
+        path: the system file, as given.
+        key: the dotted key at fault (``groups.control.priority``), or None.
+        problem: what is wrong, e.g. ``expected an int 1..99, got 120``.
+        line: for TOML syntax errors, the 1-based line (else None).
+        column: for TOML syntax errors, the 1-based column (else None).
+        source_line: for TOML syntax errors, the text of that line.
+    """
+
+    def __init__(self, path: str, key: str | None, problem: str, line: int | None = None,
+                 column: int | None = None, source_line: str = "") -> None:
+        self.path = path
+        self.key = key
+        self.problem = problem
+        self.line = line
+        self.column = column
+        self.source_line = source_line
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        if self.line is not None:
+            caret = " " * ((self.column or 1) - 1) + "^"
+            context = f"\n    {self.source_line}\n    {caret}" if self.source_line.strip() else ""
+            return f"{self.path}:{self.line}:{self.column}: {self.problem}{context}"
+        if self.key is None:
+            return f"{self.path}: {self.problem}"
+        return f"{self.path}: {self.key}: {self.problem}"
+
+
+@dataclass(frozen=True)
+class GroupConfig:
+    """One ``[groups.NAME]`` table.
+
+    Attributes:
+        name: the group's name.
+        priority: 1..99, or None.
+        memory: the memory bound in bytes, or None.
+        cpus: the CPUs the group may use, sorted, or None.
+        on_failure: ``"stop"``, ``"restart"`` or ``"stop-system"``.
+        max_restarts: how often ``on_failure = "restart"`` restarts the group.
+        roles: role name -> ``"module:function"``, in file order.
+        location: where the group is written, for messages: ``"path: groups.NAME"``.
+    """
+
+    name: str
+    priority: int | None
+    memory: int | None
+    cpus: tuple[int, ...] | None
+    on_failure: str
+    max_restarts: int
+    roles: dict[str, str]
+    location: str
+
+
+@dataclass(frozen=True)
+class SystemConfig:
+    """A checked system file.
+
+    Attributes:
+        path: the system file, as given.
+        protocol: the ``.proto`` file (relative paths are taken from the system file's dir).
+        global_name: the global type's name.
+        transport: ``"process"`` or ``"inproc"``.
+        timeout: seconds after which running roles are stopped, or None.
+        monitors: whether endpoints check the protocol at run time.
+        pythonpath: absolute dirs to put in front of ``sys.path``.
+        groups: group name -> its configuration, in file order.
+    """
+
+    path: Path
+    protocol: Path
+    global_name: str
+    transport: str
+    timeout: float | None
+    monitors: bool
+    pythonpath: tuple[Path, ...]
+    groups: dict[str, GroupConfig]
+
+    def group_of(self, role: str) -> str | None:
+        """The group that runs ``role``, or None."""
+        return next((g.name for g in self.groups.values() if role in g.roles), None)
+
+
+def load_config(path: str | Path) -> SystemConfig:
+    """Read and check a system file; nothing is imported or loaded yet.
+
+    Raises:
+        ConfigError: the file cannot be read, is not TOML (``path:line:col: ...``),
+            has an unknown or missing key, or a value of the wrong type or range
+            (``path: key: expected ..., got ...``).
+    """
+    path = Path(path)
+    shown = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(shown, None, "expected UTF-8 text") from None
+    except OSError as error:
+        raise ConfigError(shown, None, f"cannot read: {error.strerror or error}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise _syntax_error(shown, text, str(error)) from None
+    return _Reader(shown, path).system(data)
+
+
+def _syntax_error(shown: str, text: str, message: str) -> ConfigError:
+    match = _TOML_POSITION.match(message)
+    problem = match.group(1) if match else message
+    problem = problem[:1].lower() + problem[1:]
+    lines = text.split("\n")
+    if match and match.group(2):
+        line, column = int(match.group(2)), int(match.group(3))
+    else:  # "at end of document"
+        line, column = len(lines), len(lines[-1]) + 1
+    source = lines[line - 1] if 0 < line <= len(lines) else ""
+    return ConfigError(shown, None, problem, line, column, source)
+
+
+class _Reader:
+    """Checks the parsed TOML of one file, key by key."""
+
+    def __init__(self, shown: str, path: Path) -> None:
+        self.shown = shown
+        self.directory = path.parent
+
+    def error(self, key: str | None, problem: str) -> ConfigError:
+        return ConfigError(self.shown, key, problem)
+
+    def system(self, data: dict[str, Any]) -> SystemConfig:
+        self.known_keys(data, _TOP_KEYS, None)
+        protocol = self.required_string(data, "protocol")
+        global_name = self.required_string(data, "global")
+        transport = self.string(data, "transport") or "process"
+        if transport not in TRANSPORTS:
+            raise self.error("transport", f"expected {' or '.join(map(_show, TRANSPORTS))}, "
+                                          f"got {_show(transport)}")
+        timeout = data.get("timeout")
+        if timeout is not None and (isinstance(timeout, bool) or not isinstance(timeout, int | float)
+                                    or not timeout > 0):
+            raise self.error("timeout", f"expected a number of seconds > 0, got {_show(timeout)}")
+        monitors = data.get("monitors", True)
+        if not isinstance(monitors, bool):
+            raise self.error("monitors", f"expected true or false, got {_show(monitors)}")
+        return SystemConfig(
+            path=Path(self.shown), protocol=Path(os.path.normpath(self.directory / protocol)),
+            global_name=global_name, transport=transport,
+            timeout=None if timeout is None else float(timeout), monitors=monitors,
+            pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
+            groups=self.groups(data.get("groups")))
+
+    def known_keys(self, table: dict[str, Any], allowed: tuple[str, ...], prefix: str | None) -> None:
+        for key in table:
+            if key not in allowed:
+                dotted = f"{prefix}.{key}" if prefix else key
+                raise self.error(dotted, f"unknown key; expected one of {', '.join(sorted(allowed))}")
+
+    def required_string(self, table: dict[str, Any], key: str) -> str:
+        value = self.string(table, key)
+        if value is None:
+            raise self.error(key, "missing (it is required)")
+        return value
+
+    def string(self, table: dict[str, Any], key: str) -> str | None:
+        if key not in table:
+            return None
+        value = table[key]
+        if not isinstance(value, str) or not value:
+            raise self.error(key, f"expected a non-empty string, got {_show(value)}")
+        return value
+
+    def pythonpath(self, value: Any) -> tuple[Path, ...]:
+        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+            raise self.error("pythonpath", f"expected an array of directories, got {_show(value)}")
+        return tuple(Path(os.path.abspath(self.directory / entry)) for entry in value)
+
+    def groups(self, value: Any) -> dict[str, GroupConfig]:
+        if value is None:
+            raise self.error("groups", "missing (it is required): add a table such as [groups.main]")
+        if not isinstance(value, dict):
+            raise self.error("groups", f"expected tables such as [groups.main], got {_show(value)}")
+        if not value:
+            raise self.error("groups", "expected at least one group, such as [groups.main]")
+        groups: dict[str, GroupConfig] = {}
+        placed: dict[str, str] = {}
+        for name, table in value.items():
+            group = self.group(name, table)
+            for role in group.roles:
+                if role in placed:
+                    raise self.error(f"groups.{name}.roles.{role}",
+                                     f"role {role} is already in group {placed[role]}")
+                placed[role] = name
+            groups[name] = group
+        return groups
+
+    def group(self, name: str, table: Any) -> GroupConfig:
+        prefix = f"groups.{name}"
+        if not isinstance(table, dict):
+            raise self.error(prefix, f"expected a table, got {_show(table)}")
+        self.known_keys(table, _GROUP_KEYS, prefix)
+        priority = table.get("priority")
+        if priority is not None and (not _is_int(priority) or not 1 <= priority <= 99):
+            raise self.error(f"{prefix}.priority", f"expected an int 1..99, got {_show(priority)}")
+        memory = table.get("memory")
+        try:
+            memory_bytes = parse_memory(memory)
+        except ValueError:
+            raise self.error(f"{prefix}.memory", "expected a size such as \"64MiB\", \"512KiB\" or a "
+                                                 f"number of bytes, got {_show(memory)}") from None
+        on_failure = table.get("on_failure", "stop")
+        if on_failure not in FAILURE_POLICIES:
+            raise self.error(f"{prefix}.on_failure", f"expected one of "
+                             f"{', '.join(map(_show, FAILURE_POLICIES))}, got {_show(on_failure)}")
+        max_restarts = table.get("max_restarts", 3)
+        if not _is_int(max_restarts) or max_restarts < 0:
+            raise self.error(f"{prefix}.max_restarts", f"expected an int >= 0, got {_show(max_restarts)}")
+        return GroupConfig(name, priority, memory_bytes, self.cpus(prefix, table.get("cpus")),
+                           on_failure, max_restarts, self.roles(prefix, table),
+                           f"{self.shown}: {prefix}")
+
+    def cpus(self, prefix: str, value: Any) -> tuple[int, ...] | None:
+        if value is None:
+            return None
+        if (not isinstance(value, list) or not value
+                or not all(_is_int(cpu) and cpu >= 0 for cpu in value)):
+            raise self.error(f"{prefix}.cpus", "expected a non-empty array of CPU numbers, "
+                                               f"got {_show(value)}")
+        return tuple(sorted(set(value)))
+
+    def roles(self, prefix: str, table: dict[str, Any]) -> dict[str, str]:
+        if "roles" not in table:
+            raise self.error(f"{prefix}.roles", "missing (it is required): "
+                             'roles = { Role = "module:function" }')
+        roles = table["roles"]
+        if not isinstance(roles, dict) or not roles:
+            raise self.error(f"{prefix}.roles", 'expected a table such as { Role = "module:function" }, '
+                                                f"got {_show(roles)}")
+        for role, reference in roles.items():
+            if not isinstance(reference, str) or not _REFERENCE.fullmatch(reference):
+                raise self.error(f"{prefix}.roles.{role}",
+                                 f'expected "module:function", got {_show(reference)}')
+        return dict(roles)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _show(value: Any) -> str:
+    """A value as TOML would spell it, for 'got ...' in messages."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "a table"
+    return f"a {type(value).__name__}"  # dates and times
+
+
+def add_pythonpath(config: SystemConfig) -> None:
+    """Put the config's ``pythonpath`` in front of ``sys.path`` (once, in order)."""
+    for directory in reversed(config.pythonpath):
+        entry = str(directory)
+        if entry not in sys.path:
+            sys.path.insert(0, entry)
+
+
+def build_system(config: SystemConfig) -> System:
+    """Load the protocol, import the role functions and declare the groups.
+
+    Raises:
+        sessiontypes.ProtocolError: the protocol file has errors.
+        ConfigError: the protocol file cannot be read, has no such global, a group
+            or role is refused (``path: groups.NAME: ...``), or a role of the global
+            type is in no group.
+    """
+    shown = str(config.path)
+    try:
+        module = sessiontypes.load(str(config.protocol))
+    except OSError as error:
+        raise ConfigError(shown, "protocol", f"cannot read {config.protocol}: "
+                                             f"{error.strerror or error}") from None
+    if config.global_name not in module.globals:
+        raise ConfigError(shown, "global", f"no global {config.global_name} in {config.protocol}; "
+                                           f"expected one of {', '.join(module.globals) or '(none)'}")
+    global_type = module.globals[config.global_name]
+    add_pythonpath(config)
+    system = System(global_type, transport=config.transport, monitors=config.monitors)
+    for group in config.groups.values():
+        try:
+            declared = system.group(group.name, priority=group.priority, memory=group.memory,
+                                    cpus=set(group.cpus) if group.cpus else None,
+                                    on_failure=group.on_failure, max_restarts=group.max_restarts)
+            for role, reference in group.roles.items():
+                declared.role(role, reference)
+        except (ValueError, AnodizeError) as error:
+            raise ConfigError(shown, f"groups.{group.name}", str(error)) from None
+    missing = [role for role in global_type.roles if config.group_of(role) is None]
+    if missing:
+        raise ConfigError(shown, "groups", f"{'role' if len(missing) == 1 else 'roles'} "
+                                           f"{', '.join(missing)} of global {global_type.name} "
+                                           f"{'is' if len(missing) == 1 else 'are'} in no group")
+    return system

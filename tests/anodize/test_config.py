@@ -1,0 +1,284 @@
+"""System files: what load_config accepts, every message it refuses with, and build_system."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from anodize.config import ConfigError, GroupConfig, SystemConfig, build_system, load_config
+from sessiontypes import ProtocolError
+
+REPO = Path(__file__).resolve().parents[2]
+
+ROLES = '''\
+def producer(ep):
+    for i in range(3):
+        ep.send("C", "data", i)
+    ep.send("C", "stop")
+
+
+def consumer(ep):
+    while ep.recv("P").label == "data":
+        pass
+
+
+def crasher(ep):
+    raise RuntimeError("sensor unplugged")
+'''
+
+STREAM = "global Stream(P, C) = mu t. P -> C : { data(int). t, stop. end }\n"
+
+GOOD = '''\
+protocol = "protocols/stream.proto"
+global = "Stream"
+transport = "inproc"
+timeout = 5
+monitors = false
+pythonpath = ["code", "."]
+
+[groups.control]
+priority = 90
+memory = "64MiB"
+cpus = [0]
+on_failure = "restart"
+max_restarts = 2
+roles = { P = "cfg_roles:producer" }
+
+[groups.logging]
+roles = { C = "cfg_roles:consumer" }
+'''
+
+
+@pytest.fixture
+def system_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+    """A directory with protocols/stream.proto and code/cfg_roles.py; sys.path and
+    sys.modules are restored afterwards."""
+    (tmp_path / "protocols").mkdir()
+    (tmp_path / "protocols" / "stream.proto").write_text(STREAM, encoding="utf-8")
+    (tmp_path / "code").mkdir()
+    (tmp_path / "code" / "cfg_roles.py").write_text(ROLES, encoding="utf-8")
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    yield tmp_path
+    sys.modules.pop("cfg_roles", None)
+
+
+def write(directory: Path, text: str, name: str = "system.toml") -> Path:
+    path = directory / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_a_good_file(system_dir: Path) -> None:
+    path = write(system_dir, GOOD)
+    config = load_config(path)
+    assert config == SystemConfig(
+        path=path, protocol=system_dir / "protocols" / "stream.proto", global_name="Stream",
+        transport="inproc", timeout=5.0, monitors=False,
+        pythonpath=(system_dir / "code", system_dir),
+        groups={
+            "control": GroupConfig("control", 90, 64 * 2**20, (0,), "restart", 2,
+                                   {"P": "cfg_roles:producer"}, f"{path}: groups.control"),
+            "logging": GroupConfig("logging", None, None, None, "stop", 3,
+                                   {"C": "cfg_roles:consumer"}, f"{path}: groups.logging"),
+        })
+    assert list(config.groups) == ["control", "logging"]
+    assert config.group_of("C") == "logging" and config.group_of("X") is None
+
+
+def test_defaults_and_paths_relative_to_the_file(tmp_path: Path) -> None:
+    (tmp_path / "systems").mkdir()
+    path = write(tmp_path / "systems", 'protocol = "../p.proto"\nglobal = "G"\n'
+                                       '[groups.g]\nroles = { A = "m:f" }\n')
+    config = load_config(path)
+    assert (config.protocol, config.transport, config.timeout, config.monitors, config.pythonpath) == (
+        tmp_path / "p.proto", "process", None, True, (tmp_path / "systems",))
+
+
+MINIMAL = 'protocol = "p.proto"\nglobal = "G"\n'
+GROUP = '[groups.g]\nroles = { A = "m:f" }\n'
+
+BAD = {
+    "unknown_top_key": (
+        MINIMAL + "protocl = 1\n" + GROUP,
+        "protocl: unknown key; expected one of global, groups, monitors, protocol, pythonpath, "
+        "timeout, transport"),
+    "unknown_group_key": (
+        MINIMAL + GROUP + "prio = 3\n",
+        "groups.g.prio: unknown key; expected one of cpus, max_restarts, memory, on_failure, "
+        "priority, roles"),
+    "missing_protocol": ('global = "G"\n' + GROUP, "protocol: missing (it is required)"),
+    "missing_global": ('protocol = "p.proto"\n' + GROUP, "global: missing (it is required)"),
+    "missing_groups": (MINIMAL, "groups: missing (it is required): add a table such as [groups.main]"),
+    "empty_groups": (MINIMAL + "groups = {}\n", "groups: expected at least one group, such as [groups.main]"),
+    "groups_not_a_table": (MINIMAL + "groups = 3\n", "groups: expected tables such as [groups.main], got 3"),
+    "missing_roles": (MINIMAL + "[groups.g]\npriority = 3\n",
+                      'groups.g.roles: missing (it is required): roles = { Role = "module:function" }'),
+    "empty_roles": (MINIMAL + "[groups.g]\nroles = {}\n",
+                    'groups.g.roles: expected a table such as { Role = "module:function" }, got a table'),
+    "bad_reference": (MINIMAL + '[groups.g]\nroles = { A = "m.f" }\n',
+                      'groups.g.roles.A: expected "module:function", got "m.f"'),
+    "reference_not_a_string": (MINIMAL + "[groups.g]\nroles = { A = 1 }\n",
+                               'groups.g.roles.A: expected "module:function", got 1'),
+    "role_twice": (MINIMAL + GROUP + '[groups.h]\nroles = { A = "m:g" }\n',
+                   "groups.h.roles.A: role A is already in group g"),
+    "protocol_not_a_string": ('protocol = 3\nglobal = "G"\n' + GROUP,
+                              "protocol: expected a non-empty string, got 3"),
+    "empty_global": ('protocol = "p.proto"\nglobal = ""\n' + GROUP,
+                     'global: expected a non-empty string, got ""'),
+    "transport": (MINIMAL + 'transport = "tcp"\n' + GROUP,
+                  'transport: expected "inproc" or "process", got "tcp"'),
+    "timeout_negative": (MINIMAL + "timeout = -1\n" + GROUP,
+                         "timeout: expected a number of seconds > 0, got -1"),
+    "timeout_bool": (MINIMAL + "timeout = true\n" + GROUP,
+                     "timeout: expected a number of seconds > 0, got true"),
+    "monitors": (MINIMAL + 'monitors = "yes"\n' + GROUP, 'monitors: expected true or false, got "yes"'),
+    "pythonpath": (MINIMAL + 'pythonpath = "."\n' + GROUP,
+                   'pythonpath: expected an array of directories, got "."'),
+    "priority_range": (MINIMAL + GROUP + "priority = 120\n",
+                       "groups.g.priority: expected an int 1..99, got 120"),
+    "priority_bool": (MINIMAL + GROUP + "priority = true\n",
+                      "groups.g.priority: expected an int 1..99, got true"),
+    "priority_float": (MINIMAL + GROUP + "priority = 5.0\n",
+                       "groups.g.priority: expected an int 1..99, got 5.0"),
+    "memory": (MINIMAL + GROUP + 'memory = "lots"\n',
+               'groups.g.memory: expected a size such as "64MiB", "512KiB" or a number of bytes, '
+               'got "lots"'),
+    "cpus": (MINIMAL + GROUP + "cpus = [0, -1]\n",
+             "groups.g.cpus: expected a non-empty array of CPU numbers, got [0, -1]"),
+    "cpus_empty": (MINIMAL + GROUP + "cpus = []\n",
+                   "groups.g.cpus: expected a non-empty array of CPU numbers, got []"),
+    "on_failure": (MINIMAL + GROUP + 'on_failure = "retry"\n',
+                   'groups.g.on_failure: expected one of "stop", "restart", "stop-system", got "retry"'),
+    "max_restarts": (MINIMAL + GROUP + "max_restarts = -2\n",
+                     "groups.g.max_restarts: expected an int >= 0, got -2"),
+    "group_not_a_table": (MINIMAL + "groups = { g = 1 }\n", "groups.g: expected a table, got 1"),
+}
+
+
+@pytest.mark.parametrize("name", BAD)
+def test_each_mistake_has_its_message(tmp_path: Path, name: str) -> None:
+    text, message = BAD[name]
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    assert str(caught.value) == f"{path}: {message}"
+    assert caught.value.path == str(path)
+    assert caught.value.key == message.partition(":")[0]
+
+
+def test_a_toml_syntax_error_has_line_column_and_caret(tmp_path: Path) -> None:
+    path = write(tmp_path, 'protocol = "p.proto"\nglobal = \n')
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    assert str(caught.value) == f"{path}:2:10: invalid value\n    global = \n             ^"
+    assert (caught.value.line, caught.value.column, caught.value.key) == (2, 10, None)
+
+
+def test_a_toml_error_at_the_end_of_the_document(tmp_path: Path) -> None:
+    path = write(tmp_path, 'protocol = "p.proto')
+    with pytest.raises(ConfigError, match=rf"^{path}:1:20: unterminated string\n"):
+        load_config(path)
+
+
+def test_a_missing_file(tmp_path: Path) -> None:
+    path = tmp_path / "none.toml"
+    with pytest.raises(ConfigError, match=rf"^{path}: cannot read: No such file or directory$"):
+        load_config(path)
+
+
+# ---- build_system -------------------------------------------------------------------
+
+def build(directory: Path, groups: str, header: str = 'global = "Stream"\n') -> SystemConfig:
+    text = f'protocol = "protocols/stream.proto"\n{header}transport = "inproc"\ntimeout = 5\n' \
+           f'pythonpath = ["code"]\n{groups}'
+    return load_config(write(directory, text))
+
+
+TWO_GROUPS = ('[groups.a]\nroles = { P = "cfg_roles:producer" }\n'
+              '[groups.b]\nroles = { C = "cfg_roles:consumer" }\n')
+
+
+def test_build_system_runs_an_inproc_system(system_dir: Path) -> None:
+    config = build(system_dir, TWO_GROUPS)
+    system = build_system(config)
+    assert (system.transport, list(system.groups)) == ("inproc", ["a", "b"])
+    assert system.groups["a"].roles == {"P": "cfg_roles:producer"}
+    report = system.run(timeout=config.timeout)
+    assert report.ok, report.summary()
+    assert report.messages == {"P->C": 4}
+
+
+def test_build_system_puts_the_pythonpath_first_once(system_dir: Path) -> None:
+    config = build(system_dir, TWO_GROUPS)
+    build_system(config)
+    build_system(config)
+    assert sys.path[0] == str(system_dir / "code")
+    assert sys.path.count(str(system_dir / "code")) == 1
+
+
+def test_a_failing_role_fails_the_report(system_dir: Path) -> None:
+    config = build(system_dir, '[groups.a]\nroles = { P = "cfg_roles:crasher" }\n'
+                               '[groups.b]\nroles = { C = "cfg_roles:consumer" }\n')
+    report = build_system(config).run(timeout=5)
+    assert not report.ok
+    assert report.roles["P"].status == "failed"
+
+
+def test_an_unknown_global_lists_the_available_ones(system_dir: Path) -> None:
+    config = build(system_dir, TWO_GROUPS, header='global = "Strem"\n')
+    with pytest.raises(ConfigError) as caught:
+        build_system(config)
+    assert str(caught.value) == (f"{config.path}: global: no global Strem in "
+                                 f"{system_dir / 'protocols' / 'stream.proto'}; expected one of Stream")
+
+
+def test_a_role_in_no_group(system_dir: Path) -> None:
+    config = build(system_dir, '[groups.a]\nroles = { P = "cfg_roles:producer" }\n')
+    with pytest.raises(ConfigError, match=rf"^{config.path}: groups: role C of global Stream is in "
+                                          r"no group$"):
+        build_system(config)
+
+
+def test_a_role_the_global_does_not_have(system_dir: Path) -> None:
+    config = build(system_dir, TWO_GROUPS + '[groups.c]\nroles = { X = "cfg_roles:consumer" }\n')
+    with pytest.raises(ConfigError, match=rf"^{config.path}: groups.c: global Stream has no role X; "
+                                          r"expected one of P, C$"):
+        build_system(config)
+
+
+def test_a_role_function_that_cannot_be_imported(system_dir: Path) -> None:
+    config = build(system_dir, '[groups.a]\nroles = { P = "cfg_roles:produce" }\n'
+                               '[groups.b]\nroles = { C = "cfg_roles:consumer" }\n')
+    with pytest.raises(ConfigError, match=rf"^{config.path}: groups.a: role function "
+                                          r"'cfg_roles:produce': module cfg_roles has no produce$"):
+        build_system(config)
+
+
+def test_cpus_this_process_may_not_use(system_dir: Path) -> None:
+    config = build(system_dir, '[groups.a]\ncpus = [100000]\nroles = { P = "cfg_roles:producer" }\n')
+    with pytest.raises(ConfigError, match=rf"^{config.path}: groups.a: group a: cpus \[100000\] must be"):
+        build_system(config)
+
+
+def test_a_missing_protocol_file(system_dir: Path) -> None:
+    path = write(system_dir, 'protocol = "nope.proto"\nglobal = "G"\n' + GROUP)
+    with pytest.raises(ConfigError, match=rf"^{path}: protocol: cannot read {system_dir}/nope.proto: "
+                                          r"No such file or directory$"):
+        build_system(load_config(path))
+
+
+def test_protocol_errors_are_not_wrapped(system_dir: Path) -> None:
+    (system_dir / "protocols" / "stream.proto").write_text("global Stream = P -> P : x\n")
+    with pytest.raises(ProtocolError):
+        build_system(build(system_dir, TWO_GROUPS))
+
+
+def test_the_example_in_the_readme_is_a_valid_system_file(tmp_path: Path) -> None:
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    example = readme.partition("## System files")[2].partition("```toml\n")[2].partition("```")[0]
+    assert example, "README.md has a 'System files' section with a TOML example"
+    config = load_config(write(tmp_path, example))
+    assert (config.global_name, list(config.groups)) == ("Pipeline", ["control", "logging"])
