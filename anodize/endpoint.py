@@ -22,6 +22,7 @@ from sessiontypes import StateMachine
 from .errors import Action, AnodizeError, PeerFailedError
 from .monitor import Monitor
 from .transport.inproc import STOP, InprocNetwork, PeerFailure
+from .transport.process import Corrupt
 
 __all__ = ["Message", "Endpoint", "RoleStopped"]
 
@@ -263,6 +264,10 @@ class Endpoint:
         if item is STOP:
             channel.put(item)
             raise RoleStopped()
+        if isinstance(item, Corrupt):  # a frame from another process that did not decode
+            monitor = self._monitor or Monitor(self._machine, self.protocol, self.role)
+            raise monitor.violation(Action("recv", frm, "?"), blame=frm,
+                                    reason=f"the message could not be decoded ({item.reason})")
         message: Message = item  # type: ignore[assignment]
         if self._monitor is not None:
             self._monitor.recv(frm, message.label, message.payload)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 __all__ = [
     "AnodizeError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
-    "LinearityError", "Action",
+    "LinearityError", "Action", "RoleError", "error_to_data", "error_from_data",
 ]
 
 
@@ -135,3 +135,58 @@ class LinearityError(AnodizeError):
     def __str__(self) -> str:
         return (f"state {self.state} was already used; each state object allows one action, "
                 "continue with the state that action returned")
+
+
+class RoleError(AnodizeError):
+    """An exception raised by a role in another group's process, as the supervisor saw it.
+
+    Attributes:
+        type_name: the exception's class name in that process.
+        message: its text.
+        traceback: the formatted traceback, for debugging.
+    """
+
+    def __init__(self, type_name: str, message: str, traceback: str = "") -> None:
+        self.type_name = type_name
+        self.message = message
+        self.traceback = traceback
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        return f"{self.type_name}: {self.message}"
+
+
+def error_to_data(error: BaseException) -> dict[str, object]:
+    """Plain data for ``error`` (sent from a group's process to the supervisor)."""
+    import traceback
+
+    data: dict[str, object] = {"type": type(error).__name__, "message": str(error),
+                               "traceback": "".join(traceback.format_exception(error))[-8000:]}
+    if isinstance(error, ProtocolViolationError):
+        data["violation"] = [error.protocol, error.role, error.peer, error.state,
+                             [[a.kind, a.peer, a.label, a.payload_type] for a in error.expected],
+                             [error.actual.kind, error.actual.peer, error.actual.label,
+                              error.actual.payload_type],
+                             error.blame, error.location, error.reason]
+    elif isinstance(error, PeerFailedError):
+        data["peer_failed"] = [error.role, error.peer, error.cause]
+    elif isinstance(error, MemoryBoundError):
+        data["memory"] = [error.group, error.bound, error.peak]
+    return data
+
+
+def error_from_data(data: dict[str, object]) -> AnodizeError:
+    """Rebuild what :func:`error_to_data` sent: the same class for anodize's errors."""
+    try:
+        if "violation" in data:
+            protocol, role, peer, state, expected, actual, blame, location, reason = data["violation"]  # type: ignore[misc]
+            return ProtocolViolationError(protocol, role, peer, state, [Action(*a) for a in expected],
+                                          Action(*actual), blame, location, reason)
+        if "peer_failed" in data:
+            return PeerFailedError(*data["peer_failed"])  # type: ignore[arg-type]
+        if "memory" in data:
+            return MemoryBoundError(*data["memory"])  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        pass  # malformed: fall back to the text
+    return RoleError(str(data.get("type", "Exception")), str(data.get("message", "")),
+                     str(data.get("traceback", "")))

@@ -1,0 +1,367 @@
+"""Payloads across processes, without pickle's arbitrary code execution.
+
+A message crosses a process boundary as one *frame*: a 4-byte length, a kind
+byte (``M`` message, ``F`` the sender failed), then for a message the label and
+the payload in a small tagged format:
+
+- builtin values (None, bool, int, float, str, bytes, bytearray, complex) and
+  containers of them (tuple, list, dict, set, frozenset) are encoded directly;
+- numpy arrays of plain dtypes are encoded inline when small, and through a
+  shared-memory slot when large (see :mod:`anodize.shm`); numpy scalars inline;
+- instances of dataclasses the protocol names as sorts are encoded field by
+  field and rebuilt without calling their ``__init__``;
+- instances of other classes the protocol names are pickled, and unpickled by an
+  unpickler that loads no class but those (so no other code can run).
+
+Anything else is refused when it is sent, with a message saying why. Decoding
+never executes code from the wire: a malformed frame raises :class:`DecodeError`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import pickle
+import struct
+import sys
+from collections.abc import Callable, Iterable
+from typing import Any
+
+__all__ = ["Codec", "DecodeError", "EncodeError", "INLINE_ARRAY_LIMIT", "HEADER", "KIND_MESSAGE",
+           "KIND_FAILURE"]
+
+HEADER = struct.Struct("<I")  # frame length, not counting these 4 bytes
+KIND_MESSAGE, KIND_FAILURE = 0x4D, 0x46  # b"M", b"F"
+INLINE_ARRAY_LIMIT = 64 * 1024  # bytes: larger arrays travel through shared memory
+
+_I64 = struct.Struct("<q")
+_F64 = struct.Struct("<d")
+_U32 = struct.Struct("<I")
+_U8 = struct.Struct("<B")
+_C128 = struct.Struct("<dd")
+_I64_MIN, _I64_MAX = -(2**63), 2**63 - 1
+
+# Tags, one byte each.
+(T_NONE, T_TRUE, T_FALSE, T_INT, T_BIGINT, T_FLOAT, T_COMPLEX, T_STR, T_BYTES, T_BYTEARRAY,
+ T_TUPLE, T_LIST, T_DICT, T_SET, T_FROZENSET, T_ARRAY, T_SHARED_ARRAY, T_NUMPY_SCALAR,
+ T_DATACLASS, T_PICKLED) = range(20)
+
+
+class EncodeError(Exception):
+    """A payload this channel cannot carry (the reason says which part and why)."""
+
+
+class DecodeError(Exception):
+    """A frame that does not decode: corrupt, truncated, or naming a class not allowed."""
+
+
+# A shared-memory writer: (array) -> (segment name, slot index, byte offset).
+ArrayWriter = Callable[[Any], tuple[str, int, int]]
+# A shared-memory reader: (segment name, slot, offset, dtype, shape) -> array.
+ArrayReader = Callable[[str, int, int, str, tuple[int, ...]], Any]
+
+
+class Codec:
+    """Encodes and decodes the frames of one channel.
+
+    Args:
+        classes: the payload classes the protocol names (``module:Class`` sorts).
+        write_array: where large arrays go (None: always inline).
+        read_array: how a receiver maps a shared-memory slot (None: refuse them).
+    """
+
+    def __init__(self, classes: Iterable[type] = (), write_array: ArrayWriter | None = None,
+                 read_array: ArrayReader | None = None) -> None:
+        self.classes = {_name_of(c): c for c in classes}
+        self._class_ids = {c: name for name, c in self.classes.items()}
+        self.write_array = write_array
+        self.read_array = read_array
+        self._labels: dict[str, bytes] = {}
+        self._numpy: Any = sys.modules.get("numpy")  # imported lazily: only arrays need it
+
+    # ---- frames ------------------------------------------------------------------------
+    def message_frame(self, label: str, payload: object) -> bytes:
+        """The whole frame for ``label(payload)``.
+
+        Raises:
+            EncodeError: the payload holds something this codec refuses.
+        """
+        head = self._labels.get(label)
+        if head is None:
+            encoded = label.encode()
+            head = self._labels[label] = bytes((KIND_MESSAGE,)) + _U32.pack(len(encoded)) + encoded
+        # Fast paths for the commonest payloads: no payload, a small int.
+        if payload is None:
+            body = head + b"\x00"
+        elif type(payload) is int and _I64_MIN <= payload <= _I64_MAX:
+            body = head + b"\x03" + _I64.pack(payload)
+        else:
+            out = io.BytesIO()
+            out.write(head)
+            self._encode(payload, out, 0)
+            body = out.getvalue()
+        return HEADER.pack(len(body)) + body
+
+    @staticmethod
+    def failure_frame(cause: str) -> bytes:
+        """The frame telling the receiver that the sender failed, and how."""
+        body = bytes((KIND_FAILURE,)) + cause.encode(errors="replace")
+        return HEADER.pack(len(body)) + body
+
+    def decode_body(self, body: bytes | bytearray | memoryview) -> tuple[int, Any]:
+        """``(KIND_MESSAGE, (label, payload))`` or ``(KIND_FAILURE, cause)``.
+
+        Raises:
+            DecodeError: the body is malformed.
+        """
+        try:
+            kind = body[0]
+            if kind == KIND_FAILURE:
+                return kind, bytes(body[1:]).decode(errors="replace")
+            if kind != KIND_MESSAGE:
+                raise DecodeError(f"unknown frame kind {kind:#x}")
+            (length,) = _U32.unpack_from(body, 1)
+            label = bytes(body[5:5 + length]).decode()
+            payload, end = self._decode(body, 5 + length, 0)
+            if end != len(body):
+                raise DecodeError(f"{len(body) - end} bytes left over after the payload")
+            return kind, (label, payload)
+        except DecodeError:
+            raise
+        except (IndexError, struct.error, UnicodeDecodeError, ValueError, TypeError, OverflowError,
+                RecursionError, MemoryError) as error:
+            raise DecodeError(f"malformed frame: {type(error).__name__}: {error}") from None
+
+    # ---- encoding ----------------------------------------------------------------------
+    def _encode(self, value: object, out: io.BytesIO, depth: int) -> None:
+        if depth > 100:
+            raise EncodeError("payload nested more than 100 levels deep")
+        kind = type(value)
+        if value is None:
+            out.write(b"\x00")
+        elif kind is bool:
+            out.write(b"\x01" if value else b"\x02")
+        elif kind is int:
+            if _I64_MIN <= value <= _I64_MAX:  # type: ignore[operator]
+                out.write(b"\x03" + _I64.pack(value))
+            else:
+                self._write_blob(T_BIGINT, str(value).encode(), out)
+        elif kind is float:
+            out.write(b"\x05" + _F64.pack(value))
+        elif kind is complex:
+            out.write(b"\x06" + _C128.pack(value.real, value.imag))  # type: ignore[attr-defined]
+        elif kind is str:
+            self._write_blob(T_STR, value.encode(errors="surrogatepass"), out)  # type: ignore[attr-defined]
+        elif kind is bytes:
+            self._write_blob(T_BYTES, value, out)  # type: ignore[arg-type]
+        elif kind is bytearray:
+            self._write_blob(T_BYTEARRAY, bytes(value), out)  # type: ignore[arg-type]
+        elif kind in _SEQUENCE_TAGS:
+            items = list(value)  # type: ignore[call-overload]
+            out.write(_U8.pack(_SEQUENCE_TAGS[kind]) + _U32.pack(len(items)))
+            for item in items:
+                self._encode(item, out, depth + 1)
+        elif kind is dict:
+            out.write(_U8.pack(T_DICT) + _U32.pack(len(value)))  # type: ignore[arg-type]
+            for key, item in value.items():  # type: ignore[attr-defined]
+                self._encode(key, out, depth + 1)
+                self._encode(item, out, depth + 1)
+        elif kind in self._class_ids:
+            self._encode_named(value, kind, out, depth)
+        elif self._is_numpy(value):
+            self._encode_numpy(value, out)
+        else:
+            raise EncodeError(
+                f"cannot carry a {kind.__module__}.{kind.__qualname__} across processes: only "
+                "builtin values, containers of them, numpy arrays and classes the protocol "
+                "names as sorts travel between groups")
+
+    def _encode_named(self, value: object, kind: type, out: io.BytesIO, depth: int) -> None:
+        name = self._class_ids[kind].encode()
+        if dataclasses.is_dataclass(kind):
+            fields = dataclasses.fields(kind)
+            self._write_blob(T_DATACLASS, name, out)
+            out.write(_U32.pack(len(fields)))
+            for f in fields:
+                self._write_blob(T_STR, f.name.encode(), out)
+                self._encode(getattr(value, f.name), out, depth + 1)
+        else:
+            self._write_blob(T_PICKLED, name, out)
+            try:
+                data = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+            except Exception as error:  # any pickling failure of user code
+                raise EncodeError(f"cannot pickle {kind.__qualname__}: {error}") from None
+            out.write(_U32.pack(len(data)) + data)
+
+    def _is_numpy(self, value: object) -> bool:
+        if self._numpy is None:
+            self._numpy = sys.modules.get("numpy")
+        np = self._numpy
+        return np is not None and isinstance(value, (np.ndarray, np.generic))
+
+    def _encode_numpy(self, value: Any, out: io.BytesIO) -> None:
+        np = self._numpy
+        if value.dtype.hasobject or value.dtype.fields is not None:
+            raise EncodeError(f"cannot carry a numpy {value.dtype} array: only plain numeric "
+                              "dtypes travel between groups")
+        dtype = value.dtype.str.encode()
+        if isinstance(value, np.generic):
+            self._write_blob(T_NUMPY_SCALAR, dtype, out)
+            self._write_blob(T_BYTES, value.tobytes(), out)
+            return
+        shape = b"".join(_I64.pack(n) for n in value.shape)
+        if value.nbytes > INLINE_ARRAY_LIMIT and self.write_array is not None:
+            segment, slot, offset = self.write_array(value)
+            self._write_blob(T_SHARED_ARRAY, dtype, out)
+            out.write(_U8.pack(value.ndim) + shape)
+            self._write_blob(T_STR, segment.encode(), out)
+            out.write(_U32.pack(slot) + _I64.pack(offset))
+        else:
+            self._write_blob(T_ARRAY, dtype, out)
+            out.write(_U8.pack(value.ndim) + shape)
+            self._write_blob(T_BYTES, np.ascontiguousarray(value).tobytes(), out)
+
+    @staticmethod
+    def _write_blob(tag: int, data: bytes, out: io.BytesIO) -> None:
+        out.write(_U8.pack(tag) + _U32.pack(len(data)))
+        out.write(data)
+
+    # ---- decoding ----------------------------------------------------------------------
+    def _decode(self, buf: Any, at: int, depth: int) -> tuple[Any, int]:
+        if depth > 100:
+            raise DecodeError("payload nested more than 100 levels deep")
+        tag = buf[at]
+        at += 1
+        if tag == T_NONE:
+            return None, at
+        if tag == T_TRUE:
+            return True, at
+        if tag == T_FALSE:
+            return False, at
+        if tag == T_INT:
+            return _I64.unpack_from(buf, at)[0], at + 8
+        if tag == T_FLOAT:
+            return _F64.unpack_from(buf, at)[0], at + 8
+        if tag == T_COMPLEX:
+            real, imag = _C128.unpack_from(buf, at)
+            return complex(real, imag), at + 16
+        if tag in _BLOB_DECODERS:
+            data, at = _read_blob(buf, at)
+            return _BLOB_DECODERS[tag](data), at
+        if tag in _SEQUENCE_BUILDERS:
+            (count,) = _U32.unpack_from(buf, at)
+            at += 4
+            items = []
+            for _ in range(count):
+                item, at = self._decode(buf, at, depth + 1)
+                items.append(item)
+            return _SEQUENCE_BUILDERS[tag](items), at
+        if tag == T_DICT:
+            (count,) = _U32.unpack_from(buf, at)
+            at += 4
+            result = {}
+            for _ in range(count):
+                key, at = self._decode(buf, at, depth + 1)
+                result[key], at = self._decode(buf, at, depth + 1)
+            return result, at
+        if tag in (T_ARRAY, T_SHARED_ARRAY, T_NUMPY_SCALAR):
+            return self._decode_numpy(tag, buf, at)
+        if tag == T_DATACLASS:
+            return self._decode_dataclass(buf, at, depth)
+        if tag == T_PICKLED:
+            name, at = _read_blob(buf, at)
+            (length,) = _U32.unpack_from(buf, at)
+            data = bytes(buf[at + 4:at + 4 + length])
+            if len(data) != length:
+                raise DecodeError("truncated pickled payload")
+            return _RestrictedUnpickler(io.BytesIO(data), self.classes).load(), at + 4 + length
+        raise DecodeError(f"unknown payload tag {tag}")
+
+    def _named_class(self, name: bytes) -> type:
+        cls = self.classes.get(name.decode())
+        if cls is None:
+            raise DecodeError(f"payload class {name.decode()!r} is not named by the protocol")
+        return cls
+
+    def _decode_dataclass(self, buf: Any, at: int, depth: int) -> tuple[Any, int]:
+        name, at = _read_blob(buf, at)
+        cls = self._named_class(name)
+        if not dataclasses.is_dataclass(cls):
+            raise DecodeError(f"payload class {name.decode()!r} is not a dataclass")
+        known = {f.name for f in dataclasses.fields(cls)}
+        (count,) = _U32.unpack_from(buf, at)
+        at += 4
+        value = object.__new__(cls)  # no __init__: nothing of the sender's runs here
+        for _ in range(count):
+            if buf[at] != T_STR:
+                raise DecodeError("dataclass field name expected")
+            field_name, at = _read_blob(buf, at + 1)
+            if field_name.decode() not in known:
+                raise DecodeError(f"{cls.__qualname__} has no field {field_name.decode()!r}")
+            item, at = self._decode(buf, at, depth + 1)
+            object.__setattr__(value, field_name.decode(), item)  # frozen dataclasses too
+        return value, at
+
+    def _decode_numpy(self, tag: int, buf: Any, at: int) -> tuple[Any, int]:
+        import numpy as np  # only receivers of arrays pay for the import
+
+        dtype_text, at = _read_blob(buf, at)
+        dtype = np.dtype(dtype_text.decode())
+        if dtype.hasobject or dtype.fields is not None:
+            raise DecodeError(f"numpy dtype {dtype} is not allowed")
+        if tag == T_NUMPY_SCALAR:
+            data, at = _read_blob(buf, at + 1)
+            return np.frombuffer(data, dtype)[0], at
+        ndim = buf[at]
+        shape = tuple(_I64.unpack_from(buf, at + 1 + 8 * i)[0] for i in range(ndim))
+        at += 1 + 8 * ndim
+        if any(n < 0 for n in shape):
+            raise DecodeError(f"negative array shape {shape}")
+        if tag == T_ARRAY:
+            data, at = _read_blob(buf, at + 1)
+            return np.frombuffer(data, dtype).reshape(shape).copy(), at
+        segment, at = _read_blob(buf, at + 1)
+        slot = _U32.unpack_from(buf, at)[0]
+        offset = _I64.unpack_from(buf, at + 4)[0]
+        if self.read_array is None:
+            raise DecodeError("a shared-memory array arrived on a channel without shared memory")
+        return self.read_array(segment.decode(), slot, offset, dtype.str, shape), at + 12
+
+
+def _read_blob(buf: Any, at: int) -> tuple[bytes, int]:
+    (length,) = _U32.unpack_from(buf, at)
+    start = at + 4
+    data = bytes(buf[start:start + length])
+    if len(data) != length:
+        raise DecodeError("truncated frame")
+    return data, start + length
+
+
+_SEQUENCE_TAGS = {tuple: T_TUPLE, list: T_LIST, set: T_SET, frozenset: T_FROZENSET}
+_SEQUENCE_BUILDERS: dict[int, Callable[[list[Any]], Any]] = {
+    T_TUPLE: tuple, T_LIST: lambda items: items, T_SET: set, T_FROZENSET: frozenset}
+_BLOB_DECODERS: dict[int, Callable[[bytes], Any]] = {
+    T_STR: lambda data: data.decode(errors="surrogatepass"),
+    T_BYTES: lambda data: data,
+    T_BYTEARRAY: bytearray,
+    T_BIGINT: lambda data: int(data.decode()),
+}
+
+
+def _name_of(cls: type) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+class _RestrictedUnpickler(pickle.Unpickler):
+    """Loads only the classes a protocol names (and nothing that can run other code)."""
+
+    def __init__(self, data: io.BytesIO, classes: dict[str, type]) -> None:
+        super().__init__(data)
+        self._allowed = {(c.__module__, c.__qualname__): c for c in classes.values()}
+
+    def find_class(self, module: str, name: str) -> Any:
+        cls = self._allowed.get((module, name))
+        if cls is None:
+            raise DecodeError(f"pickled payload refers to {module}.{name}, which the protocol "
+                              "does not name")
+        return cls

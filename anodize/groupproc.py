@@ -1,0 +1,251 @@
+"""The life of one group's process, from spawn to exit.
+
+The supervisor (:mod:`anodize.supervisor`) spawns a fresh interpreter per group
+and hands it a :class:`GroupSpec` and its pipes. The process then:
+
+1. applies the group's CPU set and priority to itself (its threads inherit them);
+2. imports its role functions by ``module:function`` and builds its endpoints;
+3. starts one thread per role, held at a gate, measures its memory baseline,
+   sets the memory bound, reports "ready" and waits for "go";
+4. runs, sending a heartbeat (memory in use, messages sent) four times a second
+   and a report per role as each ends; a failed role's receivers are told;
+5. exits when every role has ended. A role meeting ``MemoryError`` stops the
+   whole group at once (``os._exit``: every thread, and the memory goes back to
+   the OS) after reporting the bound and the peak.
+
+Everything sent to the supervisor is plain data encoded by :mod:`anodize.codec`
+(never pickled), so a misbehaving group cannot run code in the supervisor.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from queue import Empty, SimpleQueue
+from typing import Any
+
+from sessiontypes import StateMachine
+
+from .codec import Codec, DecodeError
+from .endpoint import Endpoint
+from .errors import MemoryBoundError, error_to_data
+from .group import resolve_function
+from .memory import data_size, limit_data
+from .payloads import resolve_class
+from .report import RoleReport
+from .roles import describe_error, run_role
+from .sched import apply_thread_scheduling
+from .shm import ArrayRing, RingReader
+from .transport.process import ProcessNetwork, make_codec
+
+__all__ = ["GroupSpec", "group_main", "control_send", "control_recv", "EXIT_MEMORY", "HEARTBEAT"]
+
+EXIT_MEMORY = 87  # the exit status of a group stopped for exceeding its memory bound
+HEARTBEAT = 0.25  # seconds
+_RESERVE = 4 * 2**20  # freed on MemoryError so that reporting it can allocate
+_CONTROL = Codec()
+
+
+@dataclass(frozen=True)
+class GroupSpec:
+    """What a group's process needs (pickled by multiprocessing at spawn, by the supervisor)."""
+
+    run_id: str
+    name: str
+    incarnation: int
+    protocol: str
+    roles: dict[str, str]                  # role -> "module:function"
+    machines: dict[str, StateMachine]      # the local roles' state machines
+    channels: tuple[tuple[str, str], ...]  # every pair the global type connects
+    dead: dict[str, str]                   # remote roles not reachable, and why
+    monitors: bool = True
+    priority: int | None = None
+    cpus: frozenset[int] | None = None
+    memory: int | None = None
+    sys_path: tuple[str, ...] = ()
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def control_send(conn: Connection, kind: str, data: object = None) -> None:
+    """Send one control message (plain data) over ``conn``."""
+    conn.send_bytes(_CONTROL.message_frame(kind, data)[4:])
+
+
+def control_recv(conn: Connection) -> tuple[str, Any]:
+    """Receive one control message.
+
+    Raises:
+        EOFError: the other side is gone.
+        DecodeError: the message is malformed.
+    """
+    _, value = _CONTROL.decode_body(conn.recv_bytes())
+    if not isinstance(value, tuple):
+        raise DecodeError("a control message must be a message frame")
+    return value  # type: ignore[return-value]
+
+
+def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
+    """The entry point of a group's process (the target multiprocessing runs)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle
+    for path in reversed(spec.sys_path):
+        if path not in sys.path:
+            sys.path.insert(0, path)
+    try:
+        _GroupProcess(spec, control, pipes).run()
+    except BaseException as error:  # a failure of the group itself: say so, then go
+        try:
+            control_send(control, "crash", error_to_data(error))
+        except OSError:
+            pass
+        os._exit(1)
+    os._exit(0)
+
+
+class _GroupProcess:
+    def __init__(self, spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
+        self.spec = spec
+        self.control = control
+        self.pipes = pipes  # kept: closing a Connection would close its descriptor
+        self.results: SimpleQueue[RoleReport] = SimpleQueue()
+        self.gate = threading.Event()
+        self.reserve: bytearray | None = bytearray(_RESERVE)
+        self.baseline = 0
+        self.peak = 0
+        self.send_lock = threading.Lock()  # the control reader and the main thread both send
+
+    def run(self) -> None:
+        spec = self.spec
+        scheduling = apply_thread_scheduling(spec.priority, spec.cpus)  # inherited by our threads
+        functions = {role: resolve_function(ref) for role, ref in spec.roles.items()}
+        network = self.network = self._network()
+        endpoints = {role: Endpoint(role, spec.protocol, spec.machines[role], network, spec.monitors)
+                     for role in spec.roles}
+        threads = [threading.Thread(target=self._role_thread, name=f"anodize:{spec.name}/{role}",
+                                    args=(role, functions[role], endpoints[role]), daemon=True)
+                   for role in spec.roles]
+        for thread in threads:
+            thread.start()
+        network.start()
+        self.endpoints = endpoints
+        threading.Thread(target=self._read_control, name="anodize-control", daemon=True).start()
+        memory_note = self._bound_memory()  # every thread of ours exists by now
+        self._send("ready", {"pid": os.getpid(), "scheduling": scheduling, "baseline": self.baseline,
+                             "memory_note": memory_note})
+        self._supervise(len(threads))
+
+    def _network(self) -> ProcessNetwork:
+        spec = self.spec
+        classes = _payload_classes(spec.machines.values())
+        reader = RingReader()
+        local = set(spec.roles)
+
+        def codec_for(pair: tuple[str, str]) -> Codec:
+            sender, receiver = pair
+            if sender not in local:
+                return make_codec(classes, None, reader)
+            prefix = f"anodize-{spec.run_id}-{spec.incarnation}-{sender.encode().hex()}-{receiver.encode().hex()}"
+            ring = ArrayRing(prefix, peer_gone=lambda: self._gone(receiver))
+            return make_codec(classes, ring, None)
+
+        fds = {pair: conn.fileno() for pair, conn in self.pipes.items()}
+        doorbell_roles = [r for r, m in spec.machines.items() if m.forks]
+        return ProcessNetwork(spec.roles, spec.channels, fds, spec.dead, codec_for, doorbell_roles)
+
+    def _gone(self, receiver: str) -> str | None:
+        network = self.network
+        if receiver in network.failed:
+            return network.failed[receiver]
+        return "the run is stopping" if network.stopping else None
+
+    def _bound_memory(self) -> str:
+        """Measure the baseline (threads started, roles not yet running); set the bound."""
+        self.baseline = data_size() or 0
+        if self.spec.memory is None:
+            return ""
+        if not self.baseline:
+            return "not enforced: /proc/self/status is not readable here"
+        how = limit_data(self.baseline + self.spec.memory)
+        return f"{how} at baseline {self.baseline / 2**20:.1f} MiB + bound"
+
+    def _role_thread(self, role: str, function: Any, endpoint: Endpoint) -> None:
+        self.gate.wait()
+        run_role(self.spec.name, None, None, role, function, endpoint, self.results.put, schedule=False)
+
+    def _supervise(self, count: int) -> None:
+        reported = 0
+        next_beat = time.monotonic()
+        while reported < count:
+            try:
+                report = self.results.get(timeout=max(0.0, next_beat - time.monotonic()))
+            except Empty:
+                self._heartbeat()
+                next_beat = time.monotonic() + HEARTBEAT
+                continue
+            reported += 1
+            if isinstance(report.error, MemoryError):
+                self._memory_exceeded(report.name)
+            if report.status == "failed":
+                self.network.fail(report.name, describe_error(report.error))
+            self._send("role", {"role": report.name, "status": report.status,
+                                "error": error_to_data(report.error) if report.error else None})
+        self._send("bye", self._counts())
+
+    def _heartbeat(self) -> None:
+        self._send("beat", self._counts())
+
+    def _counts(self) -> dict[str, Any]:
+        used = (data_size() or self.baseline) - self.baseline
+        self.peak = max(self.peak, used)
+        sent = {f"{role}->{peer}": n for role, ep in self.endpoints.items()
+                for peer, n in ep.sent_counts().items()}
+        return {"memory": used, "peak": self.peak, "sent": sent}
+
+    def _memory_exceeded(self, role: str) -> None:
+        self.reserve = None  # room to report in
+        counts = self._counts()
+        bound = self.spec.memory or 0
+        error = MemoryBoundError(self.spec.name, bound, self.peak)
+        self._send("memory", {"role": role, "error": error_to_data(error), **counts})
+        os._exit(EXIT_MEMORY)  # every thread stops; the OS takes the memory back
+
+    def _read_control(self) -> None:
+        while True:
+            try:
+                kind, data = control_recv(self.control)
+            except (EOFError, OSError, DecodeError):
+                self.network.stop()  # the supervisor is gone: do not linger
+                time.sleep(2.0)
+                os._exit(1)
+            if kind == "go":
+                self.gate.set()
+            elif kind == "failed":
+                self.network.fail(data["role"], data["cause"])
+            elif kind == "stop":
+                self.network.stop()
+
+    def _send(self, kind: str, data: object) -> None:
+        with self.send_lock:
+            try:
+                control_send(self.control, kind, data)
+            except OSError:
+                pass  # the supervisor is gone; the control reader ends the process
+
+
+def _payload_classes(machines: Any) -> list[type]:
+    """The classes named as sorts by the local types (the only ones that may be decoded)."""
+    targets = set()
+    stack = list(machines)
+    while stack:
+        machine = stack.pop()
+        for transitions in machine.table:
+            for transition in transitions.values():
+                sort = transition.sort
+                if sort is not None and sort.target and not sort.target.startswith("ros:"):
+                    targets.add(sort.target)
+        stack.extend(b for branches in machine.forks.values() for b in branches)
+    return [resolve_class(t) for t in sorted(targets)]

@@ -1,0 +1,156 @@
+"""Per-group memory bounds: measured, enforced at allocation time, reported honestly.
+
+A group's bound covers what its roles allocate on top of the process's
+*baseline* (the interpreter and the modules imported before the roles start),
+so ``memory="64MiB"`` means the same whatever numpy or OpenCV cost to import.
+Two mechanisms, both where available:
+
+- ``RLIMIT_DATA`` (always on Linux): the kernel refuses to grow the process's
+  data segment past baseline + bound, so the allocation itself fails with
+  ``MemoryError`` in the role that asked; the group is then stopped as a whole.
+- a cgroup memory limit, where the machine has a writable cgroup hierarchy
+  (v2 ``memory.max`` or v1 ``memory.limit_in_bytes``): a backstop that also
+  counts memory ``RLIMIT_DATA`` does not (shared mappings, kernel buffers); the
+  kernel kills the process if it is crossed.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+from dataclasses import dataclass
+
+__all__ = ["data_size", "peak_rss", "limit_data", "Cgroup", "make_cgroup", "CGROUP_SLACK"]
+
+CGROUP_SLACK = 64 * 2**20  # on top of baseline RSS + bound: the backstop must not fire first
+
+
+def _status_field(field: str, pid: int | str = "self") -> int | None:
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            for line in status:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) * 1024  # the kernel writes kB
+    except OSError:
+        return None
+    return None
+
+
+def data_size(pid: int | str = "self") -> int | None:
+    """The process's data segment (``VmData``: heap, anonymous mappings, thread stacks), bytes."""
+    return _status_field("VmData", pid)
+
+
+def peak_rss(pid: int | str = "self") -> int | None:
+    """The process's peak resident memory (``VmHWM``), bytes."""
+    return _status_field("VmHWM", pid)
+
+
+def rss(pid: int | str = "self") -> int | None:
+    """The process's resident memory now (``VmRSS``), bytes."""
+    return _status_field("VmRSS", pid)
+
+
+def limit_data(limit: int) -> str:
+    """Set RLIMIT_DATA (soft and hard: roles cannot raise it again); describe the result."""
+    try:
+        resource.setrlimit(resource.RLIMIT_DATA, (limit, limit))
+    except (ValueError, OSError) as error:
+        return f"RLIMIT_DATA refused ({error})"
+    return "RLIMIT_DATA"
+
+
+@dataclass
+class Cgroup:
+    """A memory cgroup made for one group process (v1 or v2)."""
+
+    path: str
+    version: int
+
+    def _file(self, v1: str, v2: str) -> str:
+        return os.path.join(self.path, v1 if self.version == 1 else v2)
+
+    def add(self, pid: int) -> None:
+        with open(os.path.join(self.path, "cgroup.procs"), "w") as procs:
+            procs.write(str(pid))
+
+    def set_limit(self, limit: int) -> None:
+        with open(self._file("memory.limit_in_bytes", "memory.max"), "w") as f:
+            f.write(str(limit))
+
+    def peak(self) -> int | None:
+        try:
+            with open(self._file("memory.max_usage_in_bytes", "memory.peak")) as f:
+                return int(f.read().split()[0])
+        except (OSError, ValueError):
+            return None
+
+    def oom_killed(self) -> bool:
+        """Whether the kernel killed a process of this cgroup for crossing the limit."""
+        name = "memory.oom_control" if self.version == 1 else "memory.events"
+        try:
+            with open(os.path.join(self.path, name)) as f:
+                for line in f:
+                    key, _, value = line.partition(" ")
+                    if key == "oom_kill" and int(value) > 0:
+                        return True
+        except (OSError, ValueError):
+            pass
+        return False
+
+    def remove(self) -> None:
+        try:
+            os.rmdir(self.path)
+        except OSError:
+            pass  # a process still in it, or already gone: the kernel frees it with the last one
+
+
+def make_cgroup(name: str) -> tuple[Cgroup | None, str]:
+    """A fresh memory cgroup under this process's own, or None and why not."""
+    for version, mount, own in _memory_hierarchies():
+        parent = os.path.join(mount, own.lstrip("/"))
+        if not os.path.isdir(parent):
+            parent = mount  # a container that shows its own cgroup as the root
+        path = os.path.join(parent, name)
+        try:
+            os.mkdir(path)
+        except FileExistsError:
+            pass
+        except OSError as error:
+            return None, f"cgroup v{version} not writable ({error.strerror})"
+        if version == 2 and not os.path.exists(os.path.join(path, "memory.max")):
+            os.rmdir(path)
+            return None, "cgroup v2 without the memory controller delegated"
+        return Cgroup(path, version), f"cgroup v{version}"
+    return None, "no cgroup memory controller mounted"
+
+
+def _memory_hierarchies() -> list[tuple[int, str, str]]:
+    """(version, mount point, this process's cgroup path), memory controller first."""
+    own: dict[str, str] = {}
+    try:
+        with open("/proc/self/cgroup") as f:
+            for line in f:
+                _, controllers, path = line.rstrip("\n").split(":", 2)
+                for controller in controllers.split(",") if controllers else [""]:
+                    own[controller] = path
+    except OSError:
+        return []
+    found = []
+    try:
+        with open("/proc/self/mounts") as f:
+            mounts = [line.split() for line in f]
+    except OSError:
+        return []
+    for _, mount, fstype, options, *_ in mounts:
+        if fstype == "cgroup" and "memory" in options.split(",") and "memory" in own:
+            found.append((1, mount, own["memory"]))
+        elif fstype == "cgroup2" and "" in own:
+            controllers = os.path.join(mount, "cgroup.controllers")
+            try:
+                with open(controllers) as c:
+                    if "memory" in c.read().split():
+                        found.append((2, mount, own[""]))
+            except OSError:
+                pass
+    return found

@@ -1,0 +1,317 @@
+"""Channels of a group process: in-process queues inside the group, OS pipes between groups.
+
+A group's process sees the same interface as the inproc transport
+(:class:`~anodize.transport.inproc.InprocNetwork`): a channel per ordered pair
+with ``put``/``get``. Channels to roles of other groups are pipes carrying
+frames (:mod:`anodize.codec`); large arrays go through shared-memory rings
+(:mod:`anodize.shm`). Only the sending group holds a pipe's write end, so when
+that group's process dies the receiver reads end-of-file: a crashed peer is
+always noticed, never waited on. A role that fails in a live process has a
+failure frame written after its last message, so nothing it sent is lost.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import threading
+from collections import deque
+from collections.abc import Callable, Iterable
+from queue import Empty, SimpleQueue
+
+from ..codec import HEADER, KIND_FAILURE, Codec, DecodeError, EncodeError
+from ..errors import AnodizeError, PeerFailedError
+from ..shm import ArrayRing, RingReader
+from .inproc import STOP, InprocNetwork, PeerFailure
+
+__all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "Corrupt", "PayloadError"]
+
+_READ_SIZE = 1 << 20
+_PIPE_SIZE = 1 << 20  # ask the kernel for 1 MiB pipes: fewer blocked senders when streaming
+_EOF_CAUSE_WAIT = 2.0  # seconds to wait for the supervisor's word on why a peer's process ended
+
+
+class PayloadError(AnodizeError):
+    """A payload that cannot cross to another group's process (nothing was sent)."""
+
+
+class Corrupt:
+    """Stands in the channel for a frame that did not decode: the sender is to blame."""
+
+    __slots__ = ("reason",)
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+
+
+class PipeSender:
+    """The write end of a channel to a role in another process."""
+
+    def __init__(self, fd: int, codec: Codec, network: ProcessNetwork, sender: str, receiver: str) -> None:
+        self.fd = fd
+        self.codec = codec
+        self.network = network
+        self.sender = sender
+        self.receiver = receiver
+        self._lock = threading.Lock()  # a failure frame must not split a message frame
+        self.closed = False
+        _grow_pipe(fd)
+
+    def put(self, item: object) -> None:
+        """Send ``(label, payload)``, or a :class:`PeerFailure` telling the receiver why we stop.
+
+        Raises:
+            PayloadError: the payload cannot travel (nothing was sent).
+            PeerFailedError: the receiver's process is gone.
+        """
+        if type(item) is tuple:
+            try:
+                frame = self.codec.message_frame(item[0], item[1])
+            except EncodeError as error:
+                raise PayloadError(f"role {self.sender}: cannot send {item[0]} to {self.receiver}: "
+                                   f"{error}") from None
+            except BrokenPipeError:  # waiting for a shared-memory slot, the receiver went away
+                raise self._peer_gone() from None
+        elif isinstance(item, PeerFailure):
+            frame = Codec.failure_frame(item.cause)
+        else:
+            return  # STOP is local to each process
+        with self._lock:
+            try:
+                _write_all(self.fd, frame)
+            except (BrokenPipeError, OSError):
+                raise self._peer_gone() from None
+
+    def put_failure(self, cause: str) -> None:
+        """Best effort, from another thread: tell the receiver this sender failed."""
+        if self._lock.acquire(timeout=1.0):  # a writer blocked on a full pipe must not block us
+            try:
+                _write_all(self.fd, Codec.failure_frame(cause))
+            except OSError:
+                pass
+            finally:
+                self._lock.release()
+
+    def _peer_gone(self) -> PeerFailedError:
+        cause = self.network.wait_for_cause(self.receiver, "its group's process has ended")
+        return PeerFailedError(self.sender, self.receiver, cause)
+
+
+class PipeReceiver:
+    """The read end of a channel from a role in another process (one reading thread)."""
+
+    def __init__(self, fd: int, codec: Codec, network: ProcessNetwork, sender: str) -> None:
+        self.fd = fd
+        self.codec = codec
+        self.network = network
+        self.sender = sender
+        self._buffer = bytearray()
+        self._at = 0
+        self._pushed: deque[object] = deque()  # sentinels put back so later receives see them too
+        self._eof = False
+        self._poll = select.poll()
+        self._poll.register(fd, select.POLLIN)
+        self._poll.register(network.wake_fd, select.POLLIN)
+
+    def put(self, item: object) -> None:
+        """Put back a sentinel (a failure or STOP) for the next receive."""
+        self._pushed.append(item)
+
+    def get(self, timeout: float | None = None) -> object:
+        """The next message ``(label, payload)``, or a sentinel.
+
+        Raises:
+            queue.Empty: nothing arrived within ``timeout`` seconds.
+        """
+        while True:
+            if self._pushed:
+                return self._pushed.popleft()
+            frame = self._next_frame()
+            if frame is not None:
+                return frame
+            if self._eof:
+                cause = self.network.wait_for_cause(self.sender, "its group's process ended")
+                return PeerFailure(self.sender, cause)
+            if self.network.stopping:
+                return STOP
+            if not self._fill(timeout):
+                raise Empty
+
+    def get_nowait(self) -> object:
+        return self.get(timeout=0)
+
+    def empty(self) -> bool:
+        """True when no complete frame (nor end-of-file) is waiting."""
+        if self._pushed or self._complete() or self._eof:
+            return False
+        return not (self._fill(0) and (self._complete() or self._eof))
+
+    def _complete(self) -> bool:
+        buffer, at = self._buffer, self._at
+        if len(buffer) - at < 4:
+            return False
+        return len(buffer) - at - 4 >= HEADER.unpack_from(buffer, at)[0]
+
+    def _next_frame(self) -> object | None:
+        buffer, at = self._buffer, self._at
+        if len(buffer) - at < 4:
+            return None
+        (length,) = HEADER.unpack_from(buffer, at)
+        end = at + 4 + length
+        if len(buffer) < end:
+            return None
+        body = buffer[at + 4:end]
+        self._at = end
+        if end > _READ_SIZE:  # drop what was consumed now and then, not on every frame
+            del buffer[:end]
+            self._at = 0
+        try:
+            kind, value = self.codec.decode_body(body)
+        except DecodeError as error:
+            return Corrupt(str(error))
+        if kind == KIND_FAILURE:
+            failure = PeerFailure(self.sender, value)
+            self.network.note_failed(self.sender, value)
+            return failure
+        return value
+
+    def _fill(self, timeout: float | None) -> bool:
+        """Read what the pipe holds, waiting up to ``timeout``; False if nothing came."""
+        ready = self._poll.poll(None if timeout is None else max(0, int(timeout * 1000)))
+        if not any(fd == self.fd for fd, _ in ready):
+            return False
+        data = os.read(self.fd, _READ_SIZE)
+        if not data:
+            self._eof = True
+        else:
+            self._buffer += data
+        return True
+
+
+class ProcessNetwork(InprocNetwork):
+    """The channels of one group's process.
+
+    Args:
+        local_roles: the roles running in this process.
+        channels: every ordered pair the global type connects.
+        pipes: for each pair with one end here and the other in another group, the
+            pipe's file descriptor (the write end for our senders, the read end for
+            our receivers).
+        dead: pairs whose other end cannot be reached (its group did not start with
+            this one), with the reason; sending or receiving there fails at once.
+        codec_for: builds the codec of a channel (its payload classes and rings).
+        doorbell_roles: local roles with parallel branches (their cross-process
+            channels are bridged into local queues so ``recv_any`` can wait on all).
+    """
+
+    def __init__(self, local_roles: Iterable[str], channels: Iterable[tuple[str, str]],
+                 pipes: dict[tuple[str, str], int], dead: dict[str, str],
+                 codec_for: Callable[[tuple[str, str]], Codec], doorbell_roles: Iterable[str] = ()) -> None:
+        self.local_roles = frozenset(local_roles)
+        local_pairs = [(a, b) for a, b in channels if a in self.local_roles and b in self.local_roles]
+        super().__init__(local_pairs, [r for r in doorbell_roles if r in self.local_roles])
+        self.wake_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+        self._cause_arrived = threading.Condition()
+        self.bridges: list[threading.Thread] = []
+        for role, cause in dead.items():
+            self.failed[role] = cause
+            self.alarm = True
+        for (sender, receiver), fd in pipes.items():
+            codec = codec_for((sender, receiver))
+            if sender in self.local_roles:
+                self.queues[(sender, receiver)] = PipeSender(fd, codec, self, sender, receiver)
+            elif receiver in self.doorbells:
+                self.queues[(sender, receiver)] = self._bridge(PipeReceiver(fd, codec, self, sender),
+                                                               sender, receiver)
+            else:
+                self.queues[(sender, receiver)] = PipeReceiver(fd, codec, self, sender)  # type: ignore[assignment]
+        for sender, receiver in channels:  # channels to or from a peer that is not there
+            if (sender, receiver) not in self.queues and receiver in self.local_roles:
+                gone: SimpleQueue[object] = SimpleQueue()
+                gone.put(PeerFailure(sender, dead.get(sender, "not running")))
+                self.queues[(sender, receiver)] = gone
+
+    def _bridge(self, source: PipeReceiver, sender: str, receiver: str) -> SimpleQueue[object]:
+        """A thread moving frames from a pipe into a local queue, ringing the doorbell."""
+        target: SimpleQueue[object] = SimpleQueue()
+
+        def pump() -> None:
+            while True:
+                item = source.get()
+                target.put(item)
+                self.ring(receiver, sender)
+                if type(item) is not tuple and not isinstance(item, Corrupt):
+                    return  # a failure or STOP ends the channel
+
+        thread = threading.Thread(target=pump, name=f"anodize-bridge:{sender}->{receiver}", daemon=True)
+        self.bridges.append(thread)
+        return target
+
+    def start(self) -> None:
+        for thread in self.bridges:
+            thread.start()
+
+    # ---- failure and stop ------------------------------------------------------------------
+    def fail(self, role: str, cause: str) -> None:
+        """``role`` failed: tell its receivers (a local role), or just record it (a remote one)."""
+        if role not in self.local_roles:
+            self.note_failed(role, cause)
+            return
+        with self._lock:
+            if role in self.failed:
+                return
+            self.failed[role] = cause
+            self.alarm = True
+        for (sender, receiver), channel in self.queues.items():
+            if sender != role:
+                continue
+            if isinstance(channel, PipeSender):
+                channel.put_failure(cause)
+            else:
+                channel.put(PeerFailure(role, cause))
+                self.ring(receiver, sender)
+
+    def note_failed(self, role: str, cause: str) -> None:
+        """Record why a remote role failed (from its failure frame or the supervisor)."""
+        with self._cause_arrived:
+            self.failed.setdefault(role, cause)
+            self.alarm = True
+            self._cause_arrived.notify_all()
+
+    def wait_for_cause(self, role: str, default: str) -> str:
+        """Why ``role`` failed; wait briefly for the supervisor to say, when its process died."""
+        with self._cause_arrived:
+            self._cause_arrived.wait_for(lambda: role in self.failed, timeout=_EOF_CAUSE_WAIT)
+            return self.failed.get(role, default)
+
+    def stop(self) -> None:
+        """Wake every receiver of this process with STOP."""
+        self.stopping = True
+        self.alarm = True
+        os.eventfd_write(self.wake_fd, 1)  # wakes pipe readers; never drained: stop is final
+        for (sender, receiver), channel in self.queues.items():
+            if isinstance(channel, SimpleQueue):
+                channel.put(STOP)
+                self.ring(receiver, sender)
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        written = os.write(fd, view)
+        view = view[written:]
+
+
+def _grow_pipe(fd: int) -> None:
+    import fcntl
+
+    try:
+        fcntl.fcntl(fd, fcntl.F_SETPIPE_SZ, _PIPE_SIZE)
+    except (OSError, AttributeError):
+        pass  # the default size works, only with more blocking
+
+
+def make_codec(classes: Iterable[type], ring: ArrayRing | None, reader: RingReader | None) -> Codec:
+    """A channel's codec: arrays go to ``ring`` when sending, come from ``reader`` when receiving."""
+    return Codec(classes, ring.write if ring is not None else None, reader.read if reader else None)
+

@@ -1,0 +1,127 @@
+"""The real-time guard: a runaway SCHED_FIFO group must not starve the machine.
+
+Two layers. The kernel's RT throttling (``/proc/sys/kernel/sched_rt_runtime_us``)
+keeps a share of every period for ordinary tasks; where it is disabled (-1) a
+spinning FIFO thread owns its CPU for good. On top of it, :class:`Watchdog`
+samples the CPU time of every group process that runs at SCHED_FIFO and, when
+one has kept a CPU busy for ``limit`` seconds without a break, demotes all of
+its threads to SCHED_OTHER and records why. The watchdog's own thread asks for
+SCHED_FIFO 99 so that it still runs when FIFO groups fill every CPU; it sleeps
+between samples, so it never competes for long.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+
+__all__ = ["Watchdog", "rt_throttling", "BUSY_SHARE"]
+
+BUSY_SHARE = 0.9  # of one CPU, over every sample of the window, counts as spinning
+_SAMPLE = 0.25  # seconds
+
+
+def rt_throttling() -> str:
+    """The kernel's RT throttling, described (``"off"`` when disabled or unknown)."""
+    try:
+        with open("/proc/sys/kernel/sched_rt_runtime_us") as r, open("/proc/sys/kernel/sched_rt_period_us") as p:
+            runtime, period = int(r.read()), int(p.read())
+    except (OSError, ValueError):
+        return "unknown"
+    if runtime < 0:
+        return "off"
+    return f"{runtime / period:.0%} of each {period / 1e6:g} s for real-time tasks"
+
+
+def cpu_seconds(pid: int) -> float | None:
+    """CPU time (user + system) the process has used, all threads."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rpartition(")")[2].split()
+    except OSError:
+        return None
+    ticks = os.sysconf("SC_CLK_TCK")
+    return (int(fields[11]) + int(fields[12])) / ticks  # utime, stime: fields 14 and 15
+
+
+def demote(pid: int) -> int:
+    """Move every thread of ``pid`` to SCHED_OTHER; returns how many were moved."""
+    moved = 0
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return 0
+    for tid in tids:
+        try:
+            os.sched_setscheduler(int(tid), os.SCHED_OTHER, os.sched_param(0))
+            moved += 1
+        except OSError:
+            pass
+    return moved
+
+
+class Watchdog:
+    """Demotes FIFO group processes that keep a CPU busy for ``limit`` seconds.
+
+    Args:
+        limit: seconds of uninterrupted spinning tolerated.
+        on_demote: called with (group name, description) after a demotion.
+    """
+
+    def __init__(self, limit: float, on_demote: Callable[[str, str], None]) -> None:
+        self.limit = limit
+        self.on_demote = on_demote
+        self._watched: dict[str, tuple[int, deque[tuple[float, float]]]] = {}
+        self._lock = threading.Lock()
+        self._stopped = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="anodize-watchdog", daemon=True)
+        self.scheduling = ""
+
+    def watch(self, group: str, pid: int) -> None:
+        with self._lock:
+            self._watched[group] = (pid, deque())
+        if not self._thread.is_alive() and not self._stopped.is_set():
+            self._thread.start()
+
+    def forget(self, group: str) -> None:
+        with self._lock:
+            self._watched.pop(group, None)
+
+    def stop(self) -> None:
+        self._stopped.set()
+
+    def _run(self) -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(99))
+            self.scheduling = "SCHED_FIFO 99"
+        except (OSError, AttributeError):
+            self.scheduling = "SCHED_OTHER (SCHED_FIFO refused)"
+        while not self._stopped.wait(_SAMPLE):
+            with self._lock:
+                watched = list(self._watched.items())
+            for group, (pid, samples) in watched:
+                self.check(group, pid, samples, time.monotonic(), cpu_seconds(pid))
+
+    def check(self, group: str, pid: int, samples: deque[tuple[float, float]], now: float,
+              used: float | None) -> bool:
+        """Record one sample; demote and report when the window shows spinning."""
+        if used is None:
+            self.forget(group)
+            return False
+        samples.append((now, used))
+        while samples and now - samples[0][0] > self.limit + _SAMPLE:
+            samples.popleft()
+        if len(samples) < 2 or now - samples[0][0] < self.limit:
+            return False
+        spinning = all((u1 - u0) / (t1 - t0) >= BUSY_SHARE
+                       for (t0, u0), (t1, u1) in zip(samples, list(samples)[1:]) if t1 > t0)
+        if not spinning:
+            return False
+        moved = demote(pid)
+        self.forget(group)
+        self.on_demote(group, f"watchdog demoted {moved} threads to SCHED_OTHER: a CPU stayed "
+                              f"busy at SCHED_FIFO for {self.limit:g} s")
+        return True
