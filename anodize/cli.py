@@ -1,4 +1,4 @@
-"""The ``anodize`` command: check, project, fsm, graph.
+"""The ``anodize`` command: check, project, fsm, graph, lint, run.
 
 The only module that prints or exits. Exit status: 0 success, 1 the input
 has errors (printed as ``path:line:col: error: ...``), 2 usage errors.
@@ -12,11 +12,16 @@ import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn, TextIO
 
 import sessiontypes
 from sessiontypes import ProtocolError, ProtocolModule
 from sessiontypes.codegen import GeneratedModule, generate_modules
+
+from .errors import AnodizeError
+
+if TYPE_CHECKING:
+    from .report import GroupStatus
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE = 0, 1, 2
 
@@ -46,6 +51,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_ERRORS
     except OSError as error:
         print(f"error: {error.filename or ''}: {error.strerror or error}", file=sys.stderr)
+        return EXIT_ERRORS
+    except AnodizeError as error:  # e.g. a system file's ConfigError: 'path: key: ...'
+        print(f"error: {error}", file=sys.stderr)
         return EXIT_ERRORS
     except KeyboardInterrupt:
         return 130
@@ -94,6 +102,19 @@ def _parser() -> argparse.ArgumentParser:
     graph.add_argument("-o", "--output", required=True, metavar="OUT",
                        help="OUT.dot, OUT.png or OUT.svg")
     graph.set_defaults(run=_graph)
+
+    lint = commands.add_parser(
+        "lint", help="warn about state a system's groups share outside the protocol")
+    lint.add_argument("file", metavar="SYSTEM.toml")
+    lint.set_defaults(run=_lint)
+
+    run_system = commands.add_parser("run", help="run a system file and print the run report")
+    run_system.add_argument("file", metavar="SYSTEM.toml")
+    run_system.add_argument("--timeout", type=float, metavar="S",
+                            help="stop roles still running after S seconds (default: the file's timeout)")
+    run_system.add_argument("--json", metavar="FILE", help="also write the run report as JSON to FILE")
+    run_system.add_argument("--quiet", action="store_true", help="no live status lines")
+    run_system.set_defaults(run=_run)
     return parser
 
 
@@ -249,6 +270,77 @@ def _graph(args: argparse.Namespace) -> int:
         draw_communication_graph(graph, out)
     print(f"wrote {out}")
     return EXIT_OK
+
+
+def _system_file(path: str) -> Path:
+    file = Path(path)
+    if file.is_dir():
+        raise UsageError(f"{path} is a directory; expected a system file (.toml)")
+    if not file.exists():
+        raise UsageError(f"no such system file: {path}")
+    if file.suffix != ".toml":
+        raise UsageError(f"{path}: expected a system file ending in .toml")
+    return file
+
+
+def _lint(args: argparse.Namespace) -> int:
+    from .config import load_config
+    from .lint import lint_report
+
+    report = lint_report(load_config(_system_file(args.file)))
+    for finding in report.findings:
+        print(finding)
+    modules = _count(len(report.modules), "module")
+    if report.findings:
+        print(f"{_count(len(report.findings), 'finding')} in {modules}")
+        return EXIT_ERRORS
+    print(f"no isolation problems found in {modules}")
+    return EXIT_OK
+
+
+def _run(args: argparse.Namespace) -> int:
+    from .config import build_system, load_config
+
+    if args.timeout is not None and not args.timeout > 0:
+        raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
+    config = load_config(_system_file(args.file))
+    system = build_system(config)
+    timeout = args.timeout if args.timeout is not None else config.timeout
+    report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout))
+    print(report.summary())
+    if args.json:
+        out = Path(args.json)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(report.to_json() + "\n", encoding="utf-8")
+        print(f"wrote {out}")
+    return EXIT_OK if report.ok else EXIT_ERRORS
+
+
+class LiveStatus:
+    """``on_status`` for ``anodize run``: one line per group.
+
+    On a terminal the lines are redrawn in place; otherwise (a log, a pipe) a
+    group's line is printed only when its state changed, so logs stay short.
+    """
+
+    def __init__(self, stream: TextIO) -> None:
+        self.stream = stream
+        self.tty = stream.isatty()
+        self.drawn = 0                       # lines drawn last time (terminal)
+        self.states: dict[str, str] = {}     # state last printed per group (log)
+
+    def __call__(self, statuses: dict[str, GroupStatus]) -> None:
+        if self.tty:
+            up = f"\x1b[{self.drawn}F" if self.drawn else ""
+            lines = "".join(f"\x1b[2K{status.line()}\n" for status in statuses.values())
+            self.stream.write(f"{up}{lines}\x1b[J")  # [J: clear what a longer frame left below
+            self.drawn = len(statuses)
+        else:
+            for name, status in statuses.items():
+                if self.states.get(name) != status.state:
+                    self.states[name] = status.state
+                    self.stream.write(status.line() + "\n")
+        self.stream.flush()
 
 
 def run() -> NoReturn:

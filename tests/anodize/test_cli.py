@@ -7,16 +7,18 @@ the installed command in a subprocess.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import subprocess
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import pytest
 
-from anodize.cli import main
+from anodize import GroupStatus
+from anodize.cli import LiveStatus, main
 
 REPO = Path(__file__).resolve().parents[2]
 CORPUS = REPO / "tests" / "sessiontypes" / "corpus"
@@ -314,6 +316,178 @@ def test_missing_or_bad_arguments_exit_2(capsys: pytest.CaptureFixture[str], arg
     assert (status, out) == (2, "")
     assert err.startswith("usage: anodize")
     assert "error: " in err
+
+
+# ---- lint and run: system files -------------------------------------------------------
+
+LINT_FIXTURES = REPO / "tests" / "anodize" / "lint_fixtures"
+
+RUN_ROLES = '''\
+import time
+
+
+def producer(ep):
+    for i in range(3):
+        ep.send("C", "data", i)
+    ep.send("C", "stop")
+
+
+def consumer(ep):
+    while ep.recv("P").label == "data":
+        pass
+
+
+def crasher(ep):
+    raise RuntimeError("sensor unplugged")
+
+
+def forever(ep):
+    while True:
+        ep.send("C", "data", 1)
+        time.sleep(0.01)
+'''
+
+
+@pytest.fixture
+def system_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Callable[..., Path]]:
+    """Writes a system file for protocols/stream.proto's Stream; roles are functions of
+    a module in tmp_path (RUN_ROLES) or of lint_fixtures/. sys.path and sys.modules
+    are restored afterwards."""
+    (tmp_path / "cli_run_roles.py").write_text(RUN_ROLES, encoding="utf-8")
+    monkeypatch.setattr(sys, "path", list(sys.path))
+
+    def write(producer: str, consumer: str, same_group: bool = False, extra: str = "") -> Path:
+        groups = (f'[groups.a]\nroles = {{ P = "{producer}", C = "{consumer}" }}\n' if same_group else
+                  f'[groups.a]\nroles = {{ P = "{producer}" }}\n[groups.b]\nroles = {{ C = "{consumer}" }}\n')
+        path = tmp_path / "system.toml"
+        path.write_text(f'protocol = "{REPO / "protocols" / "stream.proto"}"\nglobal = "Stream"\n'
+                        f'transport = "inproc"\npythonpath = [".", "{LINT_FIXTURES}"]\n{extra}{groups}',
+                        encoding="utf-8")
+        return path
+
+    yield write
+    sys.modules.pop("cli_run_roles", None)
+
+
+def test_lint_prints_findings_and_a_summary_and_exits_1(
+        capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path]) -> None:
+    path = system_file("back_channel:producer", "back_channel:consumer")
+    status, out, err = run(capsys, "lint", str(path))
+    fixture = "tests/anodize/lint_fixtures/back_channel.py"
+    assert (status, err) == (1, "")
+    assert out == (
+        f"{fixture}:6:1: warning: threading.Lock lock is shared by group a (P) and group b (C): used as "
+        "a back channel outside the protocol (P: 13:10 enters it (with); C: 19:10 enters it (with))\n"
+        f"{fixture}:7:1: warning: queue.Queue handoff is shared by group a (P) and group b (C): used as "
+        "a back channel outside the protocol (P: 14:9 calls .put(); C: 21:5 calls .get())\n"
+        "2 findings in 1 module\n")
+
+
+def test_lint_of_a_clean_system_exits_0(
+        capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path]) -> None:
+    assert run(capsys, "lint", str(system_file("constants:producer", "constants:consumer"))) == (
+        0, "no isolation problems found in 1 module\n", "")
+    path = system_file("back_channel:producer", "back_channel:consumer", same_group=True)
+    assert run(capsys, "lint", str(path)) == (0, "no isolation problems found in 1 module\n", "")
+
+
+def test_lint_of_a_bad_system_file_prints_one_error_line(
+        capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path]) -> None:
+    path = system_file("constants:producer", "constants:consumer", extra="monitors = 1\n")
+    assert run(capsys, "lint", str(path)) == (
+        1, "", f"error: {path}: monitors: expected true or false, got 1\n")
+    path = system_file("no_such_module:producer", "constants:consumer")
+    status, out, err = run(capsys, "lint", str(path))
+    assert (status, out) == (1, "")
+    assert err.startswith(f"error: {path}: groups.a.roles.P: cannot find the source of module no_such_module")
+
+
+@pytest.mark.parametrize("command", ["lint", "run"])
+def test_a_system_file_that_is_not_there_is_a_usage_error(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, command: str) -> None:
+    assert run(capsys, command, "no/such.toml") == (
+        2, "", f"anodize {command}: error: no such system file: no/such.toml\n")
+    assert run(capsys, command, str(tmp_path)) == (
+        2, "", f"anodize {command}: error: {tmp_path} is a directory; expected a system file (.toml)\n")
+    assert run(capsys, command, "protocols/stream.proto") == (
+        2, "", f"anodize {command}: error: protocols/stream.proto: expected a system file ending in .toml\n")
+
+
+def test_run_prints_status_and_the_summary_and_writes_json(
+        capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path], tmp_path: Path) -> None:
+    report = tmp_path / "reports" / "run.json"
+    status, out, err = run(capsys, "run", str(system_file("cli_run_roles:producer", "cli_run_roles:consumer")),
+                           "--json", str(report))
+    assert (status, err) == (0, "")
+    lines = out.splitlines()
+    assert [line.split()[:2] for line in lines[:2]] == [["a", "done"], ["b", "done"]]
+    assert lines[2].startswith("protocol Stream: ok in ")
+    assert lines[3].startswith("  group a: done (") and lines[4].startswith("  group b: done (")
+    assert lines[5:] == [f"wrote {report}"]
+    data = json.loads(report.read_text(encoding="utf-8"))
+    assert (data["ok"], data["protocol"], data["messages"]) == (True, "Stream", {"P->C": 4})
+
+
+def test_run_quiet_prints_only_the_summary(
+        capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path]) -> None:
+    status, out, err = run(capsys, "run", str(system_file("cli_run_roles:producer", "cli_run_roles:consumer")),
+                           "--quiet")
+    assert (status, err) == (0, "")
+    assert out.startswith("protocol Stream: ok in ") and len(out.splitlines()) == 3
+
+
+def test_run_of_a_failing_system_exits_1(
+        capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path]) -> None:
+    path = system_file("cli_run_roles:crasher", "cli_run_roles:consumer")
+    status, out, err = run(capsys, "run", str(path), "--quiet")
+    assert (status, err) == (1, "")
+    assert out.startswith("protocol Stream: NOT ok in ")
+    assert "  role P: failed: sensor unplugged\n" in out
+
+
+def test_run_stops_roles_at_the_timeout_of_the_command_line(
+        capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path]) -> None:
+    path = system_file("cli_run_roles:forever", "cli_run_roles:consumer", extra="timeout = 60\n")
+    status, out, _ = run(capsys, "run", str(path), "--quiet", "--timeout", "0.2")
+    assert status == 1
+    assert "  role P: stopped\n" in out and "  role C: stopped\n" in out
+
+
+def test_run_errors_of_the_system_file_exit_1(
+        capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path]) -> None:
+    path = system_file("cli_run_roles:producer", "cli_run_roles:nothing")
+    assert run(capsys, "run", str(path)) == (
+        1, "", f"error: {path}: groups.b: role function 'cli_run_roles:nothing': module cli_run_roles "
+               "has no nothing\n")
+    assert run(capsys, "run", str(path), "--timeout", "0") == (
+        2, "", "anodize run: error: --timeout 0.0: expected a number of seconds > 0\n")
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_live_status_redraws_in_place_on_a_terminal() -> None:
+    screen = _Terminal()
+    live = LiveStatus(screen)
+    live({"a": GroupStatus("a", "running", messages=1), "b": GroupStatus("b", "starting")})
+    live({"a": GroupStatus("a", "done", messages=4), "b": GroupStatus("b", "done")})
+    a1, b1 = GroupStatus("a", "running", messages=1).line(), GroupStatus("b", "starting").line()
+    a2, b2 = GroupStatus("a", "done", messages=4).line(), GroupStatus("b", "done").line()
+    assert screen.getvalue() == (f"\x1b[2K{a1}\n\x1b[2K{b1}\n\x1b[J"
+                                 f"\x1b[2F\x1b[2K{a2}\n\x1b[2K{b2}\n\x1b[J")
+
+
+def test_live_status_in_a_log_prints_a_line_when_a_state_changes() -> None:
+    log = io.StringIO()
+    live = LiveStatus(log)
+    live({"a": GroupStatus("a", "running", messages=1), "b": GroupStatus("b", "running")})
+    live({"a": GroupStatus("a", "running", messages=9), "b": GroupStatus("b", "running")})
+    live({"a": GroupStatus("a", "done", messages=12), "b": GroupStatus("b", "running")})
+    assert log.getvalue().splitlines() == [GroupStatus("a", "running", messages=1).line(),
+                                           GroupStatus("b", "running").line(),
+                                           GroupStatus("a", "done", messages=12).line()]
 
 
 # ---- the installed command -------------------------------------------------------------
