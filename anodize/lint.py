@@ -54,6 +54,7 @@ _DISPLAYS = {ast.List: "list", ast.ListComp: "list", ast.Dict: "dict", ast.DictC
              ast.Set: "set", ast.SetComp: "set"}
 _IMMUTABLE_BASES = {"NamedTuple", "Enum", "IntEnum", "StrEnum", "Flag", "IntFlag", "tuple", "str",
                     "int", "float", "bytes", "frozenset"}
+_RUNTIME = {"anodize", "sessiontypes"}  # the protocol's own channels are not a back channel
 _USES_SHOWN = 3  # use sites listed per role in a message
 
 
@@ -179,7 +180,8 @@ class _Library:
         """A user module by name, or None (not found, or library code)."""
         if name not in self.cache:
             origin = _find_source(name, self.search)
-            if origin is None or os.path.realpath(origin).startswith(self.library_dirs):
+            if (origin is None or os.path.realpath(origin).startswith(self.library_dirs)
+                    or name.partition(".")[0] in _RUNTIME):
                 self.cache[name] = None
             else:
                 return self._load(name, origin, None)
@@ -252,6 +254,8 @@ class _Library:
             return self.resolve(imported, attribute, depth + 1) if imported and depth < 8 else None
         if name in module.sites:
             return _Target("variable", module, name)
+        if module.is_package and (submodule := self.module(f"{module.name}.{name}")):
+            return _Target("module", submodule, "")  # 'import a.b' then 'a.b.x'
         return None
 
 
@@ -520,13 +524,10 @@ class _Visit:
             self.use(target, node)
 
     def attribute_use(self, node: ast.Attribute) -> None:
-        base = node.value
-        if not isinstance(base, ast.Name) or base.id in self.locals and base.id != self.receiver:
-            return
-        if base.id == self.receiver and self.cls:
+        if isinstance(node.value, ast.Name) and node.value.id == self.receiver:
             self.member_use(node)
             return
-        target = self.library.resolve(self.module, base.id)
+        target = self.base_target(node.value)
         if target is None:
             return
         if target.kind == "module":
@@ -552,6 +553,16 @@ class _Visit:
             cls = state[0].removesuffix(" instance") if state else ""
             if f"{cls}.{node.attr}" in target.module.functions:  # module_object.method()
                 self.calls.append((target.module, f"{cls}.{node.attr}", (target.module.name, target.name)))
+
+    def base_target(self, node: ast.expr) -> _Target | None:
+        """What ``node`` in ``node.attr`` is: a module-level name, or a chain through modules."""
+        if isinstance(node, ast.Name):
+            return None if node.id in self.locals else self.library.resolve(self.module, node.id)
+        if isinstance(node, ast.Attribute):
+            base = self.base_target(node.value)
+            if base is not None and base.kind == "module":
+                return self.library.resolve(base.module, node.attr)
+        return None
 
     def member_use(self, node: ast.Attribute) -> None:
         """``self.x`` / ``cls.x`` in a method of class ``self.cls``."""

@@ -111,6 +111,17 @@ def test_state_of_another_module_and_an_imported_role_function(tmp_path: Path) -
                               f"{SHOWN}/postbox_roles.py")
 
 
+def test_state_of_a_package_submodule_and_the_runtime_is_not_read(tmp_path: Path) -> None:
+    config = system(tmp_path, {"P": "plant_roles:producer"}, {"C": "plant_roles:consumer"})
+    report = lint_report(config)
+    assert [str(f) for f in report.findings] == [
+        f"{SHOWN}/plant/state.py:3:1: warning: list events is shared by group a (P) and group b (C) "
+        f"outside the protocol (P: {SHOWN}/plant_roles.py:9:5 calls .append(); "
+        f"C: {SHOWN}/plant_roles.py:15:5 calls .clear())"]
+    assert report.modules == (f"{SHOWN}/plant/__init__.py", f"{SHOWN}/plant/state.py",
+                              f"{SHOWN}/plant_roles.py")
+
+
 def test_class_attributes_shared_by_static_and_class_method_roles(tmp_path: Path) -> None:
     config = system(tmp_path, {"P": "class_roles:Station.producer"}, {"C": "class_roles:Station.consumer"})
     assert messages(config) == [

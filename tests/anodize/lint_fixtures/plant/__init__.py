@@ -1,0 +1,1 @@
+"""A package whose submodule holds state (it does not import it)."""

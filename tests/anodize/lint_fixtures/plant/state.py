@@ -1,0 +1,3 @@
+"""Module state reached as plant.state.events."""
+
+events = []

@@ -1,0 +1,15 @@
+"""Roles that reach a package's submodule two ways; the anodize runtime itself is not read."""
+
+import plant.state
+from anodize import Endpoint
+from plant import state
+
+
+def producer(ep: Endpoint) -> None:
+    plant.state.events.append("started")
+    ep.send("C", "stop")
+
+
+def consumer(ep: Endpoint) -> None:
+    ep.recv("P")
+    state.events.clear()
