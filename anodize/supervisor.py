@@ -68,6 +68,7 @@ class _Incarnation:
     killed_on_purpose: str = ""  # "stop" | "restart" | "failed" when the supervisor ended it
     cgroup: Cgroup | None = None
     started_at: float = field(default_factory=time.monotonic)
+    deaf: bool = False  # its end of the control connection is closed for our messages
 
 
 @dataclass
@@ -412,12 +413,12 @@ class _Supervisor:
                     self._kill(inc, "stop")
 
     def _tell(self, inc: _Incarnation, kind: str, data: object = None) -> None:
-        if inc.control is None:
+        if inc.control is None or inc.deaf:
             return
         try:
             control_send(inc.control, kind, data)
-        except OSError:
-            inc.control = None
+        except OSError:  # it is exiting; what it said before is still there to read
+            inc.deaf = True
 
     def _demoted(self, group: str, description: str) -> None:
         self.history[group].notes.append(description)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import select
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from queue import Empty, SimpleQueue
@@ -123,6 +124,7 @@ class PipeReceiver:
         Raises:
             queue.Empty: nothing arrived within ``timeout`` seconds.
         """
+        deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             if self._pushed:
                 return self._pushed.popleft()
@@ -134,7 +136,8 @@ class PipeReceiver:
                 return PeerFailure(self.sender, cause)
             if self.network.stopping:
                 return STOP
-            if not self._fill(timeout):
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            if not self._fill(left) and deadline is not None and time.monotonic() >= deadline:
                 raise Empty
 
     def get_nowait(self) -> object:
@@ -176,7 +179,10 @@ class PipeReceiver:
         return value
 
     def _fill(self, timeout: float | None) -> bool:
-        """Read what the pipe holds, waiting up to ``timeout``; False if nothing came."""
+        """Read what the pipe holds, waiting up to ``timeout``; False if no data came.
+
+        Also returns (False) when woken by a stop, so the caller looks again.
+        """
         ready = self._poll.poll(None if timeout is None else max(0, int(timeout * 1000)))
         if not any(fd == self.fd for fd, _ in ready):
             return False

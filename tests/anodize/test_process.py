@@ -1,0 +1,168 @@
+"""transport="process": groups as OS processes, isolated, supervised, and still monitored."""
+
+from __future__ import annotations
+
+import glob
+
+import pytest
+
+import anodize
+import process_roles as roles
+import sessiontypes
+from anodize import MemoryBoundError, PeerFailedError, ProtocolViolationError
+from anodize.errors import RoleError
+from anodize.shm import segment_dir
+
+PROTOCOLS = sessiontypes.loads("""
+type Frame = "process_roles:Frame"
+type Opaque = "process_roles:Opaque"
+type Things = "builtins:dict"
+global Ping(A, B) = mu t. A -> B : {ping(nat). B -> A : pong(nat). t, stop}
+global Stream(A, B) = mu t. A -> B : {item(int). t, fin}
+global Frames(A, B) = mu t. A -> B : {frame(Frame). t, fin}
+global Payloads(A, B) = A -> B : thing(Opaque). A -> B : nested(Things)
+global Hog(C, S, H, K) = (mu t. C -> S : {tick(int). t, done} || mu u. H -> K : {chunk(int). u, fin})
+""", "test_process.proto").globals
+
+
+def run(global_name: str, groups: dict[str, dict[str, object]], timeout: float = 60, **options: object
+        ) -> anodize.RunReport:
+    system = anodize.System(PROTOCOLS[global_name], transport="process")
+    for name, spec in groups.items():
+        spec = dict(spec)
+        placed = spec.pop("roles")
+        group = system.group(name, **spec)  # type: ignore[arg-type]
+        for role, function in placed.items():  # type: ignore[attr-defined]
+            group.role(role, function)
+    return system.run(timeout=timeout, **options)  # type: ignore[arg-type]
+
+
+def no_leftover_segments() -> bool:
+    return not glob.glob(f"{segment_dir()}/anodize-*")
+
+
+def test_a_protocol_runs_across_processes_with_monitors_at_both_ends() -> None:
+    report = run("Ping", {"a": {"roles": {"A": roles.client}}, "b": {"roles": {"B": roles.server}}})
+    assert report.ok, report.summary()
+    assert report.messages == {"A->B": 51, "B->A": 50}
+    assert report.groups["a"].pid != report.groups["b"].pid
+    assert report.transport == "process"
+
+
+def test_a_million_messages_cross_in_order() -> None:
+    report = run("Stream", {"a": {"roles": {"A": roles.count_source}},
+                            "b": {"roles": {"B": roles.count_sink}}}, timeout=300)
+    assert report.ok, report.summary()
+    assert report.messages["A->B"] == roles.MESSAGES + 1
+
+
+def test_ten_thousand_numpy_frames_cross_through_shared_memory_intact() -> None:
+    report = run("Frames", {"a": {"roles": {"A": roles.frame_source}},
+                            "b": {"roles": {"B": roles.frame_sink}}}, timeout=300)
+    assert report.ok, report.summary()
+    assert report.messages["A->B"] == roles.FRAMES + 1
+    assert no_leftover_segments()
+
+
+def test_a_memory_hog_is_stopped_whole_while_another_group_completes() -> None:
+    report = run("Hog", {
+        "control": {"priority": 80, "roles": {"C": roles.steady_controller, "S": roles.steady_sensor}},
+        "hog": {"memory": "64MiB", "roles": {"H": roles.hog}},
+        "sink": {"roles": {"K": roles.hog_sink}},
+    })
+    hog = report.groups["hog"]
+    assert hog.status == "failed"
+    assert isinstance(hog.error, MemoryBoundError)
+    assert hog.error.bound == 64 * 2**20
+    assert 32 * 2**20 < hog.error.peak <= 64 * 2**20 + 2**20
+    assert isinstance(report.roles["K"].error, PeerFailedError)
+    assert report.roles["K"].error.peer == "H"
+    assert report.roles["C"].status == report.roles["S"].status == "done"
+    assert report.messages["C->S"] == 151
+    assert "MemoryBoundError" in report.summary()
+
+
+def test_a_killed_group_fails_its_waiting_peer_instead_of_hanging() -> None:
+    report = run("Ping", {"a": {"roles": {"A": roles.crashing_client}},
+                          "b": {"roles": {"B": roles.patient_server}}}, timeout=60)
+    assert report.roles["A"].status == "failed"
+    assert "SIGKILL" in str(report.groups["a"].error)
+    error = report.roles["B"].error
+    assert isinstance(error, PeerFailedError), report.summary()  # not "stopped" at the timeout
+    assert error.peer == "A" and "SIGKILL" in error.cause
+
+
+def test_a_forbidden_message_injected_into_a_channel_is_rejected_and_the_sender_blamed() -> None:
+    report = run("Ping", {"a": {"roles": {"A": roles.injecting_client}},
+                          "b": {"roles": {"B": roles.server}}})
+    error = report.roles["B"].error
+    assert isinstance(error, ProtocolViolationError), report.summary()
+    assert error.blame == "A" and error.role == "B"
+    assert error.actual.label == "pong"
+
+
+def test_a_frame_that_does_not_decode_is_a_violation_by_its_sender() -> None:
+    report = run("Ping", {"a": {"roles": {"A": roles.garbling_client}},
+                          "b": {"roles": {"B": roles.server}}})
+    error = report.roles["B"].error
+    assert isinstance(error, ProtocolViolationError), report.summary()
+    assert error.blame == "A" and "could not be decoded" in str(error)
+
+
+def test_restart_starts_the_failed_session_again(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("ANODIZE_TEST_MARKER", str(tmp_path / "marker"))
+    report = run("Ping", {"a": {"on_failure": "restart", "roles": {"A": roles.once_failing_client}},
+                          "b": {"on_failure": "restart", "roles": {"B": roles.server}}})
+    assert report.ok, report.summary()
+    assert report.groups["a"].restarts == 1 and report.groups["b"].restarts == 1
+    assert "first incarnation fails" in report.groups["a"].failures[0]
+    assert report.messages["A->B"] == 51  # the restarted session, counted on top of nothing
+
+
+def test_restarts_stop_after_max_restarts() -> None:
+    report = run("Hog", {
+        "control": {"roles": {"C": roles.steady_controller, "S": roles.steady_sensor}},
+        "hog": {"memory": "32MiB", "on_failure": "restart", "max_restarts": 2,
+                "roles": {"H": roles.hog, "K": roles.hog_sink}},
+    })
+    hog = report.groups["hog"]
+    assert hog.restarts == 2 and len(hog.failures) == 3
+    assert hog.status == "failed" and isinstance(hog.error, MemoryBoundError)
+    assert report.roles["C"].status == "done"
+
+
+def test_stop_system_stops_every_group() -> None:
+    report = run("Ping", {"a": {"on_failure": "stop-system", "roles": {"A": roles.injecting_client}},
+                          "b": {"roles": {"B": roles.patient_server}}}, timeout=60, grace=1.0)
+    assert report.roles["B"].status in ("failed", "stopped")
+    assert any("stop-system" in note for note in report.notes)
+
+
+def test_a_role_stuck_outside_the_protocol_is_killed_at_the_timeout() -> None:
+    report = run("Ping", {"a": {"roles": {"A": roles.client}},
+                          "b": {"roles": {"B": roles.sleepy_server}}}, timeout=1.0, grace=0.5)
+    assert report.roles["B"].status == "stopped"
+    assert report.roles["A"].status == "stopped"
+
+
+def test_payloads_travel_without_pickle_except_for_named_classes() -> None:
+    report = run("Payloads", {"a": {"roles": {"A": roles.opaque_sender}},
+                              "b": {"roles": {"B": roles.opaque_receiver}}})
+    assert report.ok, report.summary()
+
+
+def test_an_unnamed_class_is_refused_at_the_sender() -> None:
+    report = run("Payloads", {"a": {"roles": {"A": roles.unnamed_sender}},
+                              "b": {"roles": {"B": roles.waiting_receiver}}})
+    error = report.roles["A"].error
+    assert isinstance(error, RoleError) and error.type_name == "PayloadError", report.summary()
+    assert "process_roles.Unnamed" in str(error)
+    assert isinstance(report.roles["B"].error, PeerFailedError)
+
+
+def test_role_functions_must_be_importable_by_other_processes() -> None:
+    system = anodize.System(PROTOCOLS["Ping"], transport="process")
+    with pytest.raises(anodize.AnodizeError, match="no import path"):
+        system.group("a").role("A", lambda ep: None)
+    with pytest.raises(anodize.AnodizeError, match="cannot import"):
+        system.group("b").role("B", "no_such_module_here:f")
