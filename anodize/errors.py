@@ -117,8 +117,13 @@ class MemoryBoundError(AnodizeError):
         super().__init__(str(self))
 
     def __str__(self) -> str:
-        peak = f", peak {self.peak} bytes" if self.peak else ""
-        return f"group {self.group} exceeded its memory bound of {self.bound} bytes{peak}"
+        peak = f" (peak {_mib(self.peak)})" if self.peak else ""
+        return (f"group {self.group} exceeded its memory bound of {_mib(self.bound)}{peak}; "
+                "the group was stopped as a whole")
+
+
+def _mib(size: int) -> str:
+    return f"{size / 2**20:.1f} MiB"
 
 
 class LinearityError(AnodizeError):

@@ -199,7 +199,7 @@ class _GroupProcess:
         self._send("beat", self._counts())
 
     def _counts(self) -> dict[str, Any]:
-        used = (data_size() or self.baseline) - self.baseline
+        used = max(0, (data_size() or self.baseline) - self.baseline)
         self.peak = max(self.peak, used)
         sent = {f"{role}->{peer}": n for role, ep in self.endpoints.items()
                 for peer, n in ep.sent_counts().items()}

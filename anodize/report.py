@@ -79,7 +79,7 @@ class GroupStatus:
         if self.pid:
             parts.append(f"pid {self.pid}")
         if self.memory is not None:
-            parts.append(f"{self.memory / 2**20:6.1f} MiB")
+            parts.append(f"{max(0, self.memory) / 2**20:6.1f} MiB")
         parts.append(f"{self.messages} msgs")
         if self.rate_hz is not None:
             parts.append(f"{self.rate_hz:.0f} msg/s")

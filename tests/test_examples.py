@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -32,3 +33,20 @@ def test_generated_example_code_is_up_to_date(proto: str, monkeypatch: pytest.Mo
                                                capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.chdir(ROOT)
     assert main(["project", proto, "-o", "examples/generated", "--check"]) == 0, capsys.readouterr().err
+
+
+def test_mixed_criticality_example_stops_the_memory_hog_and_not_the_control_loop(tmp_path: Path) -> None:
+    report_path = tmp_path / "report.json"
+    done = subprocess.run([str(Path(sys.executable).parent / "anodize"), "run",
+                           "examples/mixed_criticality/system.toml", "--json", str(report_path)],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 1, done.stdout + done.stderr  # not ok: a group failed, as it should
+    report = json.loads(report_path.read_text())
+    groups = report["groups"]
+    assert groups["planning"]["status"] == "failed"
+    assert groups["planning"]["error"]["type"] == "MemoryBoundError"
+    assert groups["planning"]["peak_memory"] <= groups["planning"]["memory_bound"] + 2**20
+    assert groups["control"]["status"] == "done" and report["messages"]["Control->Motor"] == 601
+    assert groups["logging"]["status"] == "done"  # it noticed the planner was gone and ended
+    assert "MemoryBoundError: group planning exceeded its memory bound of 96.0 MiB" in done.stdout
+    assert "logger: role Logger: peer Planner failed" in done.stdout

@@ -1,0 +1,206 @@
+"""The cross-process codec and the shared-memory rings, without processes."""
+
+from __future__ import annotations
+
+import gc
+import math
+import os
+import pickle
+import secrets
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from anodize.codec import HEADER, KIND_FAILURE, KIND_MESSAGE, Codec, DecodeError, EncodeError
+from anodize.shm import ArrayRing, RingReader, remove_run_segments
+
+scalars = (st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False)
+           | st.text() | st.binary() | st.binary().map(bytearray)
+           | st.complex_numbers(allow_nan=False))
+hashables = st.recursive(st.none() | st.booleans() | st.integers() | st.text() | st.binary(),
+                         lambda inner: st.tuples(inner, inner) | st.frozensets(inner, max_size=3),
+                         max_leaves=8)
+values = st.recursive(
+    scalars,
+    lambda inner: (st.lists(inner, max_size=4) | st.tuples(inner, inner)
+                   | st.dictionaries(hashables, inner, max_size=4) | st.sets(hashables, max_size=4)
+                   | st.frozensets(hashables, max_size=4)),
+    max_leaves=20)
+
+
+def round_trip(codec: Codec, label: str, payload: object) -> tuple[str, object]:
+    frame = codec.message_frame(label, payload)
+    (length,) = HEADER.unpack_from(frame)
+    assert length == len(frame) - 4
+    kind, value = codec.decode_body(frame[4:])
+    assert kind == KIND_MESSAGE
+    return value
+
+
+@settings(max_examples=300, deadline=None)
+@given(label=st.text(min_size=1, max_size=20), payload=values)
+def test_builtin_values_round_trip_with_their_types(label: str, payload: object) -> None:
+    got_label, got = round_trip(Codec(), label, payload)
+    assert got_label == label
+    assert got == payload
+    assert _same_types(got, payload)
+
+
+def _same_types(a: object, b: object) -> bool:
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, (list, tuple)):
+        return all(_same_types(x, y) for x, y in zip(a, b))  # type: ignore[call-overload]
+    if isinstance(a, dict):
+        keys = {k: k for k in b}  # type: ignore[attr-defined]
+        return all(_same_types(k, keys[k]) and _same_types(v, b[k]) for k, v in a.items())  # type: ignore[index]
+    return True
+
+
+@settings(max_examples=300, deadline=None)
+@given(body=st.binary(max_size=64))
+def test_arbitrary_bytes_never_decode_into_anything_but_a_decode_error(body: bytes) -> None:
+    try:
+        Codec().decode_body(body)
+    except DecodeError:
+        pass
+
+
+@settings(max_examples=200, deadline=None)
+@given(payload=values, cut=st.integers(min_value=1, max_value=40))
+def test_a_truncated_frame_is_a_decode_error(payload: object, cut: int) -> None:
+    body = Codec().message_frame("l", payload)[4:]
+    if cut < len(body):
+        with pytest.raises(DecodeError):
+            Codec().decode_body(body[:-cut])
+
+
+def test_a_failure_frame_carries_its_cause() -> None:
+    frame = Codec.failure_frame("MemoryBoundError: too big")
+    assert Codec().decode_body(frame[4:]) == (KIND_FAILURE, "MemoryBoundError: too big")
+
+
+@dataclass(frozen=True)
+class Pose:
+    x: float
+    y: float
+    covariance: np.ndarray
+
+    def __post_init__(self) -> None:
+        Pose.constructed += 1
+
+    constructed = 0
+
+
+class Plain:
+    def __init__(self, value: int) -> None:
+        self.value = value
+
+
+class Evil:
+    def __reduce__(self) -> tuple[object, tuple[str]]:
+        return (os.system, ("echo pwned",))
+
+
+def test_named_dataclasses_are_rebuilt_field_by_field_without_running_init() -> None:
+    codec = Codec([Pose])
+    pose = Pose(1.0, 2.5, np.eye(3))
+    before = Pose.constructed
+    _, got = round_trip(codec, "pose", pose)
+    assert Pose.constructed == before
+    assert isinstance(got, Pose) and (got.x, got.y) == (1.0, 2.5)
+    assert np.array_equal(got.covariance, np.eye(3)) and got.covariance.dtype == np.float64
+
+
+def test_classes_the_protocol_does_not_name_are_refused_on_both_sides() -> None:
+    with pytest.raises(EncodeError, match="Plain"):
+        Codec().message_frame("x", [Plain(1)])
+    body = Codec([Pose]).message_frame("pose", Pose(0.0, 0.0, np.zeros(1)))[4:]
+    with pytest.raises(DecodeError, match="not named by the protocol"):
+        Codec().decode_body(body)
+
+
+def test_named_plain_classes_are_pickled_and_unpickling_loads_nothing_else() -> None:
+    _, got = round_trip(Codec([Plain]), "p", Plain(7))
+    assert isinstance(got, Plain) and got.value == 7
+    # A frame claiming to hold a Plain but carrying a pickle that would call os.system:
+    name = f"{Plain.__module__}:{Plain.__qualname__}".encode()
+    evil = pickle.dumps(Evil())
+    import struct
+    payload = bytes([19]) + struct.pack("<I", len(name)) + name + struct.pack("<I", len(evil)) + evil
+    body = bytes([KIND_MESSAGE]) + struct.pack("<I", 1) + b"p" + payload
+    with pytest.raises(DecodeError, match="posix.system|os.system|does not name"):
+        Codec([Plain]).decode_body(body)
+
+
+def test_numpy_values_keep_dtype_shape_and_content() -> None:
+    codec = Codec()
+    for array in (np.arange(12, dtype=np.int16).reshape(3, 4), np.zeros((0, 5)),
+                  np.asfortranarray(np.random.default_rng(1).random((4, 3))),
+                  np.arange(10)[::3], np.array(3.5, dtype=np.float32)):
+        _, got = round_trip(codec, "a", array)
+        assert got.dtype == array.dtype and got.shape == array.shape
+        assert np.array_equal(got, array)
+    _, scalar = round_trip(codec, "s", np.float32(1.5))
+    assert scalar == np.float32(1.5) and type(scalar) is np.float32
+    with pytest.raises(EncodeError, match="object"):
+        codec.message_frame("o", np.array([object()]))
+
+
+def test_non_finite_floats_survive() -> None:
+    _, got = round_trip(Codec(), "f", [math.inf, -math.inf, math.nan])
+    assert got[0] == math.inf and got[1] == -math.inf and math.isnan(got[2])
+
+
+@pytest.fixture
+def ring_prefix():
+    run = f"test{secrets.token_hex(4)}"
+    yield f"anodize-{run}-c"
+    remove_run_segments(run)
+
+
+def test_large_arrays_travel_as_views_of_slots_released_when_the_last_view_dies(ring_prefix) -> None:
+    ring = ArrayRing(ring_prefix, slots=2)
+    sender, receiver = Codec(write_array=ring.write), Codec(read_array=RingReader().read)
+    image = np.random.default_rng(0).integers(0, 255, (480, 640, 3), dtype=np.uint8)
+    frame = sender.message_frame("image", image)
+    assert len(frame) < 200  # only the slot's address crossed
+    _, (_, got) = receiver.decode_body(frame[4:])
+    assert np.array_equal(got, image) and ring.in_use() == 1
+    view = got[10:20, ::2]
+    del got
+    gc.collect()
+    assert ring.in_use() == 1  # a view still reads the slot
+    del view
+    gc.collect()
+    assert ring.in_use() == 0
+
+
+def test_a_sender_with_every_slot_held_waits_and_gives_up_when_told_the_peer_is_gone(ring_prefix) -> None:
+    gone: list[str] = []
+    ring = ArrayRing(ring_prefix, slots=2, peer_gone=lambda: gone[0] if gone else None)
+    reader = RingReader()
+    receiver = Codec(read_array=reader.read)
+    sender = Codec(write_array=ring.write)
+    held = [receiver.decode_body(sender.message_frame("a", np.ones(100_000))[4:])[1][1] for _ in range(2)]
+    assert ring.in_use() == 2
+    gone.append("receiver failed")
+    with pytest.raises(BrokenPipeError, match="receiver failed"):
+        ring.write(np.ones(100_000))
+    del held
+
+
+def test_a_ring_grows_for_bigger_arrays_and_the_reader_rejects_forged_addresses(ring_prefix) -> None:
+    ring = ArrayRing(ring_prefix, slots=2)
+    reader = RingReader()
+    small = ring.write(np.ones(100_000, dtype=np.uint8))
+    big = ring.write(np.ones(3_000_000, dtype=np.uint8))
+    assert small[0] != big[0]  # a new generation
+    assert reader.read(*big, "|u1", (3_000_000,)).sum() == 3_000_000
+    with pytest.raises(ValueError):
+        reader.read(big[0], 1, big[2], "|u1", (10,))  # slot 1 was never filled
+    with pytest.raises(ValueError):
+        reader.read("../etc/passwd", 0, 4096, "|u1", (1,))
