@@ -148,7 +148,7 @@ def _error(error: BaseException | None) -> dict[str, str] | None:
 
 def _group_details(group: GroupReport) -> str:
     details = [group.scheduling or "default scheduling"]
-    if group.rate_hz is not None:
+    if group.rate_hz is not None and group.messages:
         low = f", never below {group.rate_min_hz:.0f}" if group.rate_min_hz is not None else ""
         details.append(f"{group.messages} msgs, {group.rate_hz:.0f} msg/s{low}")
     if group.peak_memory is not None:
