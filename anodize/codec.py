@@ -77,6 +77,7 @@ class Codec:
         self.write_array = write_array
         self.read_array = read_array
         self._labels: dict[str, bytes] = {}
+        self._label_names: dict[bytes, str] = {}
         self._numpy: Any = sys.modules.get("numpy")  # imported lazily: only arrays need it
 
     # ---- frames ------------------------------------------------------------------------
@@ -121,8 +122,19 @@ class Codec:
             if kind != KIND_MESSAGE:
                 raise DecodeError(f"unknown frame kind {kind:#x}")
             (length,) = _U32.unpack_from(body, 1)
-            label = bytes(body[5:5 + length]).decode()
-            payload, end = self._decode(body, 5 + length, 0)
+            start = 5 + length
+            raw = bytes(body[5:start])
+            label = self._label_names.get(raw)
+            if label is None:
+                label = raw.decode()
+                if len(self._label_names) < 4096:  # labels are few; garbage must not grow this
+                    self._label_names[raw] = label
+            size = len(body)
+            if size == start + 1 and body[start] == T_NONE:  # the commonest payloads, inline
+                return kind, (label, None)
+            if size == start + 9 and body[start] == T_INT:
+                return kind, (label, _I64.unpack_from(body, start + 1)[0])
+            payload, end = self._decode(body, start, 0)
             if end != len(body):
                 raise DecodeError(f"{len(body) - end} bytes left over after the payload")
             return kind, (label, payload)

@@ -79,8 +79,10 @@ class PipeSender:
             return  # STOP is local to each process
         with self._lock:
             try:
-                _write_all(self.fd, frame)
-            except (BrokenPipeError, OSError):
+                written = os.write(self.fd, frame)  # one call for all but huge frames
+                if written != len(frame):
+                    _write_all(self.fd, frame[written:])
+            except OSError:
                 raise self._peer_gone() from None
 
     def put_failure(self, cause: str) -> None:
