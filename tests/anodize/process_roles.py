@@ -192,3 +192,17 @@ def unnamed_sender(ep: Endpoint) -> None:
 def waiting_receiver(ep: Endpoint) -> None:
     ep.recv("A")
     ep.recv("A")
+
+
+# ---- scheduling -----------------------------------------------------------------------------
+def where_sender(ep: Endpoint) -> None:
+    """Tells its peer which CPUs and which policy its thread runs with."""
+    policy = {os.SCHED_FIFO: "fifo", os.SCHED_OTHER: "other"}.get(os.sched_getscheduler(0), "?")
+    ep.send("B", "where", f"{sorted(os.sched_getaffinity(0))} {policy} {os.getpriority(os.PRIO_PROCESS, 0)}")
+
+
+def where_receiver(ep: Endpoint) -> None:
+    expected = os.environ["ANODIZE_TEST_EXPECT"]
+    got = ep.recv("A").payload
+    if got != expected:
+        raise AssertionError(f"role A runs with {got}, expected {expected}")

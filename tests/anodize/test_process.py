@@ -11,6 +11,7 @@ import process_roles as roles
 import sessiontypes
 from anodize import MemoryBoundError, PeerFailedError, ProtocolViolationError
 from anodize.errors import RoleError
+from anodize.sched import nice_for
 from anodize.shm import segment_dir
 
 PROTOCOLS = sessiontypes.loads("""
@@ -21,6 +22,7 @@ global Ping(A, B) = mu t. A -> B : {ping(nat). B -> A : pong(nat). t, stop}
 global Stream(A, B) = mu t. A -> B : {item(int). t, fin}
 global Frames(A, B) = mu t. A -> B : {frame(Frame). t, fin}
 global Payloads(A, B) = A -> B : thing(Opaque). A -> B : nested(Things)
+global Where(A, B) = A -> B : where(str)
 global Hog(C, S, H, K) = (mu t. C -> S : {tick(int). t, done} || mu u. H -> K : {chunk(int). u, fin})
 """, "test_process.proto").globals
 
@@ -166,3 +168,27 @@ def test_role_functions_must_be_importable_by_other_processes() -> None:
         system.group("a").role("A", lambda ep: None)
     with pytest.raises(anodize.AnodizeError, match="cannot import"):
         system.group("b").role("B", "no_such_module_here:f")
+
+
+def test_a_group_runs_pinned_with_its_priority_or_says_why_not(monkeypatch) -> None:
+    monkeypatch.setenv("ANODIZE_NO_RT", "1")  # the fallback, whatever this machine permits
+    monkeypatch.setenv("ANODIZE_TEST_EXPECT", f"[0] other {nice_for(60)}")
+    report = run("Where", {"a": {"priority": 60, "cpus": {0}, "roles": {"A": roles.where_sender}},
+                           "b": {"roles": {"B": roles.where_receiver}}})
+    assert report.ok, report.summary()
+    scheduling = report.groups["a"].scheduling
+    assert scheduling == f"nice {nice_for(60)} (SCHED_FIFO refused: disabled by ANODIZE_NO_RT); cpus 0"
+
+
+def test_a_group_gets_sched_fifo_where_the_machine_permits_it(monkeypatch) -> None:
+    import os
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except PermissionError:
+        pytest.skip("this machine refuses SCHED_FIFO; the fallback is tested above")
+    monkeypatch.setenv("ANODIZE_TEST_EXPECT", "[0] fifo 0")
+    report = run("Where", {"a": {"priority": 60, "cpus": {0}, "roles": {"A": roles.where_sender}},
+                           "b": {"roles": {"B": roles.where_receiver}}})
+    assert report.ok, report.summary()
+    assert report.groups["a"].scheduling == "SCHED_FIFO 60; cpus 0"
