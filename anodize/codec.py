@@ -76,6 +76,7 @@ class Codec:
         self._class_ids = {c: name for name, c in self.classes.items()}
         self.write_array = write_array
         self.read_array = read_array
+        self.ring: Any = None  # the sender's shared-memory ring, when it has one
         self._labels: dict[str, bytes] = {}
         self._label_names: dict[bytes, str] = {}
         self._numpy: Any = sys.modules.get("numpy")  # imported lazily: only arrays need it
@@ -178,10 +179,10 @@ class Codec:
             for key, item in value.items():  # type: ignore[attr-defined]
                 self._encode(key, out, depth + 1)
                 self._encode(item, out, depth + 1)
+        elif self._is_numpy(value):  # before named classes: a "numpy:ndarray" sort is still an array
+            self._encode_numpy(value, out)
         elif kind in self._class_ids:
             self._encode_named(value, kind, out, depth)
-        elif self._is_numpy(value):
-            self._encode_numpy(value, out)
         else:
             raise EncodeError(
                 f"cannot carry a {kind.__module__}.{kind.__qualname__} across processes: only "

@@ -105,6 +105,24 @@ class Endpoint:
         if doorbell is not None:
             doorbell.put(self.role)
 
+    def buffer(self, to: str, shape: tuple[int, ...], dtype: object = "uint8") -> Any:
+        """A numpy array to fill and then send to ``to``, with no copy on the way.
+
+        Between groups of the process transport the array lives in a slot of the
+        channel's shared-memory ring: sending it (alone or inside a payload) passes
+        only the slot's address, and the array becomes read-only here (the slot is
+        the receiver's). Elsewhere it is an ordinary ``numpy.empty`` array.
+        """
+        if not self._plain and self._forked():
+            return self._branch_for(self._send_route, to, "send", "").buffer(to, shape, dtype)
+        out = self._out.get(to)
+        make = getattr(out[0], "buffer", None) if out is not None else None
+        if make is not None:
+            return make(tuple(shape), dtype)
+        import numpy as np
+
+        return np.empty(shape, dtype)  # type: ignore[call-overload]
+
     def recv(self, frm: str, timeout: float | None = None) -> Message:
         """Receive the next message from role ``frm``.
 

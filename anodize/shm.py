@@ -74,7 +74,8 @@ class ArrayRing:
         self.name = ""
         self._map: mmap.mmap | None = None
         self._old: list[mmap.mmap] = []  # earlier generations, kept while views may live
-        self._next = 0
+        self._claimed: dict[int, tuple[int, int]] = {}  # slot -> (generation, offset), not yet sent
+        self._address = 0  # where the current ring is mapped in this process
 
     def write(self, array: Any) -> tuple[str, int, int]:
         """Copy ``array`` into a free slot; return (ring name, slot, byte offset).
@@ -84,6 +85,9 @@ class ArrayRing:
         """
         import numpy as np
 
+        in_place = self._sent_in_place(array)
+        if in_place is not None:
+            return in_place
         if array.nbytes > self.slot_size:
             self._grow(array.nbytes)
         assert self._map is not None
@@ -105,24 +109,66 @@ class ArrayRing:
             self._map = mmap.mmap(fd, _HEADER + self.slots * self.slot_size)
         finally:
             os.close(fd)
-        self._next = 0
+        import numpy as np
+
+        self._address = np.frombuffer(self._map, np.uint8, count=1).__array_interface__["data"][0]
+        self._claimed.clear()  # slots claimed in the old ring are sent by copying
 
     def _claim(self) -> int:
         states = self._map
         assert states is not None
         delay = 0.00005
         while True:
-            for step in range(self.slots):
-                slot = (self._next + step) % self.slots
-                if states[slot] == FREE:
-                    states[slot] = BUSY
-                    self._next = (slot + 1) % self.slots
-                    return slot
+            # The lowest free slot: a slot freed a moment ago is still in the CPU's caches.
+            slot = states.find(b"\x00", 0, self.slots)
+            if slot >= 0:
+                states[slot] = BUSY
+                return slot
             reason = self.peer_gone()
             if reason is not None:
                 raise BrokenPipeError(reason)
             time.sleep(delay)  # every slot is held by the receiver: wait for one
             delay = min(delay * 2, 0.005)
+
+    def claim_array(self, shape: tuple[int, ...], dtype: Any) -> Any:
+        """A writable array in a claimed slot: fill it, send it, and nothing is copied.
+
+        Sending it hands the slot over (the array becomes read-only here); an array
+        never sent gives its slot back when it is collected.
+        """
+        import numpy as np
+
+        dt = np.dtype(dtype)
+        nbytes = dt.itemsize
+        for n in shape:
+            nbytes *= n
+        if nbytes > self.slot_size:
+            self._grow(nbytes)
+        assert self._map is not None
+        slot = self._claim()
+        offset = _HEADER + slot * self.slot_size
+        root = np.frombuffer(self._map, dt, count=nbytes // dt.itemsize, offset=offset)
+        self._claimed[slot] = (self.generation, offset)
+        weakref.finalize(root, self._unclaim, self._map, slot, self.generation)
+        return root.reshape(shape)
+
+    def _unclaim(self, ring: mmap.mmap, slot: int, generation: int) -> None:
+        if self._claimed.get(slot, (None,))[0] == generation:  # claimed, never sent
+            del self._claimed[slot]
+            _release(ring, slot)
+
+    def _sent_in_place(self, array: Any) -> tuple[str, int, int] | None:
+        """The address of ``array`` if it is a claimed slot of the current ring, whole."""
+        if not self._claimed or not array.flags.c_contiguous or self._map is None:
+            return None
+        address = array.__array_interface__["data"][0] - self._address
+        slot, rest = divmod(address - _HEADER, self.slot_size)
+        claimed = self._claimed.get(slot)
+        if rest or claimed != (self.generation, address):
+            return None
+        del self._claimed[slot]
+        array.flags.writeable = False  # the slot is the receiver's now
+        return self.name, slot, address
 
     def in_use(self) -> int:
         """Slots of the current generation the receiver still holds."""

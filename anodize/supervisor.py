@@ -44,7 +44,7 @@ if TYPE_CHECKING:
 
 __all__ = ["run_processes", "WATCHDOG_LIMIT"]
 
-WATCHDOG_LIMIT = 2.0  # seconds a FIFO group may keep a CPU busy before it is demoted
+WATCHDOG_LIMIT = 0.5  # seconds a FIFO group may keep a CPU busy before it is demoted (< RT throttling's 0.95 s)
 _TICK = 0.1
 _STATUS_EVERY = 0.5
 _START_TIMEOUT = 60.0  # seconds for a group's process to import its roles and report ready

@@ -27,7 +27,8 @@ from .inproc import STOP, InprocNetwork, PeerFailure
 
 __all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "Corrupt", "PayloadError"]
 
-_READ_SIZE = 1 << 20
+# Reads of at most 64 KiB: larger ones make malloc mmap and munmap a buffer on every call.
+_READ_SIZE = 64 * 1024
 _PIPE_SIZE = 1 << 20  # ask the kernel for 1 MiB pipes: fewer blocked senders when streaming
 _EOF_CAUSE_WAIT = 2.0  # seconds to wait for the supervisor's word on why a peer's process ended
 
@@ -84,6 +85,15 @@ class PipeSender:
                     _write_all(self.fd, frame[written:])
             except OSError:
                 raise self._peer_gone() from None
+
+    def buffer(self, shape: tuple[int, ...], dtype: object) -> object:
+        """A numpy array in a shared-memory slot of this channel, to fill and send."""
+        ring = self.codec.ring
+        if ring is None:
+            import numpy as np
+
+            return np.empty(shape, dtype)  # type: ignore[call-overload]
+        return ring.claim_array(shape, dtype)
 
     def put_failure(self, cause: str) -> None:
         """Best effort, from another thread: tell the receiver this sender failed."""
@@ -167,7 +177,7 @@ class PipeReceiver:
             return None
         body = buffer[at + 4:end]
         self._at = end
-        if end > _READ_SIZE:  # drop what was consumed now and then, not on every frame
+        if end > 4 * _READ_SIZE:  # drop what was consumed now and then, not on every frame
             del buffer[:end]
             self._at = 0
         try:
@@ -321,5 +331,7 @@ def _grow_pipe(fd: int) -> None:
 
 def make_codec(classes: Iterable[type], ring: ArrayRing | None, reader: RingReader | None) -> Codec:
     """A channel's codec: arrays go to ``ring`` when sending, come from ``reader`` when receiving."""
-    return Codec(classes, ring.write if ring is not None else None, reader.read if reader else None)
+    codec = Codec(classes, ring.write if ring is not None else None, reader.read if reader else None)
+    codec.ring = ring
+    return codec
 

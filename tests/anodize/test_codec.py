@@ -204,3 +204,24 @@ def test_a_ring_grows_for_bigger_arrays_and_the_reader_rejects_forged_addresses(
         reader.read(big[0], 1, big[2], "|u1", (10,))  # slot 1 was never filled
     with pytest.raises(ValueError):
         reader.read("../etc/passwd", 0, 4096, "|u1", (1,))
+
+
+def test_an_array_filled_in_a_claimed_slot_is_sent_without_a_copy_and_handed_over(ring_prefix) -> None:
+    ring = ArrayRing(ring_prefix, slots=2)
+    sender, receiver = Codec(write_array=ring.write), Codec(read_array=RingReader().read)
+    image = ring.claim_array((480, 640, 3), np.uint8)
+    image[:] = 7
+    address = image.__array_interface__["data"][0]
+    _, (_, got) = receiver.decode_body(sender.message_frame("image", image)[4:])
+    assert got.__array_interface__["data"][0] != 0 and int(got.sum()) == 7 * image.size
+    assert not image.flags.writeable  # the slot is the receiver's now
+    assert ring.in_use() == 1
+    unsent = ring.claim_array((10,), np.float64)
+    assert unsent.__array_interface__["data"][0] != address
+    assert ring.in_use() == 2
+    del unsent
+    gc.collect()
+    assert ring.in_use() == 1  # a claimed slot never sent comes back
+    del got
+    gc.collect()
+    assert ring.in_use() == 0
