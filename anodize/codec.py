@@ -27,12 +27,13 @@ import sys
 from collections.abc import Callable, Iterable
 from typing import Any
 
-__all__ = ["Codec", "DecodeError", "EncodeError", "INLINE_ARRAY_LIMIT", "HEADER", "KIND_MESSAGE",
+__all__ = ["Codec", "DecodeError", "EncodeError", "INLINE_ARRAY_LIMIT", "MAX_FRAME", "HEADER", "KIND_MESSAGE",
            "KIND_FAILURE"]
 
 HEADER = struct.Struct("<I")  # frame length, not counting these 4 bytes
 KIND_MESSAGE, KIND_FAILURE = 0x4D, 0x46  # b"M", b"F"
 INLINE_ARRAY_LIMIT = 64 * 1024  # bytes: larger arrays travel through shared memory
+MAX_FRAME = 64 * 2**20  # bytes: a receiver buffers no more for one message
 
 _I64 = struct.Struct("<q")
 _F64 = struct.Struct("<d")
@@ -102,6 +103,10 @@ class Codec:
             out.write(head)
             self._encode(payload, out, 0)
             body = out.getvalue()
+            if len(body) > MAX_FRAME:
+                raise EncodeError(f"the payload encodes to {len(body) / 2**20:.1f} MiB, over the "
+                                  f"{MAX_FRAME // 2**20} MiB a message may take (numpy arrays of any "
+                                  "size travel through shared memory instead)")
         return HEADER.pack(len(body)) + body
 
     @staticmethod
@@ -141,8 +146,7 @@ class Codec:
             return kind, (label, payload)
         except DecodeError:
             raise
-        except (IndexError, struct.error, UnicodeDecodeError, ValueError, TypeError, OverflowError,
-                RecursionError, MemoryError) as error:
+        except Exception as error:  # whatever the bytes provoke, it is the sender's fault
             raise DecodeError(f"malformed frame: {type(error).__name__}: {error}") from None
 
     # ---- encoding ----------------------------------------------------------------------
@@ -223,7 +227,8 @@ class Codec:
             self._write_blob(T_BYTES, value.tobytes(), out)
             return
         shape = b"".join(_I64.pack(n) for n in value.shape)
-        if value.nbytes > INLINE_ARRAY_LIMIT and self.write_array is not None:
+        if self.write_array is not None and (value.nbytes > INLINE_ARRAY_LIMIT or (
+                self.ring is not None and self.ring.owns(value))):  # a filled slot goes as it is
             segment, slot, offset = self.write_array(value)
             self._write_blob(T_SHARED_ARRAY, dtype, out)
             out.write(_U8.pack(value.ndim) + shape)
@@ -301,18 +306,22 @@ class Codec:
         cls = self._named_class(name)
         if not dataclasses.is_dataclass(cls):
             raise DecodeError(f"payload class {name.decode()!r} is not a dataclass")
-        known = {f.name for f in dataclasses.fields(cls)}
+        missing = {f.name for f in dataclasses.fields(cls)}
         (count,) = _U32.unpack_from(buf, at)
         at += 4
         value = object.__new__(cls)  # no __init__: nothing of the sender's runs here
         for _ in range(count):
             if buf[at] != T_STR:
                 raise DecodeError("dataclass field name expected")
-            field_name, at = _read_blob(buf, at + 1)
-            if field_name.decode() not in known:
-                raise DecodeError(f"{cls.__qualname__} has no field {field_name.decode()!r}")
+            raw, at = _read_blob(buf, at + 1)
+            name = raw.decode()
+            if name not in missing:
+                raise DecodeError(f"{cls.__qualname__} has no field {name!r}, or it came twice")
+            missing.discard(name)
             item, at = self._decode(buf, at, depth + 1)
-            object.__setattr__(value, field_name.decode(), item)  # frozen dataclasses too
+            object.__setattr__(value, name, item)  # frozen dataclasses too
+        if missing:
+            raise DecodeError(f"{cls.__qualname__} arrived without {', '.join(sorted(missing))}")
         return value, at
 
     def _decode_numpy(self, tag: int, buf: Any, at: int) -> tuple[Any, int]:

@@ -19,7 +19,7 @@ from typing import Any, NamedTuple
 
 from sessiontypes import StateMachine
 
-from .errors import Action, AnodizeError, PeerFailedError
+from .errors import Action, AnodizeError, PeerFailedError, RoleStopped
 from .monitor import Monitor
 from .transport.inproc import STOP, InprocNetwork, PeerFailure
 from .transport.process import Corrupt
@@ -36,13 +36,6 @@ class Message(NamedTuple):
 
     label: str
     payload: Any = None
-
-
-class RoleStopped(BaseException):
-    """Raised inside a role when the run is stopped (its timeout passed).
-
-    A ``BaseException`` so that a role's ``except Exception`` does not swallow it.
-    """
 
 
 class Endpoint:

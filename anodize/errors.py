@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 __all__ = [
     "AnodizeError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
-    "LinearityError", "Action", "RoleError", "error_to_data", "error_from_data",
+    "LinearityError", "Action", "RoleError", "RoleStopped", "error_to_data", "error_from_data",
 ]
 
 
@@ -140,6 +140,13 @@ class LinearityError(AnodizeError):
     def __str__(self) -> str:
         return (f"state {self.state} was already used; each state object allows one action, "
                 "continue with the state that action returned")
+
+
+class RoleStopped(BaseException):
+    """Raised inside a role when the run is stopped (its timeout passed).
+
+    A ``BaseException`` so that a role's ``except Exception`` does not swallow it.
+    """
 
 
 class RoleError(AnodizeError):

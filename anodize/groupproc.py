@@ -146,10 +146,11 @@ class _GroupProcess:
 
         def codec_for(pair: tuple[str, str]) -> Codec:
             sender, receiver = pair
+            # A channel's rings are named after it: a receiver maps no other ring.
+            prefix = f"anodize-{spec.run_id}-{sender.encode().hex()}-{receiver.encode().hex()}-"
             if sender not in local:
-                return make_codec(classes, None, reader)
-            prefix = f"anodize-{spec.run_id}-{spec.incarnation}-{sender.encode().hex()}-{receiver.encode().hex()}"
-            ring = ArrayRing(prefix, peer_gone=lambda: self._gone(receiver))
+                return make_codec(classes, None, lambda *address: reader.read(*address, prefix=prefix))
+            ring = ArrayRing(f"{prefix}{spec.incarnation}", peer_gone=lambda: self._gone(receiver))
             return make_codec(classes, ring, None)
 
         fds = {pair: conn.fileno() for pair, conn in self.pipes.items()}
@@ -164,6 +165,11 @@ class _GroupProcess:
 
     def _bound_memory(self) -> str:
         """Measure the baseline (threads started, roles not yet running); set the bound."""
+        # A thread that ends makes glibc drop the stacks it caches for reuse (a deep
+        # protocol parse at import may have left a huge one): they are not the roles'.
+        flush = threading.Thread(target=lambda: None)
+        flush.start()
+        flush.join()
         self.baseline = data_size() or 0
         if self.spec.memory is None:
             return ""
@@ -192,7 +198,8 @@ class _GroupProcess:
             if report.status == "failed":
                 self.network.fail(report.name, describe_error(report.error))
             self._send("role", {"role": report.name, "status": report.status,
-                                "error": error_to_data(report.error) if report.error else None})
+                                "error": error_to_data(report.error) if report.error else None,
+                                **self._counts()})
         self._send("bye", self._counts())
 
     def _heartbeat(self) -> None:

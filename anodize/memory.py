@@ -20,7 +20,8 @@ import os
 import resource
 from dataclasses import dataclass
 
-__all__ = ["data_size", "peak_rss", "limit_data", "Cgroup", "make_cgroup", "CGROUP_SLACK"]
+__all__ = ["data_size", "peak_rss", "rss", "limit_data", "Cgroup", "make_cgroup", "remove_stale_cgroups",
+           "CGROUP_SLACK"]
 
 CGROUP_SLACK = 64 * 2**20  # on top of baseline RSS + bound: the backstop must not fire first
 
@@ -105,12 +106,37 @@ class Cgroup:
             pass  # a process still in it, or already gone: the kernel frees it with the last one
 
 
-def make_cgroup(name: str) -> tuple[Cgroup | None, str]:
-    """A fresh memory cgroup under this process's own, or None and why not."""
+def _parents() -> list[tuple[int, str]]:
+    """(version, directory) where this process may make memory cgroups."""
+    found = []
     for version, mount, own in _memory_hierarchies():
         parent = os.path.join(mount, own.lstrip("/"))
-        if not os.path.isdir(parent):
-            parent = mount  # a container that shows its own cgroup as the root
+        found.append((version, parent if os.path.isdir(parent) else mount))  # else: a container
+    return found
+
+
+def remove_stale_cgroups() -> int:
+    """Remove cgroups ``anodize-<pid>-...`` left by supervisors that were killed."""
+    removed = 0
+    for _, parent in _parents():
+        try:
+            names = os.listdir(parent)
+        except OSError:
+            continue
+        for name in names:
+            owner = name.split("-")[1] if name.startswith("anodize-") and name.count("-") > 1 else ""
+            if owner.isdigit() and not os.path.exists(f"/proc/{owner}"):
+                try:
+                    os.rmdir(os.path.join(parent, name))
+                    removed += 1
+                except OSError:
+                    pass
+    return removed
+
+
+def make_cgroup(name: str) -> tuple[Cgroup | None, str]:
+    """A fresh memory cgroup under this process's own, or None and why not."""
+    for version, parent in _parents():
         path = os.path.join(parent, name)
         try:
             os.mkdir(path)

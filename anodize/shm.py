@@ -21,15 +21,18 @@ import glob
 import mmap
 import os
 import tempfile
+import itertools
+import struct
 import time
 import weakref
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["ArrayRing", "RingReader", "remove_run_segments", "segment_dir"]
+__all__ = ["ArrayRing", "RingReader", "remove_run_segments", "remove_stale_segments", "segment_dir"]
 
 FREE, BUSY = 0, 1
-_HEADER = 4096  # the slot states live in the first page
+_HEADER = 4096  # the first page: one state byte per slot, and the geometry at its end
+_GEOMETRY = struct.Struct("<QQ")  # (slots, slot size), at _HEADER - 16
 _ALIGN = 4096
 DEFAULT_SLOTS = 8
 
@@ -54,6 +57,30 @@ def remove_run_segments(run_id: str) -> int:
     return len(paths)
 
 
+def remove_stale_segments() -> int:
+    """Delete ring files of runs whose supervisor is dead (killed before it could clean up)."""
+    removed = 0
+    for path in glob.glob(_path("anodize-*-*")):
+        owner = os.path.basename(path).split("-")[1]
+        if owner.isdigit() and not _alive(int(owner)):
+            try:
+                os.unlink(path)
+                removed += 1
+            except OSError:
+                pass
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 class ArrayRing:
     """The sending side: copies arrays into free slots.
 
@@ -74,7 +101,7 @@ class ArrayRing:
         self.name = ""
         self._map: mmap.mmap | None = None
         self._old: list[mmap.mmap] = []  # earlier generations, kept while views may live
-        self._claimed: dict[int, tuple[int, int]] = {}  # slot -> (generation, offset), not yet sent
+        self._claimed: dict[int, tuple[int, int, int]] = {}  # slot -> (generation, offset, token)
         self._address = 0  # where the current ring is mapped in this process
 
     def write(self, array: Any) -> tuple[str, int, int]:
@@ -109,6 +136,7 @@ class ArrayRing:
             self._map = mmap.mmap(fd, _HEADER + self.slots * self.slot_size)
         finally:
             os.close(fd)
+        _GEOMETRY.pack_into(self._map, _HEADER - _GEOMETRY.size, self.slots, self.slot_size)
         import numpy as np
 
         self._address = np.frombuffer(self._map, np.uint8, count=1).__array_interface__["data"][0]
@@ -148,24 +176,37 @@ class ArrayRing:
         slot = self._claim()
         offset = _HEADER + slot * self.slot_size
         root = np.frombuffer(self._map, dt, count=nbytes // dt.itemsize, offset=offset)
-        self._claimed[slot] = (self.generation, offset)
-        weakref.finalize(root, self._unclaim, self._map, slot, self.generation)
+        token = next(_tokens)
+        self._claimed[slot] = (self.generation, offset, token)
+        weakref.finalize(root, self._unclaim, self._map, slot, token)
         return root.reshape(shape)
 
-    def _unclaim(self, ring: mmap.mmap, slot: int, generation: int) -> None:
-        if self._claimed.get(slot, (None,))[0] == generation:  # claimed, never sent
+    def _unclaim(self, ring: mmap.mmap, slot: int, token: int) -> None:
+        claim = self._claimed.get(slot)
+        if claim is not None and claim[2] == token:  # this claim, never sent
             del self._claimed[slot]
             _release(ring, slot)
 
-    def _sent_in_place(self, array: Any) -> tuple[str, int, int] | None:
-        """The address of ``array`` if it is a claimed slot of the current ring, whole."""
+    def owns(self, array: Any) -> bool:
+        """Whether ``array`` is a claimed, unsent slot of the current ring (whole)."""
+        return self._claim_of(array) is not None
+
+    def _claim_of(self, array: Any) -> tuple[int, int] | None:
         if not self._claimed or not array.flags.c_contiguous or self._map is None:
             return None
         address = array.__array_interface__["data"][0] - self._address
         slot, rest = divmod(address - _HEADER, self.slot_size)
         claimed = self._claimed.get(slot)
-        if rest or claimed != (self.generation, address):
+        if rest or claimed is None or claimed[:2] != (self.generation, address):
             return None
+        return slot, address
+
+    def _sent_in_place(self, array: Any) -> tuple[str, int, int] | None:
+        """The address of ``array`` if it is a claimed slot of the current ring, whole."""
+        found = self._claim_of(array)
+        if found is None:
+            return None
+        slot, address = found
         del self._claimed[slot]
         array.flags.writeable = False  # the slot is the receiver's now
         return self.name, slot, address
@@ -180,35 +221,49 @@ class RingReader:
 
     def __init__(self) -> None:
         self._maps: dict[str, mmap.mmap] = {}
+        self._viewed: set[tuple[str, int]] = set()  # slots with a live view here
 
-    def read(self, name: str, slot: int, offset: int, dtype: str, shape: tuple[int, ...]) -> Any:
+    def read(self, name: str, slot: int, offset: int, dtype: str, shape: tuple[int, ...],
+             prefix: str = "anodize-") -> Any:
         """An array viewing ``slot`` of ring ``name``; the slot is freed when it is collected.
 
+        ``prefix`` is what the channel's ring names must start with (a sender may
+        only point into its own rings).
+
         Raises:
-            ValueError: the address does not lie inside the ring.
+            ValueError: the address is not a filled slot of one of the sender's rings.
             OSError: the ring does not exist.
         """
         import numpy as np
 
+        if not name.startswith(prefix) or "/" in name:
+            raise ValueError(f"ring {name!r} does not belong to this channel")
         ring = self._maps.get(name)
         if ring is None:
-            if "/" in name or not name.startswith("anodize-"):
-                raise ValueError(f"not a ring name: {name!r}")
             fd = os.open(_path(name), os.O_RDWR)
             try:
                 ring = self._maps[name] = mmap.mmap(fd, 0)
             finally:
                 os.close(fd)
+        slots, slot_size = _GEOMETRY.unpack_from(ring, _HEADER - _GEOMETRY.size)
         dt = np.dtype(dtype)
         count = 1
         for n in shape:
             count *= n
-        if not 0 <= slot < _HEADER or ring[slot] != BUSY or offset < _HEADER or \
-                offset + count * dt.itemsize > len(ring):
+        if not 0 <= slot < slots or offset != _HEADER + slot * slot_size or \
+                count * dt.itemsize > slot_size or ring[slot] != BUSY or (name, slot) in self._viewed:
             raise ValueError(f"slot {slot} at offset {offset} is not a filled slot of ring {name}")
         root = np.frombuffer(ring, dt, count=count, offset=offset)
-        weakref.finalize(root, _release, ring, slot)  # fires when the last view is gone
+        self._viewed.add((name, slot))
+        weakref.finalize(root, self._release, ring, name, slot)  # when the last view is gone
         return root.reshape(shape)
+
+    def _release(self, ring: mmap.mmap, name: str, slot: int) -> None:
+        self._viewed.discard((name, slot))
+        _release(ring, slot)
+
+
+_tokens = itertools.count()
 
 
 def _release(ring: mmap.mmap, slot: int) -> None:

@@ -33,10 +33,10 @@ from .codec import DecodeError
 from .errors import MemoryBoundError, RoleError, error_from_data
 from .group import Group, reference_of
 from .groupproc import EXIT_MEMORY, GroupSpec, control_recv, control_send, group_main
-from .memory import CGROUP_SLACK, Cgroup, make_cgroup, rss
+from .memory import CGROUP_SLACK, Cgroup, make_cgroup, remove_stale_cgroups, rss
 from .report import GroupReport, GroupStatus, RoleReport, RunReport, Status
 from .roles import describe_error
-from .shm import remove_run_segments
+from .shm import remove_run_segments, remove_stale_segments
 from .watchdog import Watchdog, rt_throttling
 
 if TYPE_CHECKING:
@@ -115,6 +115,8 @@ class _Supervisor:
     # ---- the run ---------------------------------------------------------------------------
     def run(self) -> RunReport:
         deadline = None if self.timeout is None else self.started + self.timeout
+        remove_stale_segments()  # of earlier runs whose supervisor was killed
+        remove_stale_cgroups()
         try:
             self._start(list(self.system.groups))
             next_status = time.monotonic()
@@ -253,21 +255,31 @@ class _Supervisor:
             inc.control = None  # the process is ending; its sentinel tells the rest
             return
         except DecodeError as error:
-            self._group_failed(inc, RoleError("DecodeError", f"garbled control message: {error}"))
-            self._kill(inc, "stop")
+            self._group_failed(inc, RoleError("ControlError", f"garbled control message: {error}"))
+            self._kill(inc, "failed")
             return
+        try:
+            self._dispatch(inc, kind, data)
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError) as error:
+            # A group that garbles its reports is not trusted to run on.
+            self._group_failed(inc, RoleError("ControlError", f"malformed {kind!r} report: {error}"))
+            self._kill(inc, "failed")
+
+    def _dispatch(self, inc: _Incarnation, kind: str, data: Any) -> None:
         if kind == "ready":
             self._on_ready(inc, data)
         elif kind in ("beat", "bye"):
             self._counts(inc, data)
         elif kind == "role":
+            self._counts(inc, data)
             self._on_role(inc, data)
         elif kind == "memory":
             self._counts(inc, data)
-            error = error_from_data(data["error"])
-            self._group_failed(inc, error)
+            self._group_failed(inc, error_from_data(data["error"]))
         elif kind == "crash":
             self._group_failed(inc, error_from_data(data))
+        else:
+            raise ValueError(f"unknown report kind {kind!r}")
 
     def _drain(self, inc: _Incarnation) -> None:
         """Read what a process said before it exited."""
@@ -275,6 +287,8 @@ class _Supervisor:
             self._read(inc)
 
     def _counts(self, inc: _Incarnation, data: dict[str, Any]) -> None:
+        if "sent" not in data:
+            return
         history = self.history[inc.group.name]
         history.memory = int(data.get("memory", 0))
         history.peak = max(history.peak, int(data.get("peak", 0)))
@@ -310,9 +324,19 @@ class _Supervisor:
             status: Status = "stopped" if inc.killed_on_purpose == "stop" and inc.error is None else "failed"
             inc.reports[role] = RoleReport(role, inc.group.name, status,
                                            None if status == "stopped" else inc.error, inc.scheduling)
+        self._close(inc)
         if inc.killed_on_purpose == "restart":
             self._restart_when_ready()
         self._maybe_go()
+
+    @staticmethod
+    def _close(inc: _Incarnation) -> None:
+        if inc.control is not None:
+            inc.control.close()
+            inc.control = None
+        if inc.process is not None and not inc.process.is_alive():
+            inc.process.close()
+            inc.process = None
 
     def _death_cause(self, inc: _Incarnation, code: int | None) -> BaseException:
         history = self.history[inc.group.name]
@@ -328,7 +352,8 @@ class _Supervisor:
                 name = f"signal {-code}"
             return RoleError("ProcessDied", f"group {inc.group.name}'s process was killed by {name}")
         return RoleError("ProcessDied", f"group {inc.group.name}'s process exited with status {code} "
-                                        "before its roles reported")
+                                        "before its roles reported (its stderr says why; a script that "
+                                        "runs a process system needs if __name__ == '__main__':)")
 
     # ---- failures --------------------------------------------------------------------------
     def _group_failed(self, inc: _Incarnation, error: BaseException) -> None:
@@ -476,6 +501,7 @@ class _Supervisor:
                 inc.process.join(5.0)
             if inc.cgroup is not None:
                 inc.cgroup.remove()
+            self._close(inc)
         remove_run_segments(self.run_id)
 
 

@@ -20,9 +20,9 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from queue import Empty, SimpleQueue
 
-from ..codec import HEADER, KIND_FAILURE, Codec, DecodeError, EncodeError
-from ..errors import AnodizeError, PeerFailedError
-from ..shm import ArrayRing, RingReader
+from ..codec import HEADER, KIND_FAILURE, MAX_FRAME, Codec, DecodeError, EncodeError
+from ..errors import AnodizeError, PeerFailedError, RoleStopped
+from ..shm import ArrayRing
 from .inproc import STOP, InprocNetwork, PeerFailure
 
 __all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "Corrupt", "PayloadError"]
@@ -105,7 +105,9 @@ class PipeSender:
             finally:
                 self._lock.release()
 
-    def _peer_gone(self) -> PeerFailedError:
+    def _peer_gone(self) -> BaseException:
+        if self.network.stopping:  # the receiver stopped with the run: so do we
+            return RoleStopped()
         cause = self.network.wait_for_cause(self.receiver, "its group's process has ended")
         return PeerFailedError(self.sender, self.receiver, cause)
 
@@ -143,11 +145,11 @@ class PipeReceiver:
             frame = self._next_frame()
             if frame is not None:
                 return frame
+            if self.network.stopping:
+                return STOP
             if self._eof:
                 cause = self.network.wait_for_cause(self.sender, "its group's process ended")
                 return PeerFailure(self.sender, cause)
-            if self.network.stopping:
-                return STOP
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
             if not self._fill(left) and deadline is not None and time.monotonic() >= deadline:
                 raise Empty
@@ -156,8 +158,8 @@ class PipeReceiver:
         return self.get(timeout=0)
 
     def empty(self) -> bool:
-        """True when no complete frame (nor end-of-file) is waiting."""
-        if self._pushed or self._complete() or self._eof:
+        """True when no complete frame (nor end-of-file, nor a stop) is waiting."""
+        if self._pushed or self._complete() or self._eof or self.network.stopping:
             return False
         return not (self._fill(0) and (self._complete() or self._eof))
 
@@ -172,6 +174,10 @@ class PipeReceiver:
         if len(buffer) - at < 4:
             return None
         (length,) = HEADER.unpack_from(buffer, at)
+        if length > MAX_FRAME:  # never buffer that much for one message; the stream is lost
+            corrupt = Corrupt(f"a frame of {length} bytes, over the {MAX_FRAME} byte limit")
+            self._pushed.append(corrupt)
+            return corrupt
         end = at + 4 + length
         if len(buffer) < end:
             return None
@@ -182,7 +188,7 @@ class PipeReceiver:
             self._at = 0
         try:
             kind, value = self.codec.decode_body(body)
-        except DecodeError as error:
+        except DecodeError as error:  # the stream is still in step: later frames may be fine
             return Corrupt(str(error))
         if kind == KIND_FAILURE:
             failure = PeerFailure(self.sender, value)
@@ -198,7 +204,10 @@ class PipeReceiver:
         ready = self._poll.poll(None if timeout is None else max(0, int(timeout * 1000)))
         if not any(fd == self.fd for fd, _ in ready):
             return False
-        data = os.read(self.fd, _READ_SIZE)
+        try:
+            data = os.read(self.fd, _READ_SIZE)
+        except OSError:  # the descriptor was silenced (our role failed): nothing more comes
+            data = b""
         if not data:
             self._eof = True
         else:
@@ -231,6 +240,7 @@ class ProcessNetwork(InprocNetwork):
         self.wake_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self._cause_arrived = threading.Condition()
         self.bridges: list[threading.Thread] = []
+        self.incoming_fds = {pair: fd for pair, fd in pipes.items() if pair[1] in self.local_roles}
         for role, cause in dead.items():
             self.failed[role] = cause
             self.alarm = True
@@ -255,7 +265,13 @@ class ProcessNetwork(InprocNetwork):
 
         def pump() -> None:
             while True:
-                item = source.get()
+                try:
+                    item = source.get()
+                except Exception as error:  # never die silently: the receiver must hear of it
+                    item = Corrupt(f"{type(error).__name__}: {error}")
+                    target.put(item)
+                    self.ring(receiver, sender)
+                    return
                 target.put(item)
                 self.ring(receiver, sender)
                 if type(item) is not tuple and not isinstance(item, Corrupt):
@@ -281,6 +297,8 @@ class ProcessNetwork(InprocNetwork):
             self.failed[role] = cause
             self.alarm = True
         for (sender, receiver), channel in self.queues.items():
+            if receiver == role and (sender, receiver) in self.incoming_fds:
+                _silence(self.incoming_fds[(sender, receiver)])  # its blocked senders get EPIPE
             if sender != role:
                 continue
             if isinstance(channel, PipeSender):
@@ -313,6 +331,15 @@ class ProcessNetwork(InprocNetwork):
                 self.ring(receiver, sender)
 
 
+def _silence(fd: int) -> None:
+    """Close a pipe's read end without freeing its number (a reader may still poll it)."""
+    null = os.open(os.devnull, os.O_RDONLY)
+    try:
+        os.dup2(null, fd)
+    finally:
+        os.close(null)
+
+
 def _write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     while view:
@@ -329,9 +356,10 @@ def _grow_pipe(fd: int) -> None:
         pass  # the default size works, only with more blocking
 
 
-def make_codec(classes: Iterable[type], ring: ArrayRing | None, reader: RingReader | None) -> Codec:
-    """A channel's codec: arrays go to ``ring`` when sending, come from ``reader`` when receiving."""
-    codec = Codec(classes, ring.write if ring is not None else None, reader.read if reader else None)
+def make_codec(classes: Iterable[type], ring: ArrayRing | None,
+               read_array: Callable[..., object] | None) -> Codec:
+    """A channel's codec: arrays go to ``ring`` when sending, come from ``read_array`` when receiving."""
+    codec = Codec(classes, ring.write if ring is not None else None, read_array)
     codec.ring = ring
     return codec
 

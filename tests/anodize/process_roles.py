@@ -210,3 +210,46 @@ def where_receiver(ep: Endpoint) -> None:
     got = ep.recv("A").payload
     if got != expected:
         raise AssertionError(f"role A runs with {got}, expected {expected}")
+
+
+# ---- review regressions: blocked senders, stops, oversized frames ---------------------------
+def flooding_sender(ep: Endpoint) -> None:
+    """Sends until the pipe is full and it blocks (its receiver never reads)."""
+    blob = b"x" * 60_000
+    while True:
+        ep.send("B", "blob", blob)
+
+
+def failing_non_reader(ep: Endpoint) -> None:
+    time.sleep(1.0)
+    raise RuntimeError("B gives up without reading")
+
+
+def sleeping_non_reader(ep: Endpoint) -> None:
+    time.sleep(3600)
+
+
+def hello_sender(ep: Endpoint) -> None:
+    ep.send("D", "hello")
+    ep.recv("D")
+
+
+def lingering_receiver(ep: Endpoint) -> None:
+    """Keeps its group's process alive long after its group mate B failed."""
+    ep.recv("C")
+    time.sleep(3600)
+
+
+def stoppable_non_reader(ep: Endpoint) -> None:
+    """Waits in a receive (so a stop reaches it) without ever taking the flood."""
+    ep.recv("D")
+
+
+def huge_frame_client(ep: Endpoint) -> None:
+    """Announces a 2 GiB frame: the receiver must not try to buffer it."""
+    channel, _ = ep._out["B"]
+    os.write(channel.fd, (2**31).to_bytes(4, "little") + b"M" * 1000)
+
+
+def any_receiver(ep: Endpoint) -> None:
+    ep.recv_any()

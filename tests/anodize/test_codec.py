@@ -225,3 +225,66 @@ def test_an_array_filled_in_a_claimed_slot_is_sent_without_a_copy_and_handed_ove
     del got
     gc.collect()
     assert ring.in_use() == 0
+
+
+def test_garbage_in_a_named_pickle_a_missing_field_or_a_missing_ring_is_a_decode_error(ring_prefix) -> None:
+    import struct
+
+    def body(tag: int, name: bytes, rest: bytes) -> bytes:
+        return (bytes([KIND_MESSAGE]) + struct.pack("<I", 1) + b"p" + bytes([tag])
+                + struct.pack("<I", len(name)) + name + rest)
+
+    plain = f"{Plain.__module__}:{Plain.__qualname__}".encode()
+    with pytest.raises(DecodeError):
+        Codec([Plain]).decode_body(body(19, plain, struct.pack("<I", 3) + b"\x80\x05\xff"))
+    pose = Codec([Pose]).message_frame("pose", Pose(1.0, 2.0, np.zeros(2)))[4:]
+    fewer = pose.replace(struct.pack("<I", 3), struct.pack("<I", 2), 1)  # claims 2 fields of 3
+    with pytest.raises(DecodeError):
+        Codec([Pose]).decode_body(fewer)
+    reader = RingReader()
+    shared = Codec(write_array=ArrayRing(ring_prefix).write).message_frame("a", np.ones(100_000))[4:]
+    remove_run_segments(ring_prefix.split("-")[1])
+    with pytest.raises(DecodeError):
+        Codec(read_array=reader.read).decode_body(shared)
+
+
+def test_a_reader_maps_only_its_channels_rings_and_each_slot_once(ring_prefix) -> None:
+    ring = ArrayRing(ring_prefix + "x", slots=2)
+    address = ring.write(np.ones(100_000))
+    other_channel = RingReader()
+    with pytest.raises(ValueError, match="does not belong"):
+        other_channel.read(*address, "<f8", (100_000,), prefix=ring_prefix + "y")
+    reader = RingReader()
+    first = reader.read(*address, "<f8", (100_000,), prefix=ring_prefix)
+    with pytest.raises(ValueError):  # a second frame pointing at a slot still viewed
+        reader.read(*address, "<f8", (100_000,), prefix=ring_prefix)
+    assert first.sum() == 100_000
+
+
+def _gives_up_after(seconds: float):
+    import time
+
+    deadline = time.monotonic() + seconds
+    return lambda: "test deadline: the slot never came back" if time.monotonic() > deadline else None
+
+
+def test_a_sent_buffer_collected_late_does_not_free_a_newer_claim_of_its_slot(ring_prefix) -> None:
+    ring = ArrayRing(ring_prefix, slots=1, peer_gone=_gives_up_after(5.0))
+    reader = RingReader()
+    sender, receiver = Codec(write_array=ring.write), Codec(read_array=reader.read)
+    sender.ring = ring  # small claimed buffers go through their slot too
+    left = ring.claim_array((1000,), np.uint8)
+    _, (_, got) = receiver.decode_body(sender.message_frame("a", left)[4:])
+    del got
+    gc.collect()  # the receiver released the slot; the sender still holds `left`
+    right = ring.claim_array((1000,), np.uint8)
+    del left
+    gc.collect()  # left's finalizer must not free right's claim
+    assert ring.in_use() == 1
+    right[:] = 1
+    assert ring._sent_in_place(right) is not None
+
+
+def test_an_ndarray_sort_still_travels_as_an_array() -> None:
+    _, got = round_trip(Codec([np.ndarray]), "image", np.arange(6).reshape(2, 3))
+    assert isinstance(got, np.ndarray) and got.tolist() == [[0, 1, 2], [3, 4, 5]]

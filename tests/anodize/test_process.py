@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import glob
+import os
 
 import pytest
 
@@ -23,6 +24,8 @@ global Stream(A, B) = mu t. A -> B : {item(int). t, fin}
 global Frames(A, B) = mu t. A -> B : {frame(Frame). t, fin}
 global Payloads(A, B) = A -> B : thing(Opaque). A -> B : nested(Things)
 global Where(A, B) = A -> B : where(str)
+global Flood(A, B, C, D) = (mu t. A -> B : {blob(bytes). t, fin} || C -> D : hello. D -> C : bye)
+global Gate(A, B, D) = D -> B : go. mu t. A -> B : {blob(bytes). t, fin}
 global Hog(C, S, H, K) = (mu t. C -> S : {tick(int). t, done} || mu u. H -> K : {chunk(int). u, fin})
 """, "test_process.proto").globals
 
@@ -40,7 +43,8 @@ def run(global_name: str, groups: dict[str, dict[str, object]], timeout: float =
 
 
 def no_leftover_segments() -> bool:
-    return not glob.glob(f"{segment_dir()}/anodize-*")
+    """No ring file of this process's runs is left (ring names start with the supervisor's pid)."""
+    return not glob.glob(f"{segment_dir()}/anodize-{os.getpid()}-*")
 
 
 def test_a_protocol_runs_across_processes_with_monitors_at_both_ends() -> None:
@@ -192,3 +196,37 @@ def test_a_group_gets_sched_fifo_where_the_machine_permits_it(monkeypatch) -> No
                            "b": {"roles": {"B": roles.where_receiver}}})
     assert report.ok, report.summary()
     assert report.groups["a"].scheduling == "SCHED_FIFO 60; cpus 0"
+
+
+def test_a_sender_blocked_on_a_full_pipe_learns_that_its_receiver_failed() -> None:
+    # B fails without reading while D keeps B's process alive: A must not wait for that process.
+    report = run("Flood", {"a": {"roles": {"A": roles.flooding_sender}},
+                           "b": {"roles": {"B": roles.failing_non_reader, "D": roles.lingering_receiver}},
+                           "c": {"roles": {"C": roles.hello_sender}}}, timeout=8, grace=0.5)
+    error = report.roles["A"].error
+    assert isinstance(error, PeerFailedError), report.summary()
+    assert error.peer == "B" and "gives up without reading" in error.cause
+
+
+def test_a_sender_blocked_on_a_full_pipe_is_stopped_not_failed_at_the_timeout() -> None:
+    # B waits for D's go (never sent), so it stops at the timeout without taking the flood;
+    # its process then exits, and A's blocked write fails: that is a stop, not a failure.
+    report = run("Gate", {"a": {"roles": {"A": roles.flooding_sender}},
+                          "b": {"roles": {"B": roles.stoppable_non_reader}},
+                          "d": {"roles": {"D": roles.sleeping_non_reader}}}, timeout=1.5, grace=4.0)
+    assert report.roles["A"].status == "stopped", report.summary()
+    assert report.roles["B"].status == "stopped"
+
+
+def test_an_announced_oversized_frame_is_a_violation_by_its_sender() -> None:
+    report = run("Ping", {"a": {"roles": {"A": roles.huge_frame_client}},
+                          "b": {"memory": "64MiB", "roles": {"B": roles.server}}})
+    error = report.roles["B"].error
+    assert isinstance(error, ProtocolViolationError), report.summary()
+    assert error.blame == "A" and "byte limit" in str(error)
+
+
+def test_recv_any_across_processes_is_stopped_at_the_timeout() -> None:
+    report = run("Ping", {"a": {"roles": {"A": roles.sleepy_server}},
+                          "b": {"roles": {"B": roles.any_receiver}}}, timeout=1.0, grace=2.0)
+    assert report.roles["B"].status == "stopped", report.summary()
