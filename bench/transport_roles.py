@@ -96,10 +96,16 @@ class FrameSink:
 
 
 def frame_source(ep: Endpoint) -> None:
-    n = config()["frames"]
+    """Sends pre-made frames, or (``produce``) fills each frame in a slot from ``ep.buffer``."""
+    cfg = config()
+    n, produce = cfg["frames"], cfg.get("produce", False)
     pool = frame_pool()
     for i in range(n):
         pixels, check = pool[i % POOL]
+        if produce:  # the producer writes the frame where it will travel: no copy after this
+            made = ep.buffer("B", pixels.shape, pixels.dtype)
+            np.copyto(made, pixels)
+            pixels = made
         ep.send("B", "frame", Frame(i, time.monotonic(), check, pixels))
     ep.send("B", "fin")
 
@@ -113,9 +119,12 @@ def frame_sink(ep: Endpoint) -> None:
 
 def queue_frame_source(queue: Any, barrier: Any, n: int) -> None:
     pool = frame_pool()
+    produce = config().get("produce", False)
     barrier.wait()
     for i in range(n):
         pixels, check = pool[i % POOL]
+        if produce:  # a fresh frame each time (Queue.put pickles later, in its feeder thread)
+            pixels = pixels.copy()
         queue.put(("frame", Frame(i, time.monotonic(), check, pixels)))
     queue.put(("fin", None))
     queue.close()
