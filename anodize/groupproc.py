@@ -195,11 +195,13 @@ class _GroupProcess:
             reported += 1
             if isinstance(report.error, MemoryError):
                 self._memory_exceeded(report.name)
-            if report.status == "failed":
-                self.network.fail(report.name, describe_error(report.error))
+            # The supervisor hears of a failure before the peers do: the root cause, not
+            # the peers' PeerFailedErrors, is then what its policy acts on.
             self._send("role", {"role": report.name, "status": report.status,
                                 "error": error_to_data(report.error) if report.error else None,
                                 **self._counts()})
+            if report.status == "failed":
+                self.network.fail(report.name, describe_error(report.error))
         self._send("bye", self._counts())
 
     def _heartbeat(self) -> None:
