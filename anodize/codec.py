@@ -67,17 +67,18 @@ class Codec:
 
     Args:
         classes: the payload classes the protocol names (``module:Class`` sorts).
-        write_array: where large arrays go (None: always inline).
+        ring: the sender's shared-memory ring (an :class:`anodize.shm.ArrayRing`),
+            where large arrays go (None: always inline).
         read_array: how a receiver maps a shared-memory slot (None: refuse them).
     """
 
-    def __init__(self, classes: Iterable[type] = (), write_array: ArrayWriter | None = None,
+    def __init__(self, classes: Iterable[type] = (), ring: Any = None,
                  read_array: ArrayReader | None = None) -> None:
         self.classes = {_name_of(c): c for c in classes}
         self._class_ids = {c: name for name, c in self.classes.items()}
-        self.write_array = write_array
+        self.ring = ring
+        self.write_array: ArrayWriter | None = ring.write if ring is not None else None
         self.read_array = read_array
-        self.ring: Any = None  # the sender's shared-memory ring, when it has one
         self._labels: dict[str, bytes] = {}
         self._label_names: dict[bytes, str] = {}
         self._numpy: Any = sys.modules.get("numpy")  # imported lazily: only arrays need it
@@ -227,8 +228,8 @@ class Codec:
             self._write_blob(T_BYTES, value.tobytes(), out)
             return
         shape = b"".join(_I64.pack(n) for n in value.shape)
-        if self.write_array is not None and (value.nbytes > INLINE_ARRAY_LIMIT or (
-                self.ring is not None and self.ring.owns(value))):  # a filled slot goes as it is
+        if self.write_array is not None and (
+                value.nbytes > INLINE_ARRAY_LIMIT or self.ring.owns(value)):  # a filled slot goes as it is
             segment, slot, offset = self.write_array(value)
             self._write_blob(T_SHARED_ARRAY, dtype, out)
             out.write(_U8.pack(value.ndim) + shape)

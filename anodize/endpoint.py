@@ -342,17 +342,11 @@ class Endpoint:
         return found
 
 
-
 def _peers(machine: StateMachine) -> tuple[set[str], set[str]]:
     """The roles a machine (with its forks) sends to and receives from."""
     sends: set[str] = set()
     recvs: set[str] = set()
-    stack = [machine]
-    while stack:
-        m = stack.pop()
-        for transitions in m.table:
-            for action, peer, _ in transitions:
-                if peer is not None:
-                    (sends if action == "send" else recvs).add(peer)
-        stack.extend(b for branches in m.forks.values() for b in branches)
+    for t in machine.all_transitions():
+        if t.peer is not None:
+            (sends if t.action == "send" else recvs).add(t.peer)
     return sends, recvs

@@ -24,6 +24,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from queue import Empty, SimpleQueue
@@ -245,16 +246,8 @@ class _GroupProcess:
                 pass  # the supervisor is gone; the control reader ends the process
 
 
-def _payload_classes(machines: Any) -> list[type]:
+def _payload_classes(machines: Iterable[StateMachine]) -> list[type]:
     """The classes named as sorts by the local types (the only ones that may be decoded)."""
-    targets = set()
-    stack = list(machines)
-    while stack:
-        machine = stack.pop()
-        for transitions in machine.table:
-            for transition in transitions.values():
-                sort = transition.sort
-                if sort is not None and sort.target and not sort.target.startswith("ros:"):
-                    targets.add(sort.target)
-        stack.extend(b for branches in machine.forks.values() for b in branches)
+    targets = {t.sort.target for machine in machines for t in machine.all_transitions()
+               if t.sort is not None and t.sort.target and not t.sort.target.startswith("ros:")}
     return [resolve_class(t) for t in sorted(targets)]

@@ -22,6 +22,7 @@ import mmap
 import os
 import tempfile
 import itertools
+import math
 import struct
 import time
 import weakref
@@ -167,9 +168,7 @@ class ArrayRing:
         import numpy as np
 
         dt = np.dtype(dtype)
-        nbytes = dt.itemsize
-        for n in shape:
-            nbytes *= n
+        nbytes = dt.itemsize * math.prod(shape)
         if nbytes > self.slot_size:
             self._grow(nbytes)
         assert self._map is not None
@@ -247,9 +246,7 @@ class RingReader:
                 os.close(fd)
         slots, slot_size = _GEOMETRY.unpack_from(ring, _HEADER - _GEOMETRY.size)
         dt = np.dtype(dtype)
-        count = 1
-        for n in shape:
-            count *= n
+        count = math.prod(shape)
         if not 0 <= slot < slots or offset != _HEADER + slot * slot_size or \
                 count * dt.itemsize > slot_size or ring[slot] != BUSY or (name, slot) in self._viewed:
             raise ValueError(f"slot {slot} at offset {offset} is not a filled slot of ring {name}")

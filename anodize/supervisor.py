@@ -21,6 +21,7 @@ import os
 import secrets
 import signal
 import statistics
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -506,8 +507,6 @@ class _Supervisor:
 
 
 def _sys_path() -> list[str]:
-    import sys
-
     return [os.path.abspath(p) for p in sys.path]
 
 

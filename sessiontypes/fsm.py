@@ -68,6 +68,17 @@ class StateMachine:
     def states(self) -> range:
         return range(len(self.table))
 
+    def all_transitions(self) -> list[Transition]:
+        """Every transition of this machine and of the machines of its parallel branches."""
+        found: list[Transition] = []
+        stack = [self]
+        while stack:
+            machine = stack.pop()
+            for transitions in machine.table:
+                found.extend(transitions.values())
+            stack.extend(b for branches in machine.forks.values() for b in branches)
+        return found
+
     def is_final(self, state: int) -> bool:
         """No action is left in ``state`` (a fork is final when its branches are)."""
         return not self.table[state] and state not in self.forks

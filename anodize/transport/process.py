@@ -359,7 +359,5 @@ def _grow_pipe(fd: int) -> None:
 def make_codec(classes: Iterable[type], ring: ArrayRing | None,
                read_array: Callable[..., object] | None) -> Codec:
     """A channel's codec: arrays go to ``ring`` when sending, come from ``read_array`` when receiving."""
-    codec = Codec(classes, ring.write if ring is not None else None, read_array)
-    codec.ring = ring
-    return codec
+    return Codec(classes, ring, read_array)
 

@@ -164,7 +164,7 @@ def ring_prefix():
 
 def test_large_arrays_travel_as_views_of_slots_released_when_the_last_view_dies(ring_prefix) -> None:
     ring = ArrayRing(ring_prefix, slots=2)
-    sender, receiver = Codec(write_array=ring.write), Codec(read_array=RingReader().read)
+    sender, receiver = Codec(ring=ring), Codec(read_array=RingReader().read)
     image = np.random.default_rng(0).integers(0, 255, (480, 640, 3), dtype=np.uint8)
     frame = sender.message_frame("image", image)
     assert len(frame) < 200  # only the slot's address crossed
@@ -184,7 +184,7 @@ def test_a_sender_with_every_slot_held_waits_and_gives_up_when_told_the_peer_is_
     ring = ArrayRing(ring_prefix, slots=2, peer_gone=lambda: gone[0] if gone else None)
     reader = RingReader()
     receiver = Codec(read_array=reader.read)
-    sender = Codec(write_array=ring.write)
+    sender = Codec(ring=ring)
     held = [receiver.decode_body(sender.message_frame("a", np.ones(100_000))[4:])[1][1] for _ in range(2)]
     assert ring.in_use() == 2
     gone.append("receiver failed")
@@ -208,7 +208,7 @@ def test_a_ring_grows_for_bigger_arrays_and_the_reader_rejects_forged_addresses(
 
 def test_an_array_filled_in_a_claimed_slot_is_sent_without_a_copy_and_handed_over(ring_prefix) -> None:
     ring = ArrayRing(ring_prefix, slots=2)
-    sender, receiver = Codec(write_array=ring.write), Codec(read_array=RingReader().read)
+    sender, receiver = Codec(ring=ring), Codec(read_array=RingReader().read)
     image = ring.claim_array((480, 640, 3), np.uint8)
     image[:] = 7
     address = image.__array_interface__["data"][0]
@@ -242,7 +242,7 @@ def test_garbage_in_a_named_pickle_a_missing_field_or_a_missing_ring_is_a_decode
     with pytest.raises(DecodeError):
         Codec([Pose]).decode_body(fewer)
     reader = RingReader()
-    shared = Codec(write_array=ArrayRing(ring_prefix).write).message_frame("a", np.ones(100_000))[4:]
+    shared = Codec(ring=ArrayRing(ring_prefix)).message_frame("a", np.ones(100_000))[4:]
     remove_run_segments(ring_prefix.split("-")[1])
     with pytest.raises(DecodeError):
         Codec(read_array=reader.read).decode_body(shared)
@@ -271,8 +271,7 @@ def _gives_up_after(seconds: float):
 def test_a_sent_buffer_collected_late_does_not_free_a_newer_claim_of_its_slot(ring_prefix) -> None:
     ring = ArrayRing(ring_prefix, slots=1, peer_gone=_gives_up_after(5.0))
     reader = RingReader()
-    sender, receiver = Codec(write_array=ring.write), Codec(read_array=reader.read)
-    sender.ring = ring  # small claimed buffers go through their slot too
+    sender, receiver = Codec(ring=ring), Codec(read_array=reader.read)
     left = ring.claim_array((1000,), np.uint8)
     _, (_, got) = receiver.decode_body(sender.message_frame("a", left)[4:])
     del got
