@@ -37,7 +37,7 @@ from .endpoint import Endpoint
 from .errors import MemoryBoundError, error_to_data
 from .group import resolve_function
 from .memory import data_size, limit_data
-from .payloads import resolve_class
+from .payloads import resolve_class, with_field_classes
 from .report import RoleReport
 from .roles import describe_error, run_role
 from .sched import apply_thread_scheduling
@@ -250,4 +250,4 @@ def _payload_classes(machines: Iterable[StateMachine]) -> list[type]:
     """The classes named as sorts by the local types (the only ones that may be decoded)."""
     targets = {t.sort.target for machine in machines for t in machine.all_transitions()
                if t.sort is not None and t.sort.target and not t.sort.target.startswith("ros:")}
-    return [resolve_class(t) for t in sorted(targets)]
+    return with_field_classes(resolve_class(t) for t in sorted(targets))

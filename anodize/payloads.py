@@ -9,14 +9,16 @@ any payload is accepted for them.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
-from collections.abc import Callable
+import typing
+from collections.abc import Callable, Iterable
 
 from sessiontypes import Sort
 
 from .errors import AnodizeError
 
-__all__ = ["Validator", "validator_for", "exact_types_for", "resolve_class"]
+__all__ = ["Validator", "validator_for", "exact_types_for", "resolve_class", "with_field_classes"]
 
 # A validator returns None when the payload fits, or why it does not.
 Validator = Callable[[object], "str | None"]
@@ -70,6 +72,36 @@ def resolve_class(target: str) -> type:
     if not isinstance(value, type):
         raise AnodizeError(f"payload class {target!r} is not a class")
     return value
+
+
+def with_field_classes(classes: Iterable[type]) -> list[type]:
+    """``classes`` and every dataclass their dataclass fields are declared with, recursively.
+
+    A sort such as ``PoseStamped`` names one class, but its fields hold a ``Header``
+    and a ``Pose``: those are part of the message type the protocol names, so they
+    may cross processes too (``tuple[PoseStamped, ...]`` fields count as well).
+    """
+    found: dict[type, None] = {}
+    pending = list(classes)
+    while pending:
+        kind = pending.pop()
+        if kind in found:
+            continue
+        found[kind] = None
+        if dataclasses.is_dataclass(kind):
+            try:
+                hints = typing.get_type_hints(kind)
+            except Exception:  # unresolvable annotations: keep the class, skip its fields
+                continue
+            for hint in hints.values():
+                pending.extend(_dataclasses_in(hint))
+    return list(found)
+
+
+def _dataclasses_in(hint: object) -> list[type]:
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+        return [hint]
+    return [k for arg in typing.get_args(hint) for k in _dataclasses_in(arg)]
 
 
 def validator_for(sort: Sort | None) -> Validator:
