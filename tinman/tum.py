@@ -25,7 +25,7 @@ def read_file_list(path: str | Path) -> dict[float, list[str]]:
     for number, line in enumerate(text.replace(",", " ").replace("\t", " ").split("\n"), 1):
         if not line or line[0] == "#":
             continue
-        fields = [field for field in line.split(" ") if field.strip()]
+        fields = [field.strip() for field in line.split(" ") if field.strip()]
         if len(fields) > 1:
             try:
                 entries[float(fields[0])] = fields[1:]
