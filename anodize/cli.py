@@ -9,8 +9,10 @@ from __future__ import annotations
 import argparse
 import os
 import shlex
+import shutil
 import sys
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TextIO
 
@@ -32,9 +34,13 @@ class UsageError(Exception):
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
     parser = _parser()
     try:
-        args = parser.parse_args(argv)
+        if _is_named_run(argv):  # 'anodize run NAME ...': the named system parses the rest
+            args = argparse.Namespace(command="run", run=lambda _: _run_named(argv[1], argv[2:]))
+        else:
+            args = parser.parse_args(argv)
     except SystemExit as exit_:  # argparse has printed the usage message
         return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
     try:
@@ -108,8 +114,12 @@ def _parser() -> argparse.ArgumentParser:
     lint.add_argument("file", metavar="SYSTEM.toml")
     lint.set_defaults(run=_lint)
 
-    run_system = commands.add_parser("run", help="run a system file and print the run report")
-    run_system.add_argument("file", metavar="SYSTEM.toml")
+    run_system = commands.add_parser(
+        "run", help="run a system file (or a named system) and print the run report",
+        description="Run a system file, or a system an installed package registers by name "
+                    "('anodize run NAME --help' lists its options).",
+        epilog=f"named systems: {', '.join(_named_systems()) or '(none installed)'}")
+    run_system.add_argument("file", metavar="SYSTEM.toml|NAME")
     run_system.add_argument("--timeout", type=float, metavar="S",
                             help="stop roles still running after S seconds (default: the file's timeout)")
     run_system.add_argument("--json", metavar="FILE", help="also write the run report as JSON to FILE")
@@ -277,7 +287,9 @@ def _system_file(path: str) -> Path:
     if file.is_dir():
         raise UsageError(f"{path} is a directory; expected a system file (.toml)")
     if not file.exists():
-        raise UsageError(f"no such system file: {path}")
+        names = _named_systems()
+        known = f" or named system (named systems: {', '.join(names)})" if names else ""
+        raise UsageError(f"no such system file{known}: {path}")
     if file.suffix != ".toml":
         raise UsageError(f"{path}: expected a system file ending in .toml")
     return file
@@ -314,6 +326,75 @@ def _run(args: argparse.Namespace) -> int:
         out.write_text(report.to_json() + "\n", encoding="utf-8")
         print(f"wrote {out}")
     return EXIT_OK if report.ok else EXIT_ERRORS
+
+
+def _named_systems() -> list[str]:
+    from .named import named_systems
+
+    return named_systems()
+
+
+def _is_named_run(argv: list[str]) -> bool:
+    return (len(argv) >= 2 and argv[0] == "run" and not argv[1].startswith("-")
+            and not Path(argv[1]).exists() and argv[1] in _named_systems())
+
+
+def _run_named(name: str, rest: list[str]) -> int:
+    from .named import find_named
+
+    named = find_named(name)
+    assert named is not None  # _is_named_run saw it registered
+    parser = argparse.ArgumentParser(prog=f"anodize run {name}", description=named.summary)
+    parser.add_argument("--quiet", action="store_true", help="no live progress line")
+    named.add_arguments(parser)
+    try:
+        args = parser.parse_args(rest)
+    except SystemExit as exit_:
+        return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
+    prepared = named.prepare(args, lambda line: print(line, flush=True))
+    progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
+    try:
+        report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress)
+    finally:
+        if progress is not None:
+            progress.close()
+    print(report.summary())
+    finished = named.finish(report, args)
+    for line in finished.lines:
+        print(line)
+    return EXIT_OK if finished.ok else EXIT_ERRORS
+
+
+class ProgressLine:
+    """``on_status`` for a named system: its one-line account of the run so far.
+
+    On a terminal the line is redrawn in place; in a log, one line every 5 s.
+    """
+
+    LOG_EVERY = 5.0  # seconds
+
+    def __init__(self, stream: TextIO, describe: Callable[[dict[str, GroupStatus], float], str]) -> None:
+        self.stream = stream
+        self.describe = describe
+        self.tty = stream.isatty()
+        self.started = time.monotonic()
+        self.logged = 0.0  # elapsed time of the last line written to a log
+
+    def __call__(self, statuses: dict[str, GroupStatus]) -> None:
+        elapsed = time.monotonic() - self.started
+        line = self.describe(statuses, elapsed)
+        if self.tty:
+            width = shutil.get_terminal_size().columns
+            self.stream.write(f"\r\x1b[2K{line[:width - 1]}")
+        elif elapsed - self.logged >= self.LOG_EVERY:
+            self.logged = elapsed
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
 
 
 class LiveStatus:

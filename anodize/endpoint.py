@@ -228,6 +228,18 @@ class Endpoint:
         assert self._branches is not None
         return self._branches
 
+    def sleep(self, seconds: float) -> None:
+        """Wait ``seconds`` (a role's pacing), returning early only to stop with the run.
+
+        A role that paces itself with ``time.sleep`` notices a stop only at its next
+        send or receive; this wait ends the moment the supervisor stops the run.
+
+        Raises:
+            RoleStopped: the run is stopping.
+        """
+        if self._network.stop_event.wait(max(0.0, seconds)):
+            raise RoleStopped()
+
     # ---- completion ------------------------------------------------------------------
     def unfinished(self) -> list[Endpoint]:
         """Endpoints (this one or its branches) whose local type has not reached ``end``.

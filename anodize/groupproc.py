@@ -123,6 +123,7 @@ class _GroupProcess:
         spec = self.spec
         scheduling = apply_thread_scheduling(spec.priority, spec.cpus)  # inherited by our threads
         functions = {role: resolve_function(ref) for role, ref in spec.roles.items()}
+        threading.excepthook = self._thread_failed
         network = self.network = self._network()
         endpoints = {role: Endpoint(role, spec.protocol, spec.machines[role], network, spec.monitors)
                      for role in spec.roles}
@@ -178,6 +179,12 @@ class _GroupProcess:
             return "not enforced: /proc/self/status is not readable here"
         how = limit_data(self.baseline + self.spec.memory)
         return f"{how} at baseline {self.baseline / 2**20:.1f} MiB + bound"
+
+    def _thread_failed(self, args: threading.ExceptHookArgs) -> None:
+        """A thread a role started died: past the memory bound, the whole group stops."""
+        if isinstance(args.exc_value, MemoryError):
+            self._memory_exceeded(args.thread.name if args.thread is not None else "a thread")
+        threading.__excepthook__(args)
 
     def _role_thread(self, role: str, function: Any, endpoint: Endpoint) -> None:
         self.gate.wait()

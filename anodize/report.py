@@ -107,9 +107,22 @@ class RunReport:
         """Every role reached the end of its local type."""
         return all(r.status == "done" for r in self.roles.values())
 
+    @property
+    def failed(self) -> bool:
+        """Some role or group failed (a stop at the timeout is not a failure)."""
+        return (any(r.status == "failed" for r in self.roles.values())
+                or any(g.status == "failed" for g in self.groups.values()))
+
+    @property
+    def outcome(self) -> str:
+        """``"ok"``, ``"stopped, no failures"`` (a run ended by its timeout) or ``"NOT ok"``."""
+        if self.ok:
+            return "ok"
+        return "NOT ok" if self.failed else "stopped, no failures"
+
     def summary(self) -> str:
         """A few lines for people: one per group, then each role that did not finish."""
-        lines = [f"protocol {self.protocol}: {'ok' if self.ok else 'NOT ok'} in {self.duration:.2f} s"
+        lines = [f"protocol {self.protocol}: {self.outcome} in {self.duration:.2f} s"
                  f" ({self.transport})"]
         for group in self.groups.values():
             lines.append(f"  group {group.name}: {group.status} ({_group_details(group)})")

@@ -46,6 +46,7 @@ class InprocNetwork:
         self.doorbells: dict[str, SimpleQueue[str]] = {role: SimpleQueue() for role in doorbell_roles}
         self.failed: dict[str, str] = {}
         self.stopping = False
+        self.stop_event = threading.Event()  # set with ``stopping``: sleeping roles wake on it
         # Raised on any failure or stop: senders test this one flag on the fast path.
         self.alarm = False
         self._lock = threading.Lock()
@@ -66,6 +67,7 @@ class InprocNetwork:
         """Wake every waiting receiver with STOP."""
         self.stopping = True
         self.alarm = True
+        self.stop_event.set()
         for (sender, receiver), queue in self.queues.items():
             queue.put(STOP)
             self.ring(receiver, sender)

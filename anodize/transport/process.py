@@ -324,6 +324,7 @@ class ProcessNetwork(InprocNetwork):
         """Wake every receiver of this process with STOP."""
         self.stopping = True
         self.alarm = True
+        self.stop_event.set()
         os.eventfd_write(self.wake_fd, 1)  # wakes pipe readers; never drained: stop is final
         for (sender, receiver), channel in self.queues.items():
             if isinstance(channel, SimpleQueue):

@@ -1,0 +1,184 @@
+"""``anodize run tinman``: TinMan as a named system of anodize.
+
+Registered under the ``anodize.systems`` entry point (see pyproject.toml), so
+anodize finds it by name without importing tinman. It runs ``tinman.toml``,
+then writes ``report.json`` and ``trajectory.png`` into the output folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+from anodize import AnodizeError, GroupStatus, RunReport
+from anodize.config import build_system, load_config
+from anodize.named import Finished, Prepared
+
+from .outcome import build_report
+from .settings import FAULTS, Settings, export
+
+__all__ = ["TINMAN", "TinMan", "SYSTEM_FILE", "TinManError"]
+
+SYSTEM_FILE = Path(__file__).with_name("tinman.toml")
+PAPER_GLOBAL = "TinMan"  # Fig. 16 as written
+
+
+class TinManError(AnodizeError):
+    """A TinMan option or input that cannot be used (the message says which and why)."""
+
+
+class TinMan:
+    """The named system ``tinman``."""
+
+    summary = ("TinMan, the robot system of the Anodize paper: camera, visual odometry, planner, "
+               "joystick control and a simulated robot in four groups of different criticality. "
+               "Writes report.json and trajectory.png.")
+
+    def __init__(self) -> None:
+        self.settings = Settings()
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        parser.add_argument("--duration", type=float, default=20.0, metavar="S",
+                            help="seconds to run (default 20)")
+        parser.add_argument("--out", default="out/tinman", metavar="DIR",
+                            help="folder for report.json and trajectory.png (default out/tinman)")
+        parser.add_argument("--paper", action="store_true",
+                            help="run Fig. 16's single-loop global type TinMan instead of TinManParallel")
+        parser.add_argument("--inject", action="append", default=[], metavar="FAULT=GROUP",
+                            help=f"inject a fault into a group ({', '.join(FAULTS)}), e.g. memory-hog=planning")
+        parser.add_argument("--teleop", action="store_true",
+                            help="drive with the keyboard (w/s forward/back, a/d turn, q/e curve) "
+                                 "instead of the scripted joystick; needs a terminal")
+        parser.add_argument("--dataset", metavar="DIR",
+                            help="a TUM RGB-D sequence for the camera (default: the synthetic one, "
+                                 "generated and cached on first use)")
+        parser.add_argument("--planner", choices=("rrt", "astar"), default="rrt",
+                            help="RRT-Connect with shortcut smoothing (default) or grid A*")
+
+    def prepare(self, args: argparse.Namespace, log: Callable[[str], None]) -> Prepared:
+        if not args.duration > 0:
+            raise TinManError(f"--duration {args.duration}: expected a number of seconds > 0")
+        config = load_config(SYSTEM_FILE)
+        if args.paper:
+            config = dataclasses.replace(config, global_name=PAPER_GLOBAL)
+        groups = {role: group.name for group in config.groups.values() for role in group.roles}
+        inject = _faults(args.inject, sorted(config.groups))
+        if args.teleop:
+            _check_terminal()
+        out = Path(args.out)
+        self.settings = Settings(out=str(out.resolve()), dataset=str(_dataset(args.dataset, log)),
+                                 duration=float(args.duration), paper=args.paper, teleop=args.teleop,
+                                 inject=inject, groups=groups, planner=args.planner)
+        shutil.rmtree(self.settings.records, ignore_errors=True)  # no record of an older run may linger
+        self.settings.records.mkdir(parents=True, exist_ok=True)
+        export(self.settings)
+        return Prepared(build_system(config), timeout=float(args.duration), grace=3.0)
+
+    def progress(self, statuses: dict[str, GroupStatus], elapsed: float) -> str:
+        shown = min(elapsed, self.settings.duration)
+        parts = [f"TinMan {shown:4.1f}/{self.settings.duration:g} s"]
+        for status in statuses.values():
+            rate = f" {status.rate_hz:.0f} msg/s" if status.rate_hz is not None and status.state == "running" else ""
+            parts.append(f"{status.name} {status.state}{rate}")
+        return " | ".join(parts)
+
+    def finish(self, report: RunReport, args: argparse.Namespace) -> Finished:
+        from .picture import draw_run  # matplotlib: only once there is something to draw
+
+        settings = self.settings
+        data = build_report(report, settings)
+        ok, problems = _judge(data, settings)
+        data["ok"], data["problems"] = ok, problems
+        out = Path(settings.out)
+        report_file = out / "report.json"
+        report_file.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+        title = "TinMan"
+        if data["ate_rmse_m"] is not None:
+            title += (f": VO ATE RMSE {data['ate_rmse_m'] * 100:.1f} cm over {data['trajectory_length_m']:.2f} m "
+                      f"({data['ate_percent']:.2f}%)")
+        picture = draw_run(out / "trajectory.png", settings, title=title)
+        return Finished(ok, _lines(data, problems) + [f"wrote {_shown(report_file)} and {_shown(picture)}"])
+
+
+def _faults(requests: list[str], groups: list[str]) -> dict[str, str]:
+    faults: dict[str, str] = {}
+    for request in requests:
+        fault, _, group = request.partition("=")
+        if fault not in FAULTS or not group:
+            raise TinManError(f"--inject {request}: expected FAULT=GROUP with FAULT one of {', '.join(FAULTS)}")
+        if group not in groups:
+            raise TinManError(f"--inject {request}: no group {group!r}; expected one of {', '.join(groups)}")
+        faults[group] = fault
+    return faults
+
+
+def _check_terminal() -> None:
+    try:
+        os.close(os.open("/dev/tty", os.O_RDONLY))
+    except OSError as error:
+        raise TinManError(f"--teleop needs a terminal to read keys from ({error.strerror})") from None
+
+
+def _dataset(given: str | None, log: Callable[[str], None]) -> Path:
+    from .dataset import DatasetError, TumSequence
+
+    if given is None:
+        from .sequences import default_sequence
+
+        return default_sequence(log=log).resolve()
+    try:
+        TumSequence.open(given)  # fail now, with the reason, rather than in a group process
+    except DatasetError as error:
+        raise TinManError(str(error)) from None
+    return Path(given).resolve()
+
+
+def _judge(data: dict, settings: Settings) -> tuple[bool, list[str]]:
+    """Whether the run did what TinMan is for; the problems if not."""
+    problems = []
+    if data["violations"]:
+        problems.append(f"{data['violations']} protocol violation(s)")
+    for name, group in data["groups"].items():
+        if group["status"] == "failed" and name not in settings.inject:
+            problems.append(f"group {name} failed: {(group['error'] or {}).get('message', 'see the report')}")
+        if group["status"] != "failed" and name in settings.inject:
+            problems.append(f"group {name} was injected with {settings.inject[name]} but did not fail")
+    if not data["frames_processed"] and "perception" not in settings.inject:
+        problems.append("visual odometry tracked no frame")
+    if data["control_period_ms"].get("p50") is None and "control" not in settings.inject:
+        problems.append("the control loop sent no command")
+    return not problems, problems
+
+
+def _lines(data: dict, problems: list[str]) -> list[str]:
+    lines = []
+    if data["ate_rmse_m"] is not None:
+        lines.append(f"visual odometry: ATE RMSE {data['ate_rmse_m']:.3f} m over {data['trajectory_length_m']:.2f} m "
+                     f"({data['ate_percent']:.2f}%), {data['frames_processed']} frames tracked, "
+                     f"{data['frames_dropped']} dropped")
+    period = data["control_period_ms"]
+    if period.get("p50") is not None:
+        lines.append(f"control loop: period p50 {period['p50']:.1f} ms, p99 {period['p99']:.1f} ms "
+                     f"over {data['control']['commands']} commands")
+    lost = data["control"].get("planner_lost")
+    if lost:
+        lines.append(f"planner lost during the run; teleop commands after that: "
+                     f"{data['control']['teleop_commands_after_planner_lost']}")
+    lines.append(f"protocol violations: {data['violations']}")
+    lines.extend(f"problem: {problem}" for problem in problems)
+    return lines
+
+
+def _shown(path: Path) -> str:
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+TINMAN = TinMan()

@@ -1,0 +1,30 @@
+"""Faults ``anodize run tinman --inject FAULT=GROUP`` puts into a group, to watch isolation work."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from .settings import current
+
+__all__ = ["start_faults", "memory_hog"]
+
+HOG_STEP = 16 * 2**20  # bytes kept per step
+HOG_PERIOD = 0.1       # seconds between steps: 160 MiB/s
+
+
+def start_faults(role: str) -> None:
+    """Start the fault injected into ``role``'s group, if any (call once per role, at its start)."""
+    if current().fault_for(role) == "memory-hog":
+        threading.Thread(target=memory_hog, name=f"{role}-memory-hog", daemon=True).start()
+
+
+def memory_hog() -> None:
+    """Allocate and touch memory without end, as a leaking planner would.
+
+    The group's memory bound stops the whole group; nothing here catches that.
+    """
+    kept = []
+    while True:
+        kept.append(bytearray(HOG_STEP))  # bytearray() zero-fills: the pages are really used
+        time.sleep(HOG_PERIOD)

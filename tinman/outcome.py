@@ -1,0 +1,97 @@
+"""TinMan's report of a run: what the robot system achieved, from the run report and the records."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from anodize import ProtocolViolationError, RunReport
+
+from .ate import evaluate_ate
+from .records import load_records
+from .settings import Settings
+from .tum import read_trajectory
+
+__all__ = ["build_report", "violations_in"]
+
+
+def violations_in(report: RunReport) -> list[str]:
+    """Every protocol violation the monitors raised, as ``role: message``."""
+    found = [f"{name}: {role.error}" for name, role in report.roles.items()
+             if isinstance(role.error, ProtocolViolationError)]
+    found += [f"group {name}: {group.error}" for name, group in report.groups.items()
+              if isinstance(group.error, ProtocolViolationError)]
+    return found
+
+
+def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
+    """``report.json``'s content (see the README's TinMan section for each key)."""
+    records = load_records(settings.records)
+    vo = records.get("VisOdom", {})
+    camera = records.get("Camera", {})
+    move = records.get("Move", {})
+    gazebo = records.get("Gazebo", {})
+    planner = records.get("Planner", {})
+    ate = _ate(settings)
+    violations = violations_in(report)
+    run = report.to_dict()
+    return {
+        "system": "tinman",
+        "global": report.protocol,
+        "transport": report.transport,
+        "outcome": report.outcome,
+        "duration_s": round(report.duration, 3),
+        "requested_duration_s": settings.duration,
+        "dataset": settings.dataset,
+        "injected": dict(settings.inject),
+        **ate,
+        "frames_processed": vo.get("frames_processed"),
+        "frames_dropped": _sum(vo.get("frames_dropped"), camera.get("frames_skipped")),
+        "frames_published": camera.get("frames_published"),
+        "vo_track_ms": {"p50": vo.get("track_ms_p50"), "p99": vo.get("track_ms_p99")},
+        "violations": len(violations),
+        "violation_messages": violations,
+        "messages": dict(report.messages),
+        "groups": {name: {key: group[key] for key in (
+            "status", "scheduling", "peak_memory", "memory_bound", "memory_note", "error", "restarts",
+            "messages", "rate_hz", "rate_min_hz")} for name, group in run["groups"].items()},
+        "roles": {name: {"group": role["group"], "status": role["status"], "error": role["error"]}
+                  for name, role in run["roles"].items()},
+        "control_period_ms": move.get("period_ms", {"p50": None, "p99": None}),
+        "control": {"commands": move.get("commands"), "sources": move.get("sources"),
+                    "paths_received": move.get("paths_received"),
+                    "planner_lost": move.get("planner_lost"),
+                    "teleop_commands_after_planner_lost": move.get("teleop_commands_after_planner_lost")},
+        "robot": {"distance_m": _round(gazebo.get("odometer_m")), "bumps": gazebo.get("bumps")},
+        "planner": {"method": planner.get("method"), "plans": planner.get("plans"),
+                    "failures": planner.get("failure_count"),
+                    "plan_ms_p50": _round(float(np.median(planner["plan_ms"])) if planner.get("plan_ms") else None)},
+        "notes": list(report.notes),
+    }
+
+
+def _ate(settings: Settings) -> dict[str, Any]:
+    empty = {"ate_rmse_m": None, "trajectory_length_m": None, "ate_percent": None, "ate_pairs": 0}
+    estimate_file = settings.records / "vo_estimate.txt"
+    truth_file = Path(settings.dataset) / "groundtruth.txt"
+    if not estimate_file.exists() or not truth_file.exists():
+        return empty
+    try:
+        truth_stamps, truth_poses = read_trajectory(truth_file)
+        stamps, poses = read_trajectory(estimate_file)
+        result = evaluate_ate(truth_stamps, truth_poses[:, :3, 3], stamps, poses[:, :3, 3])
+    except (OSError, ValueError) as error:
+        return {**empty, "ate_error": str(error)}
+    return {"ate_rmse_m": round(result.rmse, 5), "trajectory_length_m": round(result.length, 4),
+            "ate_percent": round(result.percent, 4), "ate_pairs": result.pairs}
+
+
+def _sum(*values: Any) -> int | None:
+    present = [int(v) for v in values if v is not None]
+    return sum(present) if present else None
+
+
+def _round(value: float | None, digits: int = 3) -> float | None:
+    return None if value is None else round(float(value), digits)

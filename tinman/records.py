@@ -1,0 +1,39 @@
+"""What roles measured, left as one JSON file per role for the run's report.
+
+Group processes cannot hand the launcher Python objects, and a group stopped by
+its memory bound cannot hand over anything at all; so roles write their records
+as they go (atomically: write, then rename) and the report reads what is there.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from .settings import current
+
+__all__ = ["save_record", "load_records"]
+
+
+def save_record(name: str, data: dict[str, Any]) -> Path:
+    """Write ``data`` as ``<records>/<name>.json``, replacing an older record whole."""
+    folder = current().records
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{name}.json"
+    partial = folder / f".{name}.{os.getpid()}.partial"
+    partial.write_text(json.dumps(data), encoding="utf-8")
+    partial.replace(path)
+    return path
+
+
+def load_records(folder: str | Path) -> dict[str, dict[str, Any]]:
+    """Every record in ``folder``: name -> data (unreadable files are skipped, not fatal)."""
+    records: dict[str, dict[str, Any]] = {}
+    for path in sorted(Path(folder).glob("*.json")):
+        try:
+            records[path.stem] = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+    return records

@@ -1,0 +1,101 @@
+"""The control group (priority 90): Joy, Control and Move, the loop that must keep its rate."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from anodize import Endpoint, PeerFailedError, RoleStopped
+
+from ..faults import start_faults
+from ..joystick import scripted_joy, twist_from_joy
+from ..keyboard import Keyboard
+from ..messages import Header, Joy, Time, Twist
+from ..mixer import Mixer
+from ..records import save_record
+from ..settings import current
+from ..world import DEFAULT_WORLD
+
+__all__ = ["joy", "control", "move"]
+
+
+def joy(ep: Endpoint) -> None:
+    """The joystick: its state every control period, on an absolute schedule."""
+    settings = current()
+    start_faults("Joy")
+    period = 1.0 / settings.control_rate
+    keyboard = Keyboard.open() if settings.teleop else None
+    read = keyboard.read if keyboard is not None else scripted_joy
+    start = time.monotonic()
+    tick = 0
+    try:
+        while True:
+            axes, buttons = read(time.monotonic() - start)
+            ep.send("Control", "Joy", Joy(Header(Time.now(), "joy"), axes, buttons))
+            tick += 1
+            late = time.monotonic() - (start + tick * period)
+            if late > period:  # fell behind (e.g. the machine was busy): do not burst to catch up
+                tick += int(late / period)
+            ep.sleep(start + tick * period - time.monotonic())
+    finally:
+        if keyboard is not None:
+            keyboard.close()
+
+
+def control(ep: Endpoint) -> None:
+    """Joystick to velocity command."""
+    start_faults("Control")
+    while True:
+        state = ep.recv("Joy").payload
+        v, w, _ = twist_from_joy(state.axes, state.buttons)
+        ep.send("Move", "Twist", Twist.planar(v, w))
+
+
+def move(ep: Endpoint) -> None:
+    """The mixer: a command to the robot for every command from Control."""
+    settings = current()
+    start_faults("Move")
+    mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate)
+    planner_lost: list[str] = []
+    if not settings.paper:  # the planning loop runs beside the control loop: its own thread
+        ep.fork()
+        threading.Thread(target=_take_paths, args=(ep, mixer, planner_lost), name="Move-paths",
+                         daemon=True).start()
+    sent: list[float] = []
+    teleop_after_loss = 0
+    try:
+        while True:
+            teleop = ep.recv("Control").payload
+            if settings.paper:
+                mixer.set_path(ep.recv("Planner").payload)
+            command, source = mixer.step(teleop)
+            ep.send("Gazebo", "Twist", command)
+            sent.append(time.monotonic())
+            if planner_lost and source == "teleop":
+                teleop_after_loss += 1
+    finally:
+        periods = np.diff(np.array(sent)) * 1000.0
+        save_record("Move", {
+            "commands": len(sent), "sources": mixer.sources, "paths_received": mixer.paths_received,
+            "period_ms": _percentiles(periods), "planner_lost": planner_lost[0] if planner_lost else None,
+            "teleop_commands_after_planner_lost": teleop_after_loss,
+            "odometry_pose": list(mixer.model.pose)})
+
+
+def _take_paths(ep: Endpoint, mixer: Mixer, planner_lost: list[str]) -> None:
+    try:
+        while True:
+            mixer.set_path(ep.recv("Planner").payload)
+    except PeerFailedError as error:  # only the planning branch ends: control goes on
+        planner_lost.append(str(error))
+    except RoleStopped:
+        pass
+
+
+def _percentiles(values: np.ndarray) -> dict[str, float | None]:
+    if len(values) == 0:
+        return {"p50": None, "p99": None, "max": None, "mean": None}
+    return {"p50": round(float(np.percentile(values, 50)), 3), "p99": round(float(np.percentile(values, 99)), 3),
+            "max": round(float(values.max()), 3), "mean": round(float(values.mean()), 3)}

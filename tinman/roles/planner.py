@@ -1,0 +1,56 @@
+"""The planning group (priority 30, memory bound): Planner."""
+
+from __future__ import annotations
+
+import time
+
+from anodize import Endpoint
+
+from ..faults import start_faults
+from ..geometry import robot_pose
+from ..messages import Header, Path, Pose, PoseStamped, Time
+from ..planning import NoPathError, Patrol, Planner
+from ..records import save_record
+from ..settings import current
+from ..world import DEFAULT_WORLD
+
+__all__ = ["planner"]
+
+
+def planner(ep: Endpoint) -> None:
+    """Plans from VisOdom's pose to the patrol's next waypoint; Move gets the latest path.
+
+    A Path goes back for every Pose (the protocol's loop); a new plan is made at
+    most every ``replan_period`` seconds, and the latest one is sent in between.
+    """
+    settings = current()
+    start_faults("Planner")
+    planning = Planner(DEFAULT_WORLD, method=settings.planner, seed=settings.seed)
+    patrol = Patrol(DEFAULT_WORLD)
+    path = Path(Header(Time.now(), "map"))
+    planned_at = -float("inf")
+    plans: list[dict[str, object]] = []
+    failures: list[str] = []
+    plan_ms: list[float] = []
+    while True:
+        pose = ep.recv("VisOdom").payload
+        if time.monotonic() - planned_at >= settings.replan_period:
+            planned_at = time.monotonic()
+            x, y, _ = robot_pose(pose.pose.matrix())
+            goal = patrol.goal_for(x, y)
+            began = time.perf_counter()
+            try:
+                points = planning.plan((x, y), goal)
+            except NoPathError as error:  # keep following the last plan; say why in the record
+                failures.append(str(error))
+            else:
+                plan_ms.append((time.perf_counter() - began) * 1000.0)
+                header = Header(pose.header.stamp, "map")
+                path = Path(header, tuple(PoseStamped(header, Pose.planar(px, py, 0.0)) for px, py in points))
+                plans.append({"stamp": pose.header.stamp.seconds(), "goal": list(goal),
+                              "points": [[round(px, 3), round(py, 3)] for px, py in points]})
+            # Written at every plan: a planner stopped by its memory bound leaves its record.
+            save_record("Planner", {"method": settings.planner, "plans": len(plans),
+                                    "failures": failures[-5:], "failure_count": len(failures),
+                                    "plan_ms": plan_ms[-200:], "recent_plans": plans[-12:]})
+        ep.send("Move", "Path", path)

@@ -1,0 +1,76 @@
+"""How one TinMan run is configured, shared with every group process.
+
+Role functions take only their endpoint, and group processes are spawned fresh,
+so the run's settings travel in one environment variable (JSON) that the
+launcher sets before the groups start and every role reads back.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field, replace
+from functools import lru_cache
+from pathlib import Path
+
+__all__ = ["Settings", "ENVIRONMENT_VARIABLE", "current", "export", "FAULTS"]
+
+ENVIRONMENT_VARIABLE = "TINMAN_SETTINGS"
+FAULTS = ("memory-hog",)  # what --inject can put into a group
+
+
+@dataclass(frozen=True)
+class Settings:
+    """One run's choices.
+
+    Attributes:
+        out: the folder for the report, the picture and each role's records.
+        dataset: the TUM RGB-D sequence the camera replays ("" = the default synthetic one).
+        duration: seconds the run lasts.
+        paper: whether the run follows Fig. 16's single loop (``TinMan``).
+        teleop: keyboard driving from the terminal instead of the scripted joystick.
+        inject: group -> fault to inject (``"memory-hog"``).
+        groups: role -> the group that runs it (so a role knows whether a fault is its own).
+        planner: ``"rrt"`` (RRT-Connect with shortcut smoothing) or ``"astar"``.
+        control_rate: Hz of the joystick, hence of the whole control loop.
+        replan_period: seconds between two plans.
+        seed: for the planner's random samples.
+    """
+
+    out: str = "out/tinman"
+    dataset: str = ""
+    duration: float = 20.0
+    paper: bool = False
+    teleop: bool = False
+    inject: dict[str, str] = field(default_factory=dict)
+    groups: dict[str, str] = field(default_factory=dict)
+    planner: str = "rrt"
+    control_rate: float = 50.0
+    replan_period: float = 0.5
+    seed: int = 0
+
+    @property
+    def records(self) -> Path:
+        """Where roles leave what they measured (one JSON file per role)."""
+        return Path(self.out) / "records"
+
+    def fault_for(self, role: str) -> str | None:
+        """The fault injected into ``role``'s group, if any."""
+        group = self.groups.get(role)
+        return self.inject.get(group) if group is not None else None
+
+    def with_changes(self, **changes: object) -> Settings:
+        return replace(self, **changes)  # type: ignore[arg-type]
+
+
+def export(settings: Settings) -> None:
+    """Make ``settings`` what :func:`current` returns here and in processes started after."""
+    os.environ[ENVIRONMENT_VARIABLE] = json.dumps(asdict(settings))
+    current.cache_clear()
+
+
+@lru_cache(maxsize=1)
+def current() -> Settings:
+    """The run's settings (the defaults when none were exported)."""
+    text = os.environ.get(ENVIRONMENT_VARIABLE)
+    return Settings(**json.loads(text)) if text else Settings()
