@@ -11,6 +11,7 @@ __all__ = ["start_faults", "memory_hog"]
 
 HOG_STEP = 16 * 2**20  # bytes kept per step
 HOG_PERIOD = 0.1       # seconds between steps: 160 MiB/s
+HOG_DELAY = 3.0        # seconds of normal running first, so the report shows the group before and after
 
 
 def start_faults(role: str) -> None:
@@ -24,6 +25,7 @@ def memory_hog() -> None:
 
     The group's memory bound stops the whole group; nothing here catches that.
     """
+    time.sleep(HOG_DELAY)
     kept = []
     while True:
         kept.append(bytearray(HOG_STEP))  # bytearray() zero-fills: the pages are really used

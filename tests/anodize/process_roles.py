@@ -253,3 +253,48 @@ def huge_frame_client(ep: Endpoint) -> None:
 
 def any_receiver(ep: Endpoint) -> None:
     ep.recv_any()
+
+
+def hog_in_a_thread(ep: Endpoint) -> None:
+    """Sends one chunk, then leaks from a helper thread it started (not the role's own)."""
+    import threading
+
+    def leak() -> None:
+        hoard = []
+        while True:
+            hoard.append(np.ones(8 * 2**20, dtype=np.uint8))
+
+    ep.send("K", "chunk", 0)
+    threading.Thread(target=leak, daemon=True).start()
+    ep.sleep(60.0)
+    ep.send("K", "fin")
+
+
+def sleeper(ep: Endpoint) -> None:
+    """Paces itself with ep.sleep for far longer than any test's timeout."""
+    while True:
+        ep.sleep(60.0)
+        ep.send("B", "item", 1)
+
+
+@dataclass(frozen=True, slots=True)
+class Inner:
+    """Not named by any sort: it crosses only as a field of one that is."""
+
+    values: tuple[float, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Outer:
+    label: str
+    inner: Inner
+    more: tuple[Inner, ...] = ()
+
+
+def send_nested(ep: Endpoint) -> None:
+    ep.send("B", "outer", Outer("a", Inner((1.0, 2.5)), (Inner(()), Inner((3.0,)))))
+
+
+def receive_nested(ep: Endpoint) -> None:
+    received = ep.recv("A").payload
+    assert received == Outer("a", Inner((1.0, 2.5)), (Inner(()), Inner((3.0,)))), received

@@ -19,6 +19,7 @@ PROTOCOLS = sessiontypes.loads("""
 type Frame = "process_roles:Frame"
 type Opaque = "process_roles:Opaque"
 type Things = "builtins:dict"
+type Outer = "process_roles:Outer"
 global Ping(A, B) = mu t. A -> B : {ping(nat). B -> A : pong(nat). t, stop}
 global Stream(A, B) = mu t. A -> B : {item(int). t, fin}
 global Frames(A, B) = mu t. A -> B : {frame(Frame). t, fin}
@@ -26,6 +27,8 @@ global Payloads(A, B) = A -> B : thing(Opaque). A -> B : nested(Things)
 global Where(A, B) = A -> B : where(str)
 global Flood(A, B, C, D) = (mu t. A -> B : {blob(bytes). t, fin} || C -> D : hello. D -> C : bye)
 global Gate(A, B, D) = D -> B : go. mu t. A -> B : {blob(bytes). t, fin}
+global Nested(A, B) = A -> B : outer(Outer)
+global Sleepy(A, B) = mu t. A -> B : item(int). t
 global Hog(C, S, H, K) = (mu t. C -> S : {tick(int). t, done} || mu u. H -> K : {chunk(int). u, fin})
 """, "test_process.proto").globals
 
@@ -53,6 +56,30 @@ def test_a_protocol_runs_across_processes_with_monitors_at_both_ends() -> None:
     assert report.messages == {"A->B": 51, "B->A": 50}
     assert report.groups["a"].pid != report.groups["b"].pid
     assert report.transport == "process"
+
+
+def test_a_leak_in_a_thread_a_role_started_stops_the_group_at_its_bound() -> None:
+    report = run("Hog", {
+        "control": {"priority": 80, "roles": {"C": roles.steady_controller, "S": roles.steady_sensor}},
+        "hog": {"memory": "64MiB", "roles": {"H": roles.hog_in_a_thread}},
+        "sink": {"roles": {"K": roles.hog_sink}},
+    }, timeout=30)
+    assert isinstance(report.groups["hog"].error, MemoryBoundError), report.summary()
+    assert report.roles["K"].error.peer == "H"  # type: ignore[union-attr]
+    assert report.roles["C"].status == "done"
+
+
+def test_a_role_pacing_itself_with_ep_sleep_stops_with_the_run() -> None:
+    report = run("Sleepy", {"a": {"roles": {"A": roles.sleeper}}, "b": {"roles": {"B": roles.count_sink}}},
+                 timeout=0.5, grace=30.0)
+    assert report.roles["A"].status == "stopped", report.summary()
+    assert report.outcome == "stopped, no failures"
+    assert report.duration < 30  # woken by the stop: neither the 60 s sleep nor the grace period's kill
+
+
+def test_dataclasses_held_in_fields_of_a_named_dataclass_cross_too() -> None:
+    report = run("Nested", {"a": {"roles": {"A": roles.send_nested}}, "b": {"roles": {"B": roles.receive_nested}}})
+    assert report.ok, report.summary()
 
 
 def test_a_million_messages_cross_in_order() -> None:
