@@ -251,17 +251,17 @@ def free_cell_graph(grid: OccupancyGrid) -> nx.Graph:
     graph = nx.Graph()
     graph.add_nodes_from(zip(*(axis.tolist() for axis in np.nonzero(free))))
 
-    def add(mask: np.ndarray, d_row: int, d_col: int, weight: float) -> None:
-        rows, cols = np.nonzero(mask)
-        rows, cols = rows.tolist(), cols.tolist()
-        graph.add_weighted_edges_from(((r, c), (r + d_row, c + d_col), weight) for r, c in zip(rows, cols))
+    def add(mask: np.ndarray, first: tuple[int, int], second: tuple[int, int], weight: float) -> None:
+        """An edge between the cells at offsets ``first`` and ``second`` from each cell set in ``mask``."""
+        rows, cols = (axis.tolist() for axis in np.nonzero(mask))
+        graph.add_weighted_edges_from(((r + first[0], c + first[1]), (r + second[0], c + second[1]), weight)
+                                      for r, c in zip(rows, cols))
 
-    add(free[:, :-1] & free[:, 1:], 0, 1, 1.0)
-    add(free[:-1, :] & free[1:, :], 1, 0, 1.0)
+    add(free[:, :-1] & free[:, 1:], (0, 0), (0, 1), 1.0)
+    add(free[:-1, :] & free[1:, :], (0, 0), (1, 0), 1.0)
     square = free[:-1, :-1] & free[1:, 1:] & free[:-1, 1:] & free[1:, :-1]
-    add(square, 1, 1, _DIAGONAL)
-    rows, cols = np.nonzero(square)
-    graph.add_weighted_edges_from(((r, c + 1), (r + 1, c), _DIAGONAL) for r, c in zip(rows.tolist(), cols.tolist()))
+    add(square, (0, 0), (1, 1), _DIAGONAL)
+    add(square, (0, 1), (1, 0), _DIAGONAL)
     return graph
 
 

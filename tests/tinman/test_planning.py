@@ -21,7 +21,7 @@ def length(path) -> float:
 
 
 def assert_path_is_safe(world: World, grid, path, start, goal) -> None:
-    assert path[0] == pytest.approx(start, abs=0) and path[-1] == pytest.approx(goal, abs=0)
+    assert path[0] == tuple(start) and path[-1] == tuple(goal)
     for a, b in zip(path, path[1:]):
         assert grid.segment_free(a, b), (a, b)
         # Finer than the grid check: the robot's disc along the whole segment.
