@@ -137,13 +137,22 @@ class TumSequence:
             IndexError: no such frame.
             DatasetError: the image file is missing or is not a 16-bit single-channel PNG.
         """
+        return self.depth_raw(index).astype(np.float32) * np.float32(1.0 / DEPTH_SCALE)
+
+    def depth_raw(self, index: int) -> np.ndarray:
+        """Frame ``index``'s depth image as stored: uint16 (H, W), ``DEPTH_SCALE`` units per metre.
+
+        Raises:
+            IndexError: no such frame.
+            DatasetError: the image file is missing or is not a 16-bit single-channel PNG.
+        """
         path = self._frames[index].depth
         image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if image is None:
             raise DatasetError(path, "missing or unreadable image" if path.exists() else "no such image file")
         if image.dtype != np.uint16 or image.ndim != 2:
             raise DatasetError(path, f"expected a 16-bit depth image, got {image.dtype} {image.shape}")
-        return image.astype(np.float32) * np.float32(1.0 / DEPTH_SCALE)
+        return image
 
     @property
     def groundtruth(self) -> tuple[np.ndarray, np.ndarray] | None:

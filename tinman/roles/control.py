@@ -13,6 +13,7 @@ from ..faults import start_faults
 from ..joystick import scripted_joy, twist_from_joy
 from ..keyboard import Keyboard
 from ..messages import Header, Joy, Time, Twist
+from ..mission import patrol_pursuit
 from ..mixer import Mixer
 from ..records import save_record
 from ..settings import current
@@ -57,7 +58,7 @@ def move(ep: Endpoint) -> None:
     """The mixer: a command to the robot for every command from Control."""
     settings = current()
     start_faults("Move")
-    mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate)
+    mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate, patrol_pursuit())  # as the mission drives
     planner_lost: list[str] = []
     if not settings.paper:  # the planning loop runs beside the control loop: its own thread
         ep.fork()

@@ -9,6 +9,7 @@ from anodize import Endpoint
 from ..faults import start_faults
 from ..geometry import robot_pose
 from ..messages import Header, Path, Pose, PoseStamped, Time
+from ..mission import WAYPOINT_TOLERANCE
 from ..planning import NoPathError, Patrol, Planner
 from ..records import save_record
 from ..settings import current
@@ -26,7 +27,7 @@ def planner(ep: Endpoint) -> None:
     settings = current()
     start_faults("Planner")
     planning = Planner(DEFAULT_WORLD, method=settings.planner, seed=settings.seed)
-    patrol = Patrol(DEFAULT_WORLD)
+    patrol = Patrol(DEFAULT_WORLD, tolerance=WAYPOINT_TOLERANCE)
     path = Path(Header(Time.now(), "map"))
     planned_at = -float("inf")
     plans: list[dict[str, object]] = []
