@@ -34,6 +34,10 @@ __all__ = ["RoomRenderer"]
 _SUBSAMPLES = np.array([[-0.375, -0.125], [0.125, -0.375], [0.375, 0.125], [-0.125, 0.375]],
                        dtype=np.float32)
 _F = np.float32
+# Mip level offset: -0.75 makes frames closest to 16-times supersampled ones (mean
+# error 4.3 levels against 9.2 at 0 and 15 without mip-mapping, measured over four views
+# of a test room); -1 is as close but starts to alias, and shimmer would hurt tracking.
+_LEVEL_BIAS = -0.75
 
 
 class RoomRenderer:
@@ -206,7 +210,8 @@ class RoomRenderer:
         row = v * atlas.lookup(ids, atlas.scale_v) + atlas.lookup(ids, atlas.offset_v)
         normal_component = np.abs(dy + on_x * (dx - dy) + on_z * (dz - dy))
         np.maximum(normal_component, _F(1e-6), out=normal_component)
-        level = np.log2(t) - np.log2(normal_component) + log2_stretch + atlas.lookup(ids, atlas.log2_inv_texel)
+        level = (np.log2(t) - np.log2(normal_component) + log2_stretch
+                 + atlas.lookup(ids, atlas.log2_inv_texel) + _F(_LEVEL_BIAS))
         np.clip(level, 0.0, MIP_LEVELS - 1, out=level)
         return atlas.sample(col, row, level)
 

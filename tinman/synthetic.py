@@ -54,7 +54,7 @@ def add_depth_noise(depth_m: np.ndarray, rng: np.random.Generator) -> np.ndarray
     """
     z = np.asarray(depth_m, dtype=np.float32)
     sigma = np.float32(0.0012) + np.float32(0.0019) * (z - np.float32(0.4)) ** 2
-    noisy = z + sigma * rng.standard_normal(z.shape, dtype=np.float32)
+    noisy = z + sigma * _standard_normal(z.shape, rng)
     valid = (z >= MIN_RANGE) & (z <= MAX_RANGE) & (rng.random(z.shape, dtype=np.float32) >= DROPOUT)
     # A jump of more than 5% of the depth between neighbours is a silhouette, not a slope.
     kernel = np.ones((3, 3), np.uint8)
@@ -63,14 +63,16 @@ def add_depth_noise(depth_m: np.ndarray, rng: np.random.Generator) -> np.ndarray
     valid &= ~(edge & (rng.random(z.shape, dtype=np.float32) < _EDGE_DROPOUT))
     counts = np.rint(noisy * np.float32(DEPTH_SCALE))
     np.clip(counts, 1, np.iinfo(np.uint16).max, out=counts)
-    return np.where(valid, counts, 0).astype(np.uint16)
+    counts *= valid
+    return counts.astype(np.uint16)
 
 
 def add_image_noise(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """A camera's view of a clean image: slight optical blur, then sensor noise.
 
-    The noise is Gaussian with a variance that grows with brightness (read noise of
-    2 levels plus shot noise), independently per pixel and channel.
+    The noise is Gaussian, independent per pixel and channel, with a standard
+    deviation of 2 levels in the dark growing to 3.6 in full light (read noise plus
+    shot noise).
 
     Args:
         rgb: uint8 (H, W, 3) image.
@@ -80,9 +82,18 @@ def add_image_noise(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         uint8 (H, W, 3).
     """
     blurred = cv2.GaussianBlur(rgb, (3, 3), 0.6).astype(np.float32)
-    sigma = np.sqrt(np.float32(4.0) + np.float32(0.03) * blurred)
-    noisy = blurred + sigma * rng.standard_normal(blurred.shape, dtype=np.float32)
-    return np.clip(noisy + np.float32(0.5), 0, 255).astype(np.uint8)
+    sigma = np.float32(2.0) + blurred * np.float32(1.0 / 160.0)
+    noisy = blurred + sigma * _standard_normal(blurred.shape, rng) + np.float32(0.5)
+    return np.clip(noisy, 0, 255).astype(np.uint8)
+
+
+def _standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
+    """Standard normal float32 samples, drawn by OpenCV (three times faster than numpy)
+    from a seed taken from ``rng``, so the result still depends only on ``rng``."""
+    cv2.setRNGSeed(int(rng.integers(1, 2 ** 31 - 1)))
+    samples = np.empty(shape, np.float32)
+    cv2.randn(samples, 0.0, 1.0)
+    return samples
 
 
 def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequence[float],
@@ -204,7 +215,8 @@ def _render_job(job: tuple[int, float, float, np.ndarray]) -> None:
     rgb, depth = renderer.render(pose)
     colour = add_image_noise(rgb, rng)
     depth_png = add_depth_noise(depth, rng)
-    png = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+    # Noisy images hardly compress: Huffman coding alone is as small and much faster.
+    png = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
     _write_png(directory / "rgb" / f"{stamp:.6f}.png", cv2.cvtColor(colour, cv2.COLOR_RGB2BGR), png)
     _write_png(directory / "depth" / f"{depth_stamp:.6f}.png", depth_png, png)
 
