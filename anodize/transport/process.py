@@ -109,6 +109,8 @@ class PipeSender:
         if self.network.stopping:  # the receiver stopped with the run: so do we
             return RoleStopped()
         cause = self.network.wait_for_cause(self.receiver, "its group's process has ended")
+        if self.network.stopping and self.receiver not in self.network.failed:
+            return RoleStopped()
         return PeerFailedError(self.sender, self.receiver, cause)
 
 
@@ -149,6 +151,8 @@ class PipeReceiver:
                 return STOP
             if self._eof:
                 cause = self.network.wait_for_cause(self.sender, "its group's process ended")
+                if self.network.stopping and self.sender not in self.network.failed:
+                    return STOP  # the sender's group ended because the run is stopping
                 return PeerFailure(self.sender, cause)
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
             if not self._fill(left) and deadline is not None and time.monotonic() >= deadline:
@@ -317,13 +321,15 @@ class ProcessNetwork(InprocNetwork):
     def wait_for_cause(self, role: str, default: str) -> str:
         """Why ``role`` failed; wait briefly for the supervisor to say, when its process died."""
         with self._cause_arrived:
-            self._cause_arrived.wait_for(lambda: role in self.failed, timeout=_EOF_CAUSE_WAIT)
+            self._cause_arrived.wait_for(lambda: role in self.failed or self.stopping, timeout=_EOF_CAUSE_WAIT)
             return self.failed.get(role, default)
 
     def stop(self) -> None:
         """Wake every receiver of this process with STOP."""
-        self.stopping = True
-        self.alarm = True
+        with self._cause_arrived:  # a receiver waiting to learn why a peer's process ended: the stop
+            self.stopping = True
+            self.alarm = True
+            self._cause_arrived.notify_all()
         self.stop_event.set()
         os.eventfd_write(self.wake_fd, 1)  # wakes pipe readers; never drained: stop is final
         for (sender, receiver), channel in self.queues.items():
