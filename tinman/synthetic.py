@@ -91,9 +91,10 @@ def _standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.nda
     """Standard normal float32 samples, drawn by OpenCV (three times faster than numpy)
     from a seed taken from ``rng``, so the result still depends only on ``rng``."""
     cv2.setRNGSeed(int(rng.integers(1, 2 ** 31 - 1)))
-    samples = np.empty(shape, np.float32)
+    # One channel: OpenCV would apply the scalar deviation to the first channel only.
+    samples = np.empty((1, int(np.prod(shape))), np.float32)
     cv2.randn(samples, 0.0, 1.0)
-    return samples
+    return samples.reshape(shape)
 
 
 def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequence[float],
