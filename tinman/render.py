@@ -132,26 +132,23 @@ class RoomRenderer:
         """Slab test of box ``b`` on the rays in ``window``; updates the hits in place."""
         lo = self._box_lo[b] - origin
         hi = self._box_hi[b] - origin
-        near = far = enter_axis = going_back = None
+        slabs = []
         for a in range(3):
             inv = inverse[a][window]
             t_lo = _F(lo[a]) * inv
             t_hi = _F(hi[a]) * inv
-            t_in = np.minimum(t_lo, t_hi)
-            t_out = np.maximum(t_lo, t_hi)
-            if near is None:
-                near, far = t_in, t_out
-                enter_axis = np.zeros(near.shape, np.uint8)
-                going_back = (inv < 0).view(np.uint8)
-            else:
-                later = (t_in > near).view(np.uint8)
-                np.maximum(near, t_in, out=near)
-                np.minimum(far, t_out, out=far)
-                enter_axis += later * (np.uint8(a) - enter_axis)
-                if a == 1:
-                    going_back += later * ((inv < 0).view(np.uint8) - going_back)
-                else:  # only the top is entered along z (from above)
-                    going_back -= later * going_back
+            slabs.append((np.minimum(t_lo, t_hi), np.maximum(t_lo, t_hi), (inv < 0).view(np.uint8)))
+        near, far, going_back = slabs[0]
+        enter_axis = np.zeros(near.shape, np.uint8)
+        for a in (1, 2):
+            t_in, t_out, backwards = slabs[a]
+            later = (t_in > near).view(np.uint8)
+            np.maximum(near, t_in, out=near)
+            np.minimum(far, t_out, out=far)
+            enter_axis += later * (np.uint8(a) - enter_axis)
+            # Which of the two faces: x0 or x1, y0 or y1; along z only the top is entered.
+            # (uint8 arithmetic wraps, so "+= later * (new - old)" selects exactly.)
+            going_back += later * ((backwards if a == 1 else np.uint8(0)) - going_back)
         t_window = t[window]
         hit = (near <= far) & (near > 0) & (near < t_window)
         if not hit.any():

@@ -93,7 +93,7 @@ def _standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.nda
     cv2.setRNGSeed(int(rng.integers(1, 2 ** 31 - 1)))
     # One channel: OpenCV would apply the scalar deviation to the first channel only.
     samples = np.empty((1, int(np.prod(shape))), np.float32)
-    cv2.randn(samples, 0.0, 1.0)
+    cv2.randn(samples, np.zeros(1), np.ones(1))
     return samples.reshape(shape)
 
 

@@ -123,19 +123,22 @@ class Atlas:
         samples = []
         for k in (low, high):
             scale = cv2.LUT(k, _LEVEL_SCALE)
-            x = (col + np.float32(0.5)) * scale + cv2.LUT(k, self._column_offset)
-            y = (row + np.float32(0.5)) * scale + cv2.LUT(k, self._row_offset)
+            x = col * scale + cv2.LUT(k, self._column_offset)
+            y = row * scale + cv2.LUT(k, self._row_offset)
             samples.append(cv2.remap(self.image, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
         blended = cv2.blendLinear(samples[0], samples[1], np.float32(1.0) - fraction, fraction)
         return blended.reshape(*shape, 4)
 
     def __post_init__(self) -> None:
         rows0, cols0 = self.level0_shape
-        # Where level k starts in the atlas, minus the half texel of pixel-centred coordinates.
-        self._column_offset = np.full(MAX_SURFACES, cols0 - 0.5, np.float32)
-        self._column_offset[0] = -0.5
-        self._row_offset = np.full(MAX_SURFACES, -0.5, np.float32)
-        self._row_offset[:MIP_LEVELS] += _LEVEL_ROW * rows0
+        # Level k of pixel-centred coordinate c is (c + 0.5) * 2^-k - 0.5, plus where level k
+        # starts in the atlas: c * scale + offset.
+        self._column_offset = np.full(MAX_SURFACES, cols0, np.float32)
+        self._column_offset[0] = 0.0
+        self._row_offset = np.zeros(MAX_SURFACES, np.float32)
+        self._row_offset[:MIP_LEVELS] = _LEVEL_ROW * rows0
+        for offset in (self._column_offset, self._row_offset):
+            offset += 0.5 * _LEVEL_SCALE - 0.5
 
 
 _LEVEL_SCALE = np.zeros(MAX_SURFACES, np.float32)
@@ -172,7 +175,7 @@ def build_atlas(world: World, surfaces: list[Surface], seed: int) -> Atlas:
         level0[r:r + rows, c:c + cols] = pictures[i]
     image = np.zeros((rows0, _ATLAS_WIDTH + _ATLAS_WIDTH // 2, 4), np.uint8)
     image[:, :_ATLAS_WIDTH, :3] = level0
-    level = level0
+    level: np.ndarray = level0
     for k in range(1, MIP_LEVELS):
         level = cv2.resize(level, (level.shape[1] // 2, level.shape[0] // 2), interpolation=cv2.INTER_AREA)
         top = int(round(_LEVEL_ROW[k] * rows0))
