@@ -229,7 +229,7 @@ class Endpoint:
         return self._branches
 
     def sleep(self, seconds: float) -> None:
-        """Wait ``seconds`` (a role's pacing), returning early only to stop with the run.
+        """Wait ``seconds`` (a role's pacing; ``math.inf``: until the run stops).
 
         A role that paces itself with ``time.sleep`` notices a stop only at its next
         send or receive; this wait ends the moment the supervisor stops the run.
@@ -237,7 +237,7 @@ class Endpoint:
         Raises:
             RoleStopped: the run is stopping.
         """
-        if self._network.stop_event.wait(max(0.0, seconds)):
+        if self._network.stop_event.wait(None if seconds == float("inf") else max(0.0, seconds)):
             raise RoleStopped()
 
     # ---- completion ------------------------------------------------------------------

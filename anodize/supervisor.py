@@ -111,17 +111,20 @@ class _Supervisor:
         self.notes: list[str] = []
         self.watchdog = Watchdog(WATCHDOG_LIMIT, self._demoted)
         self.started = time.monotonic()
+        self.went: float | None = None  # when the roles first started (every group ready)
         self.stop_since = 0.0
 
     # ---- the run ---------------------------------------------------------------------------
     def run(self) -> RunReport:
-        deadline = None if self.timeout is None else self.started + self.timeout
         remove_stale_segments()  # of earlier runs whose supervisor was killed
         remove_stale_cgroups()
         try:
             self._start(list(self.system.groups))
             next_status = time.monotonic()
             while self._live():
+                # The timeout is the roles' time: it counts from "go", not from the processes'
+                # start-up (spawning and importing can take seconds).
+                deadline = None if self.timeout is None or self.went is None else self.went + self.timeout
                 now = time.monotonic()
                 if deadline is not None and now >= deadline and not self.stopping:
                     self._stop_all("the timeout passed")
@@ -202,6 +205,8 @@ class _Supervisor:
             if inc.state == "ready":
                 inc.state = "running"
                 self._tell(inc, "go")
+                if self.went is None:
+                    self.went = time.monotonic()
 
     def _check_start_timeouts(self) -> None:
         for inc in self.current.values():

@@ -112,7 +112,9 @@ class System:
         """Run every role to the end of its local type (or until ``timeout`` seconds).
 
         Roles still running at the timeout are stopped (``RoleStopped`` is raised in
-        them at their next send or receive) and reported as "stopped"; ``grace`` is how
+        them at their next send or receive, or in ``Endpoint.sleep``) and reported as
+        "stopped". The timeout counts from when the roles start: with
+        ``transport="process"``, once every group's process is ready. ``grace`` is how
         long they get to stop before their group is killed (process transport) or
         abandoned (inproc). ``on_status``, if given, is called about twice a second
         with a :class:`GroupStatus` per group (from the supervising thread: keep it quick).

@@ -145,7 +145,9 @@ def _judge(data: dict, settings: Settings) -> tuple[bool, list[str]]:
         problems.append(f"{data['violations']} protocol violation(s)")
     for name, group in data["groups"].items():
         if group["status"] == "failed" and name not in settings.inject:
-            problems.append(f"group {name} failed: {(group['error'] or {}).get('message', 'see the report')}")
+            errors = [group["error"]] + [role["error"] for role in data["roles"].values() if role["group"] == name]
+            first = next((error for error in errors if error), {"type": "?", "message": "see the report"})
+            problems.append(f"group {name} failed: {first['type']}: {first['message']}")
         if group["status"] != "failed" and name in settings.inject:
             problems.append(f"group {name} was injected with {settings.inject[name]} but did not fail")
     if not data["frames_processed"] and "perception" not in settings.inject:

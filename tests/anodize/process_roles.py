@@ -298,3 +298,10 @@ def send_nested(ep: Endpoint) -> None:
 def receive_nested(ep: Endpoint) -> None:
     received = ep.recv("A").payload
     assert received == Outer("a", Inner((1.0, 2.5)), (Inner(()), Inner((3.0,)))), received
+
+
+def sleep_for_ever(ep: Endpoint) -> None:
+    import math
+
+    ep.send("B", "item", 0)
+    ep.sleep(math.inf)

@@ -257,3 +257,9 @@ def test_recv_any_across_processes_is_stopped_at_the_timeout() -> None:
     report = run("Ping", {"a": {"roles": {"A": roles.sleepy_server}},
                           "b": {"roles": {"B": roles.any_receiver}}}, timeout=1.0, grace=2.0)
     assert report.roles["B"].status == "stopped", report.summary()
+
+
+def test_ep_sleep_for_ever_ends_with_the_run() -> None:
+    report = run("Sleepy", {"a": {"roles": {"A": roles.sleep_for_ever}}, "b": {"roles": {"B": roles.count_sink}}},
+                 timeout=0.5, grace=30.0)
+    assert report.roles["A"].status == "stopped", report.summary()

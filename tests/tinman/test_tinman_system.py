@@ -1,0 +1,72 @@
+"""The whole TinMan system, run the way the README runs it, for a few seconds each."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from anodize import cli
+from tinman.sequences import generate
+from tinman.settings import ENVIRONMENT_VARIABLE
+
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 6 s synthetic sequence: the start of the default patrol (runs past its end idle the camera)."""
+    return generate(tmp_path_factory.mktemp("sequence") / "room", duration=6.0)
+
+
+def run_tinman(monkeypatch: pytest.MonkeyPatch, out: Path, sequence: Path, *options: str) -> dict:
+    monkeypatch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the test: the run exports its own
+    status = cli.main(["run", "tinman", "--quiet", "--dataset", str(sequence), "--out", str(out), *options])
+    report = json.loads((out / "report.json").read_text())
+    assert (out / "trajectory.png").stat().st_size > 10_000
+    assert status == (0 if report["ok"] else 1)
+    return report
+
+
+def test_tinman_runs_with_every_group_and_no_violation(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, sequence: Path) -> None:
+    report = run_tinman(monkeypatch, tmp_path, sequence, "--duration", "6")
+    assert report["ok"], report["problems"]
+    assert report["global"] == "TinManParallel" and report["outcome"] == "stopped, no failures"
+    assert report["violations"] == 0
+    assert set(report["groups"]) == {"control", "perception", "planning", "simulation"}
+    assert all(group["status"] == "stopped" for group in report["groups"].values())
+    assert report["frames_processed"] > 30
+    assert report["ate_rmse_m"] is not None and report["ate_percent"] < 5.0
+    assert report["control_period_ms"]["p50"] is not None
+    for channel in ("Joy->Control", "Control->Move", "Move->Gazebo", "Camera->VisOdom",
+                    "VisOdom->Visualizer", "VisOdom->Planner", "Planner->Move"):
+        assert report["messages"][channel] > 0, channel
+    # The control loop outpaces the camera loop, which outpaces the planning loop.
+    assert report["messages"]["Move->Gazebo"] > report["messages"]["Camera->VisOdom"] > \
+        report["messages"]["Planner->Move"]
+    assert report["control"]["sources"]["path"] > 0  # the robot followed plans
+    assert report["robot"]["distance_m"] > 0.3 and report["robot"]["bumps"] == 0
+
+
+def test_a_leaking_planner_is_stopped_while_control_keeps_driving(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, sequence: Path) -> None:
+    report = run_tinman(monkeypatch, tmp_path, sequence, "--duration", "9", "--inject", "memory-hog=planning")
+    assert report["ok"], report["problems"]
+    planning = report["groups"]["planning"]
+    assert planning["status"] == "failed" and planning["error"]["type"] == "MemoryBoundError"
+    assert report["groups"]["control"]["status"] == "stopped"      # ran until the end
+    assert report["groups"]["perception"]["status"] == "stopped"
+    assert report["control"]["planner_lost"] is not None
+    # The scripted joystick's turn at 6 s came after the planner was gone, and was obeyed.
+    assert report["control"]["teleop_commands_after_planner_lost"] > 0
+    assert report["violations"] == 0
+
+
+def test_the_papers_single_loop_also_runs(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, sequence: Path) -> None:
+    report = run_tinman(monkeypatch, tmp_path, sequence, "--duration", "4", "--paper")
+    assert report["global"] == "TinMan" and report["violations"] == 0
+    assert report["ok"], report["problems"]
+    # One loop: every channel carries about as many messages as the camera's.
+    camera = report["messages"]["Camera->VisOdom"]
+    assert abs(report["messages"]["Move->Gazebo"] - camera) <= 1
+    assert abs(report["messages"]["Planner->Move"] - camera) <= 1
