@@ -66,7 +66,9 @@ def test_the_papers_single_loop_also_runs(monkeypatch: pytest.MonkeyPatch, tmp_p
     report = run_tinman(monkeypatch, tmp_path, sequence, "--duration", "4", "--paper")
     assert report["global"] == "TinMan" and report["violations"] == 0
     assert report["ok"], report["problems"]
-    # One loop: every channel carries about as many messages as the camera's.
-    camera = report["messages"]["Camera->VisOdom"]
-    assert abs(report["messages"]["Move->Gazebo"] - camera) <= 1
-    assert abs(report["messages"]["Planner->Move"] - camera) <= 1
+    # One loop: Move waits for a Path per camera frame, so the robot's commands go at the
+    # camera's pace (30 Hz at most) while the joystick's queue up at 50 Hz.
+    messages = report["messages"]
+    assert abs(messages["Move->Gazebo"] - messages["Planner->Move"]) <= 1
+    assert messages["Move->Gazebo"] <= messages["Camera->VisOdom"]
+    assert messages["Move->Gazebo"] < 0.8 * messages["Joy->Control"]
