@@ -336,7 +336,7 @@ def _named_systems() -> list[str]:
 
 def _is_named_run(argv: list[str]) -> bool:
     return (len(argv) >= 2 and argv[0] == "run" and not argv[1].startswith("-")
-            and not Path(argv[1]).exists() and argv[1] in _named_systems())
+            and not Path(argv[1]).is_file() and argv[1] in _named_systems())
 
 
 def _run_named(name: str, rest: list[str]) -> int:
