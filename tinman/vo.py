@@ -70,6 +70,8 @@ class VisualOdometry:
         keyframe_inliers: ... or below this absolute count.
         min_depth, max_depth: depth readings outside this range (metres) are not used.
         reprojection_error: the RANSAC inlier threshold, in pixels.
+        ratio: a match's descriptor distance must be below this fraction of the runner-up's.
+        search_radius: how far (pixels) from its predicted position a keyframe point is looked for.
         max_failures: after this many failed frames in a row, restart from the current
             frame as a keyframe at the last pose (the view has moved on).
     """
@@ -77,7 +79,8 @@ class VisualOdometry:
     def __init__(self, intrinsics: Intrinsics, initial_pose: np.ndarray | None = None, features: int = 1000,
                  min_inliers: int = 20, keyframe_fraction: float = 0.5, keyframe_inliers: int = 120,
                  min_depth: float = 0.3, max_depth: float = 6.0, reprojection_error: float = 2.0,
-                 ratio: float = 0.8, max_failures: int = 3) -> None:
+                 ratio: float = 0.8, search_radius: float = 20.0, max_failures: int = 3,
+                 pyramid_levels: int = 2, scale_factor: float = 1.3, fast_threshold: int = 20) -> None:
         self.intrinsics = intrinsics
         self.camera_matrix = intrinsics.matrix()
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
@@ -87,12 +90,14 @@ class VisualOdometry:
         self.min_depth, self.max_depth = min_depth, max_depth
         self.reprojection_error = reprojection_error
         self.ratio = ratio
+        self.search_radius = search_radius
         self.max_failures = max_failures
         self.last: TrackStats | None = None
         self.frames = 0
         self.failures = 0
         self.keyframes = 0
-        self._orb = cv2.ORB_create(nfeatures=features, scaleFactor=1.2, nlevels=8, fastThreshold=12)
+        self._orb = cv2.ORB_create(nfeatures=features, scaleFactor=scale_factor, nlevels=pyramid_levels,
+                                   fastThreshold=fast_threshold)
         self._matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
         self._keyframe: _Keyframe | None = None
         self._relative = np.eye(4)  # T_kc of the last frame tracked
@@ -115,20 +120,21 @@ class VisualOdometry:
         # features are only useful if they can match a keyframe's.
         mask = ((depth_m >= self.min_depth) & (depth_m <= self.max_depth)).view(np.uint8)
         keypoints, descriptors = self._orb.detectAndCompute(gray, mask)
+        pixels = cv2.KeyPoint_convert(keypoints).reshape(-1, 2) if keypoints else np.zeros((0, 2), np.float32)
         index = self.frames
         self.frames += 1
         if self._keyframe is None:
-            made = self._make_keyframe(keypoints, descriptors, depth_m, self.pose)
+            made = self._make_keyframe(pixels, descriptors, depth_m, self.pose)
             self._finish(start, index, len(keypoints), 0, 0, made, failed=not made)
             return self.pose.copy()
 
-        matches, inliers, relative = self._relative_pose(keypoints, descriptors)
+        matches, inliers, relative = self._relative_pose(pixels, descriptors)
         if relative is None:
             self.failures += 1
             self._failed_in_a_row += 1
             restart = self._failed_in_a_row >= self.max_failures
             if restart:  # keep the last pose, but measure from what is in view now
-                self._make_keyframe(keypoints, descriptors, depth_m, self.pose)
+                self._make_keyframe(pixels, descriptors, depth_m, self.pose)
             self._motion = np.eye(4)
             self._finish(start, index, len(keypoints), matches, 0, restart, failed=True)
             return self.pose.copy()
@@ -144,60 +150,88 @@ class VisualOdometry:
         switch = (inliers < self.keyframe_inliers
                   or inliers < self.keyframe_fraction * keyframe.reference_inliers)
         if switch:
-            switch = self._make_keyframe(keypoints, descriptors, depth_m, pose)
+            switch = self._make_keyframe(pixels, descriptors, depth_m, pose)
         self._finish(start, index, len(keypoints), matches, inliers, switch, failed=False)
         return pose.copy()
 
     # ---- steps ---------------------------------------------------------------------------
 
-    def _relative_pose(self, keypoints: tuple, descriptors: np.ndarray | None
+    def _relative_pose(self, pixels: np.ndarray, descriptors: np.ndarray | None
                        ) -> tuple[int, int, np.ndarray | None]:
-        """``(matches, inliers, T_kc)`` of the frame against the keyframe; ``T_kc`` None on failure."""
+        """``(matches, inliers, T_kc)`` of the frame against the keyframe; ``T_kc`` None on failure.
+
+        Matches are first searched near where the constant-velocity prediction puts the
+        keyframe's points (fast, and few outliers); if that finds too little, among all
+        features (a turn started, or tracking was lost).
+        """
         keyframe = self._keyframe
         assert keyframe is not None
         if descriptors is None or len(keyframe.descriptors) < 2 or len(descriptors) < 2:
             return 0, 0, None
-        pairs = self._matcher.knnMatch(keyframe.descriptors, descriptors, k=2)
-        object_index, image_index = [], []
-        for pair in pairs:
-            if len(pair) == 2 and pair[0].distance < self.ratio * pair[1].distance:
-                object_index.append(pair[0].queryIdx)
-                image_index.append(pair[0].trainIdx)
-        if len(object_index) < self.min_inliers:
-            return len(object_index), 0, None
-        objects = keyframe.points[object_index]
-        image = np.array([keypoints[i].pt for i in image_index], dtype=np.float32)
-
-        # Predict with constant velocity and drop matches far from where the point should be:
-        # cheap, and it removes most outliers before RANSAC sees them.
-        predicted = self._relative @ self._motion
-        rvec, tvec = _rodrigues(np.linalg.inv(predicted))
-        projected, _ = cv2.projectPoints(objects, rvec, tvec, self.camera_matrix, None)
-        near = np.linalg.norm(projected.reshape(-1, 2) - image, axis=1) < 80.0
+        camera_from_keyframe = np.linalg.inv(self._relative @ self._motion)  # predicted
+        rvec, _ = cv2.Rodrigues(camera_from_keyframe[:3, :3])
+        tvec = camera_from_keyframe[:3, 3].reshape(3, 1).copy()
+        projected = self._project(keyframe.points, camera_from_keyframe)
+        best: tuple[int, int, np.ndarray | None] = (0, 0, None)
+        if self._failed_in_a_row == 0:
+            query, train = _guided_matches(projected, keyframe.descriptors, pixels, descriptors,
+                                           self.search_radius, self.ratio, self.intrinsics)
+            best = self._solve(keyframe.points[query], pixels[train], rvec, tvec)
+            if best[1] >= self.keyframe_inliers:
+                return best
+        query, train = self._global_matches(keyframe.descriptors, descriptors)
+        # Drop matches far from where the point should be: it removes most outliers
+        # before RANSAC sees them (unless the prediction itself is off).
+        near = np.linalg.norm(projected[query] - pixels[train], axis=1) < 80.0
         if near.sum() >= self.min_inliers:
-            objects, image = objects[near], image[near]
+            query, train = query[near], train[near]
+        found = self._solve(keyframe.points[query], pixels[train], rvec, tvec)
+        return found if found[1] > best[1] else best
+
+    def _project(self, points: np.ndarray, camera_from_points: np.ndarray) -> np.ndarray:
+        """Pixel positions of 3D points (N x 2); far outside the image for points behind the camera."""
+        camera = points @ camera_from_points[:3, :3].T + camera_from_points[:3, 3]
+        z = camera[:, 2]
+        in_front = z > 0.05
+        safe_z = np.where(in_front, z, 1.0)
+        k = self.intrinsics
+        pixels = np.column_stack([k.fx * camera[:, 0] / safe_z + k.cx, k.fy * camera[:, 1] / safe_z + k.cy])
+        pixels[~in_front] = -1e6
+        return pixels
+
+    def _global_matches(self, query: np.ndarray, train: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ratio-tested nearest neighbours of every query descriptor among all train descriptors."""
+        pairs = self._matcher.knnMatch(query, train, k=2)
+        kept = [(a.queryIdx, a.trainIdx) for a, b in (p for p in pairs if len(p) == 2)
+                if a.distance < self.ratio * b.distance]
+        indices = np.array(kept, dtype=np.int64).reshape(-1, 2)
+        return indices[:, 0], indices[:, 1]
+
+    def _solve(self, objects: np.ndarray, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
+               ) -> tuple[int, int, np.ndarray | None]:
+        """PnP with RANSAC, refined on the inliers: ``(matches, inliers, T_kc or None)``."""
         matches = len(objects)
         if matches < self.min_inliers:
             return matches, 0, None
         found, rvec, tvec, inliers = cv2.solvePnPRansac(
-            objects, image, self.camera_matrix, None, rvec.copy(), tvec.copy(), useExtrinsicGuess=False,
-            iterationsCount=100, reprojectionError=self.reprojection_error, confidence=0.999,
-            flags=cv2.SOLVEPNP_AP3P)
+            objects, image.astype(np.float32), self.camera_matrix, None, rvec.copy(), tvec.copy(),
+            useExtrinsicGuess=False, iterationsCount=100, reprojectionError=self.reprojection_error,
+            confidence=0.999, flags=cv2.SOLVEPNP_AP3P)
         if not found or inliers is None or len(inliers) < self.min_inliers:
             return matches, 0 if inliers is None else len(inliers), None
         inliers = inliers.ravel()
-        rvec, tvec = cv2.solvePnPRefineLM(objects[inliers], image[inliers], self.camera_matrix, None, rvec, tvec)
+        rvec, tvec = cv2.solvePnPRefineLM(objects[inliers], image[inliers].astype(np.float32),
+                                          self.camera_matrix, None, rvec, tvec)
         camera_from_keyframe = np.eye(4)
         camera_from_keyframe[:3, :3] = cv2.Rodrigues(rvec)[0]
         camera_from_keyframe[:3, 3] = tvec.ravel()
         return matches, len(inliers), np.linalg.inv(camera_from_keyframe)
 
-    def _make_keyframe(self, keypoints: tuple, descriptors: np.ndarray | None, depth_m: np.ndarray,
+    def _make_keyframe(self, pixels: np.ndarray, descriptors: np.ndarray | None, depth_m: np.ndarray,
                        pose: np.ndarray) -> bool:
         """Make this frame the keyframe at ``pose``; False (nothing changed) if too few points have depth."""
-        if descriptors is None or not keypoints:
+        if descriptors is None or len(pixels) == 0:
             return False
-        pixels = np.array([k.pt for k in keypoints], dtype=np.float32)
         depth = _reliable_depth(depth_m, self.min_depth, self.max_depth)
         cols = np.clip(np.rint(pixels[:, 0]).astype(int), 0, depth.shape[1] - 1)
         rows = np.clip(np.rint(pixels[:, 1]).astype(int), 0, depth.shape[0] - 1)
@@ -219,6 +253,76 @@ class VisualOdometry:
                                (time.perf_counter() - start) * 1000.0)
 
 
+_MAX_HAMMING = 64  # of 256 bits: above this two ORB descriptors are not the same corner
+
+
+def _guided_matches(projected: np.ndarray, query: np.ndarray, pixels: np.ndarray, train: np.ndarray,
+                    radius: float, ratio: float, intrinsics: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """Match each projected query point with the features within ``radius`` pixels of it.
+
+    The features are bucketed in a grid of ``radius``-sized cells, so each point compares
+    its descriptor only with those in the 3x3 cells around it. A match must be the
+    point's nearest descriptor there, clearly nearer than the second (``ratio``), near
+    enough (``_MAX_HAMMING``), and each feature is used at most once (its nearest point).
+
+    Returns:
+        ``(query indices, train indices)`` of the matches.
+    """
+    empty = np.zeros(0, dtype=np.intp)
+    # Bucket the features in cells, with a border of empty cells all round so that
+    # every point's 3x3 neighbourhood exists: counts/starts give each cell's run in order.
+    stride = int(intrinsics.width // radius) + 3
+    cell_count = (int(intrinsics.height // radius) + 3) * stride
+    feature_x, feature_y = pixels[:, 0], pixels[:, 1]
+    feature_cells = ((feature_y // radius).astype(np.intp) + 1) * stride + (feature_x // radius).astype(np.intp) + 1
+    order = np.argsort(feature_cells, kind="stable")
+    counts = np.bincount(feature_cells, minlength=cell_count)
+    starts = np.cumsum(counts) - counts
+
+    point_x, point_y = projected[:, 0], projected[:, 1]
+    points = np.flatnonzero((point_x >= 0) & (point_x < intrinsics.width)
+                            & (point_y >= 0) & (point_y < intrinsics.height))
+    centre = ((point_y[points] // radius).astype(np.intp) + 1) * stride + (point_x[points] // radius).astype(np.intp) + 1
+    neighbourhood = np.array([row * stride + column for row in (-1, 0, 1) for column in (-1, 0, 1)])
+    cells = (centre[:, None] + neighbourhood).ravel()
+    lengths = counts[cells]
+    total = int(lengths.sum())
+    if total == 0:
+        return empty, empty
+    # Every (point, feature in its neighbourhood) pair; a point's pairs stay contiguous.
+    candidate_query = np.repeat(np.repeat(points, 9), lengths)
+    run_start = np.cumsum(lengths) - lengths
+    candidate_train = order[np.repeat(starts[cells] - run_start, lengths) + np.arange(total)]
+    dx = point_x[candidate_query] - feature_x[candidate_train]
+    dy = point_y[candidate_query] - feature_y[candidate_train]
+    near = dx * dx + dy * dy < radius * radius
+    candidate_query, candidate_train = candidate_query[near], candidate_train[near]
+    if len(candidate_query) == 0:
+        return empty, empty
+    # Hamming distances of the 256-bit descriptors, as four 64-bit words each.
+    words_query = np.ascontiguousarray(query).view(np.uint64)
+    words_train = np.ascontiguousarray(train).view(np.uint64)
+    distance = np.bitwise_count(words_query[candidate_query] ^ words_train[candidate_train]).sum(
+        axis=1, dtype=np.int32)
+
+    # Best and second best of each point's (contiguous) group of candidates.
+    new_group = np.r_[True, candidate_query[1:] != candidate_query[:-1]]
+    group_start = np.flatnonzero(new_group)
+    group = np.cumsum(new_group) - 1
+    best = np.minimum.reduceat(distance, group_start)
+    at_best = np.flatnonzero(distance == best[group])
+    best_index = at_best[np.r_[True, group[at_best][1:] != group[at_best][:-1]]]
+    runner_up = distance.copy()
+    runner_up[best_index] = 1 << 16
+    second = np.minimum.reduceat(runner_up, group_start)
+    keep = best_index[(best <= _MAX_HAMMING) & (best < ratio * second)]
+    # One feature, one point: the nearest descriptor wins.
+    keep = keep[np.argsort(distance[keep], kind="stable")]
+    _, unique = np.unique(candidate_train[keep], return_index=True)
+    keep = keep[unique]
+    return candidate_query[keep], candidate_train[keep]
+
+
 def _reliable_depth(depth_m: np.ndarray, min_depth: float, max_depth: float) -> np.ndarray:
     """Depth smoothed over 3x3 pixels, 0 where a reading is missing, out of range or on an edge.
 
@@ -234,10 +338,6 @@ def _reliable_depth(depth_m: np.ndarray, min_depth: float, max_depth: float) -> 
     ok = (low >= min_depth) & (high <= max_depth) & (high - low <= 0.08 * mean)
     return np.where(ok, mean, 0.0).astype(np.float32)
 
-
-def _rodrigues(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    rvec, _ = cv2.Rodrigues(pose[:3, :3])
-    return rvec, pose[:3, 3].reshape(3, 1).copy()
 
 
 # ---- running over a recorded sequence ----------------------------------------------------------
