@@ -282,12 +282,12 @@ def _graph(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _system_file(path: str) -> Path:
+def _system_file(path: str, named: bool = False) -> Path:
     file = Path(path)
     if file.is_dir():
         raise UsageError(f"{path} is a directory; expected a system file (.toml)")
     if not file.exists():
-        names = _named_systems()
+        names = _named_systems() if named and file.suffix != ".toml" else []
         known = f" or named system (named systems: {', '.join(names)})" if names else ""
         raise UsageError(f"no such system file{known}: {path}")
     if file.suffix != ".toml":
@@ -315,7 +315,7 @@ def _run(args: argparse.Namespace) -> int:
 
     if args.timeout is not None and not args.timeout > 0:
         raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
-    config = load_config(_system_file(args.file))
+    config = load_config(_system_file(args.file, named=True))
     system = build_system(config)
     timeout = args.timeout if args.timeout is not None else config.timeout
     report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout))

@@ -121,7 +121,8 @@ class RunReport:
         return "NOT ok" if self.failed else "stopped, no failures"
 
     def summary(self) -> str:
-        """A few lines for people: one per group, then each role that did not finish."""
+        """A few lines for people: one per group, then each role that failed (and, when
+        some did, each role that was stopped)."""
         lines = [f"protocol {self.protocol}: {self.outcome} in {self.duration:.2f} s"
                  f" ({self.transport})"]
         for group in self.groups.values():
@@ -129,7 +130,8 @@ class RunReport:
             if group.error is not None:
                 lines.append(f"    {type(group.error).__name__}: {group.error}")
         for role in self.roles.values():
-            if role.status != "done":
+            # A run its timeout ended stops every role: listing them all says nothing.
+            if role.status == "failed" or (role.status == "stopped" and self.failed):
                 lines.append(f"  role {role.name}: {role.status}" + (f": {role.error}" if role.error else ""))
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)

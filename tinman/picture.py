@@ -36,7 +36,7 @@ def draw_run(path: str | Path, settings: Settings, estimate: Sequence[Sequence[f
         title: the headline (e.g. the ATE); a plain one when empty.
     """
     records = load_records(settings.records)
-    figure, axes = plt.subplots(figsize=(10, 7.8), dpi=110)
+    figure, axes = plt.subplots(figsize=(11.5, 6.4), dpi=110)
     _draw_room(axes, world)
     stamps_seen = _draw_estimate(axes, settings, estimate)
     _draw_truth(axes, settings, stamps_seen)

@@ -450,7 +450,8 @@ def test_run_stops_roles_at_the_timeout_of_the_command_line(
     path = system_file("cli_run_roles:forever", "cli_run_roles:consumer", extra="timeout = 60\n")
     status, out, _ = run(capsys, "run", str(path), "--quiet", "--timeout", "0.2")
     assert status == 1
-    assert "  role P: stopped\n" in out and "  role C: stopped\n" in out
+    assert out.startswith("protocol Stream: stopped, no failures in ")
+    assert "  group a: stopped (" in out and "role P" not in out
 
 
 def test_run_errors_of_the_system_file_exit_1(
