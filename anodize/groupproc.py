@@ -9,8 +9,8 @@ and hands it a :class:`GroupSpec` and its pipes. The process then:
    sets the memory bound, reports "ready" and waits for "go";
 4. runs, sending a heartbeat (memory in use, messages sent) four times a second
    and a report per role as each ends; a failed role's receivers are told;
-5. exits when every role has ended. A role meeting ``MemoryError`` stops the
-   whole group at once (``os._exit``: every thread, and the memory goes back to
+5. exits when every role has ended. A role (or a thread it started) meeting ``MemoryError``
+   stops the whole group at once (``os._exit``: every thread, and the memory goes back to
    the OS) after reporting the bound and the peak.
 
 Everything sent to the supervisor is plain data encoded by :mod:`anodize.codec`
