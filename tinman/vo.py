@@ -1,8 +1,14 @@
 """RGB-D visual odometry: ORB features, depth back-projection and PnP against a keyframe.
 
 Each frame's ORB features are matched against those of the current keyframe, whose
-3D points come from its depth image. ``cv2.solvePnPRansac`` finds the frame's pose
-relative to the keyframe and ``cv2.solvePnPRefineLM`` polishes it on the inliers.
+3D points come from its depth image: first near where a constant-velocity
+prediction puts them, else among all features. ``cv2.solvePnPRansac`` finds the
+frame's pose relative to the keyframe, and Gauss-Newton refines it on the inliers
+with two kinds of residual: reprojection errors, and the difference between the
+depth this frame reads at a feature and the depth its keyframe point should have.
+The second kind matters: from reprojections alone a small sideways step is hard to
+tell from a small turn when the points lie at similar depths.
+
 Measuring against a keyframe rather than the previous frame keeps frame-to-frame
 noise from adding up: error accumulates only when the keyframe changes, which
 happens when too few of its points are still seen.
@@ -74,13 +80,23 @@ class VisualOdometry:
         search_radius: how far (pixels) from its predicted position a keyframe point is looked for.
         max_failures: after this many failed frames in a row, restart from the current
             frame as a keyframe at the last pose (the view has moved on).
+        pyramid_levels, scale_factor, fast_threshold: ORB's detector settings.
+        use_depth: refine with this frame's depth readings too (else reprojection only,
+            with ``cv2.solvePnPRefineLM``).
+        pixel_sigma: the feature position noise assumed by the refinement, in pixels.
+
+    Attributes:
+        pose: ``T_wc`` of the last frame tracked (the initial pose before any).
+        last: statistics of the last frame tracked (None before any).
+        frames, failures, keyframes: counts so far.
     """
 
-    def __init__(self, intrinsics: Intrinsics, initial_pose: np.ndarray | None = None, features: int = 1000,
+    def __init__(self, intrinsics: Intrinsics, initial_pose: np.ndarray | None = None, features: int = 1000, *,
                  min_inliers: int = 20, keyframe_fraction: float = 0.5, keyframe_inliers: int = 120,
                  min_depth: float = 0.3, max_depth: float = 6.0, reprojection_error: float = 2.0,
                  ratio: float = 0.8, search_radius: float = 20.0, max_failures: int = 3,
-                 pyramid_levels: int = 2, scale_factor: float = 1.3, fast_threshold: int = 20) -> None:
+                 pyramid_levels: int = 2, scale_factor: float = 1.3, fast_threshold: int = 20,
+                 use_depth: bool = True, pixel_sigma: float = 2.0) -> None:
         self.intrinsics = intrinsics
         self.camera_matrix = intrinsics.matrix()
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
@@ -91,6 +107,8 @@ class VisualOdometry:
         self.reprojection_error = reprojection_error
         self.ratio = ratio
         self.search_radius = search_radius
+        self.use_depth = use_depth
+        self.pixel_sigma = pixel_sigma
         self.max_failures = max_failures
         self.last: TrackStats | None = None
         self.frames = 0
@@ -113,8 +131,14 @@ class VisualOdometry:
 
         Returns:
             ``T_wc`` (4x4) of this frame; the previous frame's when tracking failed.
+
+        Raises:
+            ValueError: the two images differ in size.
         """
         start = time.perf_counter()
+        if rgb.shape[:2] != depth_m.shape[:2] or depth_m.ndim != 2:
+            raise ValueError(f"colour image {rgb.shape} and depth image {depth_m.shape} "
+                             "must have the same height and width (depth: one channel)")
         gray = rgb if rgb.ndim == 2 else cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
         # Features only where there is depth: a keyframe needs them in 3D, and a frame's
         # features are only useful if they can match a keyframe's.
@@ -125,10 +149,11 @@ class VisualOdometry:
         self.frames += 1
         if self._keyframe is None:
             made = self._make_keyframe(pixels, descriptors, depth_m, self.pose)
+            self.failures += not made
             self._finish(start, index, len(keypoints), 0, 0, made, failed=not made)
             return self.pose.copy()
 
-        matches, inliers, relative = self._relative_pose(pixels, descriptors)
+        matches, inliers, relative = self._relative_pose(pixels, descriptors, depth_m)
         if relative is None:
             self.failures += 1
             self._failed_in_a_row += 1
@@ -156,7 +181,7 @@ class VisualOdometry:
 
     # ---- steps ---------------------------------------------------------------------------
 
-    def _relative_pose(self, pixels: np.ndarray, descriptors: np.ndarray | None
+    def _relative_pose(self, pixels: np.ndarray, descriptors: np.ndarray | None, depth_m: np.ndarray
                        ) -> tuple[int, int, np.ndarray | None]:
         """``(matches, inliers, T_kc)`` of the frame against the keyframe; ``T_kc`` None on failure.
 
@@ -176,8 +201,8 @@ class VisualOdometry:
         if self._failed_in_a_row == 0:
             query, train = _guided_matches(projected, keyframe.descriptors, pixels, descriptors,
                                            self.search_radius, self.ratio, self.intrinsics)
-            best = self._solve(keyframe.points[query], pixels[train], rvec, tvec)
-            if best[1] >= self.keyframe_inliers:
+            best = self._solve(keyframe.points[query], pixels[train], depth_m, rvec, tvec)
+            if best[2] is not None and best[1] >= self.keyframe_inliers:
                 return best
         query, train = self._global_matches(keyframe.descriptors, descriptors)
         # Drop matches far from where the point should be: it removes most outliers
@@ -185,7 +210,7 @@ class VisualOdometry:
         near = np.linalg.norm(projected[query] - pixels[train], axis=1) < 80.0
         if near.sum() >= self.min_inliers:
             query, train = query[near], train[near]
-        found = self._solve(keyframe.points[query], pixels[train], rvec, tvec)
+        found = self._solve(keyframe.points[query], pixels[train], depth_m, rvec, tvec)
         return found if found[1] > best[1] else best
 
     def _project(self, points: np.ndarray, camera_from_points: np.ndarray) -> np.ndarray:
@@ -207,9 +232,10 @@ class VisualOdometry:
         indices = np.array(kept, dtype=np.int64).reshape(-1, 2)
         return indices[:, 0], indices[:, 1]
 
-    def _solve(self, objects: np.ndarray, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
-               ) -> tuple[int, int, np.ndarray | None]:
-        """PnP with RANSAC, refined on the inliers: ``(matches, inliers, T_kc or None)``."""
+    def _solve(self, objects: np.ndarray, image: np.ndarray, depth_m: np.ndarray, rvec: np.ndarray,
+               tvec: np.ndarray) -> tuple[int, int, np.ndarray | None]:
+        """PnP with RANSAC, refined on the inliers with this frame's depth too:
+        ``(matches, inliers, T_kc or None)``."""
         matches = len(objects)
         if matches < self.min_inliers:
             return matches, 0, None
@@ -220,11 +246,18 @@ class VisualOdometry:
         if not found or inliers is None or len(inliers) < self.min_inliers:
             return matches, 0 if inliers is None else len(inliers), None
         inliers = inliers.ravel()
-        rvec, tvec = cv2.solvePnPRefineLM(objects[inliers], image[inliers].astype(np.float32),
-                                          self.camera_matrix, None, rvec, tvec)
         camera_from_keyframe = np.eye(4)
         camera_from_keyframe[:3, :3] = cv2.Rodrigues(rvec)[0]
         camera_from_keyframe[:3, 3] = tvec.ravel()
+        if self.use_depth:
+            depths = _depth_at(depth_m, image[inliers], self.min_depth, self.max_depth)
+            camera_from_keyframe = _refine(camera_from_keyframe, objects[inliers], image[inliers].astype(np.float64),
+                                           depths, self.intrinsics, self.pixel_sigma)
+        else:
+            rvec, tvec = cv2.solvePnPRefineLM(objects[inliers], image[inliers].astype(np.float32),
+                                              self.camera_matrix, None, rvec, tvec)
+            camera_from_keyframe[:3, :3] = cv2.Rodrigues(rvec)[0]
+            camera_from_keyframe[:3, 3] = tvec.ravel()
         return matches, len(inliers), np.linalg.inv(camera_from_keyframe)
 
     def _make_keyframe(self, pixels: np.ndarray, descriptors: np.ndarray | None, depth_m: np.ndarray,
@@ -232,10 +265,7 @@ class VisualOdometry:
         """Make this frame the keyframe at ``pose``; False (nothing changed) if too few points have depth."""
         if descriptors is None or len(pixels) == 0:
             return False
-        depth = _reliable_depth(depth_m, self.min_depth, self.max_depth)
-        cols = np.clip(np.rint(pixels[:, 0]).astype(int), 0, depth.shape[1] - 1)
-        rows = np.clip(np.rint(pixels[:, 1]).astype(int), 0, depth.shape[0] - 1)
-        z = depth[rows, cols]
+        z = _depth_at(depth_m, pixels, self.min_depth, self.max_depth)
         valid = z > 0
         if valid.sum() < self.min_inliers:
             return False
@@ -323,21 +353,84 @@ def _guided_matches(projected: np.ndarray, query: np.ndarray, pixels: np.ndarray
     return candidate_query[keep], candidate_train[keep]
 
 
-def _reliable_depth(depth_m: np.ndarray, min_depth: float, max_depth: float) -> np.ndarray:
-    """Depth smoothed over 3x3 pixels, 0 where a reading is missing, out of range or on an edge.
+def _depth_at(depth_m: np.ndarray, pixels: np.ndarray, min_depth: float, max_depth: float) -> np.ndarray:
+    """The depth at each pixel, averaged over its 3x3 neighbourhood; 0 where it is not reliable.
 
-    A corner feature often sits on a depth edge, where the reading may belong to the
-    background or the foreground: those are dropped (spread over 3x3 above 8% of the depth;
-    a far floor seen at a grazing angle spreads about 4%).
+    Not reliable: a reading missing or out of range in the neighbourhood, or a spread
+    over it above 8% of the depth. A corner feature often sits on a depth edge, where
+    the reading may belong to the background or the foreground; a far floor seen at
+    a grazing angle spreads about 4%.
     """
-    depth = np.asarray(depth_m, dtype=np.float32)
-    kernel = np.ones((3, 3), np.uint8)
-    low = cv2.erode(depth, kernel)
-    high = cv2.dilate(depth, kernel)
-    mean = cv2.blur(depth, (3, 3))
-    ok = (low >= min_depth) & (high <= max_depth) & (high - low <= 0.08 * mean)
-    return np.where(ok, mean, 0.0).astype(np.float32)
+    height, width = depth_m.shape
+    columns = np.clip(np.rint(pixels[:, 0]).astype(np.intp), 1, width - 2)
+    rows = np.clip(np.rint(pixels[:, 1]).astype(np.intp), 1, height - 2)
+    offsets = np.array([-1, 0, 1])
+    patch = depth_m[(rows[:, None] + offsets)[:, :, None], (columns[:, None] + offsets)[:, None, :]]
+    patch = patch.reshape(len(pixels), 9).astype(np.float32)
+    low, high, mean = patch.min(axis=1), patch.max(axis=1), patch.mean(axis=1)
+    reliable = (low >= min_depth) & (high <= max_depth) & (high - low <= 0.08 * mean)
+    return np.where(reliable, mean, 0.0).astype(np.float32)
 
+
+def _depth_sigma(z: np.ndarray) -> np.ndarray:
+    """The Kinect's axial noise at depth ``z`` (Nguyen, Izadi and Lovell 2012), metres."""
+    return 0.0012 + 0.0019 * (z - 0.4) ** 2
+
+
+def _refine(camera_from_keyframe: np.ndarray, points: np.ndarray, pixels: np.ndarray, depths: np.ndarray,
+            intrinsics: Intrinsics, pixel_sigma: float, iterations: int = 6) -> np.ndarray:
+    """Gauss-Newton on the pose: reprojection errors of the keyframe's points in this frame and,
+    where this frame has depth at the feature, the difference of the two depths.
+
+    Reprojection alone cannot tell a sideways step from a turn when the points lie
+    at similar depths; this frame's depth readings can. Each residual is scaled by
+    its noise (``pixel_sigma``; the sensor's depth noise of both readings) and
+    down-weighted beyond two sigmas (Huber).
+
+    Returns:
+        The refined ``camera_from_keyframe`` (4x4).
+    """
+    fx, fy, cx, cy = intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy
+    rotation = camera_from_keyframe[:3, :3].copy()
+    translation = camera_from_keyframe[:3, 3].copy()
+    points = points.astype(np.float64)
+    has_depth = depths > 0
+    measured = depths[has_depth].astype(np.float64)
+    depth_weight = 1.0 / np.hypot(_depth_sigma(points[has_depth, 2]), _depth_sigma(measured))
+    n = len(points)
+    for _ in range(iterations):
+        camera = points @ rotation.T + translation
+        x, y, z = camera[:, 0], camera[:, 1], camera[:, 2]
+        if np.any(z <= 0.05):
+            break
+        inverse_z = 1.0 / z
+        residual_u = (fx * x * inverse_z + cx - pixels[:, 0]) / pixel_sigma
+        residual_v = (fy * y * inverse_z + cy - pixels[:, 1]) / pixel_sigma
+        # Jacobians for a left perturbation T <- exp(delta) T, delta = (translation, rotation).
+        jacobian_u = np.column_stack([fx * inverse_z, np.zeros(n), -fx * x * inverse_z ** 2,
+                                      -fx * x * y * inverse_z ** 2, fx + fx * x * x * inverse_z ** 2,
+                                      -fx * y * inverse_z]) / pixel_sigma
+        jacobian_v = np.column_stack([np.zeros(n), fy * inverse_z, -fy * y * inverse_z ** 2,
+                                      -fy - fy * y * y * inverse_z ** 2, fy * x * y * inverse_z ** 2,
+                                      fy * x * inverse_z]) / pixel_sigma
+        xd, yd, zd = x[has_depth], y[has_depth], z[has_depth]
+        residual_z = (zd - measured) * depth_weight
+        jacobian_z = np.column_stack([np.zeros_like(zd), np.zeros_like(zd), np.ones_like(zd),
+                                      yd, -xd, np.zeros_like(zd)]) * depth_weight[:, None]
+        residuals = np.concatenate([residual_u, residual_v, residual_z])
+        jacobian = np.concatenate([jacobian_u, jacobian_v, jacobian_z])
+        weights = np.minimum(1.0, 2.0 / np.maximum(np.abs(residuals), 1e-12))  # Huber at 2 sigma
+        weighted = jacobian * weights[:, None]
+        step = -np.linalg.solve(weighted.T @ jacobian + 1e-9 * np.eye(6), weighted.T @ residuals)
+        turn = cv2.Rodrigues(step[3:].reshape(3, 1))[0]
+        rotation = turn @ rotation
+        translation = turn @ translation + step[:3]
+        if np.abs(step).max() < 1e-7:
+            break
+    refined = np.eye(4)
+    refined[:3, :3] = rotation
+    refined[:3, 3] = translation
+    return refined
 
 
 # ---- running over a recorded sequence ----------------------------------------------------------
