@@ -126,7 +126,7 @@ def _vo_eval(args: argparse.Namespace) -> int:
     result = run_sequence(sequence, max_frames=args.max_frames, features=args.features)
     frames = len(result.stats)
     ms = np.array([s.ms for s in result.stats])
-    print(f"frames          {frames} ({result.failures} failed, {result.keyframes} keyframes)")
+    print(f"frames          {frames} ({result.failures} failed, {_count(result.keyframes, 'keyframe')})")
     print(f"speed           {result.fps:.1f} fps (median {np.median(ms):.1f} ms per frame, "
           f"max {ms.max():.1f} ms; reading images not counted)")
     if args.save is not None:
@@ -173,6 +173,10 @@ def _print_ate(result: AteResult) -> None:
 
 
 # ---- helpers ------------------------------------------------------------------------------
+
+def _count(number: int, noun: str) -> str:
+    return f"{number} {noun}{'' if number == 1 else 's'}"
+
 
 def _positive_int(text: str) -> int:
     try:

@@ -6,6 +6,7 @@ test directories are not packages.)
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import types
@@ -97,6 +98,64 @@ def test_ate_malformed_file(capsys: pytest.CaptureFixture[str], tmp_path: Path,
     status, _, err = run(capsys, "ate", str(trajectories[0]), str(bad))
     assert status == 1
     assert err == f"tinman ate: error: {bad}: at 2.000000: expected 'tx ty tz qx qy qz qw', got '0 0 zero 0 0 0 1'\n"
+
+
+# ---- vo-eval ------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 15-frame synthetic TUM sequence: the camera drives 20 cm forward while turning a little."""
+    from tinman.synthetic import generate_sequence
+    from tinman.world import DEFAULT_WORLD
+
+    stamps = 1_700_000_000.0 + np.arange(15) / 30.0
+    poses = [camera_pose(1.2 + 0.3 * i / 30.0, 1.5, 0.4 * i / 30.0) for i in range(15)]
+    return generate_sequence(tmp_path_factory.mktemp("seq") / "tiny", DEFAULT_WORLD, stamps, poses,
+                             stamps, poses, workers=1)
+
+
+def test_vo_eval_prints_the_ate_and_saves_the_trajectory(capsys: pytest.CaptureFixture[str], sequence: Path,
+                                                         tmp_path: Path) -> None:
+    saved = tmp_path / "estimate.txt"
+    status, out, err = run(capsys, "vo-eval", str(sequence), "--save", str(saved), "--features", "600")
+    assert (status, err) == (0, "")
+    fields = _fields(out)
+    assert list(fields)[:3] == ["frames", "speed", "saved"]
+    assert re.fullmatch(r"15 \(0 failed, \d+ keyframes?\)", fields["frames"])
+    assert fields["saved"] == str(saved)
+    assert fields["pairs"] == "15"
+    rmse = float(fields["ATE RMSE"].split()[0])
+    assert rmse < 0.005
+    # The saved trajectory is a TUM file that 'tinman ate' reads back to the same error.
+    stamps, poses = tum.read_trajectory(saved)
+    assert len(stamps) == 15
+    np.testing.assert_allclose(poses[0], camera_pose(1.2, 1.5, 0.0), atol=1e-6)
+    status, out, _ = run(capsys, "ate", str(sequence / "groundtruth.txt"), str(saved))
+    assert status == 0 and _fields(out)["ATE RMSE"] == fields["ATE RMSE"]
+
+
+def test_vo_eval_max_frames_and_no_ground_truth(capsys: pytest.CaptureFixture[str], sequence: Path,
+                                                tmp_path: Path) -> None:
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(sequence, copy)
+    (copy / "groundtruth.txt").unlink()
+    status, out, err = run(capsys, "vo-eval", str(copy), "--max-frames", "4")
+    assert (status, err) == (0, "")
+    fields = _fields(out)
+    assert fields["frames"].startswith("4 (")
+    assert fields["ATE"] == "no groundtruth.txt in the sequence"
+
+
+def test_vo_eval_of_a_missing_or_broken_sequence(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    status, out, err = run(capsys, "vo-eval", str(tmp_path / "nowhere"))
+    assert (status, out) == (1, "")
+    assert err == f"tinman vo-eval: error: {tmp_path / 'nowhere'}: no such sequence directory\n"
+    (tmp_path / "empty").mkdir()
+    status, _, err = run(capsys, "vo-eval", str(tmp_path / "empty"))
+    assert status == 1 and err.startswith(f"tinman vo-eval: error: {tmp_path / 'empty'}")
+    assert len(err.splitlines()) == 1
 
 
 # ---- usage errors -------------------------------------------------------------------------
