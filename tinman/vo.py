@@ -20,7 +20,6 @@ height, and nothing but the initial pose comes from outside the images.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -114,7 +113,7 @@ class VisualOdometry:
         self.frames = 0
         self.failures = 0
         self.keyframes = 0
-        self._orb = cv2.ORB_create(nfeatures=features, scaleFactor=scale_factor, nlevels=pyramid_levels,
+        self._orb = cv2.ORB.create(nfeatures=features, scaleFactor=scale_factor, nlevels=pyramid_levels,
                                    fastThreshold=fast_threshold)
         self._matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
         self._keyframe: _Keyframe | None = None
@@ -144,7 +143,7 @@ class VisualOdometry:
         # features are only useful if they can match a keyframe's.
         mask = ((depth_m >= self.min_depth) & (depth_m <= self.max_depth)).view(np.uint8)
         keypoints, descriptors = self._orb.detectAndCompute(gray, mask)
-        pixels = cv2.KeyPoint_convert(keypoints).reshape(-1, 2) if keypoints else np.zeros((0, 2), np.float32)
+        pixels = np.asarray(cv2.KeyPoint.convert(keypoints) if keypoints else (), dtype=np.float32).reshape(-1, 2)
         index = self.frames
         self.frames += 1
         if self._keyframe is None:
@@ -312,7 +311,8 @@ def _guided_matches(projected: np.ndarray, query: np.ndarray, pixels: np.ndarray
     point_x, point_y = projected[:, 0], projected[:, 1]
     points = np.flatnonzero((point_x >= 0) & (point_x < intrinsics.width)
                             & (point_y >= 0) & (point_y < intrinsics.height))
-    centre = ((point_y[points] // radius).astype(np.intp) + 1) * stride + (point_x[points] // radius).astype(np.intp) + 1
+    centre = (((point_y[points] // radius).astype(np.intp) + 1) * stride
+              + (point_x[points] // radius).astype(np.intp) + 1)
     neighbourhood = np.array([row * stride + column for row in (-1, 0, 1) for column in (-1, 0, 1)])
     cells = (centre[:, None] + neighbourhood).ravel()
     lengths = counts[cells]
@@ -439,8 +439,9 @@ class FrameSource(Protocol):
     """What :func:`run_sequence` needs of a sequence (``tinman.dataset.TumSequence`` is one)."""
 
     intrinsics: Intrinsics
-    stamps: Sequence[float] | np.ndarray
 
+    @property
+    def stamps(self) -> np.ndarray: ...
     def __len__(self) -> int: ...
     def rgb(self, index: int) -> np.ndarray: ...
     def depth(self, index: int) -> np.ndarray: ...
