@@ -156,9 +156,9 @@ class VisualOdometry:
         if relative is None:
             self.failures += 1
             self._failed_in_a_row += 1
-            restart = self._failed_in_a_row >= self.max_failures
-            if restart:  # keep the last pose, but measure from what is in view now
-                self._make_keyframe(pixels, descriptors, depth_m, self.pose)
+            restart = False
+            if self._failed_in_a_row >= self.max_failures:  # keep the last pose, measure from what is in view now
+                restart = self._make_keyframe(pixels, descriptors, depth_m, self.pose)
             self._motion = np.eye(4)
             self._finish(start, index, len(keypoints), matches, 0, restart, failed=True)
             return self.pose.copy()
@@ -506,7 +506,7 @@ def run_sequence(sequence: FrameSource, max_frames: int | None = None, **options
             initial = truth[1][nearest]
     odometry = VisualOdometry(sequence.intrinsics, initial, **options)
     poses = np.empty((count, 4, 4))
-    stats = []
+    stats: list[TrackStats] = []
     seconds = 0.0
     for i in range(count):
         rgb, depth = sequence.rgb(i), sequence.depth(i)

@@ -151,6 +151,25 @@ def test_tracking_survives_several_blind_frames_and_half_missing_depth(
     assert np.linalg.norm(estimate[-1, :3, 3] - truth[-1, :3, 3]) < 0.02
 
 
+def test_after_failing_in_a_new_place_it_restarts_there(driving: tuple[np.ndarray, list[Frame]],
+                                                         flying: tuple[np.ndarray, list[Frame]]) -> None:
+    # Carried off (the frames jump to another part of the room): nothing matches the keyframe,
+    # so after max_failures frames the odometry starts again from what it sees, at its last pose.
+    driving_truth, driving_frames = driving
+    flying_truth, flying_frames = flying
+    odometry = VisualOdometry(FR1, driving_truth[0], max_failures=2)
+    last = _run(odometry, driving_frames[:10])[-1]
+    lost = _run(odometry, flying_frames[:2])
+    assert odometry.failures == 2 and odometry.last is not None and odometry.last.keyframe
+    np.testing.assert_array_equal(lost[-1], last)
+    resumed = _run(odometry, flying_frames[2:20])
+    assert odometry.failures == 2
+    # From the restart on, the motion is right, relative to where it restarted.
+    moved = np.linalg.inv(lost[-1]) @ resumed[-1]
+    truly = np.linalg.inv(flying_truth[1]) @ flying_truth[19]
+    assert np.linalg.norm(moved[:3, 3] - truly[:3, 3]) < 0.01
+
+
 def test_grey_input_gives_the_same_poses(driving: tuple[np.ndarray, list[Frame]]) -> None:
     import cv2
 
