@@ -100,7 +100,7 @@ def visodom(ep: Endpoint) -> None:
             "frames_processed": len(stamps), "frames_dropped": dropped,
             "track_ms_p50": round(float(np.median(times)), 2) if len(times) else None,
             "track_ms_p99": round(float(np.percentile(times, 99)), 2) if len(times) else None,
-            "lost_frames": int(getattr(odometry, "lost", 0))})
+            "lost_frames": odometry.failures})
 
 
 class _Latest:
