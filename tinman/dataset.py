@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .geometry import DEPTH_SCALE, FR1, Intrinsics
+from .geometry import FR1, Intrinsics, depth_metres
 from .tum import associate, read_file_list, read_trajectory
 
 __all__ = ["DatasetError", "TumSequence", "FREIBURG_INTRINSICS", "MAX_TIME_DIFFERENCE"]
@@ -137,7 +137,7 @@ class TumSequence:
             IndexError: no such frame.
             DatasetError: the image file is missing or is not a 16-bit single-channel PNG.
         """
-        return self.depth_raw(index).astype(np.float32) * np.float32(1.0 / DEPTH_SCALE)
+        return depth_metres(self.depth_raw(index))
 
     def depth_raw(self, index: int) -> np.ndarray:
         """Frame ``index``'s depth image as stored: uint16 (H, W), ``DEPTH_SCALE`` units per metre.

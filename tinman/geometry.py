@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Intrinsics", "FR1", "CAMERA_HEIGHT", "DEPTH_SCALE", "camera_pose", "robot_pose",
+__all__ = ["Intrinsics", "FR1", "CAMERA_HEIGHT", "DEPTH_SCALE", "camera_pose", "robot_pose", "depth_metres",
            "quaternion_from_matrix", "matrix_from_quaternion", "pose_matrix"]
 
 CAMERA_HEIGHT = 0.5   # metres above the floor
@@ -43,6 +43,11 @@ FR1 = Intrinsics(fx=517.3, fy=516.5, cx=318.6, cy=255.3, width=640, height=480)
 
 # Camera axes (x right, y down, z forward) in robot axes (x forward, y left, z up).
 _ROBOT_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+def depth_metres(raw: np.ndarray) -> np.ndarray:
+    """Stored 16-bit depth (``DEPTH_SCALE`` per metre, 0 = none) as float32 metres."""
+    return raw.astype(np.float32) * np.float32(1.0 / DEPTH_SCALE)
 
 
 def camera_pose(x: float, y: float, theta: float, height: float = CAMERA_HEIGHT) -> np.ndarray:

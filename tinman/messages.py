@@ -136,6 +136,11 @@ class Path:
     header: Header = field(default_factory=Header)
     poses: tuple[PoseStamped, ...] = ()
 
+    @classmethod
+    def through(cls, points: list[tuple[float, float]], header: Header) -> Path:
+        """A path through floor points ``(x, y)``, every pose stamped with ``header``."""
+        return cls(header, tuple(PoseStamped(header, Pose.planar(x, y, 0.0)) for x, y in points))
+
     def points(self) -> list[tuple[float, float]]:
         """The path on the floor: ``(x, y)`` of every pose."""
         return [(p.pose.position.x, p.pose.position.y) for p in self.poses]

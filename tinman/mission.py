@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .joystick import JOY_SCRIPT, JoyWindow, scripted_joy, twist_from_joy
-from .messages import Header, Path, Pose, PoseStamped, Time, Twist
+from .messages import Header, Path, Time, Twist
 from .mixer import Mixer
 from .planning import NoPathError, Patrol, Planner
 from .pursuit import PurePursuit
@@ -68,11 +68,6 @@ class MissionTrace:
     planning_failures: list[str]
     bumps: int
     odometer: float
-
-
-def _path_message(points: list[tuple[float, float]], t: float) -> Path:
-    header = Header(Time.from_seconds(t), "map")
-    return Path(header, tuple(PoseStamped(header, Pose.planar(x, y, 0.0)) for x, y in points))
 
 
 def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate: float = 100.0,
@@ -128,7 +123,7 @@ def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate:
                 failures.append(str(error))
             else:
                 plans.append((t, path))
-                mixer.set_path(_path_message(path, t))
+                mixer.set_path(Path.through(path, Header(Time.from_seconds(t), "map")))
         axes, buttons = scripted_joy(t, script)
         v, w, _ = twist_from_joy(axes, buttons)
         _, source = mixer.step(Twist.planar(v, w))

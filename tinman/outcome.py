@@ -50,7 +50,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "frames_processed": vo.get("frames_processed"),
         "frames_dropped": _sum(vo.get("frames_dropped"), camera.get("frames_skipped")),
         "frames_published": camera.get("frames_published"),
-        "vo_track_ms": {"p50": vo.get("track_ms_p50"), "p99": vo.get("track_ms_p99")},
+        "vo_track_ms": {key: vo.get("track_ms", {}).get(key) for key in ("p50", "p99")},
         "violations": len(violations),
         "violation_messages": violations,
         "messages": dict(report.messages),

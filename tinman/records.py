@@ -12,9 +12,11 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .settings import current
 
-__all__ = ["save_record", "load_records"]
+__all__ = ["save_record", "load_records", "percentiles"]
 
 
 def save_record(name: str, data: dict[str, Any]) -> Path:
@@ -37,3 +39,12 @@ def load_records(folder: str | Path) -> dict[str, dict[str, Any]]:
         except (OSError, ValueError):
             continue
     return records
+
+
+def percentiles(values: Any) -> dict[str, float | None]:
+    """``p50``, ``p99``, ``max`` and ``mean`` of measurements (all None when there are none)."""
+    values = np.asarray(values, dtype=float)
+    if len(values) == 0:
+        return {"p50": None, "p99": None, "max": None, "mean": None}
+    return {"p50": round(float(np.percentile(values, 50)), 3), "p99": round(float(np.percentile(values, 99)), 3),
+            "max": round(float(values.max()), 3), "mean": round(float(values.mean()), 3)}

@@ -15,7 +15,7 @@ from ..keyboard import Keyboard
 from ..messages import Header, Joy, Time, Twist
 from ..mission import patrol_pursuit
 from ..mixer import Mixer
-from ..records import save_record
+from ..records import percentiles, save_record
 from ..settings import current
 from ..world import DEFAULT_WORLD
 
@@ -80,7 +80,7 @@ def move(ep: Endpoint) -> None:
         periods = np.diff(np.array(sent)) * 1000.0
         save_record("Move", {
             "commands": len(sent), "sources": mixer.sources, "paths_received": mixer.paths_received,
-            "period_ms": _percentiles(periods), "planner_lost": planner_lost[0] if planner_lost else None,
+            "period_ms": percentiles(periods), "planner_lost": planner_lost[0] if planner_lost else None,
             "teleop_commands_after_planner_lost": teleop_after_loss,
             "odometry_pose": list(mixer.model.pose)})
 
@@ -94,9 +94,3 @@ def _take_paths(ep: Endpoint, mixer: Mixer, planner_lost: list[str]) -> None:
     except RoleStopped:
         pass
 
-
-def _percentiles(values: np.ndarray) -> dict[str, float | None]:
-    if len(values) == 0:
-        return {"p50": None, "p99": None, "max": None, "mean": None}
-    return {"p50": round(float(np.percentile(values, 50)), 3), "p99": round(float(np.percentile(values, 99)), 3),
-            "max": round(float(values.max()), 3), "mean": round(float(values.mean()), 3)}

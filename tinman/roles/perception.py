@@ -13,9 +13,9 @@ from anodize import Endpoint, PeerFailedError, RoleStopped
 
 from ..dataset import TumSequence
 from ..faults import start_faults
-from ..geometry import DEPTH_SCALE
+from ..geometry import depth_metres
 from ..messages import Header, Image, Pose, PoseStamped, RGBDFrame, Time
-from ..records import save_record
+from ..records import percentiles, save_record
 from ..settings import current
 from ..tum import write_trajectory
 from ..vo import VisualOdometry
@@ -81,8 +81,7 @@ def visodom(ep: Endpoint) -> None:
                 dropped += 1  # catch up: the Visualizer gets the latest estimate again
             else:
                 began = time.perf_counter()
-                depth_m = frame.depth.data.astype(np.float32) * np.float32(1.0 / DEPTH_SCALE)
-                pose = odometry.track(frame.rgb.data, depth_m)
+                pose = odometry.track(frame.rgb.data, depth_metres(frame.depth.data))
                 track_ms.append((time.perf_counter() - began) * 1000.0)
                 stamps.append(frame.rgb.header.stamp.seconds())
                 poses.append(pose)
@@ -95,11 +94,8 @@ def visodom(ep: Endpoint) -> None:
         out = settings.records
         out.mkdir(parents=True, exist_ok=True)
         write_trajectory(out / "vo_estimate.txt", stamps, poses, comment="TinMan VisOdom estimate")
-        times = np.array(track_ms)
         save_record("VisOdom", {
-            "frames_processed": len(stamps), "frames_dropped": dropped,
-            "track_ms_p50": round(float(np.median(times)), 2) if len(times) else None,
-            "track_ms_p99": round(float(np.percentile(times, 99)), 2) if len(times) else None,
+            "frames_processed": len(stamps), "frames_dropped": dropped, "track_ms": percentiles(track_ms),
             "lost_frames": odometry.failures})
 
 

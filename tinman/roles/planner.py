@@ -8,7 +8,7 @@ from anodize import Endpoint
 
 from ..faults import start_faults
 from ..geometry import robot_pose
-from ..messages import Header, Path, Pose, PoseStamped, Time
+from ..messages import Header, Path, Time
 from ..mission import WAYPOINT_TOLERANCE
 from ..planning import NoPathError, Patrol, Planner
 from ..records import save_record
@@ -47,7 +47,7 @@ def planner(ep: Endpoint) -> None:
             else:
                 plan_ms.append((time.perf_counter() - began) * 1000.0)
                 header = Header(pose.header.stamp, "map")
-                path = Path(header, tuple(PoseStamped(header, Pose.planar(px, py, 0.0)) for px, py in points))
+                path = Path.through(points, header)
                 plans.append({"stamp": pose.header.stamp.seconds(), "goal": list(goal),
                               "points": [[round(px, 3), round(py, 3)] for px, py in points]})
             # Written at every plan: a planner stopped by its memory bound leaves its record.
