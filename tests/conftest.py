@@ -1,0 +1,24 @@
+"""Hypothesis profiles for the whole suite.
+
+- ``dev`` (the default on a developer's machine): random, with the example database,
+  so a failure found once is replayed until it is fixed.
+- ``ci`` (the default where ``CI`` is set, as ``.ci/run`` does): derandomized and without
+  a database, so every CI run tries the same examples and a green run stays green.
+- ``thorough``: ten times the examples of every property test, for a hunting campaign:
+  ``pytest --hypothesis-profile=thorough tests``.
+
+Property tests scale their own example counts with :func:`budget.examples`, so the
+profile's multiplier reaches tests that set ``max_examples`` explicitly.
+"""
+
+from __future__ import annotations
+
+import os
+
+from hypothesis import HealthCheck, settings
+
+settings.register_profile("dev", deadline=None)
+settings.register_profile("ci", deadline=None, derandomize=True, database=None, print_blob=True)
+settings.register_profile("thorough", deadline=None, max_examples=1000,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("ci" if os.environ.get("CI") else "dev")  # --hypothesis-profile overrides
