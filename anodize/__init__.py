@@ -10,22 +10,21 @@
     True
 """
 
-from .endpoint import Endpoint, Message, RoleStopped
 from .errors import (
     Action,
     AnodizeError,
+    ConfigurationError,
     LinearityError,
     MemoryBoundError,
     PeerFailedError,
     ProtocolViolationError,
+    RoleStopped,
 )
-from .group import Group
-from .report import GroupReport, GroupStatus, RoleReport, RunReport
-from .system import System
-from .typed import State
+from .session import Endpoint, Message, State
+from .supervision import Group, GroupReport, GroupStatus, RoleReport, RunReport, System
 
 __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
-    "AnodizeError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
+    "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
 ]

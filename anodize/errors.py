@@ -12,13 +12,18 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 __all__ = [
-    "AnodizeError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
+    "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "Action", "RoleError", "RoleStopped", "error_to_data", "error_from_data",
 ]
 
 
 class AnodizeError(Exception):
-    """Root of the runtime's errors."""
+    """Root of the runtime's errors: every error a user can cause derives from it."""
+
+
+class ConfigurationError(AnodizeError, ValueError):
+    """A system declared wrongly: a bad group, priority, memory size, CPU set, policy,
+    transport or role placement (also a ``ValueError``, as lark's configuration errors are)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,10 +148,17 @@ class LinearityError(AnodizeError):
 
 
 class RoleStopped(BaseException):
-    """Raised inside a role when the run is stopped (its timeout passed).
+    """Raised inside a role when the run, or its group, is stopped (timeout, Ctrl-C, policy).
 
     A ``BaseException`` so that a role's ``except Exception`` does not swallow it.
+
+    Attributes:
+        detail: what the role was doing, e.g. ``blocked in state 3 waiting for ?Cam(Frame)``.
     """
+
+    def __init__(self, detail: str = "") -> None:
+        self.detail = detail
+        super().__init__(detail)
 
 
 class RoleError(AnodizeError):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from anodize.cli import main
+from anodize.tools.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,6 +1,10 @@
-"""Transports: how messages travel between roles.
+"""How messages travel between roles.
 
-A transport provides one FIFO channel per ordered pair of roles that the
-global type connects, and a way to tell every receiver that a peer failed or
-that the run is stopping. ``inproc`` (threads of one process) is the first.
+- :mod:`.inproc`: one queue per channel, between threads of one process;
+- :mod:`.process`: OS pipes between group processes, framed by :mod:`.codec`
+  (no pickle for known sorts), with large numpy arrays in the shared-memory
+  rings of :mod:`.shm`.
+
+Each gives one FIFO channel per ordered pair of roles the global type connects,
+and carries a peer's failure or a stop after everything sent before it.
 """

@@ -3,8 +3,8 @@
 A group's process sees the same interface as the inproc transport
 (:class:`~anodize.transport.inproc.InprocNetwork`): a channel per ordered pair
 with ``put``/``get``. Channels to roles of other groups are pipes carrying
-frames (:mod:`anodize.codec`); large arrays go through shared-memory rings
-(:mod:`anodize.shm`). Only the sending group holds a pipe's write end, so when
+frames (:mod:`anodize.transport.codec`); large arrays go through shared-memory rings
+(:mod:`anodize.transport.shm`). Only the sending group holds a pipe's write end, so when
 that group's process dies the receiver reads end-of-file: a crashed peer is
 always noticed, never waited on. A role that fails in a live process has a
 failure frame written after its last message, so nothing it sent is lost.
@@ -20,12 +20,13 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from queue import Empty, SimpleQueue
 
-from ..codec import HEADER, KIND_FAILURE, MAX_FRAME, Codec, DecodeError, EncodeError
 from ..errors import AnodizeError, PeerFailedError, RoleStopped
-from ..shm import ArrayRing
-from .inproc import STOP, InprocNetwork, PeerFailure
+from ..session.channel import STOP, Corrupt, PeerFailure
+from .codec import HEADER, MAX_FRAME, Codec, DecodeError, EncodeError, FrameKind
+from .inproc import InprocNetwork
+from .shm import ArrayRing
 
-__all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "Corrupt", "PayloadError"]
+__all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "PayloadError"]
 
 # Reads of at most 64 KiB: larger ones make malloc mmap and munmap a buffer on every call.
 _READ_SIZE = 64 * 1024
@@ -35,15 +36,6 @@ _EOF_CAUSE_WAIT = 2.0  # seconds to wait for the supervisor's word on why a peer
 
 class PayloadError(AnodizeError):
     """A payload that cannot cross to another group's process (nothing was sent)."""
-
-
-class Corrupt:
-    """Stands in the channel for a frame that did not decode: the sender is to blame."""
-
-    __slots__ = ("reason",)
-
-    def __init__(self, reason: str) -> None:
-        self.reason = reason
 
 
 class PipeSender:
@@ -107,10 +99,10 @@ class PipeSender:
 
     def _peer_gone(self) -> BaseException:
         if self.network.stopping:  # the receiver stopped with the run: so do we
-            return RoleStopped()
+            return RoleStopped(f"interrupted sending to {self.receiver}")
         cause = self.network.wait_for_cause(self.receiver, "its group's process has ended")
         if self.network.stopping and self.receiver not in self.network.failed:
-            return RoleStopped()
+            return RoleStopped(f"interrupted sending to {self.receiver}")
         return PeerFailedError(self.sender, self.receiver, cause)
 
 
@@ -194,7 +186,7 @@ class PipeReceiver:
             kind, value = self.codec.decode_body(body)
         except DecodeError as error:  # the stream is still in step: later frames may be fine
             return Corrupt(str(error))
-        if kind == KIND_FAILURE:
+        if kind == FrameKind.FAILURE:
             failure = PeerFailure(self.sender, value)
             self.network.note_failed(self.sender, value)
             return failure
@@ -330,7 +322,8 @@ class ProcessNetwork(InprocNetwork):
             self.stopping = True
             self.alarm = True
             self._cause_arrived.notify_all()
-        self.stop_event.set()
+        for role in self.local_roles:
+            self.stop_event_for(role).set()
         os.eventfd_write(self.wake_fd, 1)  # wakes pipe readers; never drained: stop is final
         for (sender, receiver), channel in self.queues.items():
             if isinstance(channel, SimpleQueue):

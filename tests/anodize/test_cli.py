@@ -1,6 +1,6 @@
 """The ``anodize`` command line: check, project, fsm, graph.
 
-Most tests run :func:`anodize.cli.main` in-process from the repository root
+Most tests run :func:`anodize.tools.cli.main` in-process from the repository root
 (paths in messages are then relative, as a user would type them); one runs
 the installed command in a subprocess.
 """
@@ -8,8 +8,10 @@ the installed command in a subprocess.
 from __future__ import annotations
 
 import io
+import re
 import json
 import os
+import signal
 import subprocess
 import sys
 from collections.abc import Callable, Iterator, Sequence
@@ -18,7 +20,8 @@ from pathlib import Path
 import pytest
 
 from anodize import GroupStatus
-from anodize.cli import LiveStatus, main
+from anodize.supervision.report import GroupState
+from anodize.tools.cli import LiveStatus, main
 
 REPO = Path(__file__).resolve().parents[2]
 CORPUS = REPO / "tests" / "sessiontypes" / "corpus"
@@ -442,7 +445,11 @@ def test_run_of_a_failing_system_exits_1(
     status, out, err = run(capsys, "run", str(path), "--quiet")
     assert (status, err) == (1, "")
     assert out.startswith("protocol Stream: NOT ok in ")
-    assert "  role P: failed: sensor unplugged\n" in out
+    # Where the role raised, in its own file (the traceback's innermost frame of role code).
+    assert re.search(r"^  role P: failed at .*cli_run_roles\.py:\d+ in crasher: RuntimeError: sensor unplugged$",
+                     out, re.M)
+    assert re.search(r"^  role C: failed at .*cli_run_roles\.py:\d+ in consumer: role C: peer P failed "
+                     r"\(RuntimeError: sensor unplugged\)$", out, re.M)
 
 
 def test_run_stops_roles_at_the_timeout_of_the_command_line(
@@ -451,7 +458,10 @@ def test_run_stops_roles_at_the_timeout_of_the_command_line(
     status, out, _ = run(capsys, "run", str(path), "--quiet", "--timeout", "0.2")
     assert status == 1
     assert out.startswith("protocol Stream: stopped, no failures in ")
-    assert "  group a: stopped (" in out and "role P" not in out
+    assert "  group a: stopped (" in out
+    # Every role still running is named, with what it was doing when the timeout came.
+    assert "  role C: stopped, blocked in state 0 waiting for ?P(data(int)) or ?P(stop)\n" in out
+    assert re.search(r"^  role P: stopped, (interrupted sending data to C, in state 0|sleeping.*)$", out, re.M)
 
 
 def test_run_errors_of_the_system_file_exit_1(
@@ -472,10 +482,10 @@ class _Terminal(io.StringIO):
 def test_live_status_redraws_in_place_on_a_terminal() -> None:
     screen = _Terminal()
     live = LiveStatus(screen)
-    live({"a": GroupStatus("a", "running", messages=1), "b": GroupStatus("b", "starting")})
-    live({"a": GroupStatus("a", "done", messages=4), "b": GroupStatus("b", "done")})
-    a1, b1 = GroupStatus("a", "running", messages=1).line(), GroupStatus("b", "starting").line()
-    a2, b2 = GroupStatus("a", "done", messages=4).line(), GroupStatus("b", "done").line()
+    live({"a": GroupStatus(name="a", state=GroupState.RUNNING, messages=1), "b": GroupStatus(name="b", state=GroupState.STARTING)})
+    live({"a": GroupStatus(name="a", state=GroupState.DONE, messages=4), "b": GroupStatus(name="b", state=GroupState.DONE)})
+    a1, b1 = GroupStatus(name="a", state=GroupState.RUNNING, messages=1).line(), GroupStatus(name="b", state=GroupState.STARTING).line()
+    a2, b2 = GroupStatus(name="a", state=GroupState.DONE, messages=4).line(), GroupStatus(name="b", state=GroupState.DONE).line()
     assert screen.getvalue() == (f"\x1b[2K{a1}\n\x1b[2K{b1}\n\x1b[J"
                                  f"\x1b[2F\x1b[2K{a2}\n\x1b[2K{b2}\n\x1b[J")
 
@@ -483,19 +493,19 @@ def test_live_status_redraws_in_place_on_a_terminal() -> None:
 def test_live_status_in_a_log_prints_a_line_when_a_state_changes() -> None:
     log = io.StringIO()
     live = LiveStatus(log)
-    live({"a": GroupStatus("a", "running", messages=1), "b": GroupStatus("b", "running")})
-    live({"a": GroupStatus("a", "running", messages=9), "b": GroupStatus("b", "running")})
-    live({"a": GroupStatus("a", "done", messages=12), "b": GroupStatus("b", "running")})
-    assert log.getvalue().splitlines() == [GroupStatus("a", "running", messages=1).line(),
-                                           GroupStatus("b", "running").line(),
-                                           GroupStatus("a", "done", messages=12).line()]
+    live({"a": GroupStatus(name="a", state=GroupState.RUNNING, messages=1), "b": GroupStatus(name="b", state=GroupState.RUNNING)})
+    live({"a": GroupStatus(name="a", state=GroupState.RUNNING, messages=9), "b": GroupStatus(name="b", state=GroupState.RUNNING)})
+    live({"a": GroupStatus(name="a", state=GroupState.DONE, messages=12), "b": GroupStatus(name="b", state=GroupState.RUNNING)})
+    assert log.getvalue().splitlines() == [GroupStatus(name="a", state=GroupState.RUNNING, messages=1).line(),
+                                           GroupStatus(name="b", state=GroupState.RUNNING).line(),
+                                           GroupStatus(name="a", state=GroupState.DONE, messages=12).line()]
 
 
 # ---- the installed command -------------------------------------------------------------
 
 def _command() -> Sequence[str]:
     script = Path(sys.executable).parent / "anodize"
-    return [str(script)] if script.exists() else [sys.executable, "-m", "anodize.cli"]
+    return [str(script)] if script.exists() else [sys.executable, "-m", "anodize.tools.cli"]
 
 
 def test_installed_command_in_a_subprocess() -> None:
@@ -521,3 +531,33 @@ def test_installed_command_in_a_subprocess() -> None:
                           timeout=60)
     assert done.returncode == 2
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("transport", ["inproc", "process"])
+def test_ctrl_c_stops_the_run_and_still_prints_and_writes_the_report(
+        system_file: Callable[..., Path], tmp_path: Path, transport: str) -> None:
+    path = system_file("cli_run_roles:forever", "cli_run_roles:consumer")
+    path.write_text(path.read_text(encoding="utf-8").replace('transport = "inproc"', f'transport = "{transport}"'),
+                    encoding="utf-8")
+    report = tmp_path / "run.json"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    process = subprocess.Popen([*_command(), "run", str(path), "--json", str(report)], cwd=tmp_path, env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        assert process.stdout is not None
+        for line in process.stdout:  # the live status says when the roles run
+            if line.split()[1:2] == ["running"]:
+                break
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=60)
+    finally:
+        process.kill()
+    assert (process.returncode, err) == (130, "")
+    assert "protocol Stream: interrupted in " in out
+    assert "  note: stopping every group: interrupted (Ctrl-C)\n" in out
+    data = json.loads(report.read_text(encoding="utf-8"))
+    assert (data["outcome"], data["interrupted"], data["ok"]) == ("interrupted", True, False)
+    assert data["roles"]["C"]["status"] == "stopped"
+    assert data["roles"]["C"]["detail"].startswith("blocked in state 0 waiting for ?P(data(int))")

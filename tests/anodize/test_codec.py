@@ -14,8 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from anodize.codec import HEADER, KIND_FAILURE, KIND_MESSAGE, Codec, DecodeError, EncodeError
-from anodize.shm import ArrayRing, RingReader, remove_run_segments
+from anodize.transport.codec import HEADER, FrameKind, Codec, DecodeError, EncodeError
+from anodize.transport.shm import ArrayRing, RingReader, remove_run_segments
 
 scalars = (st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False)
            | st.text() | st.binary() | st.binary().map(bytearray)
@@ -36,7 +36,7 @@ def round_trip(codec: Codec, label: str, payload: object) -> tuple[str, object]:
     (length,) = HEADER.unpack_from(frame)
     assert length == len(frame) - 4
     kind, value = codec.decode_body(frame[4:])
-    assert kind == KIND_MESSAGE
+    assert kind == FrameKind.MESSAGE
     return value
 
 
@@ -80,7 +80,7 @@ def test_a_truncated_frame_is_a_decode_error(payload: object, cut: int) -> None:
 
 def test_a_failure_frame_carries_its_cause() -> None:
     frame = Codec.failure_frame("MemoryBoundError: too big")
-    assert Codec().decode_body(frame[4:]) == (KIND_FAILURE, "MemoryBoundError: too big")
+    assert Codec().decode_body(frame[4:]) == (FrameKind.FAILURE, "MemoryBoundError: too big")
 
 
 @dataclass(frozen=True)
@@ -131,7 +131,7 @@ def test_named_plain_classes_are_pickled_and_unpickling_loads_nothing_else() -> 
     evil = pickle.dumps(Evil())
     import struct
     payload = bytes([19]) + struct.pack("<I", len(name)) + name + struct.pack("<I", len(evil)) + evil
-    body = bytes([KIND_MESSAGE]) + struct.pack("<I", 1) + b"p" + payload
+    body = bytes([FrameKind.MESSAGE]) + struct.pack("<I", 1) + b"p" + payload
     with pytest.raises(DecodeError, match="posix.system|os.system|does not name"):
         Codec([Plain]).decode_body(body)
 
@@ -231,7 +231,7 @@ def test_garbage_in_a_named_pickle_a_missing_field_or_a_missing_ring_is_a_decode
     import struct
 
     def body(tag: int, name: bytes, rest: bytes) -> bytes:
-        return (bytes([KIND_MESSAGE]) + struct.pack("<I", 1) + b"p" + bytes([tag])
+        return (bytes([FrameKind.MESSAGE]) + struct.pack("<I", 1) + b"p" + bytes([tag])
                 + struct.pack("<I", len(name)) + name + rest)
 
     plain = f"{Plain.__module__}:{Plain.__qualname__}".encode()

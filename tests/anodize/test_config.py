@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from anodize.config import ConfigError, GroupConfig, SystemConfig, build_system, load_config
+from anodize.tools.config import ConfigError, GroupConfig, SystemConfig, build_system, load_config
 from sessiontypes import ProtocolError
 
 REPO = Path(__file__).resolve().parents[2]

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from anodize.config import ConfigError, SystemConfig, load_config
-from anodize.lint import Finding, lint_report, lint_system
+from anodize.tools.config import ConfigError, SystemConfig, load_config
+from anodize.tools.lint import Finding, lint_report, lint_system
 
 REPO = Path(__file__).resolve().parents[2]
 FIXTURES = REPO / "tests" / "anodize" / "lint_fixtures"

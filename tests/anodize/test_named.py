@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from anodize import cli
-from anodize.named import find_named, named_systems
+from anodize.tools import cli
+from anodize.tools.named import find_named, named_systems
 
 
 def test_the_installed_tinman_package_registers_its_system() -> None:

@@ -12,8 +12,8 @@ import process_roles as roles
 import sessiontypes
 from anodize import MemoryBoundError, PeerFailedError, ProtocolViolationError
 from anodize.errors import RoleError
-from anodize.sched import nice_for
-from anodize.shm import segment_dir
+from anodize.isolation.sched import nice_for
+from anodize.transport.shm import segment_dir
 
 PROTOCOLS = sessiontypes.loads("""
 type Frame = "process_roles:Frame"

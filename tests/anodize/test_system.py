@@ -157,7 +157,7 @@ def test_scheduling_is_applied_or_the_fallback_is_reported() -> None:
 
 
 def test_refused_real_time_falls_back_to_nice(monkeypatch: pytest.MonkeyPatch) -> None:
-    from anodize.sched import apply_thread_scheduling
+    from anodize.isolation.sched import apply_thread_scheduling
 
     monkeypatch.setenv("ANODIZE_NO_RT", "1")
     result: list[str] = []

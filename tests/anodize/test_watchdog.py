@@ -7,7 +7,7 @@ import subprocess
 import sys
 from collections import deque
 
-from anodize.watchdog import Watchdog, cpu_seconds, rt_throttling
+from anodize.isolation.watchdog import Watchdog, cpu_seconds, rt_throttling
 
 
 def feed(dog: Watchdog, samples: list[tuple[float, float]], pid: int = 0) -> bool:

@@ -35,9 +35,9 @@ from typing import Any
 
 import sessiontypes
 
-from .errors import AnodizeError
-from .group import FAILURE_POLICIES, parse_memory
-from .system import TRANSPORTS, System
+from ..errors import AnodizeError, ConfigurationError
+from ..supervision.group import FailurePolicy, parse_memory
+from ..supervision.system import TRANSPORTS, System
 
 __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
            "add_pythonpath"]
@@ -48,7 +48,7 @@ _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]
 _TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
 
 
-class ConfigError(AnodizeError):
+class ConfigError(ConfigurationError):
     """Raised for a system file that cannot be read, parsed, or turned into a system.
 
     Attributes:
@@ -261,9 +261,9 @@ class _Reader:
             raise self.error(f"{prefix}.memory", "expected a size such as \"64MiB\", \"512KiB\" or a "
                                                  f"number of bytes, got {_show(memory)}") from None
         on_failure = table.get("on_failure", "stop")
-        if on_failure not in FAILURE_POLICIES:
+        if on_failure not in {p.value for p in FailurePolicy}:
             raise self.error(f"{prefix}.on_failure", f"expected one of "
-                             f"{', '.join(map(_show, FAILURE_POLICIES))}, got {_show(on_failure)}")
+                             f"{', '.join(_show(p.value) for p in FailurePolicy)}, got {_show(on_failure)}")
         max_restarts = table.get("max_restarts", 3)
         if not _is_int(max_restarts) or max_restarts < 0:
             raise self.error(f"{prefix}.max_restarts", f"expected an int >= 0, got {_show(max_restarts)}")

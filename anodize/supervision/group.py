@@ -6,16 +6,37 @@ import importlib
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
-from .errors import AnodizeError
+from ..errors import AnodizeError, ConfigurationError
 
-__all__ = ["Group", "parse_memory", "FAILURE_POLICIES", "resolve_function", "reference_of"]
+__all__ = ["Group", "FailurePolicy", "parse_memory", "resolve_function", "reference_of"]
 
 _UNITS = {"": 1, "b": 1, "kb": 10**3, "mb": 10**6, "gb": 10**9,
           "kib": 2**10, "mib": 2**20, "gib": 2**30}
 
-FAILURE_POLICIES = ("stop", "restart", "stop-system")
+
+
+class FailurePolicy(StrEnum):
+    """What the supervisor does when a group fails."""
+
+    STOP = "stop"                # the group stops; its peers get PeerFailedError, the rest runs on
+    RESTART = "restart"          # it starts again from its initial states (at most max_restarts times)
+    STOP_SYSTEM = "stop-system"  # every group stops
+
+    @classmethod
+    def parse(cls, value: object, group: str) -> FailurePolicy:
+        """The policy named ``value``.
+
+        Raises:
+            ConfigurationError: not a policy.
+        """
+        try:
+            return cls(value)
+        except ValueError:
+            raise ConfigurationError(f"group {group}: on_failure must be one of "
+                                     f"{', '.join(p.value for p in cls)}, got {value!r}") from None
 
 
 def parse_memory(value: int | str | None) -> int | None:
@@ -28,13 +49,13 @@ def parse_memory(value: int | str | None) -> int | None:
         return None
     if isinstance(value, int) and not isinstance(value, bool):
         if value <= 0:
-            raise ValueError(f"memory bound {value}: expected a positive number of bytes")
+            raise ConfigurationError(f"memory bound {value}: expected a positive number of bytes")
         return value
     if not isinstance(value, str):
-        raise ValueError(f"memory bound {value!r}: expected a size such as 64MiB, 512KiB or 1GB")
+        raise ConfigurationError(f"memory bound {value!r}: expected a size such as 64MiB, 512KiB or 1GB")
     match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([KkMmGg]i?[Bb]|[Bb])?\s*", value)
     if not match or float(match.group(1)) <= 0:
-        raise ValueError(f"memory bound {value!r}: expected a size such as 64MiB, 512KiB or 1GB")
+        raise ConfigurationError(f"memory bound {value!r}: expected a size such as 64MiB, 512KiB or 1GB")
     number, unit = match.groups()
     return int(float(number) * _UNITS[(unit or "").lower()])
 
@@ -90,7 +111,7 @@ class Group:
     priority: int | None = None
     memory: int | None = None
     cpus: frozenset[int] | None = None
-    on_failure: str = "stop"
+    on_failure: FailurePolicy = FailurePolicy.STOP
     max_restarts: int = 3
     roles: dict[str, Callable[..., Any] | str] = field(default_factory=dict)
     _system: Any = field(default=None, repr=False)

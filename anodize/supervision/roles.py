@@ -1,27 +1,47 @@
 """Running one role's function on its thread, and reporting how it ended.
 
-Shared by both transports: the inproc supervisor and a group's process.
+Shared by every transport: the in-process runner and a group's process.
 """
 
 from __future__ import annotations
 
 import inspect
+import os
+import traceback
 import typing
 from collections.abc import Callable
 from typing import Any
 
-from .endpoint import Endpoint, RoleStopped
-from .errors import AnodizeError
-from .report import RoleReport
-from .sched import apply_thread_scheduling
-from .typed import State
+from ..errors import AnodizeError, RoleStopped
+from ..isolation.sched import apply_thread_scheduling
+from ..session.endpoint import Endpoint
+from ..session.typed import State
+from .report import RoleReport, RoleStatus
 
-__all__ = ["run_role", "argument_for", "describe_error"]
+__all__ = ["run_role", "argument_for", "describe_error", "where_raised"]
+
+_RUNTIME = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the anodize package
+_FRAMES_KEPT = 6
 
 
 def describe_error(error: BaseException | None) -> str:
     """``"Type: message"`` for peers' ``PeerFailedError`` causes and reports."""
     return f"{type(error).__name__}: {error}" if error else "failed"
+
+
+def where_raised(error: BaseException) -> tuple[str, tuple[str, ...]]:
+    """Where ``error`` was raised in the role's own code, and the last frames.
+
+    Returns:
+        ``("file.py:12 in fn", frames)``: the innermost frame outside the anodize
+        runtime (a violation is raised inside the endpoint, but the fault is at the
+        role's call), and up to six innermost frames, one ``file:line in fn`` each.
+    """
+    frames = traceback.extract_tb(error.__traceback__)
+    lines = tuple(f"{f.filename}:{f.lineno} in {f.name}" for f in frames[-_FRAMES_KEPT:])
+    own = [f for f in frames if not os.path.abspath(f.filename).startswith(_RUNTIME + os.sep)]
+    where = f"{own[-1].filename}:{own[-1].lineno} in {own[-1].name}" if own else ""
+    return where, lines
 
 
 def run_role(group: str, priority: int | None, cpus: frozenset[int] | None, role: str,
@@ -40,12 +60,15 @@ def run_role(group: str, priority: int | None, cpus: frozenset[int] | None, role
         unfinished = endpoint.unfinished()
         if unfinished:
             raise unfinished[0].end_violation()
-    except RoleStopped:
-        report(RoleReport(role, group, "stopped", None, scheduling))
+    except RoleStopped as stop:
+        report(RoleReport(name=role, group=group, status=RoleStatus.STOPPED, scheduling=scheduling,
+                          detail=stop.detail))
     except BaseException as error:  # reported, never swallowed: the supervisor decides
-        report(RoleReport(role, group, "failed", error, scheduling))
+        where, frames = where_raised(error)
+        report(RoleReport(name=role, group=group, status=RoleStatus.FAILED, error=error,
+                          scheduling=scheduling, where=where, traceback=frames))
     else:
-        report(RoleReport(role, group, "done", None, scheduling))
+        report(RoleReport(name=role, group=group, status=RoleStatus.DONE, scheduling=scheduling))
 
 
 def argument_for(function: Callable[..., Any], endpoint: Endpoint) -> Any:

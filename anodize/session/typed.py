@@ -8,8 +8,8 @@ generated module shares one copy.
 
 from __future__ import annotations
 
+from ..errors import LinearityError
 from .endpoint import Endpoint, Message
-from .errors import LinearityError
 
 __all__ = ["State"]
 

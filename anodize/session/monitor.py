@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from sessiontypes import StateMachine, Transition
 
-from .errors import Action, ProtocolViolationError
+from ..errors import Action, ProtocolViolationError
 from .payloads import Validator, exact_types_for, validator_for
 
 __all__ = ["Monitor"]

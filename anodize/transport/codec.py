@@ -7,7 +7,7 @@ the payload in a small tagged format:
 - builtin values (None, bool, int, float, str, bytes, bytearray, complex) and
   containers of them (tuple, list, dict, set, frozenset) are encoded directly;
 - numpy arrays of plain dtypes are encoded inline when small, and through a
-  shared-memory slot when large (see :mod:`anodize.shm`); numpy scalars inline;
+  shared-memory slot when large (see :mod:`anodize.transport.shm`); numpy scalars inline;
 - instances of dataclasses the protocol names as sorts are encoded field by
   field and rebuilt without calling their ``__init__``;
 - instances of other classes the protocol names are pickled, and unpickled by an
@@ -25,13 +25,14 @@ import pickle
 import struct
 import sys
 from collections.abc import Callable, Iterable
+from enum import IntEnum
 from typing import Any
 
-__all__ = ["Codec", "DecodeError", "EncodeError", "INLINE_ARRAY_LIMIT", "MAX_FRAME", "HEADER", "KIND_MESSAGE",
-           "KIND_FAILURE"]
+from ..errors import AnodizeError
+
+__all__ = ["Codec", "DecodeError", "EncodeError", "INLINE_ARRAY_LIMIT", "MAX_FRAME", "HEADER", "FrameKind", "Tag"]
 
 HEADER = struct.Struct("<I")  # frame length, not counting these 4 bytes
-KIND_MESSAGE, KIND_FAILURE = 0x4D, 0x46  # b"M", b"F"
 INLINE_ARRAY_LIMIT = 64 * 1024  # bytes: larger arrays travel through shared memory
 MAX_FRAME = 64 * 2**20  # bytes: a receiver buffers no more for one message
 
@@ -42,17 +43,48 @@ _U8 = struct.Struct("<B")
 _C128 = struct.Struct("<dd")
 _I64_MIN, _I64_MAX = -(2**63), 2**63 - 1
 
-# Tags, one byte each.
-(T_NONE, T_TRUE, T_FALSE, T_INT, T_BIGINT, T_FLOAT, T_COMPLEX, T_STR, T_BYTES, T_BYTEARRAY,
- T_TUPLE, T_LIST, T_DICT, T_SET, T_FROZENSET, T_ARRAY, T_SHARED_ARRAY, T_NUMPY_SCALAR,
- T_DATACLASS, T_PICKLED) = range(20)
 
 
-class EncodeError(Exception):
+class FrameKind(IntEnum):
+    """The byte after a frame's length: what the frame carries."""
+
+    MESSAGE = 0x4D  # b"M": a label and its payload
+    FAILURE = 0x46  # b"F": the sender failed; the rest is the cause, UTF-8
+
+
+class Tag(IntEnum):
+    """The byte before each encoded value: its type. Encoder and decoder share these."""
+
+    NONE = 0
+    TRUE = 1
+    FALSE = 2
+    INT = 3           # 8 bytes, little-endian, signed
+    BIGINT = 4        # decimal text
+    FLOAT = 5
+    COMPLEX = 6
+    STR = 7
+    BYTES = 8
+    BYTEARRAY = 9
+    TUPLE = 10
+    LIST = 11
+    DICT = 12
+    SET = 13
+    FROZENSET = 14
+    ARRAY = 15        # numpy array, inline
+    SHARED_ARRAY = 16 # numpy array in a shared-memory slot
+    NUMPY_SCALAR = 17
+    DATACLASS = 18
+    PICKLED = 19
+
+
+_TAG_BYTE = {tag: bytes((tag,)) for tag in Tag}  # one-byte prefixes, built once
+
+
+class EncodeError(AnodizeError):
     """A payload this channel cannot carry (the reason says which part and why)."""
 
 
-class DecodeError(Exception):
+class DecodeError(AnodizeError):
     """A frame that does not decode: corrupt, truncated, or naming a class not allowed."""
 
 
@@ -67,7 +99,7 @@ class Codec:
 
     Args:
         classes: the payload classes the protocol names (``module:Class`` sorts).
-        ring: the sender's shared-memory ring (an :class:`anodize.shm.ArrayRing`),
+        ring: the sender's shared-memory ring (an :class:`anodize.transport.shm.ArrayRing`),
             where large arrays go (None: always inline).
         read_array: how a receiver maps a shared-memory slot (None: refuse them).
     """
@@ -93,12 +125,12 @@ class Codec:
         head = self._labels.get(label)
         if head is None:
             encoded = label.encode()
-            head = self._labels[label] = bytes((KIND_MESSAGE,)) + _U32.pack(len(encoded)) + encoded
+            head = self._labels[label] = bytes((FrameKind.MESSAGE,)) + _U32.pack(len(encoded)) + encoded
         # Fast paths for the commonest payloads: no payload, a small int.
         if payload is None:
-            body = head + b"\x00"
+            body = head + _TAG_BYTE[Tag.NONE]
         elif type(payload) is int and _I64_MIN <= payload <= _I64_MAX:
-            body = head + b"\x03" + _I64.pack(payload)
+            body = head + _TAG_BYTE[Tag.INT] + _I64.pack(payload)
         else:
             out = io.BytesIO()
             out.write(head)
@@ -113,20 +145,20 @@ class Codec:
     @staticmethod
     def failure_frame(cause: str) -> bytes:
         """The frame telling the receiver that the sender failed, and how."""
-        body = bytes((KIND_FAILURE,)) + cause.encode(errors="replace")
+        body = bytes((FrameKind.FAILURE,)) + cause.encode(errors="replace")
         return HEADER.pack(len(body)) + body
 
     def decode_body(self, body: bytes | bytearray | memoryview) -> tuple[int, Any]:
-        """``(KIND_MESSAGE, (label, payload))`` or ``(KIND_FAILURE, cause)``.
+        """``(FrameKind.MESSAGE, (label, payload))`` or ``(FrameKind.FAILURE, cause)``.
 
         Raises:
             DecodeError: the body is malformed.
         """
         try:
             kind = body[0]
-            if kind == KIND_FAILURE:
+            if kind == FrameKind.FAILURE:
                 return kind, bytes(body[1:]).decode(errors="replace")
-            if kind != KIND_MESSAGE:
+            if kind != FrameKind.MESSAGE:
                 raise DecodeError(f"unknown frame kind {kind:#x}")
             (length,) = _U32.unpack_from(body, 1)
             start = 5 + length
@@ -137,9 +169,9 @@ class Codec:
                 if len(self._label_names) < 4096:  # labels are few; garbage must not grow this
                     self._label_names[raw] = label
             size = len(body)
-            if size == start + 1 and body[start] == T_NONE:  # the commonest payloads, inline
+            if size == start + 1 and body[start] == Tag.NONE:  # the commonest payloads, inline
                 return kind, (label, None)
-            if size == start + 9 and body[start] == T_INT:
+            if size == start + 9 and body[start] == Tag.INT:
                 return kind, (label, _I64.unpack_from(body, start + 1)[0])
             payload, end = self._decode(body, start, 0)
             if end != len(body):
@@ -156,31 +188,31 @@ class Codec:
             raise EncodeError("payload nested more than 100 levels deep")
         kind = type(value)
         if value is None:
-            out.write(b"\x00")
+            out.write(_TAG_BYTE[Tag.NONE])
         elif kind is bool:
-            out.write(b"\x01" if value else b"\x02")
+            out.write(_TAG_BYTE[Tag.TRUE] if value else _TAG_BYTE[Tag.FALSE])
         elif kind is int:
             if _I64_MIN <= value <= _I64_MAX:  # type: ignore[operator]
-                out.write(b"\x03" + _I64.pack(value))
+                out.write(_TAG_BYTE[Tag.INT] + _I64.pack(value))
             else:
-                self._write_blob(T_BIGINT, str(value).encode(), out)
+                self._write_blob(Tag.BIGINT, str(value).encode(), out)
         elif kind is float:
-            out.write(b"\x05" + _F64.pack(value))
+            out.write(_TAG_BYTE[Tag.FLOAT] + _F64.pack(value))
         elif kind is complex:
-            out.write(b"\x06" + _C128.pack(value.real, value.imag))  # type: ignore[attr-defined]
+            out.write(_TAG_BYTE[Tag.COMPLEX] + _C128.pack(value.real, value.imag))  # type: ignore[attr-defined]
         elif kind is str:
-            self._write_blob(T_STR, value.encode(errors="surrogatepass"), out)  # type: ignore[attr-defined]
+            self._write_blob(Tag.STR, value.encode(errors="surrogatepass"), out)  # type: ignore[attr-defined]
         elif kind is bytes:
-            self._write_blob(T_BYTES, value, out)  # type: ignore[arg-type]
+            self._write_blob(Tag.BYTES, value, out)  # type: ignore[arg-type]
         elif kind is bytearray:
-            self._write_blob(T_BYTEARRAY, bytes(value), out)  # type: ignore[arg-type]
+            self._write_blob(Tag.BYTEARRAY, bytes(value), out)  # type: ignore[arg-type]
         elif kind in _SEQUENCE_TAGS:
             items = list(value)  # type: ignore[call-overload]
             out.write(_U8.pack(_SEQUENCE_TAGS[kind]) + _U32.pack(len(items)))
             for item in items:
                 self._encode(item, out, depth + 1)
         elif kind is dict:
-            out.write(_U8.pack(T_DICT) + _U32.pack(len(value)))  # type: ignore[arg-type]
+            out.write(_U8.pack(Tag.DICT) + _U32.pack(len(value)))  # type: ignore[arg-type]
             for key, item in value.items():  # type: ignore[attr-defined]
                 self._encode(key, out, depth + 1)
                 self._encode(item, out, depth + 1)
@@ -198,13 +230,13 @@ class Codec:
         name = self._class_ids[kind].encode()
         if dataclasses.is_dataclass(kind):
             fields = dataclasses.fields(kind)
-            self._write_blob(T_DATACLASS, name, out)
+            self._write_blob(Tag.DATACLASS, name, out)
             out.write(_U32.pack(len(fields)))
             for f in fields:
-                self._write_blob(T_STR, f.name.encode(), out)
+                self._write_blob(Tag.STR, f.name.encode(), out)
                 self._encode(getattr(value, f.name), out, depth + 1)
         else:
-            self._write_blob(T_PICKLED, name, out)
+            self._write_blob(Tag.PICKLED, name, out)
             try:
                 data = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
             except Exception as error:  # any pickling failure of user code
@@ -224,21 +256,21 @@ class Codec:
                               "dtypes travel between groups")
         dtype = value.dtype.str.encode()
         if isinstance(value, np.generic):
-            self._write_blob(T_NUMPY_SCALAR, dtype, out)
-            self._write_blob(T_BYTES, value.tobytes(), out)
+            self._write_blob(Tag.NUMPY_SCALAR, dtype, out)
+            self._write_blob(Tag.BYTES, value.tobytes(), out)
             return
         shape = b"".join(_I64.pack(n) for n in value.shape)
         if self.write_array is not None and (
                 value.nbytes > INLINE_ARRAY_LIMIT or self.ring.owns(value)):  # a filled slot goes as it is
             segment, slot, offset = self.write_array(value)
-            self._write_blob(T_SHARED_ARRAY, dtype, out)
+            self._write_blob(Tag.SHARED_ARRAY, dtype, out)
             out.write(_U8.pack(value.ndim) + shape)
-            self._write_blob(T_STR, segment.encode(), out)
+            self._write_blob(Tag.STR, segment.encode(), out)
             out.write(_U32.pack(slot) + _I64.pack(offset))
         else:
-            self._write_blob(T_ARRAY, dtype, out)
+            self._write_blob(Tag.ARRAY, dtype, out)
             out.write(_U8.pack(value.ndim) + shape)
-            self._write_blob(T_BYTES, np.ascontiguousarray(value).tobytes(), out)
+            self._write_blob(Tag.BYTES, np.ascontiguousarray(value).tobytes(), out)
 
     @staticmethod
     def _write_blob(tag: int, data: bytes, out: io.BytesIO) -> None:
@@ -251,17 +283,17 @@ class Codec:
             raise DecodeError("payload nested more than 100 levels deep")
         tag = buf[at]
         at += 1
-        if tag == T_NONE:
+        if tag == Tag.NONE:
             return None, at
-        if tag == T_TRUE:
+        if tag == Tag.TRUE:
             return True, at
-        if tag == T_FALSE:
+        if tag == Tag.FALSE:
             return False, at
-        if tag == T_INT:
+        if tag == Tag.INT:
             return _I64.unpack_from(buf, at)[0], at + 8
-        if tag == T_FLOAT:
+        if tag == Tag.FLOAT:
             return _F64.unpack_from(buf, at)[0], at + 8
-        if tag == T_COMPLEX:
+        if tag == Tag.COMPLEX:
             real, imag = _C128.unpack_from(buf, at)
             return complex(real, imag), at + 16
         if tag in _BLOB_DECODERS:
@@ -275,7 +307,7 @@ class Codec:
                 item, at = self._decode(buf, at, depth + 1)
                 items.append(item)
             return _SEQUENCE_BUILDERS[tag](items), at
-        if tag == T_DICT:
+        if tag == Tag.DICT:
             (count,) = _U32.unpack_from(buf, at)
             at += 4
             result = {}
@@ -283,11 +315,11 @@ class Codec:
                 key, at = self._decode(buf, at, depth + 1)
                 result[key], at = self._decode(buf, at, depth + 1)
             return result, at
-        if tag in (T_ARRAY, T_SHARED_ARRAY, T_NUMPY_SCALAR):
+        if tag in (Tag.ARRAY, Tag.SHARED_ARRAY, Tag.NUMPY_SCALAR):
             return self._decode_numpy(tag, buf, at)
-        if tag == T_DATACLASS:
+        if tag == Tag.DATACLASS:
             return self._decode_dataclass(buf, at, depth)
-        if tag == T_PICKLED:
+        if tag == Tag.PICKLED:
             name, at = _read_blob(buf, at)
             (length,) = _U32.unpack_from(buf, at)
             data = bytes(buf[at + 4:at + 4 + length])
@@ -312,7 +344,7 @@ class Codec:
         at += 4
         value = object.__new__(cls)  # no __init__: nothing of the sender's runs here
         for _ in range(count):
-            if buf[at] != T_STR:
+            if buf[at] != Tag.STR:
                 raise DecodeError("dataclass field name expected")
             raw, at = _read_blob(buf, at + 1)
             name = raw.decode()
@@ -332,7 +364,7 @@ class Codec:
         dtype = np.dtype(dtype_text.decode())
         if dtype.hasobject or dtype.fields is not None:
             raise DecodeError(f"numpy dtype {dtype} is not allowed")
-        if tag == T_NUMPY_SCALAR:
+        if tag == Tag.NUMPY_SCALAR:
             data, at = _read_blob(buf, at + 1)
             return np.frombuffer(data, dtype)[0], at
         ndim = buf[at]
@@ -340,7 +372,7 @@ class Codec:
         at += 1 + 8 * ndim
         if any(n < 0 for n in shape):
             raise DecodeError(f"negative array shape {shape}")
-        if tag == T_ARRAY:
+        if tag == Tag.ARRAY:
             data, at = _read_blob(buf, at + 1)
             return np.frombuffer(data, dtype).reshape(shape).copy(), at
         segment, at = _read_blob(buf, at + 1)
@@ -360,14 +392,14 @@ def _read_blob(buf: Any, at: int) -> tuple[bytes, int]:
     return data, start + length
 
 
-_SEQUENCE_TAGS = {tuple: T_TUPLE, list: T_LIST, set: T_SET, frozenset: T_FROZENSET}
+_SEQUENCE_TAGS = {tuple: Tag.TUPLE, list: Tag.LIST, set: Tag.SET, frozenset: Tag.FROZENSET}
 _SEQUENCE_BUILDERS: dict[int, Callable[[list[Any]], Any]] = {
-    T_TUPLE: tuple, T_LIST: lambda items: items, T_SET: set, T_FROZENSET: frozenset}
+    Tag.TUPLE: tuple, Tag.LIST: lambda items: items, Tag.SET: set, Tag.FROZENSET: frozenset}
 _BLOB_DECODERS: dict[int, Callable[[bytes], Any]] = {
-    T_STR: lambda data: data.decode(errors="surrogatepass"),
-    T_BYTES: lambda data: data,
-    T_BYTEARRAY: bytearray,
-    T_BIGINT: lambda data: int(data.decode()),
+    Tag.STR: lambda data: data.decode(errors="surrogatepass"),
+    Tag.BYTES: lambda data: data,
+    Tag.BYTEARRAY: bytearray,
+    Tag.BIGINT: lambda data: int(data.decode()),
 }
 
 

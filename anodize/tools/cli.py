@@ -20,12 +20,12 @@ import sessiontypes
 from sessiontypes import ProtocolError, ProtocolModule
 from sessiontypes.codegen import GeneratedModule, generate_modules
 
-from .errors import AnodizeError
+from ..errors import AnodizeError
 
 if TYPE_CHECKING:
-    from .report import GroupStatus
+    from ..supervision.report import GroupStatus
 
-EXIT_OK, EXIT_ERRORS, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_ERRORS, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
 class UsageError(Exception):
@@ -62,7 +62,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return EXIT_ERRORS
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
     except Exception as error:  # a bug: one line, not a traceback, unless debugging
         if os.environ.get("ANODIZE_DEBUG"):
             raise
@@ -325,7 +325,14 @@ def _run(args: argparse.Namespace) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(report.to_json() + "\n", encoding="utf-8")
         print(f"wrote {out}")
-    return EXIT_OK if report.ok else EXIT_ERRORS
+    return _exit_status(report.ok, report.interrupted)
+
+
+def _exit_status(ok: bool, interrupted: bool) -> int:
+    """0 for a run that went to the end, 130 after Ctrl-C (as shells do), else 1."""
+    if interrupted:
+        return EXIT_INTERRUPTED
+    return EXIT_OK if ok else EXIT_ERRORS
 
 
 def _named_systems() -> list[str]:
@@ -362,7 +369,7 @@ def _run_named(name: str, rest: list[str]) -> int:
     finished = named.finish(report, args)
     for line in finished.lines:
         print(line)
-    return EXIT_OK if finished.ok else EXIT_ERRORS
+    return _exit_status(finished.ok, report.interrupted)
 
 
 class ProgressLine:

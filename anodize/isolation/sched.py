@@ -12,6 +12,8 @@ import errno
 import os
 import threading
 
+from ..errors import ConfigurationError
+
 __all__ = ["apply_thread_scheduling", "nice_for"]
 
 
@@ -41,7 +43,7 @@ def apply_thread_scheduling(priority: int | None, cpus: frozenset[int] | None = 
         described = "SCHED_OTHER (no priority asked)"
     else:
         if not 1 <= priority <= 99:
-            raise ValueError(f"priority must be 1..99, got {priority}")
+            raise ConfigurationError(f"priority must be 1..99, got {priority}")
         described = _apply_priority(priority)
     return "; ".join([described, *notes])
 

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from typing import Protocol
 
-from .errors import AnodizeError
-from .report import GroupStatus, RunReport
-from .system import System
+from ..errors import AnodizeError
+from ..supervision.report import GroupStatus, RunReport
+from ..supervision.system import System
 
 __all__ = ["ENTRY_POINT_GROUP", "NamedSystem", "Prepared", "Finished", "find_named", "named_systems"]
 

@@ -16,7 +16,7 @@ from collections.abc import Callable, Iterable
 
 from sessiontypes import Sort
 
-from .errors import AnodizeError
+from ..errors import AnodizeError
 
 __all__ = ["Validator", "validator_for", "exact_types_for", "resolve_class", "with_field_classes"]
 

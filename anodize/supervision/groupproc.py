@@ -1,6 +1,6 @@
 """The life of one group's process, from spawn to exit.
 
-The supervisor (:mod:`anodize.supervisor`) spawns a fresh interpreter per group
+The supervisor (:mod:`anodize.supervision.processes`) spawns a fresh interpreter per group
 and hands it a :class:`GroupSpec` and its pipes. The process then:
 
 1. applies the group's CPU set and priority to itself (its threads inherit them);
@@ -13,8 +13,8 @@ and hands it a :class:`GroupSpec` and its pipes. The process then:
    stops the whole group at once (``os._exit``: every thread, and the memory goes back to
    the OS) after reporting the bound and the peak.
 
-Everything sent to the supervisor is plain data encoded by :mod:`anodize.codec`
-(never pickled), so a misbehaving group cannot run code in the supervisor.
+Everything sent to the supervisor is a typed control message (:mod:`.control`), plain
+data encoded by :mod:`anodize.transport.codec` (never pickled), so a misbehaving group cannot run code in the supervisor.
 """
 
 from __future__ import annotations
@@ -32,24 +32,36 @@ from typing import Any
 
 from sessiontypes import StateMachine
 
-from .codec import Codec, DecodeError
-from .endpoint import Endpoint
-from .errors import MemoryBoundError, error_to_data
+from ..errors import MemoryBoundError, error_to_data
+from ..isolation.memory import data_size, limit_data
+from ..isolation.sched import apply_thread_scheduling
+from ..session.endpoint import Endpoint
+from ..session.payloads import resolve_class, with_field_classes
+from ..transport.codec import Codec, DecodeError
+from ..transport.process import ProcessNetwork, make_codec
+from ..transport.shm import ArrayRing, RingReader
+from .control import (
+    Beat,
+    Crash,
+    Go,
+    GroupMessage,
+    MemoryExceeded,
+    PeerFailed,
+    Ready,
+    RoleEnded,
+    Stop,
+    recv_control,
+    send_control,
+)
 from .group import resolve_function
-from .memory import data_size, limit_data
-from .payloads import resolve_class, with_field_classes
-from .report import RoleReport
+from .report import RoleReport, RoleStatus
 from .roles import describe_error, run_role
-from .sched import apply_thread_scheduling
-from .shm import ArrayRing, RingReader
-from .transport.process import ProcessNetwork, make_codec
 
-__all__ = ["GroupSpec", "group_main", "control_send", "control_recv", "EXIT_MEMORY", "HEARTBEAT"]
+__all__ = ["GroupSpec", "group_main", "EXIT_MEMORY", "HEARTBEAT"]
 
 EXIT_MEMORY = 87  # the exit status of a group stopped for exceeding its memory bound
 HEARTBEAT = 0.25  # seconds
 _RESERVE = 4 * 2**20  # freed on MemoryError so that reporting it can allocate
-_CONTROL = Codec()
 
 
 @dataclass(frozen=True)
@@ -72,24 +84,6 @@ class GroupSpec:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-def control_send(conn: Connection, kind: str, data: object = None) -> None:
-    """Send one control message (plain data) over ``conn``."""
-    conn.send_bytes(_CONTROL.message_frame(kind, data)[4:])
-
-
-def control_recv(conn: Connection) -> tuple[str, Any]:
-    """Receive one control message.
-
-    Raises:
-        EOFError: the other side is gone.
-        DecodeError: the message is malformed.
-    """
-    _, value = _CONTROL.decode_body(conn.recv_bytes())
-    if not isinstance(value, tuple):
-        raise DecodeError("a control message must be a message frame")
-    return value  # type: ignore[return-value]
-
-
 def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
     """The entry point of a group's process (the target multiprocessing runs)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle
@@ -100,7 +94,7 @@ def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str]
         _GroupProcess(spec, control, pipes).run()
     except BaseException as error:  # a failure of the group itself: say so, then go
         try:
-            control_send(control, "crash", error_to_data(error))
+            send_control(control, Crash(error=error_to_data(error)))
         except OSError:
             pass
         os._exit(1)
@@ -136,8 +130,8 @@ class _GroupProcess:
         self.endpoints = endpoints
         threading.Thread(target=self._read_control, name="anodize-control", daemon=True).start()
         memory_note = self._bound_memory()  # every thread of ours exists by now
-        self._send("ready", {"pid": os.getpid(), "scheduling": scheduling, "baseline": self.baseline,
-                             "memory_note": memory_note})
+        self._send(Ready(pid=os.getpid(), scheduling=scheduling, baseline=self.baseline,
+                         memory_note=memory_note))
         self._supervise(len(threads))
 
     def _network(self) -> ProcessNetwork:
@@ -205,50 +199,53 @@ class _GroupProcess:
                 self._memory_exceeded(report.name)
             # The supervisor hears of a failure before the peers do: the root cause, not
             # the peers' PeerFailedErrors, is then what its policy acts on.
-            self._send("role", {"role": report.name, "status": report.status,
-                                "error": error_to_data(report.error) if report.error else None,
-                                **self._counts()})
-            if report.status == "failed":
+            self._heartbeat()
+            self._send(RoleEnded(role=report.name, status=str(report.status),
+                                 error=error_to_data(report.error) if report.error else None,
+                                 where=report.where, traceback=report.traceback, detail=report.detail))
+            if report.status is RoleStatus.FAILED:
                 self.network.fail(report.name, describe_error(report.error))
-        self._send("bye", self._counts())
+        self._heartbeat(final=True)
 
-    def _heartbeat(self) -> None:
-        self._send("beat", self._counts())
-
-    def _counts(self) -> dict[str, Any]:
+    def _heartbeat(self, final: bool = False) -> None:
         used = max(0, (data_size() or self.baseline) - self.baseline)
         self.peak = max(self.peak, used)
         sent = {f"{role}->{peer}": n for role, ep in self.endpoints.items()
                 for peer, n in ep.sent_counts().items()}
-        return {"memory": used, "peak": self.peak, "sent": sent}
+        received = {f"{peer}->{role}": n for role, ep in self.endpoints.items()
+                    for peer, n in ep.received_counts().items()}
+        self._send(Beat(memory=used, peak=self.peak, sent=sent, received=received, final=final))
 
     def _memory_exceeded(self, role: str) -> None:
         self.reserve = None  # room to report in
-        counts = self._counts()
-        bound = self.spec.memory or 0
-        error = MemoryBoundError(self.spec.name, bound, self.peak)
-        self._send("memory", {"role": role, "error": error_to_data(error), **counts})
+        self._heartbeat()
+        error = MemoryBoundError(self.spec.name, self.spec.memory or 0, self.peak)
+        self._send(MemoryExceeded(role=role, error=error_to_data(error)))
         os._exit(EXIT_MEMORY)  # every thread stops; the OS takes the memory back
 
     def _read_control(self) -> None:
         while True:
             try:
-                kind, data = control_recv(self.control)
+                message = recv_control(self.control)
             except (EOFError, OSError, DecodeError):
                 self.network.stop()  # the supervisor is gone: do not linger
                 time.sleep(2.0)
                 os._exit(1)
-            if kind == "go":
-                self.gate.set()
-            elif kind == "failed":
-                self.network.fail(data["role"], data["cause"])
-            elif kind == "stop":
-                self.network.stop()
+            match message:
+                case Go():
+                    self.gate.set()
+                case PeerFailed():
+                    self.network.fail(message.role, message.cause)
+                case Stop():
+                    self.gate.set()  # a group stopped before "go" must still end
+                    self.network.stop()
+                case _:
+                    pass  # a group's message sent to a group: not ours to act on
 
-    def _send(self, kind: str, data: object) -> None:
+    def _send(self, message: GroupMessage) -> None:
         with self.send_lock:
             try:
-                control_send(self.control, kind, data)
+                send_control(self.control, message)
             except OSError:
                 pass  # the supervisor is gone; the control reader ends the process
 

@@ -18,12 +18,12 @@ its end (:func:`remove_run_segments`), even those of crashed groups.
 from __future__ import annotations
 
 import glob
-import mmap
-import os
-import tempfile
 import itertools
 import math
+import mmap
+import os
 import struct
+import tempfile
 import time
 import weakref
 from collections.abc import Callable

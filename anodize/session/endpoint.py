@@ -19,10 +19,9 @@ from typing import Any, NamedTuple
 
 from sessiontypes import StateMachine
 
-from .errors import Action, AnodizeError, PeerFailedError, RoleStopped
+from ..errors import Action, AnodizeError, PeerFailedError, RoleStopped
+from .channel import STOP, Channel, Corrupt, Network, PeerFailure
 from .monitor import Monitor
-from .transport.inproc import STOP, InprocNetwork, PeerFailure
-from .transport.process import Corrupt
 
 __all__ = ["Message", "Endpoint", "RoleStopped"]
 
@@ -41,7 +40,7 @@ class Message(NamedTuple):
 class Endpoint:
     """One role's (or one parallel branch's) view of the session."""
 
-    def __init__(self, role: str, protocol: str, machine: StateMachine, network: InprocNetwork,
+    def __init__(self, role: str, protocol: str, machine: StateMachine, network: Network,
                  monitored: bool = True, peers: tuple[set[str], set[str]] | None = None) -> None:
         self.role = role
         self.protocol = protocol
@@ -55,6 +54,8 @@ class Endpoint:
                      for p in sends_to if (role, p) in queues}
         self._in = {p: queues[(p, role)] for p in receives_from if (p, role) in queues}
         self.sent: dict[str, int] = dict.fromkeys(self._out, 0)
+        self.received: dict[str, int] = dict.fromkeys(self._in, 0)
+        self._stop_event = network.stop_event_for(role)
         self._plain = not machine.forks  # no parallel composition: skip the routing checks
         self._fork_lock = threading.Lock()
         self._doorbell = network.doorbells.get(role)
@@ -76,17 +77,13 @@ class Endpoint:
             return self._branch_for(self._send_route, to, "send", label).send(to, label, payload)
         monitor = self._monitor
         if monitor is not None:  # first: a forbidden send is a violation, whatever the peer
-            # Monitor.send inlined (this is the hot path); it is called only to raise.
-            step = monitor.sends[monitor.state].get((to, label))
-            if step is None or (type(payload) not in step[1] and step[2](payload) is not None):
-                monitor.send(to, label, payload)
-            monitor.state = step[0]  # type: ignore[index]
+            monitor.send(to, label, payload)
         if self._network.alarm:
             failed = self._network.failed.get(to)
             if failed is not None:
                 raise PeerFailedError(self.role, to, failed)
-            if self._network.stopping:
-                raise RoleStopped()
+            if self._stop_event.is_set():
+                raise RoleStopped(f"interrupted sending {label} to {to}, in state {self._state_number()}")
         out = self._out.get(to)
         if out is None:  # only reachable without a monitor
             raise AnodizeError(f"role {self.role} has no channel to {to}")
@@ -139,11 +136,11 @@ class Endpoint:
             raise TimeoutError(f"role {self.role}: no message from {frm} within {timeout} s") from None
         if self._doorbell is not None and self._doorbell.qsize() > _DRAIN_AT:
             self._drain_doorbell()
-        if type(item) is tuple and monitor is not None:  # Monitor.recv inlined, as in send
-            step = monitor.recvs[monitor.state].get((frm, item[0]))
-            if step is not None and (type(item[1]) in step[1] or step[2](item[1]) is None):
-                monitor.state = step[0]
-                return _new_tuple(Message, item)  # type: ignore[no-any-return]
+        if type(item) is tuple:  # a message, not a signal: the fast path
+            if monitor is not None:
+                monitor.recv(frm, item[0], item[1])
+            self.received[frm] += 1
+            return _new_tuple(Message, item)  # type: ignore[no-any-return]
         return self._accept(frm, item, channel)
 
     def _drain_doorbell(self) -> None:
@@ -196,7 +193,7 @@ class Endpoint:
                 continue
             return peer, self._take(peer, channel)
 
-    def _take(self, peer: str, channel: queue.SimpleQueue[object]) -> Message:
+    def _take(self, peer: str, channel: Channel) -> Message:
         item = channel.get_nowait()  # only this role's thread(s) read its channels
         owner = self._recv_route.get(peer, self) if self._forked() else self
         return owner._accept(peer, item, channel)
@@ -237,8 +234,8 @@ class Endpoint:
         Raises:
             RoleStopped: the run is stopping.
         """
-        if self._network.stop_event.wait(None if seconds == float("inf") else max(0.0, seconds)):
-            raise RoleStopped()
+        if self._stop_event.wait(None if seconds == float("inf") else max(0.0, seconds)):
+            raise RoleStopped(f"sleeping in state {self._state_number()} (Endpoint.sleep)")
 
     # ---- completion ------------------------------------------------------------------
     def unfinished(self) -> list[Endpoint]:
@@ -265,6 +262,14 @@ class Endpoint:
                 counts[peer] = counts.get(peer, 0) + n
         return counts
 
+    def received_counts(self) -> dict[str, int]:
+        """Messages received per peer, this endpoint's and its branches'."""
+        counts = dict(self.received)
+        for branch in self._branches or ():
+            for peer, n in branch.received_counts().items():
+                counts[peer] = counts.get(peer, 0) + n
+        return counts
+
     @property
     def state(self) -> str:
         """The current state and the local type that remains (for messages and debugging)."""
@@ -275,10 +280,11 @@ class Endpoint:
         return f"{self._monitor.state} ({self._machine.describe(self._monitor.state)})"
 
     # ---- internals ---------------------------------------------------------------------
-    def _accept(self, frm: str, item: object, channel: queue.SimpleQueue[object]) -> Message:
+    def _accept(self, frm: str, item: object, channel: Channel) -> Message:
         if type(item) is tuple:
             if self._monitor is not None:
                 self._monitor.recv(frm, item[0], item[1])
+            self.received[frm] += 1
             return _new_tuple(Message, item)  # type: ignore[no-any-return]
         if isinstance(item, PeerFailure):
             channel.put(item)  # later receives fail too
@@ -286,15 +292,26 @@ class Endpoint:
             raise PeerFailedError(self.role, item.peer, item.cause)
         if item is STOP:
             channel.put(item)
-            raise RoleStopped()
+            raise RoleStopped(self._blocked_on(frm))
         if isinstance(item, Corrupt):  # a frame from another process that did not decode
             monitor = self._monitor or Monitor(self._machine, self.protocol, self.role)
             raise monitor.violation(Action("recv", frm, "?"), blame=frm,
                                     reason=f"the message could not be decoded ({item.reason})")
-        message: Message = item  # type: ignore[assignment]
-        if self._monitor is not None:
-            self._monitor.recv(frm, message.label, message.payload)
-        return message
+        raise AnodizeError(f"role {self.role}: the channel from {frm} delivered {item!r}, "
+                           "which is neither a message nor a signal")
+
+    def _state_number(self) -> str:
+        return "unmonitored" if self._monitor is None else str(self._monitor.state)
+
+    def _blocked_on(self, frm: str | None) -> str:
+        """``blocked in state 3 waiting for ?Cam(Frame)``: what a stopped receive was waiting for."""
+        monitor = self._monitor
+        if monitor is None:
+            return f"blocked waiting for a message from {frm or 'any peer'}"
+        waits = [str(Action("recv", t.peer, t.label, t.sort.spelling if t.sort else None))
+                 for t in self._machine.expected(monitor.state)
+                 if t.action == "recv" and (frm is None or t.peer == frm)]
+        return f"blocked in state {monitor.state} waiting for {' or '.join(waits) or 'a message from ' + str(frm)}"
 
     def _forked(self) -> bool:
         if self._branches is not None:
@@ -345,10 +362,10 @@ class Endpoint:
                 raise TimeoutError(f"role {self.role}: no message within {timeout} s")
             time.sleep(0.0005)
 
-    def _all_in(self) -> dict[str, queue.SimpleQueue[object]]:
+    def _all_in(self) -> dict[str, Channel]:
         if self._branches is None:
             return self._in
-        found: dict[str, queue.SimpleQueue[object]] = {}
+        found: dict[str, Channel] = {}
         for branch in self._branches:
             found.update(branch._all_in())
         return found

@@ -1,0 +1,12 @@
+"""What a role holds: its monitored endpoint, the monitor, payload checks, typed states.
+
+The endpoint steps the role's state machine on every send and receive; the
+channels beneath it come from a transport through the small interface of
+:mod:`.channel`.
+"""
+
+from .endpoint import Endpoint, Message
+from .monitor import Monitor
+from .typed import State
+
+__all__ = ["Endpoint", "Message", "Monitor", "State"]

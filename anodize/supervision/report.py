@@ -1,0 +1,249 @@
+"""What a run produced: per role, per group, per channel; and live group status."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+from ..errors import AnodizeError
+
+__all__ = ["RoleStatus", "GroupState", "RoleReport", "GroupReport", "RunReport", "GroupStatus"]
+
+
+class RoleStatus(StrEnum):
+    """How a role ended (a ``str``: ``RoleStatus.DONE == "done"``)."""
+
+    DONE = "done"        # reached the end of its local type
+    FAILED = "failed"    # raised, violated the protocol, or its group failed
+    STOPPED = "stopped"  # stopped by the supervisor (timeout, interrupt, a stop-system policy)
+
+
+class GroupState(StrEnum):
+    """Where a group is in its life; the last three are also how it ended."""
+
+    STARTING = "starting"
+    RUNNING = "running"
+    RESTARTING = "restarting"
+    DONE = "done"
+    FAILED = "failed"
+    STOPPED = "stopped"
+
+
+@dataclass(frozen=True, kw_only=True)
+class RoleReport:
+    """One role: ``status`` and, unless done, the ``error`` (None when stopped).
+
+    Attributes:
+        where: for a role that raised, ``file:line in function`` of the innermost
+            frame in the role's own code (not anodize's), or "" when unknown.
+        traceback: the last frames of the exception, innermost last, one line each.
+        detail: for a stopped role, what it was doing, e.g. ``blocked in state 3
+            waiting for ?Cam(Frame)``.
+    """
+
+    name: str
+    group: str
+    status: RoleStatus
+    error: BaseException | None = None
+    scheduling: str = ""
+    where: str = ""
+    traceback: tuple[str, ...] = ()
+    detail: str = ""
+
+    def line(self) -> str:
+        """``role Sink: failed at roles.py:12 in sink: ValueError: ...`` or ``role Sink: stopped, blocked ...``."""
+        text = f"role {self.name}: {self.status}"
+        if self.where:
+            text += f" at {self.where}"
+        if self.error is not None:
+            text += f": {_describe(self.error)}"
+        elif self.detail:
+            text += f", {self.detail}"
+        return text
+
+
+@dataclass(frozen=True, kw_only=True)
+class GroupReport:
+    """One group: failed if a role failed, else stopped if one was stopped, else done.
+
+    Attributes:
+        peak_memory: the most the group's roles had allocated, in bytes, above the
+            process's baseline (interpreter and imported modules); None where not measured.
+        memory_bound: the bound in bytes, or None.
+        memory_note: how the bound was enforced, or why it was not.
+        error: the group-level failure (e.g. a ``MemoryBoundError``), or None.
+        restarts: how many times the group was started again (``on_failure="restart"``).
+        failures: one line per failure that led to a restart or a stop, oldest first.
+        messages: messages the group's roles sent.
+        received: messages the group's roles received.
+        rate_hz: messages sent per second, the median over the whole one-second windows
+            in which every role of the group was running.
+        rate_min_hz: the lowest such window (the rate the group never fell below).
+        pid: the group's process, for ``transport="process"``.
+    """
+
+    name: str
+    status: GroupState
+    scheduling: str
+    peak_memory: int | None = None
+    memory_note: str = ""
+    memory_bound: int | None = None
+    error: BaseException | None = None
+    restarts: int = 0
+    failures: tuple[str, ...] = ()
+    messages: int = 0
+    received: int = 0
+    rate_hz: float | None = None
+    rate_min_hz: float | None = None
+    pid: int | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class GroupStatus:
+    """A live snapshot of one group, handed to ``System.run(on_status=...)``.
+
+    ``memory`` is bytes allocated above the baseline (None where not measured);
+    ``messages`` and ``received`` count messages sent and received so far;
+    ``rate_hz`` is messages sent per second over the last second.
+    """
+
+    name: str
+    state: GroupState
+    pid: int | None = None
+    memory: int | None = None
+    messages: int = 0
+    received: int = 0
+    rate_hz: float | None = None
+    restarts: int = 0
+    note: str = ""
+
+    def line(self) -> str:
+        """One line for a terminal, e.g. ``control  running  pid 4242  12.0 MiB  100 msgs  100 msg/s``."""
+        parts = [f"{self.name:<12}", f"{self.state:<10}"]
+        if self.pid:
+            parts.append(f"pid {self.pid}")
+        if self.memory is not None:
+            parts.append(f"{max(0, self.memory) / 2**20:6.1f} MiB")
+        parts.append(f"{self.messages} msgs")
+        if self.rate_hz is not None:
+            parts.append(f"{self.rate_hz:.0f} msg/s")
+        if self.restarts:
+            parts.append(f"{self.restarts} restarts")
+        if self.note:
+            parts.append(self.note)
+        return "  ".join(parts)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunReport:
+    """The supervisor's account of a run.
+
+    Attributes:
+        messages: per channel ``"A->B"``, the messages A sent to B.
+        received: per channel, the messages B took from A (fewer where a run ended
+            with messages in flight).
+        interrupted: the run was ended by Ctrl-C (SIGINT).
+        notes: system-wide facts, e.g. the real-time guard in force.
+    """
+
+    protocol: str
+    roles: dict[str, RoleReport]
+    groups: dict[str, GroupReport]
+    messages: dict[str, int] = field(default_factory=dict)
+    received: dict[str, int] = field(default_factory=dict)
+    duration: float = 0.0
+    transport: str = "inproc"
+    interrupted: bool = False
+    notes: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        """Every role reached the end of its local type."""
+        return all(r.status is RoleStatus.DONE for r in self.roles.values())
+
+    @property
+    def failed(self) -> bool:
+        """Some role or group failed (a stop at the timeout is not a failure)."""
+        return (any(r.status is RoleStatus.FAILED for r in self.roles.values())
+                or any(g.status is GroupState.FAILED for g in self.groups.values()))
+
+    @property
+    def outcome(self) -> str:
+        """``"ok"``, ``"NOT ok"``, ``"interrupted"`` (Ctrl-C, no failures) or
+        ``"stopped, no failures"`` (a run ended by its timeout)."""
+        if self.ok:
+            return "ok"
+        if self.failed:
+            return "NOT ok"
+        return "interrupted" if self.interrupted else "stopped, no failures"
+
+    def summary(self) -> str:
+        """A few lines for people: one per group, then each role that did not finish,
+        with where it raised or what it was waiting for."""
+        lines = [f"protocol {self.protocol}: {self.outcome} in {self.duration:.2f} s"
+                 f" ({self.transport})"]
+        for group in self.groups.values():
+            lines.append(f"  group {group.name}: {group.status} ({_group_details(group)})")
+            if group.error is not None:
+                lines.append(f"    {type(group.error).__name__}: {group.error}")
+        for role in self.roles.values():
+            if role.status is not RoleStatus.DONE:
+                lines.append(f"  {role.line()}")
+        lines.extend(f"  note: {note}" for note in self.notes)
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (JSON-ready): errors become ``{"type", "message"}``."""
+        return {
+            "protocol": self.protocol, "ok": self.ok, "outcome": self.outcome,
+            "interrupted": self.interrupted, "duration_s": round(self.duration, 4),
+            "transport": self.transport, "notes": list(self.notes), "messages": dict(self.messages),
+            "received": dict(self.received),
+            "groups": {name: {
+                "status": str(g.status), "scheduling": g.scheduling, "peak_memory": g.peak_memory,
+                "memory_bound": g.memory_bound, "memory_note": g.memory_note,
+                "error": _error(g.error), "restarts": g.restarts, "failures": list(g.failures),
+                "messages": g.messages, "received": g.received, "rate_hz": g.rate_hz,
+                "rate_min_hz": g.rate_min_hz, "pid": g.pid,
+            } for name, g in self.groups.items()},
+            "roles": {name: {"group": r.group, "status": str(r.status), "error": _error(r.error),
+                             "where": r.where, "traceback": list(r.traceback), "detail": r.detail,
+                             "scheduling": r.scheduling} for name, r in self.roles.items()},
+        }
+
+    def to_json(self) -> str:
+        """:meth:`to_dict` as indented JSON."""
+        return json.dumps(self.to_dict(), indent=2)
+
+
+def _describe(error: BaseException) -> str:
+    """Anodize's errors say what they are; others get their type named."""
+    return str(error) if isinstance(error, AnodizeError) else f"{type(error).__name__}: {error}"
+
+
+def _error(error: BaseException | None) -> dict[str, str] | None:
+    return None if error is None else {"type": type(error).__name__, "message": str(error)}
+
+
+def _group_details(group: GroupReport) -> str:
+    details = [group.scheduling or "default scheduling"]
+    if group.messages or group.received:
+        rate = ""
+        if group.rate_hz is not None and group.messages:  # a group that only receives has no send rate
+            low = f", never below {group.rate_min_hz:.0f}" if group.rate_min_hz is not None else ""
+            rate = f", {group.rate_hz:.0f} msg/s{low}"
+        details.append(f"{group.messages} sent, {group.received} received{rate}")
+    if group.peak_memory is not None:
+        bound = f" of {_mib(group.memory_bound)} bound" if group.memory_bound else ""
+        details.append(f"peak {_mib(group.peak_memory)}{bound}")
+    if group.memory_note:
+        details.append(group.memory_note)
+    if group.restarts:
+        details.append(f"restarted {group.restarts}x")
+    return "; ".join(details)
+
+
+def _mib(size: int | None) -> str:
+    return f"{(size or 0) / 2**20:.1f} MiB"

@@ -1,0 +1,505 @@
+"""The supervision core: one implementation of failure policy, run state, status and reports.
+
+A *runner* (threads for ``inproc``, processes for ``process``) starts groups,
+carries the supervisor's word to them and turns what happens into
+:class:`Event` values; :class:`Supervisor` decides everything else, the same way
+for every transport:
+
+- a role that fails has every other group told at once (its peers get
+  ``PeerFailedError`` instead of waiting), then its group's policy applies:
+  ``stop`` (the rest runs on), ``stop-system`` (every group stops) or
+  ``restart``; a restart starts the group again from its initial states on fresh
+  channels, together with every group connected to it that also restarts (a
+  session cannot resume with a role that forgot where it was), at most
+  ``max_restarts`` times;
+- the timeout counts from "go" (every group ready), then every group is asked
+  to stop and, ``grace`` seconds later, ended;
+- Ctrl-C stops the run the same way, and the report says it was interrupted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Protocol
+
+from ..errors import RoleError
+from .group import FailurePolicy, Group
+from .report import GroupReport, GroupState, GroupStatus, RoleReport, RoleStatus, RunReport
+from .roles import describe_error
+
+__all__ = ["Supervisor", "Runner", "RunState", "Event", "Ready", "Counts", "RoleEnded", "GroupFailed",
+           "GroupExited", "Note", "window_rates"]
+
+TICK = 0.1           # seconds between two looks at the clock when nothing happens
+STATUS_EVERY = 0.5   # seconds between two on_status calls
+RATE_WINDOW = 1.0    # seconds per window of the reported message rates
+
+
+class RunState(StrEnum):
+    """Where the run as a whole is."""
+
+    STARTING = "starting"  # groups starting; the timeout has not begun
+    RUNNING = "running"
+    STOPPING = "stopping"  # every group was asked to stop
+    ENDED = "ended"
+
+
+# ---- what runners report ---------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class Ready:
+    """A group's incarnation is built and waits for "go"."""
+
+    group: str
+    incarnation: int
+    scheduling: str = ""
+    memory_note: str = ""
+    pid: int | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Counts:
+    """A group incarnation's counters so far (per channel ``"A->B"``), memory in bytes."""
+
+    group: str
+    incarnation: int
+    sent: dict[str, int]
+    received: dict[str, int]
+    memory: int | None = None
+    peak: int | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class RoleEnded:
+    """A role ended (its report says how)."""
+
+    group: str
+    incarnation: int
+    report: RoleReport
+
+
+@dataclass(frozen=True, kw_only=True)
+class GroupFailed:
+    """The group failed as a whole (memory bound, crash, garbled report, death)."""
+
+    group: str
+    incarnation: int
+    error: BaseException
+
+
+@dataclass(frozen=True, kw_only=True)
+class GroupExited:
+    """The incarnation is over: its process exited, or every role thread ended (or was abandoned).
+
+    ``unreported`` says what happened to roles that never reported (e.g. "its thread did
+    not stop within the grace period and was abandoned").
+    """
+
+    group: str
+    incarnation: int
+    unreported: str = ""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Note:
+    """A fact for the group's report (e.g. the watchdog demoted it)."""
+
+    group: str
+    text: str
+
+
+Event = Ready | Counts | RoleEnded | GroupFailed | GroupExited | Note
+
+
+class Runner(Protocol):
+    """What a transport does for the supervisor."""
+
+    transport: str
+
+    def start(self, groups: Sequence[str], incarnation: int) -> None:
+        """Start ``groups`` together on fresh channels among them; roles of any other group
+        are gone to them. Each reports :class:`Ready`, then waits for :meth:`go`."""
+
+    def go(self, group: str) -> None:
+        """Let a ready group's roles run."""
+
+    def events(self, timeout: float) -> list[Event]:
+        """What happened, waiting up to ``timeout`` seconds for the first event."""
+
+    def tell_failed(self, group: str, role: str, cause: str) -> None:
+        """Tell ``group`` that ``role`` (of another group) failed."""
+
+    def stop(self, group: str) -> None:
+        """Ask ``group``'s roles to stop (they get ``RoleStopped``)."""
+
+    def kill(self, group: str) -> None:
+        """End ``group`` now; it still reports :class:`GroupExited`."""
+
+    def notes(self) -> list[str]:
+        """System-wide facts for the report."""
+
+    def close(self) -> None:
+        """Release everything (processes, cgroups, rings); called once, at the end."""
+
+
+# ---- the core --------------------------------------------------------------------------------
+class _Why(StrEnum):
+    """Why the supervisor ended or stopped an incarnation (empty: it has not)."""
+
+    NONE = ""
+    STOP = "stop"
+    RESTART = "restart"
+    FAILED = "failed"
+
+
+@dataclass
+class _GroupRecord:
+    """One group across its incarnations."""
+
+    group: Group
+    incarnation: int = -1
+    state: GroupState = GroupState.STARTING
+    ready: bool = False
+    ended: bool = True
+    why: _Why = _Why.NONE
+    killed: bool = False  # the supervisor ended it: its death is no failure of its own
+    error: BaseException | None = None
+    reports: dict[str, RoleReport] = field(default_factory=dict)
+    scheduling: str = ""
+    memory_note: str = ""
+    pid: int | None = None
+    restarts: int = 0
+    failures: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    memory: int | None = None
+    peak: int | None = None
+    sent: dict[str, int] = field(default_factory=dict)        # all incarnations
+    received: dict[str, int] = field(default_factory=dict)
+    sent_before: dict[str, int] = field(default_factory=dict)  # earlier incarnations' totals
+    received_before: dict[str, int] = field(default_factory=dict)
+    # (time, messages sent so far), in stretches during which every role of the group ran
+    stretches: list[list[tuple[float, int]]] = field(default_factory=list)
+    steady: bool = False  # in such a stretch now
+
+
+class Supervisor:
+    """Runs a system's groups through a :class:`Runner`; :meth:`run` returns the report."""
+
+    def __init__(self, protocol: str, roles: Sequence[str], groups: dict[str, Group],
+                 channels: Sequence[tuple[str, str]], runner: Runner, timeout: float | None,
+                 grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None) -> None:
+        self.protocol = protocol
+        self.roles = tuple(roles)
+        self.channels = tuple(channels)
+        self.runner = runner
+        self.timeout = timeout
+        self.grace = grace
+        self.on_status = on_status
+        self.records = {name: _GroupRecord(group) for name, group in groups.items()}
+        self.group_of = {role: g.name for g in groups.values() for role in g.roles}
+        self.state = RunState.STARTING
+        self.started = time.monotonic()
+        self.went: float | None = None
+        self.stop_since = 0.0
+        self.interrupted = False
+        self.notes: list[str] = []
+
+    # ---- the run ---------------------------------------------------------------------------
+    def run(self) -> RunReport:
+        """Start every group, supervise to the end, and report (also after Ctrl-C)."""
+        try:
+            self._start(list(self.records))
+            next_status = time.monotonic() + STATUS_EVERY
+            while self._live():
+                try:
+                    self._step()
+                    if self.on_status is not None and time.monotonic() >= next_status:
+                        self.on_status(self.statuses())
+                        next_status = time.monotonic() + STATUS_EVERY
+                except KeyboardInterrupt:
+                    if self.interrupted:  # a second Ctrl-C: no more grace
+                        for name in self._running():
+                            self.runner.kill(name)
+                    self.interrupted = True
+                    self._stop_all("interrupted (Ctrl-C)")
+        finally:
+            self.state = RunState.ENDED
+            self.notes[:0] = self.runner.notes()
+            self.runner.close()
+        report = self.report()
+        if self.on_status is not None:
+            self.on_status(self.statuses())
+        return report
+
+    def _step(self) -> None:
+        if (self.timeout is not None and self.went is not None and self.state is RunState.RUNNING
+                and time.monotonic() >= self.went + self.timeout):
+            self._stop_all("the timeout passed")
+        for event in self.runner.events(TICK):
+            self._handle(event)
+        if self.state is RunState.STOPPING and time.monotonic() - self.stop_since > self.grace:
+            for name in self._running():
+                self._end(name, _Why.STOP)
+
+    def _live(self) -> bool:
+        return any(not r.ended for r in self.records.values())
+
+    def _running(self) -> list[str]:
+        return [name for name, r in self.records.items() if not r.ended]
+
+    # ---- starting --------------------------------------------------------------------------
+    def _start(self, names: list[str]) -> None:
+        for name in names:
+            record = self.records[name]
+            record.incarnation += 1
+            record.state = GroupState.STARTING if record.incarnation == 0 else GroupState.RESTARTING
+            record.ready = record.ended = False
+            record.why, record.killed, record.error, record.reports = _Why.NONE, False, None, {}
+            record.steady = False
+        # One incarnation number per batch: a runner names the batch's channels by it.
+        self.runner.start(names, max(self.records[n].incarnation for n in names))
+
+    def _maybe_go(self) -> None:
+        """Once no group is still starting, let the ready ones go together."""
+        if any(not r.ended and not r.ready for r in self.records.values()):
+            return
+        for name, record in self.records.items():
+            if record.ready and record.state in (GroupState.STARTING, GroupState.RESTARTING):
+                record.state = GroupState.RUNNING
+                record.steady = True
+                record.stretches.append([])
+                self.runner.go(name)
+                if self.went is None:
+                    self.went = time.monotonic()
+                    self.state = RunState.RUNNING
+
+    # ---- events ----------------------------------------------------------------------------
+    def _handle(self, event: Event) -> None:
+        record = self.records.get(event.group)
+        if record is None:
+            return
+        if isinstance(event, Note):
+            record.notes.append(event.text)
+            return
+        if event.incarnation != record.incarnation or record.ended:
+            return  # a late word from an incarnation already ended (e.g. an abandoned thread)
+        match event:
+            case Ready():
+                record.ready = True
+                record.scheduling = event.scheduling
+                record.memory_note = event.memory_note
+                record.pid = event.pid
+                self._maybe_go()
+            case Counts():
+                self._counts(record, event)
+            case RoleEnded():
+                self._role_ended(record, event.report)
+            case GroupFailed():
+                if not record.killed:
+                    self._group_failed(record, event.error)
+            case GroupExited():
+                self._exited(record, event.unreported)
+
+    def _counts(self, record: _GroupRecord, counts: Counts) -> None:
+        for channel, n in counts.sent.items():
+            record.sent[channel] = record.sent_before.get(channel, 0) + n
+        for channel, n in counts.received.items():
+            record.received[channel] = record.received_before.get(channel, 0) + n
+        if counts.memory is not None:
+            record.memory = counts.memory
+        if counts.peak is not None:
+            record.peak = max(record.peak or 0, counts.peak)
+        if record.steady and self.state is RunState.RUNNING:
+            record.stretches[-1].append((time.monotonic(), sum(record.sent.values())))
+
+    def _role_ended(self, record: _GroupRecord, report: RoleReport) -> None:
+        record.scheduling = record.scheduling or report.scheduling  # threads apply it per role
+        if not report.scheduling:  # a group process applies it once, to all its roles
+            report = dataclasses.replace(report, scheduling=record.scheduling)
+        record.reports[report.name] = report
+        record.steady = False  # a group with a role gone no longer runs at its rate
+        if report.status is RoleStatus.FAILED:
+            self._broadcast_failure(record.group.name, {report.name: describe_error(report.error)})
+            self._apply_policy(record, f"role {report.name}: {describe_error(report.error)}")
+
+    def _group_failed(self, record: _GroupRecord, error: BaseException) -> None:
+        """The whole group failed: every unreported role with it, and it is ended."""
+        if record.error is not None:
+            return
+        record.error = error
+        record.steady = False
+        missing = [r for r in record.group.roles if r not in record.reports]
+        for role in missing:
+            record.reports[role] = RoleReport(name=role, group=record.group.name, status=RoleStatus.FAILED,
+                                              error=error, scheduling=record.scheduling)
+        self._broadcast_failure(record.group.name, dict.fromkeys(missing, describe_error(error)))
+        self._apply_policy(record, describe_error(error), whole_group=True)
+
+    def _exited(self, record: _GroupRecord, unreported: str) -> None:
+        record.ended = True
+        record.steady = False
+        missing = [r for r in record.group.roles if r not in record.reports]
+        if missing and record.why is _Why.NONE and record.error is None:
+            # Ended on its own before its roles reported: that is a failure of the group.
+            self._group_failed(record, RoleError("GroupEnded", unreported or
+                                                 f"group {record.group.name} ended before its roles reported"))
+        for role in [r for r in record.group.roles if r not in record.reports]:
+            stopped = record.why is _Why.STOP and record.error is None
+            record.reports[role] = RoleReport(
+                name=role, group=record.group.name,
+                status=RoleStatus.STOPPED if stopped else RoleStatus.FAILED,
+                error=None if stopped else record.error, scheduling=record.scheduling,
+                detail=unreported if stopped else "")
+        record.state = self._final_state(record)
+        if record.why is _Why.RESTART:
+            self._restart_when_ready()
+        self._maybe_go()
+
+    @staticmethod
+    def _final_state(record: _GroupRecord) -> GroupState:
+        statuses = {r.status for r in record.reports.values()}
+        if RoleStatus.FAILED in statuses or record.error is not None:
+            return GroupState.FAILED
+        return GroupState.STOPPED if RoleStatus.STOPPED in statuses else GroupState.DONE
+
+    # ---- failure policy --------------------------------------------------------------------
+    def _broadcast_failure(self, group: str, causes: dict[str, str]) -> None:
+        for name, other in self.records.items():
+            if name != group and not other.ended:
+                for role, cause in causes.items():
+                    self.runner.tell_failed(name, role, cause)
+
+    def _apply_policy(self, record: _GroupRecord, what: str, whole_group: bool = False) -> None:
+        record.failures.append(f"{time.monotonic() - self.started:.2f} s: {what}")
+        if self.state is RunState.STOPPING:
+            if whole_group:
+                self._end(record.group.name, _Why.FAILED)
+            return
+        policy = record.group.on_failure
+        if policy is FailurePolicy.STOP_SYSTEM:
+            self._stop_all(f"group {record.group.name} failed and its policy is stop-system")
+            if whole_group:
+                self._end(record.group.name, _Why.FAILED)
+        elif policy is FailurePolicy.RESTART and record.restarts < record.group.max_restarts:
+            for name in self._restart_set(record.group.name):
+                other = self.records[name]
+                if other.ended:
+                    other.why = _Why.RESTART
+                else:
+                    self._end(name, _Why.RESTART)
+            self._restart_when_ready()
+        elif whole_group:
+            self._end(record.group.name, _Why.FAILED)  # stopped as a whole: all its threads, all its memory
+
+    def _restart_set(self, name: str) -> list[str]:
+        """``name`` and the groups connected to it through channels that also restart."""
+        found, todo = {name}, [name]
+        while todo:
+            current = todo.pop()
+            for sender, receiver in self.channels:
+                for a, b in ((sender, receiver), (receiver, sender)):
+                    ga, gb = self.group_of[a], self.group_of[b]
+                    other = self.records[gb]
+                    if (ga == current and gb not in found and other.group.on_failure is FailurePolicy.RESTART
+                            and other.restarts < other.group.max_restarts):
+                        found.add(gb)
+                        todo.append(gb)
+        return sorted(found)
+
+    def _restart_when_ready(self) -> None:
+        """Start the groups marked for restart once every one of them has ended."""
+        marked = [n for n, r in self.records.items() if r.why is _Why.RESTART]
+        if not marked or any(not self.records[n].ended for n in marked) or self.state is RunState.STOPPING:
+            return
+        for name in marked:
+            record = self.records[name]
+            record.restarts += 1
+            record.sent_before = dict(record.sent)
+            record.received_before = dict(record.received)
+        self._start(marked)
+
+    def _end(self, name: str, why: _Why) -> None:
+        record = self.records[name]
+        if record.why in (_Why.NONE, _Why.STOP):
+            record.why = why
+        if not record.ended and not record.killed:
+            record.killed = True
+            self.runner.kill(name)
+
+    def _stop_all(self, why: str) -> None:
+        if self.state is RunState.STOPPING:
+            return
+        self.state = RunState.STOPPING
+        self.stop_since = time.monotonic()
+        self.notes.append(f"stopping every group: {why}")
+        for name, record in self.records.items():
+            if record.why is _Why.RESTART and record.ended:
+                record.why = _Why.STOP  # a restart still pending will not happen now
+            if not record.ended:
+                if record.why is _Why.NONE:
+                    record.why = _Why.STOP
+                self.runner.stop(name)
+
+    # ---- reporting -------------------------------------------------------------------------
+    def statuses(self) -> dict[str, GroupStatus]:
+        """A live snapshot per group."""
+        return {name: GroupStatus(
+            name=name, state=r.state, pid=r.pid if not r.ended else None, memory=r.memory,
+            messages=sum(r.sent.values()), received=sum(r.received.values()),
+            rate_hz=_last_rate(r.stretches[-1] if r.steady else []), restarts=r.restarts, note="; ".join(r.notes))
+            for name, r in self.records.items()}
+
+    def report(self) -> RunReport:
+        """The run's report: roles, groups, channels, notes."""
+        roles: dict[str, RoleReport] = {}
+        groups: dict[str, GroupReport] = {}
+        for name, r in self.records.items():
+            roles.update(r.reports)
+            rates = [rate for stretch in r.stretches for rate in window_rates(stretch)]
+            groups[name] = GroupReport(
+                name=name, status=r.state, scheduling=r.scheduling, peak_memory=r.peak,
+                memory_note="; ".join(filter(None, [r.memory_note, *r.notes])), memory_bound=r.group.memory,
+                error=r.error, restarts=r.restarts, failures=tuple(r.failures),
+                messages=sum(r.sent.values()), received=sum(r.received.values()),
+                rate_hz=statistics.median(rates) if rates else None,
+                rate_min_hz=min(rates) if rates else None, pid=r.pid)
+        for role in self.roles:
+            roles.setdefault(role, RoleReport(name=role, group=self.group_of[role], status=RoleStatus.STOPPED))
+        sent = {f"{a}->{b}": 0 for a, b in self.channels}
+        received = dict(sent)
+        for r in self.records.values():
+            sent.update({c: n for c, n in r.sent.items() if c in sent})
+            received.update({c: n for c, n in r.received.items() if c in received})
+        return RunReport(protocol=self.protocol, roles={role: roles[role] for role in self.roles},
+                         groups=groups, messages=sent, received=received,
+                         duration=time.monotonic() - self.started, transport=self.runner.transport,
+                         interrupted=self.interrupted, notes=tuple(self.notes))
+
+
+def window_rates(samples: list[tuple[float, int]], window: float = RATE_WINDOW) -> list[float]:
+    """Messages per second over consecutive windows of at least ``window`` seconds.
+
+    ``samples`` are ``(time, messages so far)`` taken while every role of the group ran,
+    so start-up, the tail after a role ended and the wait for a stop never count as a
+    slow second; a stretch shorter than ``window`` gives no rate at all.
+    """
+    rates: list[float] = []
+    if not samples:
+        return rates
+    start_t, start_n = samples[0]
+    for t, n in samples[1:]:
+        if t - start_t >= window:
+            rates.append((n - start_n) / (t - start_t))
+            start_t, start_n = t, n
+    return rates
+
+
+def _last_rate(samples: list[tuple[float, int]]) -> float | None:
+    recent = [s for s in samples if samples[-1][0] - s[0] <= RATE_WINDOW] if samples else []
+    if len(recent) < 2 or recent[-1][0] <= recent[0][0]:
+        return None
+    return (recent[-1][1] - recent[0][1]) / (recent[-1][0] - recent[0][0])
