@@ -133,8 +133,7 @@ def gen_choices(n: int, seed: int = 2) -> tuple[str, list[str]]:
         out.append(f"  {a} -> {b} : tail{i}.\n")
     out.append("  t")
     # Close the go branches: one '}' per block (a line of them, wrapped).
-    for start in range(0, closers, 100):
-        out.append("\n  " + "}" * min(100, closers - start))
+    out.extend("\n  " + "}" * min(100, closers - start) for start in range(0, closers, 100))
     out.append("\n")
     return "".join(out), roles
 
@@ -156,8 +155,7 @@ def gen_deep_rec(n: int, seed: int = 3) -> tuple[str, list[str]]:
         a, b = roles[i % 3], roles[(i + 1) % 3]
         out.append(f"  {a} -> {b} : tail{i}.\n")
     out.append("  t1" if levels else "  end")
-    for start in range(0, levels, 100):
-        out.append("\n  " + "}" * min(100, levels - start))
+    out.extend("\n  " + "}" * min(100, levels - start) for start in range(0, levels, 100))
     out.append("\n")
     return "".join(out), roles
 
@@ -181,7 +179,7 @@ def generate(shape: str, n: int) -> str:
 # One measurement (runs in a worker subprocess).
 # ---------------------------------------------------------------------------
 
-class _Failure(Exception):
+class _PhaseError(Exception):
     def __init__(self, phase: str, message: str) -> None:
         super().__init__(f"{phase}: {message}")
         self.phase = phase
@@ -203,16 +201,16 @@ GC_OFF = False
 _CPU: dict[str, float] = {}
 
 
-def _timed(phase: str, function: Callable[[], Any]) -> tuple[float, Any]:
+def _timed(phase: str, function: Callable[..., Any], *args: Any) -> tuple[float, Any]:
     gc.collect()
     if GC_OFF:
         gc.disable()
     cpu = time.process_time()
     start = time.perf_counter()
     try:
-        result = function()
+        result = function(*args)
     except Exception as error:  # reported, not raised
-        raise _Failure(phase, _describe_error(error)) from error
+        raise _PhaseError(phase, _describe_error(error)) from error
     finally:
         wall = time.perf_counter() - start
         _CPU[phase] = time.process_time() - cpu
@@ -244,32 +242,32 @@ def measure_once(text: str, path: str) -> dict[str, float]:
     from sessiontypes.parse import parse_file
 
     times: dict[str, float] = {}
-    times["parse"], source = _timed("parse", lambda: parse_file(text, path))
+    times["parse"], source = _timed("parse", parse_file, text, path)
 
     # check without the projectability pass, then projection onto every role of
     # that (unprojected) module: the two pieces of work separately.
     real = check_module._check_projectable
     check_module._check_projectable = lambda *args, **kwargs: None  # type: ignore[assignment]
     try:
-        times["check"], (module, diagnostics) = _timed("check", lambda: check_file(source))
+        times["check"], (module, diagnostics) = _timed("check", check_file, source)
     finally:
         check_module._check_projectable = real
     errors = _errors_of(diagnostics)
     if errors:
-        raise _Failure("check", f"{len(errors)} error(s), first: {str(errors[0]).splitlines()[0]}")
+        raise _PhaseError("check", f"{len(errors)} error(s), first: {str(errors[0]).splitlines()[0]}")
     _drop_cached_projections(module)
-    times["project_all"], projected = _timed("project_all", lambda: _project_all(module))
+    times["project_all"], projected = _timed("project_all", _project_all, module)
     if projected == 0:
-        raise _Failure("project_all", "no role to project onto")
+        raise _PhaseError("project_all", "no role to project onto")
     del module, diagnostics
 
     # As shipped: check_file (projects every role to prove projectability),
     # then project-all as a user does after loading (may be served from a cache).
-    times["check_file"], (module, diagnostics) = _timed("check_file", lambda: check_file(source))
+    times["check_file"], (module, diagnostics) = _timed("check_file", check_file, source)
     errors = _errors_of(diagnostics)
     if errors:
-        raise _Failure("check_file", f"{len(errors)} error(s), first: {str(errors[0]).splitlines()[0]}")
-    times["project_after_check"], _ = _timed("project_after_check", lambda: _project_all(module))
+        raise _PhaseError("check_file", f"{len(errors)} error(s), first: {str(errors[0]).splitlines()[0]}")
+    times["project_after_check"], _ = _timed("project_after_check", _project_all, module)
     del module, diagnostics, source
     gc.collect()
     times["total"] = times["parse"] + times["check"] + times["project_all"]
@@ -304,14 +302,12 @@ def run_case(shape: str, n: int, repeat: int) -> dict[str, Any]:
         result["roles"] = len(roles)
         # Warm-up on a small protocol of the same shape (imports, first-call costs).
         measure_once(generate(shape, 50), f"<{shape}-warmup>")
-        runs: list[dict[str, float]] = []
-        for _ in range(repeat):
-            runs.append(measure_once(text, f"<{shape}-{n}>"))
+        runs = [measure_once(text, f"<{shape}-{n}>") for _ in range(repeat)]
         result["runs"] = runs
         result["median"] = {phase: statistics.median(r[phase] for r in runs) for phase in runs[0]}
         result["peak_rss_mb"] = _peak_rss_mb()
         result["ok"] = True
-    except _Failure as failure:
+    except _PhaseError as failure:
         result["ok"] = False
         result["error"] = str(failure)
     except Exception as error:  # generator or harness bug: still a row
@@ -424,7 +420,7 @@ def _fingerprint() -> dict[str, Any]:
         "load_average_at_end": os.getloadavg() if hasattr(os, "getloadavg") else None,
         "platform": platform.platform(),
         "cpus": os.cpu_count(),
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
     try:
         import lark

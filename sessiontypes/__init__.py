@@ -14,19 +14,20 @@ from .errors import (
     Diagnostic,
     ProjectionError,
     ProtocolCheckError,
+    ProtocolEncodingError,
     ProtocolError,
     ProtocolSyntaxError,
     UnknownRoleError,
 )
 from .fsm import StateMachine, Transition
 from .global_types import GlobalType
-from .loader import load, loads
+from .loader import load, loads, read_source
 from .local_types import LocalType
 from .location import Location
 from .sorts import Message, Sort
 
 __all__ = [
-    "load", "loads", "ProtocolModule", "GlobalType", "LocalType", "StateMachine", "Transition",
+    "load", "loads", "read_source", "ProtocolModule", "GlobalType", "LocalType", "StateMachine", "Transition",
     "Message", "Sort", "Location", "Diagnostic", "ProtocolError", "ProtocolSyntaxError",
-    "ProtocolCheckError", "ProjectionError", "UnknownRoleError",
+    "ProtocolEncodingError", "ProtocolCheckError", "ProjectionError", "UnknownRoleError",
 ]

@@ -7,7 +7,7 @@ checks roles, parallel channels and projectability, and returns the checked
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from . import global_types as g
@@ -58,7 +58,8 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
     sorts = SortTable(types, reporter)
     names = {kind: set(decls) for kind, decls in by_kind.items()}
 
-    global_walk = _Walk(reporter, sorts, globals_, "global", names["local"] | names["type"])
+    global_walk: _Walk[s.GlobalDecl, g.GlobalTerm] = _Walk(
+        reporter, sorts, globals_, "global", names["local"] | names["type"])
     global_types: dict[str, g.GlobalType] = {}
     for decl in globals_.values():
         before = len(reporter.diagnostics)
@@ -71,7 +72,8 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
         if not _has_error(reporter.diagnostics[before:]):
             _check_projectable(global_type, reporter)
 
-    local_walk = _Walk(reporter, sorts, locals_, "local", names["global"] | names["type"])
+    local_walk: _Walk[s.LocalDecl, lt.LocalTerm] = _Walk(
+        reporter, sorts, locals_, "local", names["global"] | names["type"])
     local_types: dict[str, lt.LocalType] = {}
     for ldecl in locals_.values():
         body_l = resolve_local(ldecl, local_walk)
@@ -80,9 +82,9 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
         role = ldecl.role.text if ldecl.role else None
         local_types[ldecl.name.text] = lt.LocalType(ldecl.name.text, role, body_l, "", ldecl.location)
 
-    for name, decl in types.items():
+    for name, type_decl in types.items():
         if name not in sorts.used:
-            reporter.warning(decl.name.location, f"type {name} is declared but never used")
+            reporter.warning(type_decl.name.location, f"type {name} is declared but never used")
 
     diagnostics = _sorted_unique(reporter.diagnostics)
     module = ProtocolModule(source.path, global_types, local_types, sorts.defined(),
@@ -125,9 +127,9 @@ def _check_roles(decl: s.GlobalDecl, body: g.GlobalTerm, reporter: Reporter) -> 
         if role.text not in occurring:
             reporter.error(role.location, f"role {role.text} is declared in global "
                            f"{decl.name.text} but never occurs")
-    for role, location in occurring.items():
-        if role not in declared:
-            reporter.error(location, f"role {role} is not declared in global {decl.name.text}"
+    for occurring_role, location in occurring.items():
+        if occurring_role not in declared:
+            reporter.error(location, f"role {occurring_role} is not declared in global {decl.name.text}"
                            f"({', '.join(declared)})")
     return tuple(declared)
 
@@ -190,12 +192,12 @@ def _check_parallel_global(term: g.GlobalTerm, reporter: Reporter) -> None:
 
 
 def _report_shared(channel_sets: list[set[tuple[str, str]]], location: Location,
-                   reporter: Reporter, show: object) -> None:
+                   reporter: Reporter, show: Callable[[tuple[str, str]], str]) -> None:
     for i, first in enumerate(channel_sets):
         for j in range(i + 1, len(channel_sets)):
             for channel in sorted(first & channel_sets[j]):
                 reporter.error(location, f"parallel branches {i + 1} and {j + 1} share the channel "
-                               f"{show(channel)}; each channel must belong to one branch")  # type: ignore[operator]
+                               f"{show(channel)}; each channel must belong to one branch")
 
 
 def _local_channels(term: lt.LocalTerm) -> set[tuple[str, str]]:
@@ -247,7 +249,7 @@ def _check_projectable(global_type: g.GlobalType, reporter: Reporter) -> None:
 
 
 def _has_error(diagnostics: Iterable[Diagnostic]) -> bool:
-    return any([d.severity == "error" for d in diagnostics])
+    return any(d.severity == "error" for d in diagnostics)
 
 
 def _sorted_unique(diagnostics: list[Diagnostic]) -> list[Diagnostic]:

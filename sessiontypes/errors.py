@@ -17,6 +17,7 @@ __all__ = [
     "Diagnostic",
     "ProtocolError",
     "ProtocolSyntaxError",
+    "ProtocolEncodingError",
     "ProtocolCheckError",
     "ProjectionError",
     "UnknownRoleError",
@@ -48,9 +49,14 @@ class Diagnostic:
         return f"{head}\n{caret_block(self.source_line, self.location.column)}"
 
 
+# Characters a terminal may break a line at or move the cursor for; shown as a space
+# so that the caret stays under its column.
+_LINE_BREAKS = str.maketrans(dict.fromkeys("\r\v\f\x1c\x1d\x1e\x85\u2028\u2029", " "))
+
+
 def caret_block(source_line: str, column: int) -> str:
     """Return ``source_line`` and below it a ``^`` under ``column`` (1-based)."""
-    line = source_line.rstrip("\n").expandtabs(1)
+    line = source_line.rstrip("\n").expandtabs(1).translate(_LINE_BREAKS)
     pad = " " * max(column - 1, 0)
     return f"    {line}\n    {pad}^"
 
@@ -95,6 +101,35 @@ class ProtocolSyntaxError(ProtocolError):
         if self.hint:
             text += f" ({self.hint})"
         return text
+
+    @property
+    def diagnostics(self) -> tuple[Diagnostic, ...]:
+        return (Diagnostic("error", self.location, self.message, self.source_line),)
+
+    def __str__(self) -> str:
+        return str(self.diagnostics[0])
+
+
+class ProtocolEncodingError(ProtocolError):
+    """Raised when the bytes of a protocol file are not UTF-8 text.
+
+    Attributes:
+        location: where the first byte that cannot be decoded is; the column
+            counts the characters before it on its line.
+        byte: the value of that byte.
+        source_line: its line, each byte that cannot be decoded shown as U+FFFD.
+    """
+
+    def __init__(self, location: Location, byte: int, source_line: str = "") -> None:
+        self.location = location
+        self.byte = byte
+        self.source_line = source_line
+        super().__init__(str(self))
+
+    @property
+    def message(self) -> str:
+        """The error text without the location and caret."""
+        return f"the file is not UTF-8 text: byte 0x{self.byte:02x} cannot be decoded"
 
     @property
     def diagnostics(self) -> tuple[Diagnostic, ...]:

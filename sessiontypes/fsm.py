@@ -125,7 +125,7 @@ class StateMachine:
         """A ``networkx.MultiDiGraph``; fork branches are nested with prefixed node names."""
         import networkx as nx
 
-        graph = nx.MultiDiGraph(name=f"{self.protocol} {self.role or ''}".strip())
+        graph: nx.MultiDiGraph[str] = nx.MultiDiGraph(name=f"{self.protocol} {self.role or ''}".strip())
         self._add_to(graph, "")
         return graph
 
@@ -215,11 +215,12 @@ class _Builder:
                     self.end = self.new_state(term)
                 return self.end
         key = (id(term), id(env))
-        state = self.ids.get(key)
-        if state is None:
-            state = self.new_state(term)
-            self.ids[key] = state
-            self.pending.append((term, env, state))
+        known = self.ids.get(key)
+        if known is not None:
+            return known
+        state = self.new_state(term)
+        self.ids[key] = state
+        self.pending.append((term, env, state))
         return state
 
     def fill(self, term: lt.LocalTerm, env: dict[str, int], state: int) -> None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Union
+from typing import TYPE_CHECKING
 
 from .location import NOWHERE, Location
 from .sorts import Message, Sort
@@ -77,7 +77,7 @@ class Parallel:
     location: Location = field(default=NOWHERE, compare=False, repr=False)
 
 
-GlobalTerm = Union[Choice, Rec, Var, End, Parallel]
+GlobalTerm = Choice | Rec | Var | End | Parallel
 
 
 @dataclass(frozen=True, slots=True, eq=False)

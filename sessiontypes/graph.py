@@ -17,9 +17,9 @@ from .printer import print_message
 __all__ = ["communication_graph", "graph_to_dot"]
 
 
-def communication_graph(global_type: g.GlobalType) -> nx.DiGraph:
+def communication_graph(global_type: g.GlobalType) -> nx.DiGraph[str]:
     """Return a ``networkx.DiGraph``: nodes are roles, edges carry ``messages`` (a list)."""
-    graph = nx.DiGraph(name=global_type.name)
+    graph: nx.DiGraph[str] = nx.DiGraph(name=global_type.name)
     graph.add_nodes_from(global_type.roles)
     stack: list[g.GlobalTerm] = [global_type.body]
     while stack:  # iterative: long sequences nest deeply
@@ -41,7 +41,7 @@ def communication_graph(global_type: g.GlobalType) -> nx.DiGraph:
     return graph
 
 
-def graph_to_dot(graph: nx.DiGraph) -> str:
+def graph_to_dot(graph: nx.DiGraph[str]) -> str:
     """Graphviz DOT text for a communication graph."""
     from .dot import to_dot
 

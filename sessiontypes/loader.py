@@ -5,10 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from .check import ProtocolModule, check_file
-from .errors import ProtocolCheckError
+from .errors import ProtocolCheckError, ProtocolEncodingError
+from .location import Location
 from .parse import parse_file
 
-__all__ = ["load", "loads"]
+__all__ = ["load", "loads", "read_source"]
 
 
 def loads(text: str, path: str = "<string>") -> ProtocolModule:
@@ -33,7 +34,39 @@ def load(path: str | Path) -> ProtocolModule:
 
     Raises:
         OSError: the file cannot be read.
+        ProtocolEncodingError: the file is not UTF-8 text.
         ProtocolError: as :func:`loads`.
     """
-    text = Path(path).read_text(encoding="utf-8")
-    return loads(text, str(path))
+    return loads(read_source(path), str(path))
+
+
+def read_source(path: str | Path) -> str:
+    """Return the text of the protocol file at ``path``.
+
+    The file is UTF-8; line ends ("\\r\\n", "\\r", "\\n") are read as "\\n", as
+    :meth:`pathlib.Path.read_text` does.
+
+    Raises:
+        OSError: the file cannot be read.
+        ProtocolEncodingError: the file is not UTF-8 text; located at the first
+            byte that cannot be decoded.
+    """
+    data = Path(path).read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise _encoding_error(data, error.start, str(path)) from None
+    return _universal_newlines(text)
+
+
+def _universal_newlines(text: str) -> str:
+    return text.replace("\r\n", "\n").replace("\r", "\n")
+
+
+def _encoding_error(data: bytes, start: int, path: str) -> ProtocolEncodingError:
+    """The error for the byte at ``start``, located as the parser would locate it."""
+    before = _universal_newlines(data[:start].decode("utf-8"))  # decodes: the bad byte comes after
+    line = before.count("\n") + 1
+    column = len(before) - (before.rfind("\n") + 1) + 1
+    lines = _universal_newlines(data.decode("utf-8", errors="replace")).split("\n")
+    return ProtocolEncodingError(Location(path, line, column), data[start], lines[line - 1])

@@ -13,7 +13,7 @@ always built as a :class:`Send` or :class:`Recv` (see :func:`select` and
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Union
+from typing import TYPE_CHECKING
 
 from .location import NOWHERE, Location
 from .sorts import Message
@@ -146,7 +146,7 @@ class Parallel(_Printable):
         return f"Parallel({str(self)!r})"
 
 
-LocalTerm = Union[Send, Recv, Select, Offer, Rec, Var, End, Parallel]
+LocalTerm = Send | Recv | Select | Offer | Rec | Var | End | Parallel
 
 
 def select(peer: str | None, branches: tuple[Branch, ...], location: Location = NOWHERE) -> LocalTerm:

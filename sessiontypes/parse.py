@@ -12,7 +12,7 @@ import re
 import threading
 from collections.abc import Iterator
 from importlib import resources
-from typing import Any
+from typing import Any, cast
 
 import lark
 from lark import Token, Transformer
@@ -209,7 +209,7 @@ class _Builder(Transformer[Token, Any]):
 # One regular expression for every token; lark's general lexer is several times
 # slower and lexing dominated parse time. Names equal to a keyword are keywords.
 _TOKEN = re.compile(r"""
-    (?:\s+|//[^\n]*|/\*(?:[^*]|\*(?!/))*\*/)*    # skipped: white space, comments
+    (?:[\s\ufeff]+|//[^\n]*|/\*(?:[^*]|\*(?!/))*\*/)*    # skipped: white space (WS), comments
     (?:
       (?P<NAME>[A-Za-z_][A-Za-z0-9_]*'*)
     | (?P<STRING>"(?:[^"\\\n]|\\.)*")
@@ -280,14 +280,27 @@ def parse_file(text: str, path: str = "<string>") -> s.SourceFile:
 
 
 def _parse(text: str, path: str) -> s.SourceFile:
-    lines = tuple(text.splitlines())
+    lines = _lines(text)
     with _lock:
         _builder.path = path
         try:
-            declarations = _parser.parse(text)
+            # The builder's start() turns the tree into the declarations.
+            declarations = cast("tuple[s.Declaration, ...]", _parser.parse(text))
         except lark.exceptions.UnexpectedInput as error:
             raise _syntax_error(error, text, lines, path) from None
     return s.SourceFile(path, lines, declarations)
+
+
+def _lines(text: str) -> tuple[str, ...]:
+    """The lines of ``text`` as locations count them: broken at newlines only.
+
+    ``str.splitlines`` also breaks at form feeds, U+2028 and other characters that
+    the lexer takes for white space; a line number would then show the wrong line.
+    """
+    lines = text.split("\n")
+    if not lines[-1]:  # the newline that ends the last line starts no new one
+        lines.pop()
+    return tuple([line.removesuffix("\r") for line in lines])
 
 
 def _syntax_error(
@@ -297,10 +310,11 @@ def _syntax_error(
         return lines[number - 1] if 0 < number <= len(lines) else ""
 
     if isinstance(error, lark.exceptions.UnexpectedCharacters):
-        char = text[error.pos_in_stream] if error.pos_in_stream < len(text) else ""
+        position = error.pos_in_stream or 0
+        char = text[position] if position < len(text) else ""
         location = Location(path, error.line, error.column)
         hint = ""
-        if text.startswith("/*", error.pos_in_stream):
+        if text.startswith("/*", position):
             got, hint = "'/*'", "this comment is never closed with '*/'"
         elif char == '"':
             got, hint = "'\"'", "this string is never closed"
@@ -313,7 +327,8 @@ def _syntax_error(
     token = error.token
     # LALR's expected set may name tokens this exact spot cannot take; ask the parser.
     try:
-        acceptable = set(error.interactive_parser.accepts()) or set(error.expected)
+        # lark leaves accepts() unannotated
+        acceptable = set(error.interactive_parser.accepts()) or set(error.expected)  # type: ignore[no-untyped-call]
     except Exception:  # defensive: fall back to LALR's own set
         acceptable = set(error.expected)
     if token.type == "BAD":

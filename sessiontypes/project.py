@@ -15,7 +15,7 @@ from .deep import run_deep
 from .errors import ProjectionError, UnknownRoleError
 from .location import Location
 from .merge import MergeError, merge
-from .recursion import free_vars, substitute, unfold  # noqa: F401 (re-exported)
+from .recursion import free_vars, substitute, unfold  # re-exported
 
 __all__ = ["project_global", "project", "merge", "MergeError", "unfold", "substitute", "free_vars"]
 
@@ -198,12 +198,14 @@ class _Projector:
         if cached is None:
             match term:
                 case g.Choice(sender=sender, receiver=receiver, branches=branches):
-                    cached = self.role in (sender, receiver) or any([
-                        self.occurs(b.continuation) for b in branches])
+                    # map, not a generator: resuming generators deep in a recursion
+                    # costs time proportional to the depth in CPython 3.11.
+                    cached = self.role in (sender, receiver) or any(
+                        map(self.occurs, [b.continuation for b in branches]))
                 case g.Rec(body=body):
                     cached = self.occurs(body)
                 case g.Parallel(branches=parts):
-                    cached = any([self.occurs(b) for b in parts])
+                    cached = any(map(self.occurs, parts))
                 case _:
                     cached = False
             self._occurs[key] = cached

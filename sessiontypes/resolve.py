@@ -15,7 +15,7 @@ its body, wrapped in ``mu Name.`` when the body refers back to it.
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
@@ -132,7 +132,7 @@ class _Scope:
             self.top[binder.name] = binder.shadowed
 
 
-class _Capture(Exception):
+class _Capture(Exception):  # noqa: N818 (a control-flow signal, not an error: STYLE.md)
     """Internal: a declaration reference would be captured by the mu variable ``name``."""
 
     def __init__(self, name: str) -> None:
@@ -155,7 +155,7 @@ class _Walk(Generic[Syntax, Term]):
     other_kind: set[str]                 # names declared with another kind
 
     def lookup(self, name: s.Name, scope: _Scope, depth: int,
-               parallel_depth: int) -> _Binder | None | str:
+               parallel_depth: int) -> _Binder | str | None:
         """The binder of ``name``, or "decl" for a declaration to inline, or None (reported).
 
         Raises:
@@ -187,7 +187,7 @@ class _Walk(Generic[Syntax, Term]):
         return None
 
 
-def _check_labels(reporter: Reporter, labels: Iterator[s.Name]) -> None:
+def _check_labels(reporter: Reporter, labels: Iterable[s.Name]) -> None:
     seen: set[str] = set()
     for label in labels:
         if label.text in seen:
@@ -287,15 +287,19 @@ def _resolve_g(walk: _Walk[s.GlobalDecl, g.GlobalTerm], node: s.GSyntax | None,
 
 def _uses_g(term: g.GlobalTerm, name: str) -> bool:
     """Whether ``name`` occurs free in ``term``."""
-    match term:
-        case g.Var(name=n):
-            return n == name
-        case g.Choice(branches=branches):
-            return any([_uses_g(b.continuation, name) for b in branches])
-        case g.Rec(var=var, body=body):
-            return var != name and _uses_g(body, name)
-        case g.Parallel(branches=branches):
-            return any([_uses_g(b, name) for b in branches])
+    stack = [term]  # iterative: sequences nest deeply
+    while stack:
+        match stack.pop():
+            case g.Var(name=n):
+                if n == name:
+                    return True
+            case g.Choice(branches=branches):
+                stack.extend([b.continuation for b in branches])
+            case g.Rec(var=var, body=body):
+                if var != name:
+                    stack.append(body)
+            case g.Parallel(branches=branches):
+                stack.extend(branches)
     return False
 
 
@@ -357,15 +361,20 @@ def _resolve_l(walk: _Walk[s.LocalDecl, lt.LocalTerm], node: s.LSyntax | None,
 
 
 def _uses_l(term: lt.LocalTerm, name: str) -> bool:
-    match term:
-        case lt.Var(name=n):
-            return n == name
-        case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
-            return _uses_l(cont, name)
-        case lt.Select(branches=branches) | lt.Offer(branches=branches):
-            return any([_uses_l(b.continuation, name) for b in branches])
-        case lt.Rec(var=var, body=body):
-            return var != name and _uses_l(body, name)
-        case lt.Parallel(branches=branches):
-            return any([_uses_l(b, name) for b in branches])
+    """Whether ``name`` occurs free in ``term``."""
+    stack = [term]  # iterative: sequences nest deeply
+    while stack:
+        match stack.pop():
+            case lt.Var(name=n):
+                if n == name:
+                    return True
+            case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
+                stack.append(cont)
+            case lt.Select(branches=branches) | lt.Offer(branches=branches):
+                stack.extend([b.continuation for b in branches])
+            case lt.Rec(var=var, body=body):
+                if var != name:
+                    stack.append(body)
+            case lt.Parallel(branches=branches):
+                stack.extend(branches)
     return False

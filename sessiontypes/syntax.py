@@ -9,7 +9,7 @@ first token, left out of equality.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Union
+from typing import Literal
 
 from .location import NOWHERE, Location
 
@@ -89,7 +89,7 @@ class GParallel:
     location: Location = field(default=NOWHERE, compare=False)
 
 
-GSyntax = Union[GInteraction, GRec, GRef, GEnd, GParallel]
+GSyntax = GInteraction | GRec | GRef | GEnd | GParallel
 
 
 # ---- local ----------------------------------------------------------------
@@ -144,7 +144,7 @@ class LParallel:
     location: Location = field(default=NOWHERE, compare=False)
 
 
-LSyntax = Union[LAction, LChoice, LRec, LRef, LEnd, LParallel]
+LSyntax = LAction | LChoice | LRec | LRef | LEnd | LParallel
 
 
 # ---- declarations -----------------------------------------------------------
@@ -178,7 +178,7 @@ class LocalDecl:
     location: Location = field(default=NOWHERE, compare=False)
 
 
-Declaration = Union[TypeDecl, GlobalDecl, LocalDecl]
+Declaration = TypeDecl | GlobalDecl | LocalDecl
 
 
 @dataclass(frozen=True, slots=True)

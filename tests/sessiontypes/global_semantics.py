@@ -26,7 +26,7 @@ Event = tuple[str, str, str, Sort | None]
 LocalEvent = tuple[str, str, str, Sort | None]
 
 
-class SearchBoundExceeded(Exception):
+class SearchBoundExceededError(Exception):
     """The bounded search gave up before deciding."""
 
 
@@ -130,7 +130,7 @@ class GlobalSemantics:
             case g.Parallel(branches=parts):
                 for index, part in enumerate(parts):
                     for event, after in self.steps(part):
-                        rest = parts[:index] + (after,) + parts[index + 1:]
+                        rest = (*parts[:index], after, *parts[index + 1:])
                         out.append((event, self.normalise(g.Parallel(rest))))
             case g.End():
                 pass
@@ -167,7 +167,7 @@ class GlobalSemantics:
         some run (some reachable state has a step of ``role``).
 
         Raises:
-            SearchBoundExceeded: more than ``max_nodes`` (state, position) pairs.
+            SearchBoundExceededError: more than ``max_nodes`` (state, position) pairs.
         """
         start = (self.initial, 0)
         seen = {start}
@@ -192,5 +192,5 @@ class GlobalSemantics:
                     seen.add(node)
                     stack.append(node)
                     if len(seen) > max_nodes:
-                        raise SearchBoundExceeded(f"{len(seen)} nodes")
+                        raise SearchBoundExceededError(f"{len(seen)} nodes")
         return matched, more

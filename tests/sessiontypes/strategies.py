@@ -81,7 +81,7 @@ class _Scope:
 
     def bind(self, name: str, keep: bool) -> tuple[tuple[str, frozenset[Channel], bool], ...]:
         outer = tuple(e for e in self.env if e[0] != name) if keep else ()
-        return outer + ((name, self.channels, False),)
+        return (*outer, (name, self.channels, False))
 
     def after_interaction(self) -> _Scope:
         return replace(self, env=tuple((n, c, True) for n, c, _ in self.env), exit_guarded=True)
@@ -181,7 +181,7 @@ class _Generator:
             channels = frozenset(c for c in scope.channels if not (set(c) & left_out))
             exit_ = scope.exit
             if exit_ is None:  # a shared loop is closed: its branches can only end
-                exit_ = "end" if looping else self.draw(st.sampled_from(["end"] + inner.usable()))
+                exit_ = "end" if looping else self.draw(st.sampled_from(["end", *inner.usable()]))
             inner = _Scope(channels, inner.env, exit_, True)
         loop = None
         if looping is not None:
@@ -341,7 +341,7 @@ def respellings(loop: g.Rec) -> list[g.GlobalTerm]:
     """Closed ``loop`` and terms with the same runs, written differently:
     unfolded once, its variable renamed, its body unrolled twice."""
     unfolded = substitute(loop.body, loop.var, loop)
-    fresh = next(n for n in VAR_POOL + ("w", "x'", "y''") if n not in _names(loop))
+    fresh = next(n for n in (*VAR_POOL, "w", "x'", "y''") if n not in _names(loop))
     renamed = g.Rec(fresh, substitute(loop.body, loop.var, g.Var(fresh)))
     twice = g.Rec(fresh, substitute(loop.body, loop.var, renamed.body))
     return [loop, unfolded, renamed, twice]
@@ -494,12 +494,12 @@ _TOKENS = [
 
 _SEEDS = [
     'type Twist = "tinman.messages:Twist"\nglobal P(A, B) = mu t. A -> B : Twist. B -> A : ack. t\n',
-    "local ATM = ?Int. +{ok: ATM', err: end}\n"
-    "local ATM' = &{deposit: ?Int. ATM, withdraw: ?Int. +{ok: !Int. ATM, fail: ATM}, "
-    "balance: !Int. ATM, quit: end}\n",
+    ("local ATM = ?Int. +{ok: ATM', err: end}\n"
+     "local ATM' = &{deposit: ?Int. ATM, withdraw: ?Int. +{ok: !Int. ATM, fail: ATM}, "
+     "balance: !Int. ATM, quit: end}\n"),
     "global G = (A -> B : x. end || C -> D : {y(int). D -> C : z, w: end})\n",
-    "global ATM = C -> A : Int. A -> C : {ok: ATM', err: end}\n"
-    "global ATM' = C -> A : {deposit: C -> A : Int. ATM, quit: end}\n",
+    ("global ATM = C -> A : Int. A -> C : {ok: ATM', err: end}\n"
+     "global ATM' = C -> A : {deposit: C -> A : Int. ATM, quit: end}\n"),
     "local L at A = mu t. !B(l0(int)). &B{l1. t, l2}\n",
 ]
 
@@ -511,7 +511,7 @@ def protocol_texts(draw: st.DrawFn) -> str:
         return draw(st.text(max_size=80))
     tokens = draw(st.lists(st.sampled_from(_TOKENS), max_size=40))
     gaps = draw(st.lists(st.sampled_from(["", " ", "\n"]), min_size=len(tokens), max_size=len(tokens)))
-    return "".join(t + s for t, s in zip(tokens, gaps))
+    return "".join(t + s for t, s in zip(tokens, gaps, strict=True))
 
 
 _TOKEN_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*'*|->|\|\||\"[^\"]*\"|\S")

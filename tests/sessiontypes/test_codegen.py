@@ -23,7 +23,7 @@ import pytest
 import anodize
 import sessiontypes
 from anodize import LinearityError, Message
-from anodize.cli import main
+from anodize.tools.cli import main
 from sessiontypes.codegen import (
     GENERATOR_VERSION,
     CodegenError,
@@ -218,7 +218,7 @@ def test_a_state_used_twice_raises_linearity_error(tmp_path: Path) -> None:
     assert info.value.state == "State0"
     assert endpoint.sent == [("S", "title", "War and Peace")]
     assert quoting.recv_quote()[0] == 60
-    with pytest.raises(LinearityError, match="^state State1 was already used"):
+    with pytest.raises(LinearityError, match=r"^state State1 was already used"):
         quoting.recv_quote()
     assert endpoint.received_from == ["S"]
 
@@ -282,13 +282,13 @@ def test_fork_wraps_each_branch_endpoint(tmp_path: Path) -> None:
     assert (type(planning_again), path) == (move.Branch2State0, ["a", "b"])
     assert control_endpoint.sent == [("Gazebo", "Twist", "forward")]
     assert "parallel branch 2" in move.Branch2State0.__doc__
-    with pytest.raises(LinearityError, match="^state State0 was already used"):
+    with pytest.raises(LinearityError, match=r"^state State0 was already used"):
         start.fork()
 
 
 # ---- on anodize's runtime ---------------------------------------------------------------
 
-@pytest.fixture()
+@pytest.fixture
 def programs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
     """The generated modules of two_buyer and atm, with the fixture programs, importable."""
     for proto in ("protocols/two_buyer.proto", "protocols/atm.proto"):
@@ -335,11 +335,12 @@ BROKEN_PROGRAMS: dict[str, tuple[str, str, str]] = {
                  'error: "State2" has no attribute "recv_quote"  [attr-defined]'),
     # a payload of the wrong sort
     "wrong_payload": ('start.send_title("War and Peace")', "start.send_title(42)",
-                      'error: Argument 1 to "send_title" of "State0" has incompatible type "int"; '
-                      'expected "str"  [arg-type]'),
+                      ('error: Argument 1 to "send_title" of "State0" has incompatible type "int"; '
+                       'expected "str"  [arg-type]')),
 }
 
 
+@pytest.mark.slow
 def test_generated_modules_and_programs_pass_mypy_strict(programs: Path) -> None:
     """One mypy run: every generated module, the correct programs, and the broken ones."""
     program = (FIXTURES / "two_buyer_program.py").read_text(encoding="utf-8")

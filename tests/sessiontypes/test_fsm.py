@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 import sessiontypes
 from sessiontypes.fsm import build_term_machine
 
@@ -79,6 +81,7 @@ def test_json_and_dot_export() -> None:
     assert '"s0" -> "s0" [label="!B(more(int))"];' in dot
 
 
+@pytest.mark.slow
 def test_long_sequence_builds_without_deep_recursion() -> None:
     steps = ". ".join(f"A -> B : m{i}" for i in range(30_000))
     m = sessiontypes.loads(f"global G = {steps}").globals["G"].project("B").fsm()

@@ -61,11 +61,17 @@ def test_comments_and_whitespace_are_insignificant() -> None:
     assert projections(commented) == projections(plain)
 
 
+def test_a_byte_order_mark_is_white_space() -> None:
+    # grammar.lark's WS includes U+FEFF; editors on Windows start UTF-8 files with it.
+    assert body("\ufeffglobal P = A -> B : x") == body("global P = A -> B : x")
+    assert body("global P =\ufeff A -> B : x") == body("global P = A -> B : x")
+
+
 def test_comment_markers_inside_a_line_comment_are_ignored() -> None:
     assert body("global P = A -> B : x // no /* block here\n") == body("global P = A -> B : x")
 
 
-@pytest.mark.parametrize("ascii_text, unicode_text", [
+@pytest.mark.parametrize(("ascii_text", "unicode_text"), [
     ("global P = A -> B : x", "global P = A → B : x"),
     ("global P = mu t. A -> B : x. t", "global P = μ t. A -> B : x. t"),
     ("global P = mu t. A -> B : x. t", "global P = rec t. A -> B : x. t"),
@@ -79,7 +85,7 @@ def test_unicode_spellings_are_the_same_global_type(ascii_text: str, unicode_tex
     assert projections(unicode_text) == projections(ascii_text)
 
 
-@pytest.mark.parametrize("ascii_text, unicode_text", [
+@pytest.mark.parametrize(("ascii_text", "unicode_text"), [
     ("local L = +B{x. end, y}", "local L = ⊕B{x. ⊥, y}"),
     ("local L = mu t. +{x. !int. t, y}", "local L = μ t. ⊕{x. !int. t, y}"),
     ("local L = mu t. &B{x. t, y}", "local L = rec t. &B{x. t, y}"),
@@ -168,7 +174,7 @@ def test_type_declaration_targets(target: str) -> None:
     assert only_message(module.globals["P"].body) == Message("Twist", Sort("Twist", "Twist", target))
 
 
-@pytest.mark.parametrize("spelling, key", [
+@pytest.mark.parametrize(("spelling", "key"), [
     ("int", "int"), ("Int", "int"), ("nat", "nat"), ("Nat", "nat"), ("bool", "bool"),
     ("Bool", "bool"), ("str", "str"), ("String", "str"), ("float", "float"),
     ("Float", "float"), ("bytes", "bytes"), ("Bytes", "bytes"),
@@ -202,7 +208,7 @@ def test_a_reference_to_a_declaration_is_not_recursion_when_it_does_not_come_bac
 
 # ---- 3. global types ------------------------------------------------------------------
 
-@pytest.mark.parametrize("short, long", [
+@pytest.mark.parametrize(("short", "long"), [
     ("A -> B : Ping", "A -> B : Ping. end"),
     ("A -> B : { x, y }", "A -> B : { x. end, y. end }"),
     ("A -> B : { x, y, }", "A -> B : { x, y }"),
@@ -291,7 +297,7 @@ def test_parallel_has_no_continuation() -> None:
 
 # ---- abbreviation rule ---------------------------------------------------------------
 
-@pytest.mark.parametrize("msg, message", [
+@pytest.mark.parametrize(("msg", "message"), [
     ("int", Message("int", Sort("int", "int"))),
     ("Int", Message("Int", Sort("int", "Int"))),
     ("Twist", Message("Twist", Sort("Twist", "Twist", "m:Twist"))),
@@ -330,7 +336,7 @@ def test_abbreviation_rule_in_local_types() -> None:
 
 # ---- 4. local types -------------------------------------------------------------------
 
-@pytest.mark.parametrize("text, printed", [
+@pytest.mark.parametrize(("text", "printed"), [
     ("!B(x)", "!B(x)"),
     ("?B(x(int))", "?B(x(int))"),
     ("!B(x). ?C(y). end", "!B(x).?C(y)"),
@@ -415,7 +421,7 @@ SOURCE = (
 
 
 def test_locations_on_global_syntax() -> None:
-    decl, local_decl, unicode_decl = parse_file(SOURCE, "f.proto").declarations
+    decl, _local_decl, _unicode_decl = parse_file(SOURCE, "f.proto").declarations
     assert isinstance(decl, s.GlobalDecl)
     assert decl.location == Location("f.proto", 2, 1)
     assert decl.name.location == Location("f.proto", 2, 8)
@@ -489,6 +495,34 @@ def test_locations_are_left_out_of_equality() -> None:
     other = parse_file("\n\n   global   P =\n A->B:x", "b.proto").declarations
     assert one == other
     assert hash(one) == hash(other)
+
+
+@pytest.mark.parametrize("space", ["\f", "\v", "\x1c", "\x85", "\u2028", "\u2029"])
+def test_lines_are_counted_at_newlines_only(space: str) -> None:
+    # str.splitlines() breaks at these white-space characters too: the error's line
+    # number and the line it shows disagreed, and the caret pointed past the line.
+    text = f"global P = A -> B : x{space}. B -> A : $\nglobal Q = A -> B : y\n"
+    with pytest.raises(ProtocolSyntaxError) as caught:
+        sessiontypes.loads(text, "w.proto")
+    error = caught.value
+    assert error.location == Location("w.proto", 1, 34)
+    assert error.source_line == f"global P = A -> B : x{space}. B -> A : $"
+    assert str(error) == (
+        "w.proto:1:34: error: syntax error; expected one of '{', a name, got character '$'\n"
+        "    global P = A -> B : x . B -> A : $\n"
+        "                                     ^"
+    )
+
+
+def test_a_check_error_shows_its_own_line_after_a_line_separator() -> None:
+    text = "global P = A -> B : x\u2028. B -> A : y\r\nglobal Q = C -> C : z\r\n"
+    with pytest.raises(sessiontypes.ProtocolCheckError) as caught:
+        sessiontypes.loads(text, "w.proto")
+    assert str(caught.value) == (
+        "w.proto:2:17: error: role C sends a message to itself\n"
+        "    global Q = C -> C : z\n"
+        "                    ^"
+    )
 
 
 def test_syntax_error_location_counts_unicode_characters() -> None:

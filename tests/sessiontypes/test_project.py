@@ -100,7 +100,7 @@ def test_two_spellings_of_one_loop_merge_instead_of_looping() -> None:
 def test_merge_rejects_different_sends() -> None:
     send = lt.Send("A", Message("x"), lt.End())
     other = lt.Send("A", Message("y"), lt.End())
-    with pytest.raises(MergeError, match="^only identical behaviours merge unless both receive$"):
+    with pytest.raises(MergeError, match=r"^only identical behaviours merge unless both receive$"):
         merge(send, other)
 
 

@@ -21,18 +21,19 @@ _HERE = str(Path(__file__).resolve().parent)
 if _HERE not in sys.path:
     sys.path.insert(0, _HERE)
 
+from budget import examples  # noqa: E402
+from global_semantics import GlobalSemantics, SearchBoundExceededError, restrict  # noqa: E402
+from strategies import GeneratedGlobal, global_protocols, mutated_texts, protocol_texts  # noqa: E402
+
 import sessiontypes  # noqa: E402
 from sessiontypes import GlobalType, ProjectionError, ProtocolError, StateMachine  # noqa: E402
 from sessiontypes import global_types as g  # noqa: E402
 from sessiontypes.printer import print_global  # noqa: E402
 from sessiontypes.sorts import Message  # noqa: E402
 
-from global_semantics import GlobalSemantics, SearchBoundExceeded, restrict  # noqa: E402
-from strategies import (  # noqa: E402
-    GeneratedGlobal, global_protocols, mutated_texts, protocol_texts)
-
-# Example counts keep the whole file under about 45 s; raise them locally for a campaign.
-SETTINGS = settings(deadline=None, max_examples=130,
+# Example counts keep the whole file under about 45 s; the thorough profile multiplies them
+# (`pytest --hypothesis-profile=thorough`, see tests/conftest.py).
+SETTINGS = settings(deadline=None, max_examples=examples(130),
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 
@@ -79,6 +80,7 @@ RENAMED_SENDING_LOOP = GeneratedGlobal(
 
 # ---- 1. parse and print ------------------------------------------------------------------
 
+@pytest.mark.slow
 @SETTINGS
 @given(global_protocols())
 def test_parse_builds_the_generated_term(generated: GeneratedGlobal) -> None:
@@ -88,6 +90,7 @@ def test_parse_builds_the_generated_term(generated: GeneratedGlobal) -> None:
     assert _load_global(generated.text).body == generated.body
 
 
+@pytest.mark.slow
 @SETTINGS
 @example(ROLES_IN_SECOND_BRANCH_FIRST)
 @given(global_protocols())
@@ -97,6 +100,7 @@ def test_roles_are_declared_order_or_first_occurrence(generated: GeneratedGlobal
     assert _load_global(generated.text).roles == generated.roles
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(global_protocols())
 def test_global_print_parse_round_trip(generated: GeneratedGlobal) -> None:
@@ -112,6 +116,7 @@ def test_global_print_parse_round_trip(generated: GeneratedGlobal) -> None:
     assert (declared.roles, declared.body) == (original.roles, original.body)
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(global_protocols())
 def test_local_canonical_print_round_trip(generated: GeneratedGlobal) -> None:
@@ -129,6 +134,7 @@ def test_local_canonical_print_round_trip(generated: GeneratedGlobal) -> None:
 
 # ---- 2. projection -------------------------------------------------------------------------
 
+@pytest.mark.slow
 @SETTINGS
 @example(LOOP_WITHOUT_C)
 @example(RENAMED_SENDING_LOOP)
@@ -183,7 +189,7 @@ class Config:
                 return None
             (index, after), = moved
             return Config(self.machine, self.state,
-                          self.branches[:index] + (after,) + self.branches[index + 1:])
+                          (*self.branches[:index], after, *self.branches[index + 1:]))
         transition = self.machine.step(self.state, action, peer, label)
         if transition is None or transition.sort != sort:
             return None
@@ -215,6 +221,7 @@ def _show(local_event: tuple) -> str:
     return f"{'!' if action == 'send' else '?'}{peer}({label}{'(' + str(sort) + ')' if sort else ''})"
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(global_protocols(), st.randoms(use_true_random=False))
 def test_machines_accept_every_global_run(generated: GeneratedGlobal, rng) -> None:
@@ -236,7 +243,7 @@ def test_machines_accept_every_global_run(generated: GeneratedGlobal, rng) -> No
                 assert after is not None, (
                     f"{role} = {printed}: after {'.'.join(seen) or 'nothing'} the machine "
                     f"(at {config.describe()}) refuses {_show(local_event)}; "
-                    f"global run {[f'{p}->{q}:{l}' for p, q, l, _ in run]}")
+                    f"global run {[f'{p}->{q}:{label}' for p, q, label, _ in run]}")
                 seen.append(_show(local_event))
                 config = after
             if semantics.is_final(state):
@@ -245,6 +252,7 @@ def test_machines_accept_every_global_run(generated: GeneratedGlobal, rng) -> No
                     f"{config.describe()} after {'.'.join(seen)}")
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(global_protocols(), st.randoms(use_true_random=False))
 def test_machine_walks_are_global_prefixes(generated: GeneratedGlobal, rng) -> None:
@@ -267,7 +275,7 @@ def test_machine_walks_are_global_prefixes(generated: GeneratedGlobal, rng) -> N
                 config = after
             try:
                 matched, more = semantics.explore_prefix(role, word)
-            except SearchBoundExceeded:
+            except SearchBoundExceededError:
                 event("search bound hit")
                 continue
             shown = ".".join(map(_show, word)) or "(empty)"
@@ -284,7 +292,8 @@ def test_machine_walks_are_global_prefixes(generated: GeneratedGlobal, rng) -> N
 _ERROR_HEAD = re.compile(r"^fuzz\.proto:\d+:\d+: error: ", re.MULTILINE)
 
 
-@settings(SETTINGS, max_examples=300)
+@pytest.mark.slow
+@settings(SETTINGS, max_examples=examples(300))
 @given(protocol_texts() | mutated_texts())
 def test_loads_raises_only_protocol_errors(text: str) -> None:
     """Any text either loads or raises a ProtocolError whose text says 'error'."""
