@@ -203,14 +203,46 @@ def error_from_data(data: dict[str, object]) -> AnodizeError:
     """Rebuild what :func:`error_to_data` sent: the same class for anodize's errors."""
     try:
         if "violation" in data:
-            protocol, role, peer, state, expected, actual, blame, location, reason = data["violation"]  # type: ignore[misc]
-            return ProtocolViolationError(protocol, role, peer, state, [Action(*a) for a in expected],
-                                          Action(*actual), blame, location, reason)
+            protocol, role, peer, state, expected, actual, blame, location, reason = _items(data["violation"])
+            return ProtocolViolationError(_text(protocol), _text(role), _optional_text(peer), _text(state),
+                                          [_action(a) for a in _items(expected)], _action(actual),
+                                          _text(blame), _text(location), _text(reason))
         if "peer_failed" in data:
-            return PeerFailedError(*data["peer_failed"])  # type: ignore[arg-type]
+            role, peer, cause = _items(data["peer_failed"])
+            return PeerFailedError(_text(role), _text(peer), _text(cause))
         if "memory" in data:
-            return MemoryBoundError(*data["memory"])  # type: ignore[arg-type]
+            group, bound, peak = _items(data["memory"])
+            return MemoryBoundError(_text(group), _number(bound), _number(peak))
     except (TypeError, ValueError):
         pass  # malformed: fall back to the text
     return RoleError(str(data.get("type", "Exception")), str(data.get("message", "")),
                      str(data.get("traceback", "")))
+
+
+# Checked readers for error_from_data: a wrong type raises TypeError, so malformed data falls back to RoleError.
+def _items(value: object) -> Sequence[object]:
+    if not isinstance(value, list | tuple):
+        raise TypeError(f"expected a list, got {type(value).__name__}")
+    return value
+
+
+def _text(value: object) -> str:
+    if not isinstance(value, str):
+        raise TypeError(f"expected a str, got {type(value).__name__}")
+    return value
+
+
+def _optional_text(value: object) -> str | None:
+    return None if value is None else _text(value)
+
+
+def _number(value: object) -> int:
+    if not isinstance(value, int) or isinstance(value, bool):
+        raise TypeError(f"expected an int, got {type(value).__name__}")
+    return value
+
+
+def _action(value: object) -> Action:
+    kind, peer, label, payload_type = _items(value)
+    return Action(_text(kind), _optional_text(peer), _text(label), _optional_text(payload_type))
+

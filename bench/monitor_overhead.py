@@ -349,7 +349,7 @@ def profile_stream(n: int, top: int) -> dict[str, list[dict[str, Any]]]:
     for kind in ("send", "recv"):
         stats = pstats.Stats(found[f"{kind}_profile"], stream=io.StringIO())
         rows = []
-        for (file, line, function), (cc, nc, tt, ct, _) in stats.stats.items():  # type: ignore[attr-defined]
+        for (file, line, function), (_, nc, tt, ct, _) in stats.stats.items():  # type: ignore[attr-defined]
             where = f"{Path(file).name}:{line}" if line else file
             rows.append({"function": function, "where": where, "calls": nc,
                          "own_us_per_message": tt / n * 1e6, "cumulative_us_per_message": ct / n * 1e6})
@@ -416,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
 
     document = {
         "benchmark": "monitor_overhead",
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "python": platform.python_version(),
         "implementation": platform.python_implementation(),
         "machine": platform.machine(),

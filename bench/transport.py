@@ -81,9 +81,9 @@ for path in (str(REPO), str(BENCH)):  # bench/ too: group processes import trans
         sys.path.insert(0, path)
 
 import numpy as np  # noqa: E402
+import transport_roles as roles  # noqa: E402
 
 import sessiontypes  # noqa: E402
-import transport_roles as roles  # noqa: E402
 from anodize import RunReport, System  # noqa: E402
 
 DEFAULT_JSON = BENCH / "results" / "transport.json"
@@ -314,7 +314,7 @@ def print_results(rows: list[list[str]], frames: dict[str, Any], pingpong: dict[
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     for k, row in enumerate(rows):
         cells = [cell.ljust(w) if i == 0 else cell.rjust(w) if i < 4 else cell.ljust(w)
-                 for i, (cell, w) in enumerate(zip(row, widths))]
+                 for i, (cell, w) in enumerate(zip(row, widths, strict=True))]
         print(" | ".join(cells).rstrip())
         if k == 0:
             print("-+-".join("-" * w for w in widths))
@@ -350,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
 
     document = {
         "benchmark": "transport",
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(),
                     "machine": platform.machine(), "processor": platform.processor(),
                     "python": platform.python_version(),

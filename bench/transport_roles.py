@@ -244,4 +244,5 @@ def burner(ep: Endpoint) -> None:
 def _policy_of_this_thread() -> str:
     policy = os.sched_getscheduler(0)
     names = {os.SCHED_OTHER: "SCHED_OTHER", os.SCHED_FIFO: "SCHED_FIFO", os.SCHED_RR: "SCHED_RR"}
-    return f"{names.get(policy, policy)} {os.sched_getparam(0).sched_priority} nice {os.getpriority(os.PRIO_PROCESS, 0)}"
+    priority, nice = os.sched_getparam(0).sched_priority, os.getpriority(os.PRIO_PROCESS, 0)
+    return f"{names.get(policy, policy)} {priority} nice {nice}"

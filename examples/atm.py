@@ -17,9 +17,9 @@ sys.path.insert(0, str(HERE / "generated"))
 
 import atmsession_a  # noqa: E402
 import atmsession_c  # noqa: E402
-import sessiontypes  # noqa: E402
 
 import anodize  # noqa: E402
+import sessiontypes  # noqa: E402
 
 
 def client(start: atmsession_c.Initial) -> atmsession_c.End:

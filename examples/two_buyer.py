@@ -17,12 +17,12 @@ from typing import assert_never
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE / "generated"))
 
-import sessiontypes  # noqa: E402
 import twobuyer_b1  # noqa: E402
 import twobuyer_b2  # noqa: E402
 import twobuyer_s  # noqa: E402
 
 import anodize  # noqa: E402
+import sessiontypes  # noqa: E402
 
 BOOKS = {"War and Peace": 60, "Ulysses": 140}
 

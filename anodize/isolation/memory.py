@@ -16,6 +16,7 @@ Two mechanisms, both where available:
 
 from __future__ import annotations
 
+import contextlib
 import os
 import resource
 from dataclasses import dataclass
@@ -100,10 +101,9 @@ class Cgroup:
         return False
 
     def remove(self) -> None:
-        try:
+        # OSError: a process still in it, or already gone; the kernel frees it with the last one.
+        with contextlib.suppress(OSError):
             os.rmdir(self.path)
-        except OSError:
-            pass  # a process still in it, or already gone: the kernel frees it with the last one
 
 
 def _parents() -> list[tuple[int, str]]:

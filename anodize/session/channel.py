@@ -18,7 +18,7 @@ import threading
 from dataclasses import dataclass
 from typing import Protocol
 
-__all__ = ["PeerFailure", "STOP", "Corrupt", "Channel", "Network"]
+__all__ = ["PeerFailure", "STOP", "Corrupt", "Channel", "Doorbell", "Network"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,22 +49,59 @@ class Corrupt:
 
 
 class Channel(Protocol):
-    """One direction between two roles (a ``queue.SimpleQueue`` satisfies it)."""
+    """One direction between two roles (a ``queue.SimpleQueue`` satisfies it).
+
+    The sending role only puts; the receiving role gets, and puts signals back
+    (see :class:`PeerFailure`) so that later receives see them too.
+    """
 
     def put(self, item: object) -> None: ...
 
-    def get(self, block: bool = True, timeout: float | None = None) -> object: ...
+    def get(self, *, timeout: float | None = None) -> object:
+        """The next item, waiting up to ``timeout`` seconds (None: for ever).
 
-    def get_nowait(self) -> object: ...
+        Raises:
+            queue.Empty: nothing arrived in time.
+        """
+
+    def get_nowait(self) -> object:
+        """The next item, without waiting.
+
+        Raises:
+            queue.Empty: nothing is waiting.
+        """
 
     def empty(self) -> bool: ...
+
+
+class Doorbell(Protocol):
+    """The rings of a role with parallel branches: each names a peer that put a message
+    into one of its channels (a ``queue.SimpleQueue[str]`` satisfies it)."""
+
+    def put(self, sender: str) -> None: ...
+
+    def get(self, *, timeout: float | None = None) -> str:
+        """The next ring, waiting up to ``timeout`` seconds (None: for ever).
+
+        Raises:
+            queue.Empty: no ring in time.
+        """
+
+    def get_nowait(self) -> str:
+        """The next ring, without waiting.
+
+        Raises:
+            queue.Empty: no ring is waiting.
+        """
+
+    def qsize(self) -> int: ...
 
 
 class Network(Protocol):
     """The channels of one run as an endpoint sees them, and what is known of failures."""
 
     queues: dict[tuple[str, str], Channel]
-    doorbells: dict[str, Channel]
+    doorbells: dict[str, Doorbell]
     failed: dict[str, str]
     alarm: bool  # raised on any failure or stop: the senders' fast path tests only this
 

@@ -74,7 +74,8 @@ class Endpoint:
             PeerFailedError: ``to`` has failed.
         """
         if not self._plain and self._forked():
-            return self._branch_for(self._send_route, to, "send", label).send(to, label, payload)
+            self._branch_for(self._send_route, to, "send", label).send(to, label, payload)
+            return
         monitor = self._monitor
         if monitor is not None:  # first: a forbidden send is a violation, whatever the peer
             monitor.send(to, label, payload)
@@ -111,7 +112,7 @@ class Endpoint:
             return make(tuple(shape), dtype)
         import numpy as np
 
-        return np.empty(shape, dtype)  # type: ignore[call-overload]
+        return np.empty(shape, dtype)
 
     def recv(self, frm: str, timeout: float | None = None) -> Message:
         """Receive the next message from role ``frm``.
@@ -140,7 +141,7 @@ class Endpoint:
             if monitor is not None:
                 monitor.recv(frm, item[0], item[1])
             self.received[frm] += 1
-            return _new_tuple(Message, item)  # type: ignore[no-any-return]
+            return _new_tuple(Message, item)
         return self._accept(frm, item, channel)
 
     def _drain_doorbell(self) -> None:
@@ -285,7 +286,7 @@ class Endpoint:
             if self._monitor is not None:
                 self._monitor.recv(frm, item[0], item[1])
             self.received[frm] += 1
-            return _new_tuple(Message, item)  # type: ignore[no-any-return]
+            return _new_tuple(Message, item)
         if isinstance(item, PeerFailure):
             channel.put(item)  # later receives fail too
             self.failed_peer = item.peer

@@ -27,8 +27,7 @@ class Monitor:
     reads them directly and calls :meth:`send` / :meth:`recv` only to raise.
     """
 
-    __slots__ = ("protocol", "role", "machine", "state", "sends", "recvs", "recv_peers",
-                 "fork_states")
+    __slots__ = ("fork_states", "machine", "protocol", "recv_peers", "recvs", "role", "sends", "state")
 
     def __init__(self, machine: StateMachine, protocol: str, role: str) -> None:
         self.protocol = protocol
@@ -92,10 +91,11 @@ class Monitor:
     def violation(self, actual: Action, blame: str, reason: str = "",
                   transition: Transition | None = None) -> ProtocolViolationError:
         """Describe ``actual`` against what the current state allows."""
-        expected = [Action(t.action, t.peer, t.label, t.sort.spelling if t.sort else None)
-                    for t in self.machine.expected(self.state)]
-        where = transition or (self.machine.expected(self.state) or [None])[0]
-        location = str(where.location) if where is not None else ""
+        allowed = self.machine.expected(self.state)
+        expected = [Action(t.action, t.peer, t.label, t.sort.spelling if t.sort else None) for t in allowed]
+        if transition is None and allowed:  # no interaction of its own: point at the first one allowed
+            transition = allowed[0]
+        location = str(transition.location) if transition is not None else ""
         state = f"{self.state} ({self.machine.describe(self.state)})"
         return ProtocolViolationError(self.protocol, self.role, actual.peer, state, expected, actual,
                                       blame, location, reason)

@@ -53,6 +53,7 @@ class Beat:
     """Memory (bytes above the baseline) and per-channel counts, ``"A->B"`` -> messages."""
 
     TAG: ClassVar[ControlTag] = ControlTag.BEAT
+    at: float  # time.monotonic() when counted (the same clock in every process of the machine)
     memory: int
     peak: int
     sent: dict[str, int] = field(default_factory=dict)

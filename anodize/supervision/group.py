@@ -32,11 +32,13 @@ class FailurePolicy(StrEnum):
         Raises:
             ConfigurationError: not a policy.
         """
-        try:
-            return cls(value)
-        except ValueError:
-            raise ConfigurationError(f"group {group}: on_failure must be one of "
-                                     f"{', '.join(p.value for p in cls)}, got {value!r}") from None
+        if isinstance(value, str):  # no policy's value is anything but a str
+            try:
+                return cls(value)
+            except ValueError:
+                pass
+        raise ConfigurationError(f"group {group}: on_failure must be one of "
+                                 f"{', '.join(p.value for p in cls)}, got {value!r}")
 
 
 def parse_memory(value: int | str | None) -> int | None:

@@ -14,11 +14,14 @@ and hands it a :class:`GroupSpec` and its pipes. The process then:
    the OS) after reporting the bound and the peak.
 
 Everything sent to the supervisor is a typed control message (:mod:`.control`), plain
-data encoded by :mod:`anodize.transport.codec` (never pickled), so a misbehaving group cannot run code in the supervisor.
+data encoded by :mod:`anodize.transport.codec` (never pickled), so a misbehaving group cannot
+run code in the supervisor.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import os
 import signal
 import sys
@@ -93,10 +96,8 @@ def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str]
     try:
         _GroupProcess(spec, control, pipes).run()
     except BaseException as error:  # a failure of the group itself: say so, then go
-        try:
+        with contextlib.suppress(OSError):
             send_control(control, Crash(error=error_to_data(error)))
-        except OSError:
-            pass
         os._exit(1)
     os._exit(0)
 
@@ -145,7 +146,7 @@ class _GroupProcess:
             # A channel's rings are named after it: a receiver maps no other ring.
             prefix = f"anodize-{spec.run_id}-{sender.encode().hex()}-{receiver.encode().hex()}-"
             if sender not in local:
-                return make_codec(classes, None, lambda *address: reader.read(*address, prefix=prefix))
+                return make_codec(classes, None, functools.partial(reader.read, prefix=prefix))
             ring = ArrayRing(f"{prefix}{spec.incarnation}", peer_gone=lambda: self._gone(receiver))
             return make_codec(classes, ring, None)
 
@@ -214,7 +215,7 @@ class _GroupProcess:
                 for peer, n in ep.sent_counts().items()}
         received = {f"{peer}->{role}": n for role, ep in self.endpoints.items()
                     for peer, n in ep.received_counts().items()}
-        self._send(Beat(memory=used, peak=self.peak, sent=sent, received=received, final=final))
+        self._send(Beat(at=time.monotonic(), memory=used, peak=self.peak, sent=sent, received=received, final=final))
 
     def _memory_exceeded(self, role: str) -> None:
         self.reserve = None  # room to report in
@@ -243,11 +244,9 @@ class _GroupProcess:
                     pass  # a group's message sent to a group: not ours to act on
 
     def _send(self, message: GroupMessage) -> None:
-        with self.send_lock:
-            try:
-                send_control(self.control, message)
-            except OSError:
-                pass  # the supervisor is gone; the control reader ends the process
+        # OSError: the supervisor is gone; the control reader ends the process.
+        with self.send_lock, contextlib.suppress(OSError):
+            send_control(self.control, message)
 
 
 def _payload_classes(machines: Iterable[StateMachine]) -> list[type]:

@@ -180,7 +180,7 @@ class ProcessRunner:
                 self._on_ready(inc, message)
             case control.Beat():
                 inc.peak = max(inc.peak, message.peak)
-                self.pending.append(Counts(group=name, incarnation=number, sent=message.sent,
+                self.pending.append(Counts(group=name, incarnation=number, at=message.at, sent=message.sent,
                                            received=message.received, memory=message.memory, peak=message.peak))
             case control.RoleEnded():
                 self.pending.append(RoleEnded(group=name, incarnation=number, report=_role_report(name, message)))
@@ -277,8 +277,8 @@ class ProcessRunner:
         self.pending.append(Note(group=group, text=description))
 
     def notes(self) -> list[str]:
-        return [f"real-time guard: kernel RT throttling {rt_throttling()}; watchdog demotes a SCHED_FIFO "
-                f"group that keeps a CPU busy for {WATCHDOG_LIMIT:g} s"]
+        return [(f"real-time guard: kernel RT throttling {rt_throttling()}; watchdog demotes a SCHED_FIFO "
+                 f"group that keeps a CPU busy for {WATCHDOG_LIMIT:g} s")]
 
     def close(self) -> None:
         self.watchdog.stop()

@@ -182,15 +182,12 @@ class RunReport:
     def summary(self) -> str:
         """A few lines for people: one per group, then each role that did not finish,
         with where it raised or what it was waiting for."""
-        lines = [f"protocol {self.protocol}: {self.outcome} in {self.duration:.2f} s"
-                 f" ({self.transport})"]
+        lines = [f"protocol {self.protocol}: {self.outcome} in {self.duration:.2f} s ({self.transport})"]
         for group in self.groups.values():
             lines.append(f"  group {group.name}: {group.status} ({_group_details(group)})")
             if group.error is not None:
                 lines.append(f"    {type(group.error).__name__}: {group.error}")
-        for role in self.roles.values():
-            if role.status is not RoleStatus.DONE:
-                lines.append(f"  {role.line()}")
+        lines.extend(f"  {role.line()}" for role in self.roles.values() if role.status is not RoleStatus.DONE)
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)
 

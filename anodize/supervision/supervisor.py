@@ -67,6 +67,7 @@ class Counts:
 
     group: str
     incarnation: int
+    at: float  # time.monotonic() when the counts were taken
     sent: dict[str, int]
     received: dict[str, int]
     memory: int | None = None
@@ -184,6 +185,7 @@ class _GroupRecord:
     # (time, messages sent so far), in stretches during which every role of the group ran
     stretches: list[list[tuple[float, int]]] = field(default_factory=list)
     steady: bool = False  # in such a stretch now
+    steady_since: float = 0.0
 
 
 class Supervisor:
@@ -271,6 +273,7 @@ class Supervisor:
             if record.ready and record.state in (GroupState.STARTING, GroupState.RESTARTING):
                 record.state = GroupState.RUNNING
                 record.steady = True
+                record.steady_since = time.monotonic()
                 record.stretches.append([])
                 self.runner.go(name)
                 if self.went is None:
@@ -313,8 +316,9 @@ class Supervisor:
             record.memory = counts.memory
         if counts.peak is not None:
             record.peak = max(record.peak or 0, counts.peak)
-        if record.steady and self.state is RunState.RUNNING:
-            record.stretches[-1].append((time.monotonic(), sum(record.sent.values())))
+        stretch = record.stretches[-1] if record.steady and self.state is RunState.RUNNING else None
+        if stretch is not None and counts.at >= record.steady_since:  # not counted before "go"
+            stretch.append((counts.at, sum(record.sent.values())))
 
     def _role_ended(self, record: _GroupRecord, report: RoleReport) -> None:
         record.scheduling = record.scheduling or report.scheduling  # threads apply it per role

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from typing import Any
 
 from sessiontypes import GlobalType
 from sessiontypes.graph import communication_graph
@@ -86,7 +85,8 @@ class System:
         self.groups[name] = group
         return group
 
-    def _place(self, group: Group, role: str, function: Callable[..., Any]) -> None:
+    def _place(self, group: Group, role: str, function: object) -> None:
+        # ``function`` is checked here, not trusted: Group.role passes on whatever it was given.
         if role not in self.global_type.roles:
             raise ConfigurationError(f"global {self.global_type.name} has no role {role}; expected one of "
                              f"{', '.join(self.global_type.roles)}")

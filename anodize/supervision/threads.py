@@ -11,6 +11,7 @@ report says so).
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Sequence
 from queue import Empty, SimpleQueue
 from typing import Any
@@ -123,7 +124,8 @@ class ThreadRunner:
                     for peer, n in ep.sent_counts().items()}
             received = {f"{peer}->{role}": n for role, ep in inc.endpoints.items()
                         for peer, n in ep.received_counts().items()}
-            counts.append(Counts(group=name, incarnation=inc.number, sent=sent, received=received))
+            counts.append(Counts(group=name, incarnation=inc.number, at=time.monotonic(), sent=sent,
+                                 received=received))
         return counts
 
     def tell_failed(self, group: str, role: str, cause: str) -> None:

@@ -180,7 +180,7 @@ def _project(args: argparse.Namespace) -> int:
     if args.check and args.output_dir is None:
         raise UsageError("--check compares generated modules with DIR: give -o DIR")
     # sessiontypes.load, with the text kept: generated modules carry its digest.
-    text = Path(args.file).read_text(encoding="utf-8")
+    text = sessiontypes.read_source(args.file)
     module = sessiontypes.loads(text, args.file)
     for warning in module.warnings:
         print(warning, file=sys.stderr)
@@ -199,9 +199,7 @@ def _project(args: argparse.Namespace) -> int:
     for gt in chosen:
         if len(chosen) > 1:
             lines.append(f"# {gt.name}")
-        for role in gt.roles:
-            if args.role is None or role == args.role:
-                lines.append(f"{role} = {gt.project(role)}")
+        lines.extend(f"{role} = {gt.project(role)}" for role in gt.roles if args.role is None or role == args.role)
     if lines:
         print("\n".join(lines))
     return EXIT_OK

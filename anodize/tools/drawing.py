@@ -8,7 +8,7 @@ from pathlib import Path
 import networkx as nx
 
 
-def draw_communication_graph(graph: nx.DiGraph, path: Path) -> None:
+def draw_communication_graph(graph: nx.DiGraph[str], path: Path) -> None:
     """Draw roles on a circle, one labelled arrow per channel, and save to ``path``.
 
     The format follows the suffix (``.png`` or ``.svg``).

@@ -15,7 +15,7 @@ import threading
 from collections.abc import Iterable, Mapping
 from queue import SimpleQueue
 
-from ..session.channel import STOP, Channel, PeerFailure
+from ..session.channel import STOP, Channel, Doorbell, PeerFailure
 
 __all__ = ["InprocNetwork"]
 
@@ -35,7 +35,7 @@ class InprocNetwork:
     def __init__(self, channels: Iterable[tuple[str, str]], doorbell_roles: Iterable[str] = (),
                  dead: Mapping[str, str] | None = None) -> None:
         self.queues: dict[tuple[str, str], Channel] = {pair: SimpleQueue() for pair in channels}
-        self.doorbells: dict[str, Channel] = {role: SimpleQueue() for role in doorbell_roles}
+        self.doorbells: dict[str, Doorbell] = {role: SimpleQueue() for role in doorbell_roles}
         self.failed: dict[str, str] = {}
         self.stopping = False
         self.stopped: set[str] = set()  # roles told to stop on their own (their group stops)

@@ -12,6 +12,7 @@ failure frame written after its last message, so nothing it sent is lost.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import select
 import threading
@@ -97,11 +98,28 @@ class PipeSender:
             finally:
                 self._lock.release()
 
+    # The read side of the Channel protocol: the receiving process holds the read end.
+    def get(self, *, timeout: float | None = None) -> object:
+        """Never used: this is the write end of the pipe.
+
+        Raises:
+            AnodizeError: always.
+        """
+        raise AnodizeError(f"the channel {self.sender}->{self.receiver} is read in {self.receiver}'s process")
+
+    def get_nowait(self) -> object:
+        """Never used: as :meth:`get`."""
+        return self.get()
+
+    def empty(self) -> bool:
+        """True: nothing arrives at the write end."""
+        return True
+
     def _peer_gone(self) -> BaseException:
         if self.network.stopping:  # the receiver stopped with the run: so do we
             return RoleStopped(f"interrupted sending to {self.receiver}")
         cause = self.network.wait_for_cause(self.receiver, "its group's process has ended")
-        if self.network.stopping and self.receiver not in self.network.failed:
+        if cause is None:  # the run stopped meanwhile, and the receiver did not fail
             return RoleStopped(f"interrupted sending to {self.receiver}")
         return PeerFailedError(self.sender, self.receiver, cause)
 
@@ -143,7 +161,7 @@ class PipeReceiver:
                 return STOP
             if self._eof:
                 cause = self.network.wait_for_cause(self.sender, "its group's process ended")
-                if self.network.stopping and self.sender not in self.network.failed:
+                if cause is None:
                     return STOP  # the sender's group ended because the run is stopping
                 return PeerFailure(self.sender, cause)
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
@@ -163,7 +181,8 @@ class PipeReceiver:
         buffer, at = self._buffer, self._at
         if len(buffer) - at < 4:
             return False
-        return len(buffer) - at - 4 >= HEADER.unpack_from(buffer, at)[0]
+        length: int = HEADER.unpack_from(buffer, at)[0]
+        return len(buffer) - at - 4 >= length
 
     def _next_frame(self) -> object | None:
         buffer, at = self._buffer, self._at
@@ -190,7 +209,8 @@ class PipeReceiver:
             failure = PeerFailure(self.sender, value)
             self.network.note_failed(self.sender, value)
             return failure
-        return value
+        message: tuple[str, object] = value  # (label, payload)
+        return message
 
     def _fill(self, timeout: float | None) -> bool:
         """Read what the pipe holds, waiting up to ``timeout``; False if no data came.
@@ -248,7 +268,7 @@ class ProcessNetwork(InprocNetwork):
                 self.queues[(sender, receiver)] = self._bridge(PipeReceiver(fd, codec, self, sender),
                                                                sender, receiver)
             else:
-                self.queues[(sender, receiver)] = PipeReceiver(fd, codec, self, sender)  # type: ignore[assignment]
+                self.queues[(sender, receiver)] = PipeReceiver(fd, codec, self, sender)
         for sender, receiver in channels:  # channels to or from a peer that is not there
             if (sender, receiver) not in self.queues and receiver in self.local_roles:
                 gone: SimpleQueue[object] = SimpleQueue()
@@ -310,10 +330,19 @@ class ProcessNetwork(InprocNetwork):
             self.alarm = True
             self._cause_arrived.notify_all()
 
-    def wait_for_cause(self, role: str, default: str) -> str:
-        """Why ``role`` failed; wait briefly for the supervisor to say, when its process died."""
+    def wait_for_cause(self, role: str, default: str) -> str | None:
+        """Why ``role`` failed; wait briefly for the supervisor to say, when its process died.
+
+        Returns:
+            The cause (``default`` if none arrived in time), or None when the run is
+            stopping and ``role`` did not fail: its process ended with the run.
+        """
         with self._cause_arrived:
             self._cause_arrived.wait_for(lambda: role in self.failed or self.stopping, timeout=_EOF_CAUSE_WAIT)
+            # Read here, not by the caller: ``stopping`` changes from other threads, and
+            # the caller has already seen it False before waiting.
+            if self.stopping and role not in self.failed:
+                return None
             return self.failed.get(role, default)
 
     def stop(self) -> None:
@@ -350,10 +379,9 @@ def _write_all(fd: int, data: bytes) -> None:
 def _grow_pipe(fd: int) -> None:
     import fcntl
 
-    try:
+    # Refused or not on this system: the default size works, only with more blocking.
+    with contextlib.suppress(OSError, AttributeError):
         fcntl.fcntl(fd, fcntl.F_SETPIPE_SZ, _PIPE_SIZE)
-    except (OSError, AttributeError):
-        pass  # the default size works, only with more blocking
 
 
 def make_codec(classes: Iterable[type], ring: ArrayRing | None,

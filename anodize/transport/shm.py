@@ -17,6 +17,7 @@ its end (:func:`remove_run_segments`), even those of crashed groups.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import itertools
 import math
@@ -51,10 +52,8 @@ def remove_run_segments(run_id: str) -> int:
     """Delete every ring file of run ``run_id``; returns how many there were."""
     paths = glob.glob(_path(f"anodize-{run_id}-*"))
     for path in paths:
-        try:
+        with contextlib.suppress(FileNotFoundError):
             os.unlink(path)
-        except FileNotFoundError:
-            pass
     return len(paths)
 
 

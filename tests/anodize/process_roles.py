@@ -82,7 +82,7 @@ def frame_sink(ep: Endpoint) -> None:
                                  f"{zlib.crc32(frame.pixels) != frame.crc}")
         if not np.array_equal(frame.pixels, frame_pixels(expected % 64)):
             raise AssertionError(f"frame {expected}: pixels differ")
-        kept = (kept + [frame.pixels])[-3:]
+        kept = [*kept, frame.pixels][-3:]
         expected += 1
     if expected != FRAMES:
         raise AssertionError(f"{expected} frames arrived, {FRAMES} were sent")

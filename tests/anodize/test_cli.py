@@ -8,9 +8,9 @@ the installed command in a subprocess.
 from __future__ import annotations
 
 import io
-import re
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -102,9 +102,9 @@ def test_unused_type_is_a_warning_and_exit_status_stays_zero(
     assert run(capsys, "check", str(proto)) == (
         0,
         f"{proto}: ok (1 global, 0 locals)\n",
-        f"{proto}:1:6: warning: type Unused is declared but never used\n"
-        '    type Unused = "m:Unused"\n'
-        "         ^\n",
+        (f"{proto}:1:6: warning: type Unused is declared but never used\n"
+         '    type Unused = "m:Unused"\n'
+         "         ^\n"),
     )
     status, out, err = run(capsys, "project", str(proto))
     assert (status, out) == (0, "A = !B(x)\nB = ?A(x)\n")
@@ -174,8 +174,8 @@ B = mu t.&A{token(int).!C(token(int)).t, stop.!C(stop)}
 
 def test_project_unknown_global_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert run(capsys, "project", "protocols/tinman.proto", "--global", "Nope") == (
-        2, "", "anodize project: error: no global Nope in protocols/tinman.proto; "
-               "expected one of TinMan, TinManParallel\n")
+        2, "", ("anodize project: error: no global Nope in protocols/tinman.proto; "
+                "expected one of TinMan, TinManParallel\n"))
 
 
 def test_project_unknown_role_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
@@ -238,12 +238,12 @@ def test_fsm_of_a_local_declaration(capsys: pytest.CaptureFixture[str]) -> None:
         ("recv", None, "Int", "Int")]
 
 
-@pytest.mark.parametrize("argv, message", [
+@pytest.mark.parametrize(("argv", "message"), [
     (["fsm", "protocols/tinman.proto", "--global", "TinMan"],
      f"anodize fsm: error: choose a role with --role ({TINMAN_ROLES})"),
     (["fsm", "protocols/tinman.proto", "--role", "Joy"],
-     "anodize fsm: error: protocols/tinman.proto has 2 globals; choose one with --global "
-     "(TinMan, TinManParallel)"),
+     ("anodize fsm: error: protocols/tinman.proto has 2 globals; choose one with --global "
+      "(TinMan, TinManParallel)")),
     (["fsm", "protocols/tinman.proto", "--global", "TinMan", "--role", "X"],
      f"anodize fsm: error: no role X in global TinMan; expected one of {TINMAN_ROLES}"),
     (["fsm", "protocols/tinman.proto", "--global", "Nope", "--role", "Joy"],
@@ -251,8 +251,8 @@ def test_fsm_of_a_local_declaration(capsys: pytest.CaptureFixture[str]) -> None:
     (["fsm", "protocols/atm.proto", "--local", "Nope"],
      "anodize fsm: error: no local Nope in protocols/atm.proto; expected one of ATM, ATM'"),
     (["graph", "protocols/tinman.proto", "-o", "x.png"],
-     "anodize graph: error: protocols/tinman.proto has 2 globals; choose one with --global "
-     "(TinMan, TinManParallel)"),
+     ("anodize graph: error: protocols/tinman.proto has 2 globals; choose one with --global "
+      "(TinMan, TinManParallel)")),
     (["graph", "protocols/two_buyer.proto", "--global", "Nope", "-o", "x.png"],
      "anodize graph: error: no global Nope in protocols/two_buyer.proto; expected one of TwoBuyer"),
 ])
@@ -468,8 +468,8 @@ def test_run_errors_of_the_system_file_exit_1(
         capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path]) -> None:
     path = system_file("cli_run_roles:producer", "cli_run_roles:nothing")
     assert run(capsys, "run", str(path)) == (
-        1, "", f"error: {path}: groups.b: role function 'cli_run_roles:nothing': module cli_run_roles "
-               "has no nothing\n")
+        1, "", (f"error: {path}: groups.b: role function 'cli_run_roles:nothing': module cli_run_roles "
+                "has no nothing\n"))
     assert run(capsys, "run", str(path), "--timeout", "0") == (
         2, "", "anodize run: error: --timeout 0.0: expected a number of seconds > 0\n")
 
@@ -482,23 +482,27 @@ class _Terminal(io.StringIO):
 def test_live_status_redraws_in_place_on_a_terminal() -> None:
     screen = _Terminal()
     live = LiveStatus(screen)
-    live({"a": GroupStatus(name="a", state=GroupState.RUNNING, messages=1), "b": GroupStatus(name="b", state=GroupState.STARTING)})
-    live({"a": GroupStatus(name="a", state=GroupState.DONE, messages=4), "b": GroupStatus(name="b", state=GroupState.DONE)})
-    a1, b1 = GroupStatus(name="a", state=GroupState.RUNNING, messages=1).line(), GroupStatus(name="b", state=GroupState.STARTING).line()
-    a2, b2 = GroupStatus(name="a", state=GroupState.DONE, messages=4).line(), GroupStatus(name="b", state=GroupState.DONE).line()
-    assert screen.getvalue() == (f"\x1b[2K{a1}\n\x1b[2K{b1}\n\x1b[J"
-                                 f"\x1b[2F\x1b[2K{a2}\n\x1b[2K{b2}\n\x1b[J")
+    a1 = GroupStatus(name="a", state=GroupState.RUNNING, messages=1)
+    b1 = GroupStatus(name="b", state=GroupState.STARTING)
+    a2 = GroupStatus(name="a", state=GroupState.DONE, messages=4)
+    b2 = GroupStatus(name="b", state=GroupState.DONE)
+    live({"a": a1, "b": b1})
+    live({"a": a2, "b": b2})
+    assert screen.getvalue() == (f"\x1b[2K{a1.line()}\n\x1b[2K{b1.line()}\n\x1b[J"
+                                 f"\x1b[2F\x1b[2K{a2.line()}\n\x1b[2K{b2.line()}\n\x1b[J")
 
 
 def test_live_status_in_a_log_prints_a_line_when_a_state_changes() -> None:
     log = io.StringIO()
     live = LiveStatus(log)
-    live({"a": GroupStatus(name="a", state=GroupState.RUNNING, messages=1), "b": GroupStatus(name="b", state=GroupState.RUNNING)})
-    live({"a": GroupStatus(name="a", state=GroupState.RUNNING, messages=9), "b": GroupStatus(name="b", state=GroupState.RUNNING)})
-    live({"a": GroupStatus(name="a", state=GroupState.DONE, messages=12), "b": GroupStatus(name="b", state=GroupState.RUNNING)})
-    assert log.getvalue().splitlines() == [GroupStatus(name="a", state=GroupState.RUNNING, messages=1).line(),
-                                           GroupStatus(name="b", state=GroupState.RUNNING).line(),
-                                           GroupStatus(name="a", state=GroupState.DONE, messages=12).line()]
+    b = GroupStatus(name="b", state=GroupState.RUNNING)
+    a1 = GroupStatus(name="a", state=GroupState.RUNNING, messages=1)
+    a9 = GroupStatus(name="a", state=GroupState.RUNNING, messages=9)
+    a12 = GroupStatus(name="a", state=GroupState.DONE, messages=12)
+    live({"a": a1, "b": b})
+    live({"a": a9, "b": b})
+    live({"a": a12, "b": b})
+    assert log.getvalue().splitlines() == [a1.line(), b.line(), a12.line()]
 
 
 # ---- the installed command -------------------------------------------------------------
@@ -561,3 +565,16 @@ def test_ctrl_c_stops_the_run_and_still_prints_and_writes_the_report(
     assert (data["outcome"], data["interrupted"], data["ok"]) == ("interrupted", True, False)
     assert data["roles"]["C"]["status"] == "stopped"
     assert data["roles"]["C"]["detail"].startswith("blocked in state 0 waiting for ?P(data(int))")
+
+
+@pytest.mark.parametrize("command", ["check", "project", "fsm"])
+def test_a_file_that_is_not_utf8_gets_a_located_error(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, command: str) -> None:
+    path = tmp_path / "latin1.proto"
+    path.write_bytes(b"global G(A, B) = A -> B : x.\n// caf\xe9\n")
+    extra = ["--role", "A"] if command == "fsm" else []
+    status, out, err = run(capsys, command, str(path), *extra)
+    assert (status, out) == (1, "")
+    assert err == (f"{path}:2:7: error: the file is not UTF-8 text: byte 0xe9 cannot be decoded\n"
+                   "    // caf\ufffd\n"
+                   "          ^\n")

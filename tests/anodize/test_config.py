@@ -103,12 +103,12 @@ GROUP = '[groups.g]\nroles = { A = "m:f" }\n'
 BAD = {
     "unknown_top_key": (
         MINIMAL + "protocl = 1\n" + GROUP,
-        "protocl: unknown key; expected one of global, groups, monitors, protocol, pythonpath, "
-        "timeout, transport"),
+        ("protocl: unknown key; expected one of global, groups, monitors, protocol, pythonpath, "
+         "timeout, transport")),
     "unknown_group_key": (
         MINIMAL + GROUP + "prio = 3\n",
-        "groups.g.prio: unknown key; expected one of cpus, max_restarts, memory, on_failure, "
-        "priority, roles"),
+        ("groups.g.prio: unknown key; expected one of cpus, max_restarts, memory, on_failure, "
+         "priority, roles")),
     "missing_protocol": ('global = "G"\n' + GROUP, "protocol: missing (it is required)"),
     "missing_global": ('protocol = "p.proto"\n' + GROUP, "global: missing (it is required)"),
     "missing_groups": (MINIMAL, "groups: missing (it is required): add a table such as [groups.main]"),
@@ -144,8 +144,8 @@ BAD = {
     "priority_float": (MINIMAL + GROUP + "priority = 5.0\n",
                        "groups.g.priority: expected an int 1..99, got 5.0"),
     "memory": (MINIMAL + GROUP + 'memory = "lots"\n',
-               'groups.g.memory: expected a size such as "64MiB", "512KiB" or a number of bytes, '
-               'got "lots"'),
+               ('groups.g.memory: expected a size such as "64MiB", "512KiB" or a number of bytes, '
+                'got "lots"')),
     "cpus": (MINIMAL + GROUP + "cpus = [0, -1]\n",
              "groups.g.cpus: expected a non-empty array of CPU numbers, got [0, -1]"),
     "cpus_empty": (MINIMAL + GROUP + "cpus = []\n",
@@ -192,8 +192,8 @@ def test_a_missing_file(tmp_path: Path) -> None:
 # ---- build_system -------------------------------------------------------------------
 
 def build(directory: Path, groups: str, header: str = 'global = "Stream"\n') -> SystemConfig:
-    text = f'protocol = "protocols/stream.proto"\n{header}transport = "inproc"\ntimeout = 5\n' \
-           f'pythonpath = ["code"]\n{groups}'
+    text = (f'protocol = "protocols/stream.proto"\n{header}transport = "inproc"\ntimeout = 5\n'
+            f'pythonpath = ["code"]\n{groups}')
     return load_config(write(directory, text))
 
 

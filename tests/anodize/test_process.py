@@ -5,10 +5,10 @@ from __future__ import annotations
 import glob
 import os
 
+import process_roles as roles
 import pytest
 
 import anodize
-import process_roles as roles
 import sessiontypes
 from anodize import MemoryBoundError, PeerFailedError, ProtocolViolationError
 from anodize.errors import RoleError

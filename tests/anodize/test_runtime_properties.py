@@ -35,14 +35,12 @@ for _folder in (_HERE, _HERE.parent / "sessiontypes"):  # helper modules, no pac
     if str(_folder) not in sys.path:
         sys.path.insert(0, str(_folder))
 
-import sessiontypes  # noqa: E402
-from anodize import (  # noqa: E402
-    Action, Endpoint, PeerFailedError, ProtocolViolationError, RunReport, System)
-from sessiontypes import GlobalType  # noqa: E402
-
-from role_drivers import (  # noqa: E402
-    BOGUS_LABEL, build_system, can_always_end, distances, load_global, machines_of)
+from role_drivers import BOGUS_LABEL, build_system, can_always_end, distances, load_global, machines_of  # noqa: E402
 from strategies import GeneratedGlobal, global_protocols  # noqa: E402
+
+import sessiontypes  # noqa: E402
+from anodize import Action, Endpoint, PeerFailedError, ProtocolViolationError, RunReport, System  # noqa: E402
+from sessiontypes import GlobalType  # noqa: E402
 
 # Keeps this file at about 20 s on two cores; raise max_examples locally for a campaign.
 SETTINGS = settings(deadline=None, max_examples=100,
@@ -326,7 +324,7 @@ def test_a_failed_branch_leaves_the_other_branch_running(use_fork: bool) -> None
     seen_failure: list[PeerFailedError] = []
 
     def planner(ep: Endpoint) -> None:
-        for i in range(3):
+        for _ in range(3):
             ep.send("Move", "path", ep.recv("VisOdom").payload)
         raise RuntimeError("planner crashed")
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import inspect
 import re
 
+import policy_roles as roles
 import pytest
 
 import anodize
-import policy_roles as roles
 import sessiontypes
 from anodize import PeerFailedError
 from anodize.supervision.report import GroupState, RoleStatus

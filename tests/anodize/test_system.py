@@ -152,7 +152,8 @@ def test_scheduling_is_applied_or_the_fallback_is_reported() -> None:
     report = system.run(timeout=10)
     assert report.ok
     scheduling = report.groups["fast"].scheduling
-    assert scheduling == "SCHED_FIFO 60" or re.fullmatch(r"nice -?\d+ \(SCHED_FIFO refused: .+\)|unchanged .+", scheduling)
+    assert scheduling == "SCHED_FIFO 60" or re.fullmatch(r"nice -?\d+ \(SCHED_FIFO refused: .+\)|unchanged .+",
+                                                         scheduling)
     assert report.groups["slow"].scheduling == "SCHED_OTHER (no priority asked)"
 
 

@@ -28,7 +28,7 @@ def scale(value):
 def producer(ep):
     _buffer = [scale(i) for i in range(LIMIT)]
     for item in _buffer:
-        ep.send("C", "data", int(math.floor(item)))
+        ep.send("C", "data", math.floor(item))
     ep.send("C", "stop")
     return join(GREETING, NAMES[0]), ORIGIN, EMPTY
 

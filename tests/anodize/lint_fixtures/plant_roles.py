@@ -1,8 +1,9 @@
 """Roles that reach a package's submodule two ways; the anodize runtime itself is not read."""
 
 import plant.state
-from anodize import Endpoint
 from plant import state
+
+from anodize import Endpoint
 
 
 def producer(ep: Endpoint) -> None:
