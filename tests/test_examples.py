@@ -35,6 +35,7 @@ def test_generated_example_code_is_up_to_date(proto: str, monkeypatch: pytest.Mo
     assert main(["project", proto, "-o", "examples/generated", "--check"]) == 0, capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_mixed_criticality_example_stops_the_memory_hog_and_not_the_control_loop(tmp_path: Path) -> None:
     report_path = tmp_path / "report.json"
     done = subprocess.run([str(Path(sys.executable).parent / "anodize"), "run",

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from anodize import Endpoint
 
-TICKS = 40
+TICKS = 20
 TICK_PERIOD = 0.05  # seconds: the independent pair runs about 2 s
 
 

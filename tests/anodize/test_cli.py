@@ -512,6 +512,7 @@ def _command() -> Sequence[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "anodize.tools.cli"]
 
 
+@pytest.mark.slow
 def test_installed_command_in_a_subprocess() -> None:
     env = {**os.environ, "PYTHONIOENCODING": "utf-8"}
     env.pop("ANODIZE_DEBUG", None)

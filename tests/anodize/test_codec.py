@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from budget import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -41,7 +42,7 @@ def round_trip(codec: Codec, label: str, payload: object) -> tuple[str, object]:
     return value
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(label=st.text(min_size=1, max_size=20), payload=values)
 def test_builtin_values_round_trip_with_their_types(label: str, payload: object) -> None:
     got_label, got = round_trip(Codec(), label, payload)
@@ -62,14 +63,14 @@ def _same_types(a: object, b: object) -> bool:
     return True
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(body=st.binary(max_size=64))
 def test_arbitrary_bytes_never_decode_into_anything_but_a_decode_error(body: bytes) -> None:
     with contextlib.suppress(DecodeError):
         Codec().decode_body(body)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(payload=values, cut=st.integers(min_value=1, max_value=40))
 def test_a_truncated_frame_is_a_decode_error(payload: object, cut: int) -> None:
     body = Codec().message_frame("l", payload)[4:]

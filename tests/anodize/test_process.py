@@ -58,6 +58,7 @@ def test_a_protocol_runs_across_processes_with_monitors_at_both_ends() -> None:
     assert report.transport == "process"
 
 
+@pytest.mark.slow
 def test_a_leak_in_a_thread_a_role_started_stops_the_group_at_its_bound() -> None:
     report = run("Hog", {
         "control": {"priority": 80, "roles": {"C": roles.steady_controller, "S": roles.steady_sensor}},
@@ -82,6 +83,7 @@ def test_dataclasses_held_in_fields_of_a_named_dataclass_cross_too() -> None:
     assert report.ok, report.summary()
 
 
+@pytest.mark.slow
 def test_a_million_messages_cross_in_order() -> None:
     report = run("Stream", {"a": {"roles": {"A": roles.count_source}},
                             "b": {"roles": {"B": roles.count_sink}}}, timeout=300)
@@ -89,6 +91,7 @@ def test_a_million_messages_cross_in_order() -> None:
     assert report.messages["A->B"] == roles.MESSAGES + 1
 
 
+@pytest.mark.slow
 def test_ten_thousand_numpy_frames_cross_through_shared_memory_intact() -> None:
     report = run("Frames", {"a": {"roles": {"A": roles.frame_source}},
                             "b": {"roles": {"B": roles.frame_sink}}}, timeout=300)
@@ -97,6 +100,7 @@ def test_ten_thousand_numpy_frames_cross_through_shared_memory_intact() -> None:
     assert no_leftover_segments()
 
 
+@pytest.mark.slow
 def test_a_memory_hog_is_stopped_whole_while_another_group_completes() -> None:
     report = run("Hog", {
         "control": {"priority": 80, "roles": {"C": roles.steady_controller, "S": roles.steady_sensor}},
@@ -152,6 +156,7 @@ def test_restart_starts_the_failed_session_again(tmp_path, monkeypatch) -> None:
     assert report.messages["A->B"] == 51  # the restarted session, counted on top of nothing
 
 
+@pytest.mark.slow
 def test_restarts_stop_after_max_restarts() -> None:
     report = run("Hog", {
         "control": {"roles": {"C": roles.steady_controller, "S": roles.steady_sensor}},
@@ -171,6 +176,7 @@ def test_stop_system_stops_every_group() -> None:
     assert any("stop-system" in note for note in report.notes)
 
 
+@pytest.mark.slow
 def test_a_role_stuck_outside_the_protocol_is_killed_at_the_timeout() -> None:
     report = run("Ping", {"a": {"roles": {"A": roles.client}},
                           "b": {"roles": {"B": roles.sleepy_server}}}, timeout=1.0, grace=0.5)
@@ -225,6 +231,7 @@ def test_a_group_gets_sched_fifo_where_the_machine_permits_it(monkeypatch) -> No
     assert report.groups["a"].scheduling == "SCHED_FIFO 60; cpus 0"
 
 
+@pytest.mark.slow
 def test_a_sender_blocked_on_a_full_pipe_learns_that_its_receiver_failed() -> None:
     # B fails without reading while D keeps B's process alive: A must not wait for that process.
     report = run("Flood", {"a": {"roles": {"A": roles.flooding_sender}},
@@ -235,6 +242,7 @@ def test_a_sender_blocked_on_a_full_pipe_learns_that_its_receiver_failed() -> No
     assert error.peer == "B" and "gives up without reading" in error.cause
 
 
+@pytest.mark.slow
 def test_a_sender_blocked_on_a_full_pipe_is_stopped_not_failed_at_the_timeout() -> None:
     # B waits for D's go (never sent), so it stops at the timeout without taking the flood;
     # its process then exits, and A's blocked write fails: that is a stop, not a failure.
@@ -253,6 +261,7 @@ def test_an_announced_oversized_frame_is_a_violation_by_its_sender() -> None:
     assert error.blame == "A" and "byte limit" in str(error)
 
 
+@pytest.mark.slow
 def test_recv_any_across_processes_is_stopped_at_the_timeout() -> None:
     report = run("Ping", {"a": {"roles": {"A": roles.sleepy_server}},
                           "b": {"roles": {"B": roles.any_receiver}}}, timeout=1.0, grace=2.0)

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from budget import examples
 from hypothesis import HealthCheck, assume, event, given, note, settings
 from hypothesis import strategies as st
 
@@ -43,7 +44,7 @@ from anodize import Action, Endpoint, PeerFailedError, ProtocolViolationError, R
 from sessiontypes import GlobalType  # noqa: E402
 
 # Keeps this file at about 20 s on two cores; raise max_examples locally for a campaign.
-SETTINGS = settings(deadline=None, max_examples=100,
+SETTINGS = settings(deadline=None, max_examples=examples(100),
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
                                            HealthCheck.filter_too_much])
 RUN_TIMEOUT = 20.0  # only a broken run gets near this
@@ -78,6 +79,7 @@ def _counts(report: RunReport) -> dict[str, int]:
 
 # ---- (a) conformance ----------------------------------------------------------------------
 
+@pytest.mark.slow
 @SETTINGS
 @given(global_protocols(), seeds)
 def test_roles_that_follow_their_projections_finish(generated: GeneratedGlobal, seed: int) -> None:
@@ -94,7 +96,8 @@ def test_roles_that_follow_their_projections_finish(generated: GeneratedGlobal, 
                                for (a, b), items in recorder.nonempty(recorder.sent).items()}
 
 
-@settings(SETTINGS, max_examples=8)
+@pytest.mark.slow
+@settings(SETTINGS, max_examples=examples(8))
 @given(global_protocols(), seeds)
 def test_loops_without_exit_are_stopped_at_the_timeout(generated: GeneratedGlobal, seed: int) -> None:
     """Protocols where some role can never reach ``end``: nothing fails, those roles
@@ -116,6 +119,7 @@ def test_loops_without_exit_are_stopped_at_the_timeout(generated: GeneratedGloba
 
 # ---- (b) deviation ------------------------------------------------------------------------
 
+@pytest.mark.slow
 @SETTINGS
 @given(global_protocols(), seeds, st.data())
 def test_a_deviating_role_is_blamed_and_its_message_never_delivered(
@@ -157,7 +161,8 @@ def test_a_deviating_role_is_blamed_and_its_message_never_delivered(
 
 # ---- (c) transparency ---------------------------------------------------------------------
 
-@settings(SETTINGS, max_examples=50)
+@pytest.mark.slow
+@settings(SETTINGS, max_examples=examples(50))
 @given(global_protocols(), seeds)
 def test_monitors_do_not_change_what_is_delivered(generated: GeneratedGlobal, seed: int) -> None:
     global_type = _terminating(generated)
