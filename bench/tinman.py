@@ -121,7 +121,8 @@ def table(runs: list[dict[str, Any]], ablation: dict[str, Any] | None) -> list[l
 def print_table(rows: list[list[str]]) -> None:
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     for k, row in enumerate(rows):
-        cells = [cell.ljust(w) if i in (0, 2, 3) else cell.rjust(w) for i, (cell, w) in enumerate(zip(row, widths))]
+        cells = [cell.ljust(w) if i in (0, 2, 3) else cell.rjust(w)
+                 for i, (cell, w) in enumerate(zip(row, widths, strict=True))]
         print(" | ".join(cells).rstrip())
         if k == 0:
             print("-+-".join("-" * w for w in widths))
@@ -166,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
 
     document = {
         "benchmark": "tinman",
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(),
                     "machine": platform.machine(), "processor": platform.processor(),
                     "python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,

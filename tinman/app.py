@@ -14,10 +14,11 @@ import os
 import shutil
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from anodize import AnodizeError, GroupStatus, RunReport
-from anodize.config import build_system, load_config
-from anodize.named import Finished, Prepared
+from anodize.tools.config import build_system, load_config
+from anodize.tools.named import Finished, Prepared
 
 from .outcome import build_report
 from .settings import FAULTS, Settings, export
@@ -102,7 +103,7 @@ class TinMan:
             title += (f": VO ATE RMSE {data['ate_rmse_m'] * 100:.1f} cm over {data['trajectory_length_m']:.2f} m "
                       f"({data['ate_percent']:.2f}%)")
         picture = draw_run(out / "trajectory.png", settings, title=title)
-        return Finished(ok, _lines(data, problems) + [f"wrote {_shown(report_file)} and {_shown(picture)}"])
+        return Finished(ok, [*_lines(data, problems), f"wrote {_shown(report_file)} and {_shown(picture)}"])
 
 
 def _faults(requests: list[str], groups: list[str]) -> dict[str, str]:
@@ -138,7 +139,7 @@ def _dataset(given: str | None, log: Callable[[str], None]) -> Path:
     return Path(given).resolve()
 
 
-def _judge(data: dict, settings: Settings) -> tuple[bool, list[str]]:
+def _judge(data: dict[str, Any], settings: Settings) -> tuple[bool, list[str]]:
     """Whether the run did what TinMan is for; the problems if not."""
     problems = []
     if data["violations"]:
@@ -157,7 +158,7 @@ def _judge(data: dict, settings: Settings) -> tuple[bool, list[str]]:
     return not problems, problems
 
 
-def _lines(data: dict, problems: list[str]) -> list[str]:
+def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
     lines = []
     if data["ate_rmse_m"] is not None:
         lines.append(f"visual odometry: ATE RMSE {data['ate_rmse_m']:.3f} m over {data['trajectory_length_m']:.2f} m "

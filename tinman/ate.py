@@ -79,8 +79,8 @@ def evaluate_ate(truth_stamps: np.ndarray, truth_positions: np.ndarray, estimate
     Raises:
         ValueError: fewer than three stamps could be associated (no alignment is defined).
     """
-    truth = dict(zip(map(float, truth_stamps), range(len(truth_stamps))))
-    estimate = dict(zip(map(float, estimate_stamps), range(len(estimate_stamps))))
+    truth = {float(stamp): i for i, stamp in enumerate(truth_stamps)}
+    estimate = {float(stamp): i for i, stamp in enumerate(estimate_stamps)}
     matches = associate(truth, estimate, offset, max_difference)
     if len(matches) < 3:
         raise ValueError(f"only {len(matches)} poses of the estimate match ground-truth stamps "

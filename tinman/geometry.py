@@ -11,6 +11,7 @@ groundtruth.txt lines are ``t tx ty tz qx qy qz qw`` of that same transform.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,18 +67,32 @@ def robot_pose(t_wc: np.ndarray) -> tuple[float, float, float]:
     return float(t_wc[0, 3]), float(t_wc[1, 3]), math.atan2(float(forward[1]), float(forward[0]))
 
 
-def pose_matrix(position: np.ndarray | tuple[float, float, float],
-                quaternion: np.ndarray | tuple[float, float, float, float]) -> np.ndarray:
-    """A 4x4 pose from a position and a unit quaternion ``(qx, qy, qz, qw)``."""
+def pose_matrix(position: np.ndarray | Sequence[float], quaternion: np.ndarray | Sequence[float]) -> np.ndarray:
+    """A 4x4 pose from a position and a unit quaternion ``(qx, qy, qz, qw)``.
+
+    Raises:
+        ValueError: the quaternion has length 0 or a component that is not finite.
+    """
     pose = np.eye(4)
     pose[:3, :3] = matrix_from_quaternion(quaternion)
     pose[:3, 3] = position
     return pose
 
 
-def matrix_from_quaternion(q: np.ndarray | tuple[float, float, float, float]) -> np.ndarray:
-    """The rotation matrix of ``(qx, qy, qz, qw)`` (normalised first)."""
-    x, y, z, w = np.asarray(q, dtype=float) / np.linalg.norm(q)
+def matrix_from_quaternion(q: np.ndarray | Sequence[float]) -> np.ndarray:
+    """The rotation matrix of ``(qx, qy, qz, qw)`` (normalised first).
+
+    Raises:
+        ValueError: the quaternion has length 0 or a component that is not finite.
+    """
+    components = np.asarray(q, dtype=float)
+    largest = float(np.abs(components).max())
+    if not (0.0 < largest < math.inf):  # also false for nan
+        raise ValueError(f"expected a quaternion of finite, non-zero length, got {tuple(components.tolist())}")
+    # Scaled to a largest component of 1 first: squares of a tiny quaternion underflow to 0,
+    # and the length of a subnormal one is too coarse to divide by.
+    scaled = components / largest
+    x, y, z, w = scaled / math.hypot(*scaled.tolist())
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
@@ -101,6 +116,7 @@ def quaternion_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, f
     else:
         s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
         q = (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s
-    norm = math.sqrt(sum(v * v for v in q))
-    sign = -1.0 if q[3] < 0 else 1.0
-    return tuple(float(sign * v / norm) for v in q)  # type: ignore[return-value]
+    # Divided by its length, negated when qw < 0 (q and -q are the same rotation).
+    length = -math.hypot(*q) if q[3] < 0 else math.hypot(*q)
+    qx, qy, qz, qw = (float(v / length) for v in q)
+    return qx, qy, qz, qw

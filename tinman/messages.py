@@ -30,7 +30,7 @@ class Time:
     @classmethod
     def from_seconds(cls, seconds: float) -> Time:
         whole = math.floor(seconds)
-        return cls(int(whole), min(999_999_999, int(round((seconds - whole) * 1e9))))
+        return cls(int(whole), min(999_999_999, round((seconds - whole) * 1e9)))
 
     @classmethod
     def now(cls) -> Time:

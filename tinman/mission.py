@@ -101,9 +101,9 @@ def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate:
     patrol = Patrol(world, tolerance=waypoint_tolerance)
     mixer = Mixer(world, period, pursuit if pursuit is not None else patrol_pursuit())
     robot = mixer.model
-    steps = int(round(duration * rate))
+    steps = round(duration * rate)
     # Integer step counts, not accumulated float seconds, decide when to replan.
-    replan_every = max(1, int(round(replan_period * rate)))
+    replan_every = max(1, round(replan_period * rate))
     stamps = np.arange(steps + 1) * period
     poses = np.empty((steps + 1, 3))
     teleop = np.zeros(steps + 1, dtype=bool)

@@ -15,14 +15,14 @@ import matplotlib
 
 matplotlib.use("Agg")  # headless: files only, no display needed
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.patches import Rectangle  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Rectangle
 
-from .records import load_records  # noqa: E402
-from .settings import Settings  # noqa: E402
-from .tum import read_trajectory  # noqa: E402
-from .world import DEFAULT_WORLD, World  # noqa: E402
+from .records import load_records
+from .settings import Settings
+from .tum import read_trajectory
+from .world import DEFAULT_WORLD, World
 
 __all__ = ["draw_run"]
 
@@ -67,7 +67,7 @@ def _draw_room(axes: Any, world: World) -> None:
     for box in world.boxes:
         axes.add_patch(Rectangle((box.x0, box.y0), box.x1 - box.x0, box.y1 - box.y0, color="0.35"))
     if world.waypoints:
-        wx, wy = zip(*world.waypoints)
+        wx, wy = zip(*world.waypoints, strict=True)
         axes.scatter(wx, wy, marker="*", s=140, color="goldenrod", zorder=5, label="patrol waypoints")
     axes.scatter([world.start[0]], [world.start[1]], marker="s", s=60, color="black", zorder=5, label="start")
 

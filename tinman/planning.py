@@ -152,8 +152,7 @@ def plan_rrt_connect(grid: OccupancyGrid, start: Point, goal: Point, rng: np.ran
             status, met = _connect(grid, other, grow.points[new], step)
             if status == _REACHED:
                 start_node, goal_node = (new, met) if grow is from_start else (met, new)
-                path = from_start.branch(start_node)[::-1] + from_goal.branch(goal_node)[1:]
-                return path
+                return from_start.branch(start_node)[::-1] + from_goal.branch(goal_node)[1:]
         grow, other = other, grow
     raise NoPathError(start, goal, f"RRT-Connect found none in {max_iterations} iterations")
 
@@ -199,7 +198,7 @@ def shortcut(grid: OccupancyGrid, path: Sequence[Point], rng: np.random.Generato
         # The pieces left of the old segments are checked too: segment_free samples a
         # line at fixed spacing, so a piece of a free segment is not free by implication.
         if grid.segment_free(a, b) and grid.segment_free(path[i], a) and grid.segment_free(b, path[j + 1]):
-            path = path[:i + 1] + [a, b] + path[j + 1:]
+            path = [*path[:i + 1], a, b, *path[j + 1:]]
     return _drop_repeats(path)
 
 
@@ -241,21 +240,22 @@ def simplify(grid: OccupancyGrid, path: Sequence[Point]) -> list[Point]:
 _DIAGONAL = math.sqrt(2.0)
 
 
-def free_cell_graph(grid: OccupancyGrid) -> nx.Graph:
+def free_cell_graph(grid: OccupancyGrid) -> nx.Graph[tuple[int, int]]:
     """The 8-connected graph of free cells ``(row, col)``, edge weights in cells.
 
     A diagonal edge needs both cells beside it free as well, so a path never cuts the
     corner of an occupied cell.
     """
     free = ~grid.occupied
-    graph = nx.Graph()
-    graph.add_nodes_from(zip(*(axis.tolist() for axis in np.nonzero(free))))
+    graph: nx.Graph[tuple[int, int]] = nx.Graph()
+    free_rows, free_cols = np.nonzero(free)
+    graph.add_nodes_from(zip(free_rows.tolist(), free_cols.tolist(), strict=True))
 
     def add(mask: np.ndarray, first: tuple[int, int], second: tuple[int, int], weight: float) -> None:
         """An edge between the cells at offsets ``first`` and ``second`` from each cell set in ``mask``."""
-        rows, cols = (axis.tolist() for axis in np.nonzero(mask))
+        rows, cols = np.nonzero(mask)
         graph.add_weighted_edges_from(((r + first[0], c + first[1]), (r + second[0], c + second[1]), weight)
-                                      for r, c in zip(rows, cols))
+                                      for r, c in zip(rows.tolist(), cols.tolist(), strict=True))
 
     add(free[:, :-1] & free[:, 1:], (0, 0), (0, 1), 1.0)
     add(free[:-1, :] & free[1:, :], (0, 0), (1, 0), 1.0)
@@ -269,7 +269,8 @@ def _cell_distance(a: tuple[int, int], b: tuple[int, int]) -> float:
     return math.hypot(a[0] - b[0], a[1] - b[1])
 
 
-def plan_astar(grid: OccupancyGrid, start: Point, goal: Point, graph: nx.Graph | None = None) -> list[Point]:
+def plan_astar(grid: OccupancyGrid, start: Point, goal: Point,
+               graph: nx.Graph[tuple[int, int]] | None = None) -> list[Point]:
     """The shortest 8-connected cell path by A*, simplified by line of sight.
 
     Args:
@@ -334,7 +335,7 @@ class Planner:
         _, self._regions = cv2.connectedComponents(free.astype(np.uint8), connectivity=4)
         rows, cols = np.nonzero(free)
         self._free_centres = np.column_stack([(cols + 0.5) * resolution, (rows + 0.5) * resolution])
-        self._graph: nx.Graph | None = None
+        self._graph: nx.Graph[tuple[int, int]] | None = None
 
     def _region(self, point: Point) -> int:
         row, col = self.grid.cell(*point)
@@ -380,7 +381,7 @@ class Planner:
             if self._graph is None:
                 self._graph = free_cell_graph(self.grid)
             path = plan_astar(self.grid, origin, goal, self._graph)
-        return path if origin == start else [start] + path
+        return path if origin == start else [start, *path]
 
 
 class Patrol:

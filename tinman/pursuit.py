@@ -11,6 +11,7 @@ and stops within ``goal_tolerance`` of its end.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -23,24 +24,25 @@ Point = tuple[float, float]
 def _closest_on_path(x: float, y: float, path: Sequence[Point], s_min: float, s_max: float) -> float:
     """The arc length, within ``[s_min, s_max]``, of the path point nearest to ``(x, y)`` (the first, on ties)."""
     best_distance, best_s, s = math.inf, s_min, 0.0
-    for (ax, ay), (bx, by) in zip(path, path[1:]):
-        dx, dy = bx - ax, by - ay
-        span = math.hypot(dx, dy)
+    for (ax, ay), (bx, by) in itertools.pairwise(path):
+        span = math.hypot(bx - ax, by - ay)
         if s + span >= s_min and s <= s_max:
-            t = 0.0
+            # Metres along the segment, from its unit direction: never divide by span
+            # squared, which is subnormal below about 1e-154 m and 0 below 1e-162 m.
+            along, ux, uy = 0.0, 0.0, 0.0
             if span > 0:
-                projection = ((x - ax) * dx + (y - ay) * dy) / (span * span)
-                t = min(min(1.0, (s_max - s) / span), max(max(0.0, (s_min - s) / span), projection))
-            distance = math.hypot(ax + t * dx - x, ay + t * dy - y)
+                ux, uy = (bx - ax) / span, (by - ay) / span
+                along = min(span, s_max - s, max(0.0, s_min - s, (x - ax) * ux + (y - ay) * uy))
+            distance = math.hypot(ax + along * ux - x, ay + along * uy - y)
             if distance < best_distance:
-                best_distance, best_s = distance, s + t * span
+                best_distance, best_s = distance, s + along
         s += span
     return best_s
 
 
 def _point_at_length(path: Sequence[Point], s: float) -> Point:
     """The point ``s`` metres along the path (its end when ``s`` is past it)."""
-    for (ax, ay), (bx, by) in zip(path, path[1:]):
+    for (ax, ay), (bx, by) in itertools.pairwise(path):
         span = math.hypot(bx - ax, by - ay)
         if s <= span and span > 0:
             t = s / span

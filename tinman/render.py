@@ -180,8 +180,8 @@ class RoomRenderer:
         k = self.intrinsics
         u = k.fx * p[:, 0] / p[:, 2] + k.cx
         v = k.fy * p[:, 1] / p[:, 2] + k.cy
-        c0, c1 = max(0, int(math.floor(u.min())) - 1), min(k.width, int(math.ceil(u.max())) + 2)
-        r0, r1 = max(0, int(math.floor(v.min())) - 1), min(k.height, int(math.ceil(v.max())) + 2)
+        c0, c1 = max(0, math.floor(u.min()) - 1), min(k.width, math.ceil(u.max()) + 2)
+        r0, r1 = max(0, math.floor(v.min()) - 1), min(k.height, math.ceil(v.max()) + 2)
         if c0 >= c1 or r0 >= r1:
             return None
         return slice(r0, r1), slice(c0, c1)

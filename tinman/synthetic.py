@@ -61,7 +61,7 @@ def add_depth_noise(depth_m: np.ndarray, rng: np.random.Generator) -> np.ndarray
     spread = cv2.dilate(z, kernel) - cv2.erode(z, kernel)
     edge = spread > np.maximum(np.float32(0.05), np.float32(0.05) * z)
     valid &= ~(edge & (rng.random(z.shape, dtype=np.float32) < _EDGE_DROPOUT))
-    counts = np.rint(noisy * np.float32(DEPTH_SCALE))
+    counts: np.ndarray = np.rint(noisy * np.float32(DEPTH_SCALE))
     np.clip(counts, 1, np.iinfo(np.uint16).max, out=counts)
     counts *= valid
     return counts.astype(np.uint16)
@@ -81,10 +81,10 @@ def add_image_noise(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     Returns:
         uint8 (H, W, 3).
     """
-    blurred = cv2.GaussianBlur(rgb, (3, 3), 0.6).astype(np.float32)
+    blurred: np.ndarray = cv2.GaussianBlur(rgb, (3, 3), 0.6).astype(np.float32)
     sigma = np.float32(2.0) + blurred * np.float32(1.0 / 160.0)
-    noisy = blurred + sigma * _standard_normal(blurred.shape, rng) + np.float32(0.5)
-    return np.clip(noisy, 0, 255).astype(np.uint8)
+    noisy: np.ndarray = blurred + sigma * _standard_normal(blurred.shape, rng) + np.float32(0.5)
+    return noisy.clip(0, 255).astype(np.uint8)
 
 
 def _standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
@@ -97,8 +97,8 @@ def _standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.nda
     return samples.reshape(shape)
 
 
-def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequence[float],
-                      frame_poses: Sequence[np.ndarray] | np.ndarray, truth_stamps: Sequence[float],
+def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequence[float] | np.ndarray,
+                      frame_poses: Sequence[np.ndarray] | np.ndarray, truth_stamps: Sequence[float] | np.ndarray,
                       truth_poses: Sequence[np.ndarray] | np.ndarray, intrinsics: Intrinsics = FR1,
                       seed: int = 0, workers: int = 2, world_name: str | None = None) -> Path:
     """Render and write a TUM RGB-D sequence.

@@ -178,7 +178,7 @@ def build_atlas(world: World, surfaces: list[Surface], seed: int) -> Atlas:
     level: np.ndarray = level0
     for k in range(1, MIP_LEVELS):
         level = cv2.resize(level, (level.shape[1] // 2, level.shape[0] // 2), interpolation=cv2.INTER_AREA)
-        top = int(round(_LEVEL_ROW[k] * rows0))
+        top = round(_LEVEL_ROW[k] * rows0)
         image[top:top + level.shape[0], _ATLAS_WIDTH:_ATLAS_WIDTH + level.shape[1], :3] = level
     scale_h, offset_h, scale_v, offset_v, log2_inv = (np.zeros(MAX_SURFACES, np.float32) for _ in range(5))
     for i, surface in enumerate(surfaces):
@@ -217,8 +217,8 @@ def _picture(surface: Surface, rng: np.random.Generator, lamps: np.ndarray) -> n
     texel = _TEXEL[surface.kind]
     extent_h = surface.h_range[1] - surface.h_range[0]
     extent_v = surface.v_range[1] - surface.v_range[0]
-    rows = _round_up(int(math.ceil(extent_v / texel)) + 2 * _MARGIN, _MARGIN)
-    cols = _round_up(int(math.ceil(extent_h / texel)) + 2 * _MARGIN, _MARGIN)
+    rows = _round_up(math.ceil(extent_v / texel) + 2 * _MARGIN, _MARGIN)
+    cols = _round_up(math.ceil(extent_h / texel) + 2 * _MARGIN, _MARGIN)
     picture = _paint(rng, rows, cols, texel, surface.kind)
     return _light(picture, surface, texel, lamps)
 
@@ -236,7 +236,7 @@ def _noise(rng: np.random.Generator, rows: int, cols: int, wavelength: float) ->
         return cv2.resize(coarse, (coarse.shape[1] * 8, coarse.shape[0] * 8),
                           interpolation=cv2.INTER_LINEAR)[4:4 + rows, 4:4 + cols]
     grid = rng.standard_normal((int(rows / wavelength) + 4, int(cols / wavelength) + 4), dtype=np.float32)
-    size = (int(math.ceil(grid.shape[1] * wavelength)), int(math.ceil(grid.shape[0] * wavelength)))
+    size = (math.ceil(grid.shape[1] * wavelength), math.ceil(grid.shape[0] * wavelength))
     smooth = cv2.resize(grid, size, interpolation=cv2.INTER_CUBIC)
     offset = int(wavelength)
     smooth = smooth[offset:offset + rows, offset:offset + cols]
@@ -247,7 +247,8 @@ def _palette(rng: np.random.Generator, count: int) -> np.ndarray:
     """``count`` random RGB colours around a random hue, with a wide spread of brightness."""
     hue = rng.uniform(0, 180) + rng.normal(0, 25, count)
     hsv = np.stack([np.mod(hue, 180), rng.uniform(40, 200, count), rng.uniform(25, 245, count)], axis=1)
-    return cv2.cvtColor(hsv.astype(np.uint8)[None], cv2.COLOR_HSV2RGB)[0].astype(np.float64)
+    rgb: np.ndarray = cv2.cvtColor(hsv.astype(np.uint8)[None], cv2.COLOR_HSV2RGB)[0]
+    return rgb.astype(np.float64)
 
 
 def _paint(rng: np.random.Generator, rows: int, cols: int, texel: float, kind: str) -> np.ndarray:
@@ -325,7 +326,7 @@ def _text(rng: np.random.Generator, canvas: np.ndarray, texel: float, density: f
         origin = (int(rng.uniform(0, cols)), int(rng.uniform(0, rows)))
         colour = tuple(float(v) for v in (rng.uniform(0, 60, 3) if rng.random() < 0.6 else rng.uniform(200, 255, 3)))
         cv2.putText(canvas, label, origin, cv2.FONT_HERSHEY_SIMPLEX, scale, colour,
-                    max(1, int(round(scale * 2.5))), cv2.LINE_AA)
+                    max(1, round(scale * 2.5)), cv2.LINE_AA)
 
 
 def _light(picture: np.ndarray, surface: Surface, texel: float, lamps: np.ndarray) -> np.ndarray:
@@ -351,8 +352,10 @@ def _light(picture: np.ndarray, surface: Surface, texel: float, lamps: np.ndarra
     for lamp in lamps:
         to_lamp = lamp[:, None, None] - point
         distance = np.sqrt((to_lamp ** 2).sum(axis=0))
+        # A point right at a lamp (a box top touching it) would divide 0 by 0.
+        distance = np.maximum(distance, 1e-3)
         cosine = np.clip(np.tensordot(normal, to_lamp, axes=1) / distance, 0.0, 1.0)
-        irradiance += 0.45 * cosine * np.minimum(1.0, 4.0 / np.maximum(distance, 1e-3) ** 2)
+        irradiance += 0.45 * cosine * np.minimum(1.0, 4.0 / distance ** 2)
     factor = cv2.resize(irradiance.astype(np.float32), (hh.shape[1] * step, hh.shape[0] * step),
                         interpolation=cv2.INTER_LINEAR)[:rows, :cols]
     return np.clip(picture * factor[..., None], 0, 255).astype(np.uint8)

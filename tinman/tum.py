@@ -68,7 +68,8 @@ def read_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """``(stamps (N,), poses (N, 4, 4))`` from a ``t tx ty tz qx qy qz qw`` file.
 
     Raises:
-        ValueError: a line without exactly seven numbers after its timestamp.
+        ValueError: a line without exactly seven numbers after its timestamp, or with a
+            quaternion of length 0 (or not finite).
     """
     entries = read_file_list(path)
     stamps = np.array(sorted(entries), dtype=float)
@@ -82,7 +83,10 @@ def read_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         if len(values) != 7:
             raise ValueError(f"{path}: at {stamp:.6f}: expected 'tx ty tz qx qy qz qw', "
                              f"got {' '.join(fields)!r}")
-        poses[i] = pose_matrix(values[:3], values[3:])
+        try:
+            poses[i] = pose_matrix(values[:3], values[3:])
+        except ValueError as error:
+            raise ValueError(f"{path}: at {stamp:.6f}: {error}") from None
     return stamps, poses
 
 

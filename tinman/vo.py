@@ -165,7 +165,7 @@ class VisualOdometry:
 
         self._failed_in_a_row = 0
         keyframe = self._keyframe
-        pose = keyframe.pose @ relative
+        pose: np.ndarray = keyframe.pose @ relative
         self._motion = np.linalg.inv(self._relative) @ relative
         self._relative = relative
         self.pose = pose

@@ -25,8 +25,8 @@ class Box:
     y1: float
     height: float
 
-    def contains(self, x: np.ndarray | float, y: np.ndarray | float, margin: float = 0.0) -> np.ndarray:
-        """Whether floor points lie inside the box grown by ``margin``."""
+    def contains(self, x: np.ndarray | float, y: np.ndarray | float, margin: float = 0.0) -> np.ndarray | bool:
+        """Whether floor points lie inside the box grown by ``margin`` (a bool for one point given as floats)."""
         return ((x >= self.x0 - margin) & (x <= self.x1 + margin)
                 & (y >= self.y0 - margin) & (y <= self.y1 + margin))
 
@@ -41,7 +41,7 @@ class OccupancyGrid:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.occupied.shape  # type: ignore[return-value]
+        return self.occupied.shape
 
     def cell(self, x: float, y: float) -> tuple[int, int]:
         """The ``(row, col)`` of a floor point (may lie outside the grid)."""
@@ -102,8 +102,8 @@ class World:
 
     def occupancy(self, resolution: float = 0.05, inflate: float = ROBOT_RADIUS + 0.07) -> OccupancyGrid:
         """The occupancy grid, obstacles and walls grown by ``inflate`` metres."""
-        cols = int(round(self.width / resolution))
-        rows = int(round(self.depth / resolution))
+        cols = round(self.width / resolution)
+        rows = round(self.depth / resolution)
         xs = (np.arange(cols) + 0.5) * resolution
         ys = (np.arange(rows) + 0.5) * resolution
         x, y = np.meshgrid(xs, ys)

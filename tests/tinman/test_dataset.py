@@ -9,6 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from budget import examples
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -65,12 +66,12 @@ def test_frames_are_paired_by_time_and_decoded(tmp_path: Path) -> None:
     assert sequence.metadata == {}
 
 
-@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=examples(20), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.lists(st.floats(-0.015, 0.015), min_size=2, max_size=8))
 def test_depth_within_15_ms_of_its_colour_frame_is_always_paired(tmp_path_factory: pytest.TempPathFactory,
                                                                    offsets: list[float]) -> None:
     rgb = [50.0 + i / 30 for i in range(len(offsets))]
-    depth = [s + o for s, o in zip(rgb, offsets)]
+    depth = [s + o for s, o in zip(rgb, offsets, strict=True)]
     sequence = TumSequence.open(make_sequence(tmp_path_factory.mktemp("seq"), rgb, depth, groundtruth=False))
     assert len(sequence) == len(rgb)
     np.testing.assert_allclose(sequence.depth_stamps - sequence.stamps, offsets, atol=2e-6)

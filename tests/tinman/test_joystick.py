@@ -6,8 +6,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tinman.joystick import (ANGULAR_AXIS, DEADMAN_BUTTON, DEADZONE, JOY_SCRIPT, LINEAR_AXIS, scripted_joy,
-                             twist_from_joy)
+from tinman.joystick import (
+    ANGULAR_AXIS,
+    DEADMAN_BUTTON,
+    DEADZONE,
+    JOY_SCRIPT,
+    LINEAR_AXIS,
+    scripted_joy,
+    twist_from_joy,
+)
 
 RELEASED = (0,) * 8
 DEADMAN = tuple(1 if i == DEADMAN_BUTTON else 0 for i in range(8))

@@ -9,8 +9,8 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from anodize.codec import HEADER, Codec
-from anodize.payloads import with_field_classes
+from anodize.session.payloads import with_field_classes
+from anodize.transport.codec import HEADER, Codec
 from tinman.geometry import camera_pose
 from tinman.messages import Header, Image, Joy, Path, Pose, PoseStamped, RGBDFrame, Time, Twist
 
@@ -62,6 +62,7 @@ def test_messages_cross_a_process_boundary_field_by_field() -> None:
         frame = codec.message_frame("m", message)
         (length,) = HEADER.unpack(frame[:4])
         _, (label, decoded) = codec.decode_body(frame[4:4 + length])
+        assert label == "m"
         if isinstance(message, RGBDFrame):
             assert decoded.rgb.encoding == "rgb8" and decoded.rgb.step == 15 and decoded.index == 7
             np.testing.assert_array_equal(decoded.rgb.data, rgb)

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
 import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
+from budget import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -16,7 +18,7 @@ from tinman.planning import Planner
 from tinman.world import DEFAULT_WORLD, ROBOT_RADIUS
 
 
-@lru_cache(maxsize=None)
+@cache
 def mission(method: str = "rrt", seed: int = 0, duration: float = 30.0) -> MissionTrace:
     return simulate_mission(DEFAULT_WORLD, duration=duration, rate=100.0, method=method, seed=seed)
 
@@ -85,17 +87,19 @@ def test_plans_start_at_the_robot_end_at_a_waypoint_and_avoid_obstacles():
     times = [t for t, _ in trace.plans]
     assert times == pytest.approx(list(np.arange(0.0, 30.0, 0.5)))
     for t, path in trace.plans:
-        step = int(round(t * 100))
+        step = round(t * 100)
         assert path[0] == pytest.approx(tuple(trace.poses[step, :2]))
         assert path[-1] in DEFAULT_WORLD.waypoints
-        assert all(grid.segment_free(a, b) for a, b in zip(path[1:], path[2:]))
+        # From the first free point on: a robot against a wall starts inside the grid's margin.
+        assert all(grid.segment_free(a, b) for a, b in itertools.pairwise(path[1:]))
     goals = [path[-1] for _, path in trace.plans]
     assert goals[0] == DEFAULT_WORLD.waypoints[0]
     assert len(set(goals)) == trace.waypoints_reached + 1
 
 
+@pytest.mark.slow  # two 8 s missions per example
 @given(method=st.sampled_from(["rrt", "astar"]), seed=st.integers(0, 10_000))
-@settings(max_examples=8, deadline=None)
+@settings(max_examples=examples(8), deadline=None)
 def test_short_missions_are_collision_free_and_repeatable_for_any_seed(method, seed):
     trace = simulate_mission(duration=8.0, rate=50.0, method=method, seed=seed)
     assert_collision_free(trace)

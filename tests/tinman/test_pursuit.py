@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
-from hypothesis import given, settings
+from budget import examples
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tinman.pursuit import PurePursuit
@@ -17,10 +19,11 @@ OPEN_ROOM = World(width=20.0, depth=20.0)
 
 def distance_to_path(x: float, y: float, path) -> float:
     best = math.inf
-    for (ax, ay), (bx, by) in zip(path, path[1:]):
-        dx, dy = bx - ax, by - ay
-        t = max(0.0, min(1.0, ((x - ax) * dx + (y - ay) * dy) / (dx * dx + dy * dy)))
-        best = min(best, math.hypot(ax + t * dx - x, ay + t * dy - y))
+    for (ax, ay), (bx, by) in itertools.pairwise(path):
+        span = math.hypot(bx - ax, by - ay)
+        ux, uy = ((bx - ax) / span, (by - ay) / span) if span > 0 else (0.0, 0.0)
+        along = max(0.0, min(span, (x - ax) * ux + (y - ay) * uy))
+        best = min(best, math.hypot(ax + along * ux - x, ay + along * uy - y))
     return best
 
 
@@ -103,6 +106,21 @@ def test_the_target_is_the_lookahead_along_the_path_past_the_nearest_point():
         pursuit.target((0.0, 0.0, 0.0), [])
 
 
+def test_segments_too_short_to_square_are_followed_like_any_other():
+    # 2.3e-281 ** 2 underflows to 0.0: the nearest point is found without dividing by it.
+    tiny = [(0.0, 0.0), (0.0, 2.3e-281)]
+    assert PurePursuit().target((1.0, 0.0, 0.0), tiny) == (0.0, 2.3e-281)
+    assert PurePursuit(max_angular=1.5).command((1.0, 0.0, 0.0), tiny) == (0.0, 1.5)  # behind: turn
+    # Within a longer path, a tiny (or empty) step counts as its length and no more.
+    for step in (2.3e-281, 1e-200, 5e-324, 0.0):
+        path = [(0.0, 0.0), (1.0, 0.0), (1.0, step), (1.0, 2.0)]
+        pursuit = PurePursuit(lookahead=0.5)
+        assert pursuit.target((0.8, 0.1, 0.0), path) == pytest.approx((1.0, 0.3))
+        assert pursuit.target((1.1, 0.9, 0.0), path) == pytest.approx((1.0, 1.4))
+        v, w = pursuit.command((1.1, 0.9, math.pi / 2), path)
+        assert v == 0.35 and math.isfinite(w)
+
+
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match="must be positive"):
         PurePursuit(lookahead=0.0)
@@ -113,6 +131,8 @@ paths = st.lists(st.tuples(st.floats(0.0, 10.0), st.floats(0.0, 10.0)), min_size
 
 
 @given(pose=poses, path=paths, max_angular=st.floats(0.3, 2.0), speed=st.floats(0.1, 0.6))
+# A segment whose squared length underflows to 0 once divided the projection by zero.
+@example(pose=(1.0, 0.0, 0.0), path=[(0.0, 0.0), (0.0, 2.3e-281)], max_angular=1.5, speed=0.35)
 def test_commands_stay_within_the_limits_and_never_reverse(pose, path, max_angular, speed):
     pursuit = PurePursuit(speed=speed, max_angular=max_angular)
     v, w = pursuit.command(pose, path)
@@ -121,11 +141,21 @@ def test_commands_stay_within_the_limits_and_never_reverse(pose, path, max_angul
     assert (v, w) != (0.0, 0.0) or pursuit.at_goal(pose, path)
 
 
+@given(pose=poses, path=paths)
+@example(pose=(1.0, 0.0, 0.0), path=[(0.0, 0.0), (0.0, 2.3e-281), (1.0, 1e-300), (1.0, 1e-300)])
+def test_the_target_lies_on_the_path(pose, path):
+    target = PurePursuit().target(pose, path)
+    if len(path) == 1:
+        assert target == path[0]
+    else:
+        assert distance_to_path(*target, path) < 1e-9
+
+
 @given(start=poses, path=st.lists(st.tuples(st.floats(3.0, 17.0), st.floats(3.0, 17.0)), min_size=2, max_size=5))
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 def test_any_path_is_followed_to_its_end(start, path):
     pursuit = PurePursuit()
-    robot, poses = drive(pursuit, path, (path[0][0], path[0][1], start[2]), seconds=200.0, rate=20.0)
+    robot, _ = drive(pursuit, path, (path[0][0], path[0][1], start[2]), seconds=200.0, rate=20.0)
     assert pursuit.at_goal(robot.pose, path)
 
 

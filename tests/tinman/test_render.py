@@ -8,6 +8,7 @@ import math
 import cv2
 import numpy as np
 import pytest
+from budget import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -74,7 +75,7 @@ def tilted(x: float, y: float, theta: float, pitch: float, roll: float) -> np.nd
     return pose
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(free_poses)
 def test_depth_equals_an_independent_ray_cast(small: RoomRenderer, p: tuple[float, ...]) -> None:
     pose = tilted(*p)
@@ -129,7 +130,7 @@ def test_a_point_seen_from_two_poses_lands_on_the_same_surface(small: RoomRender
         planes += [abs(point[2] - z) for z in (0.0, 2.5, 0.8)]
         assert min(planes) < 1e-4
         pu, pv = project(point, SMALL, second)
-        iu, iv = int(round(pu)), int(round(pv))
+        iu, iv = round(pu), round(pv)
         if not (0 <= iu < SMALL.width and 0 <= iv < SMALL.height):
             continue
         in_view += 1
@@ -168,7 +169,8 @@ def test_no_aliasing_frames_match_supersampled_ones(small: RoomRenderer,
                              interpolation=cv2.INTER_AREA).astype(float) for p in poses]
 
     def error() -> float:
-        return float(np.mean([np.abs(small.render(p)[0] - ref).mean() for p, ref in zip(poses, references)]))
+        return float(np.mean([np.abs(small.render(p)[0] - ref).mean()
+                              for p, ref in zip(poses, references, strict=True)]))
 
     mip_mapped = error()
     assert mip_mapped < 6.5
@@ -176,6 +178,7 @@ def test_no_aliasing_frames_match_supersampled_ones(small: RoomRenderer,
     assert error() > 2.5 * mip_mapped
 
 
+@pytest.mark.slow  # the full-resolution renderer takes seconds to paint its textures
 @pytest.mark.parametrize("pose", [(1.0, 1.0, 0.0), (4.3, 1.1, 1.0), (6.9, 2.9, 2.5), (7.4, 5.4, -2.4),
                                   (2.2, 3.0, 0.2), (4.75, 0.9, 0.0)])
 def test_orb_finds_many_well_spread_features(full: RoomRenderer, pose: tuple[float, float, float]) -> None:
@@ -187,6 +190,7 @@ def test_orb_finds_many_well_spread_features(full: RoomRenderer, pose: tuple[flo
     assert len(cells) >= 12  # of the 4 x 4 grid
 
 
+@pytest.mark.slow  # the full-resolution renderer, as above
 def test_orb_features_match_between_nearby_views_and_give_the_motion(full: RoomRenderer) -> None:
     first, second = camera_pose(1.0, 1.0, 0.2), camera_pose(1.04, 1.01, 0.23)
     rgb1, depth1 = full.render(first)
@@ -195,8 +199,8 @@ def test_orb_features_match_between_nearby_views_and_give_the_motion(full: RoomR
     k1, d1 = orb.detectAndCompute(cv2.cvtColor(rgb1, cv2.COLOR_RGB2GRAY), None)
     k2, d2 = orb.detectAndCompute(cv2.cvtColor(rgb2, cv2.COLOR_RGB2GRAY), None)
     matches = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(d1, d2)
-    points = np.array([back_project(depth1, FR1, np.eye(4), int(round(k1[m.queryIdx].pt[0])),
-                                    int(round(k1[m.queryIdx].pt[1]))) for m in matches])
+    points = np.array([back_project(depth1, FR1, np.eye(4), round(k1[m.queryIdx].pt[0]),
+                                    round(k1[m.queryIdx].pt[1])) for m in matches])
     pixels = np.array([k2[m.trainIdx].pt for m in matches])
     ok, rvec, tvec, inliers = cv2.solvePnPRansac(points, pixels, FR1.matrix(), None, reprojectionError=2.0)
     assert ok and len(inliers) > 200

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from budget import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -26,7 +27,7 @@ def angle_difference(a: float, b: float) -> float:
 
 
 @given(v=st.floats(0.05, 0.5), theta=st.floats(-math.pi, math.pi), steps=st.integers(1, 300))
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 def test_straight_line_covers_v_times_t(v, theta, steps):
     robot = free_robot((10.0, 10.0, theta))
     for _ in range(steps):
@@ -42,7 +43,7 @@ def test_straight_line_covers_v_times_t(v, theta, steps):
 
 @given(v=st.floats(0.05, 0.5), w=st.floats(0.5, 1.5).flatmap(lambda m: st.sampled_from([m, -m])),
        theta=st.floats(-math.pi, math.pi), dt=st.sampled_from([0.01, 0.03, 0.1]))
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 def test_full_circle_returns_to_start_on_a_circle_of_radius_v_over_w(v, w, theta, dt):
     robot = free_robot((10.0, 10.0, theta))
     period = 2 * math.pi / abs(w)
@@ -92,7 +93,7 @@ def test_a_wall_stops_the_robot_and_counts_bumps():
     robot = DiffDrive(world, (3.0, 2.0, 0.0), max_linear_accel=math.inf)
     for _ in range(200):
         robot.step(0.5, 0.0, 0.05)
-    x, y, theta = robot.pose
+    x, y, _ = robot.pose
     assert 3.7 < x < 4.0 - robot.radius
     assert not world.collides(x, y, robot.radius)
     assert robot.bumps >= 150

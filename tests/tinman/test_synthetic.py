@@ -148,6 +148,7 @@ def test_a_failed_run_leaves_nothing_behind(tmp_path: Path, monkeypatch: pytest.
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # starts two spawned worker processes and renders 112 frames
 def test_worker_processes_write_the_same_sequence(tmp_path: Path) -> None:
     serial = generate(tmp_path / "serial", frames=56, workers=1)
     parallel = generate(tmp_path / "parallel", frames=56, workers=2)

@@ -46,7 +46,7 @@ def trajectories(tmp_path: Path) -> tuple[Path, Path]:
     signs = np.r_[np.ones(40), -np.ones(40)]
     moved = camera_pose(3.0, -1.0, 0.7)
     estimate = []
-    for pose, sign in zip(truth, signs):
+    for pose, sign in zip(truth, signs, strict=True):
         shifted = pose.copy()
         shifted[2, 3] += 0.05 * sign
         estimate.append(moved @ shifted)
@@ -114,6 +114,7 @@ def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
                              stamps, poses, workers=1)
 
 
+@pytest.mark.slow  # renders the 15-frame sequence (seconds), shared with the next test
 def test_vo_eval_prints_the_ate_and_saves_the_trajectory(capsys: pytest.CaptureFixture[str], sequence: Path,
                                                          tmp_path: Path) -> None:
     saved = tmp_path / "estimate.txt"
@@ -134,6 +135,7 @@ def test_vo_eval_prints_the_ate_and_saves_the_trajectory(capsys: pytest.CaptureF
     assert status == 0 and _fields(out)["ATE RMSE"] == fields["ATE RMSE"]
 
 
+@pytest.mark.slow  # the same rendered sequence as the test above
 def test_vo_eval_max_frames_and_no_ground_truth(capsys: pytest.CaptureFixture[str], sequence: Path,
                                                 tmp_path: Path) -> None:
     import shutil

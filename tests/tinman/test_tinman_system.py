@@ -7,9 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from anodize import cli
+from anodize.tools import cli
 from tinman.sequences import generate
 from tinman.settings import ENVIRONMENT_VARIABLE
+
+pytestmark = pytest.mark.slow  # each runs the whole system in processes for seconds
 
 
 @pytest.fixture(scope="module")

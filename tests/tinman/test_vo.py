@@ -12,6 +12,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+from budget import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -20,7 +21,7 @@ from tinman.ate import evaluate_ate
 from tinman.geometry import DEPTH_SCALE, FR1, camera_pose
 from tinman.render import RoomRenderer
 from tinman.synthetic import add_depth_noise, add_image_noise
-from tinman.vo import VisualOdometry, _depth_at, _guided_matches, _MAX_HAMMING, _refine, run_sequence
+from tinman.vo import _MAX_HAMMING, VisualOdometry, _depth_at, _guided_matches, _refine, run_sequence
 from tinman.world import DEFAULT_WORLD
 
 FRAMES = 40
@@ -99,6 +100,7 @@ def test_follows_a_driving_robot_to_within_a_centimetre(driving: tuple[np.ndarra
     assert np.array_equal(estimate[0], truth[0])
 
 
+@pytest.mark.slow  # renders its own 40-frame sequence (the driving one stays in the quick run)
 def test_all_six_degrees_of_freedom_are_estimated(flying: tuple[np.ndarray, list[Frame]]) -> None:
     truth, frames = flying
     estimate = _run(VisualOdometry(FR1, truth[0]), frames)
@@ -111,6 +113,7 @@ def test_all_six_degrees_of_freedom_are_estimated(flying: tuple[np.ndarray, list
     assert down == pytest.approx(math.degrees(math.asin(-truth[-1, 2, 2])), abs=0.5)
 
 
+@pytest.mark.slow  # the same sequence as above, tracked twice
 def test_depth_readings_make_the_pose_more_accurate(flying: tuple[np.ndarray, list[Frame]]) -> None:
     truth, frames = flying
     with_depth = _errors(truth, _run(VisualOdometry(FR1, truth[0]), frames))
@@ -272,7 +275,7 @@ def _reference_matches(projected: np.ndarray, query: np.ndarray, pixels: np.ndar
     return {(i, j) for j, (i, _) in chosen.items()}
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), points=st.integers(0, 60), features=st.integers(0, 60),
        radius=st.sampled_from([8.0, 20.0, 45.0]))
 def test_guided_matches_equal_brute_force(seed: int, points: int, features: int, radius: float) -> None:
@@ -289,7 +292,7 @@ def test_guided_matches_equal_brute_force(seed: int, points: int, features: int,
         query[copied] = train[source[copied]] ^ flips[copied]
         projected[copied] = pixels[source[copied]] + rng.normal(scale=radius / 3, size=(copied.sum(), 2))
     query_index, train_index = _guided_matches(projected, query, pixels, train, radius, 0.8, FR1)
-    got = set(zip(query_index.tolist(), train_index.tolist()))
+    got = set(zip(query_index.tolist(), train_index.tolist(), strict=True))
     assert len(got) == len(query_index)
     assert got == _reference_matches(projected, query, pixels, train, radius, 0.8)
 
@@ -301,7 +304,7 @@ def test_guided_matches_find_the_obvious_pairs() -> None:
     query = train[::-1].copy()
     projected = pixels[::-1] + 1.5
     query_index, train_index = _guided_matches(projected, query, pixels, train, 20.0, 0.8, FR1)
-    assert sorted(zip(query_index.tolist(), train_index.tolist())) == [(i, 49 - i) for i in range(50)]
+    assert sorted(zip(query_index.tolist(), train_index.tolist(), strict=True)) == [(i, 49 - i) for i in range(50)]
 
 
 def test_depth_is_averaged_on_surfaces_and_dropped_at_edges_holes_and_out_of_range() -> None:
@@ -356,12 +359,12 @@ def test_refine_with_depth_tells_a_step_from_a_turn() -> None:
     assert np.mean(errors_with) < 0.5 * np.mean(errors_without)
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=examples(30), deadline=None)
 @given(depths=hnp.arrays(np.float32, (6, 6), elements=st.sampled_from([0.0, 0.2, 1.0, 1.02, 2.0, 7.0])))
 def test_depth_at_never_reports_an_unreliable_reading(depths: np.ndarray) -> None:
     pixels = np.array([[x, y] for y in range(1, 5) for x in range(1, 5)], dtype=np.float32)
     z = _depth_at(depths, pixels, 0.3, 6.0)
-    for (x, y), value in zip(pixels.astype(int), z):
+    for (x, y), value in zip(pixels.astype(int), z, strict=True):
         patch = depths[y - 1:y + 2, x - 1:x + 2]
         reliable = patch.min() >= 0.3 and patch.max() <= 6.0 and np.ptp(patch) <= 0.08 * patch.mean()
         assert value == (pytest.approx(patch.mean(), rel=1e-5) if reliable else 0.0)
