@@ -281,7 +281,9 @@ def test_receiving_from_a_peer_the_state_does_not_expect_fails_at_once() -> None
     assert isinstance(error, ProtocolViolationError)
     assert (error.role, error.blame, error.actual) == ("B", "B", Action("recv", "C", "*"))
     assert error.expected == (Action("recv", "A", "x"),)
-    assert report.roles["A"].status == "done"
+    # A's one send races B's failure: it is delivered, or refused because B has failed.
+    a = report.roles["A"]
+    assert a.status == "done" or (isinstance(a.error, PeerFailedError) and a.error.peer == "B"), a
     assert isinstance(report.roles["C"].error, PeerFailedError)
 
 
