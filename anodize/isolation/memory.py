@@ -19,12 +19,15 @@ from __future__ import annotations
 import contextlib
 import os
 import resource
+import signal
 from dataclasses import dataclass
 
 __all__ = ["data_size", "peak_rss", "rss", "limit_data", "Cgroup", "make_cgroup", "remove_stale_cgroups",
            "CGROUP_SLACK"]
 
-CGROUP_SLACK = 64 * 2**20  # on top of baseline RSS + bound: the backstop must not fire first
+# On top of baseline + bound: kernel buffers charged to the cgroup, and room for the group to
+# report its MemoryError (or the supervisor its measurement) before the kernel kills it.
+CGROUP_SLACK = 16 * 2**20
 
 
 def _status_field(field: str, pid: int | str = "self") -> int | None:
@@ -99,6 +102,23 @@ class Cgroup:
         except (OSError, ValueError):
             pass
         return False
+
+    def kill_all(self) -> None:
+        """SIGKILL every process in the cgroup (a child that left the group's process group
+        with setsid is still in its cgroup)."""
+        kill = os.path.join(self.path, "cgroup.kill")
+        if self.version == 2 and os.path.exists(kill):
+            with contextlib.suppress(OSError), open(kill, "w") as f:
+                f.write("1")
+            return
+        try:
+            with open(os.path.join(self.path, "cgroup.procs")) as procs:
+                pids = [int(line) for line in procs if line.strip()]
+        except (OSError, ValueError):
+            return
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(pid, signal.SIGKILL)
 
     def remove(self) -> None:
         # OSError: a process still in it, or already gone; the kernel frees it with the last one.

@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import struct
+import time
 import types
 import typing
 from dataclasses import dataclass, field
@@ -19,8 +22,11 @@ from typing import Any, ClassVar
 
 from ..transport.codec import Codec, DecodeError, FrameKind
 
-__all__ = ["ControlTag", "Ready", "Beat", "RoleEnded", "MemoryExceeded", "Crash", "Go", "PeerFailed",
-           "Stop", "GroupMessage", "SupervisorMessage", "send_control", "recv_control"]
+__all__ = [
+    "ControlTag", "Ready", "Beat", "RoleEnded", "MemoryExceeded", "Crash", "Go", "PeerFailed", "Stop",
+    "GroupMessage", "SupervisorMessage", "encode_control", "send_control", "decode_control", "FrameReader",
+    "MAX_CONTROL_FRAME",
+]
 
 
 class ControlTag(IntEnum):
@@ -122,20 +128,34 @@ _CLASSES: dict[int, type[Any]] = {cls.TAG: cls for cls in (Ready, Beat, RoleEnde
 _CODEC = Codec()  # no payload classes: control messages are plain data only
 
 
-def send_control(conn: Connection, message: GroupMessage | SupervisorMessage) -> None:
-    """Send one control message over ``conn``."""
+MAX_CONTROL_FRAME = 1 << 20  # bytes: no honest control message comes near it
+_LENGTH = struct.Struct("<I")
+
+
+def encode_control(message: GroupMessage | SupervisorMessage) -> bytes:
+    """One whole frame (4-byte length, then the body) for ``message``."""
     values = tuple(getattr(message, f.name) for f in dataclasses.fields(message))
-    conn.send_bytes(_CODEC.message_frame("control", (int(message.TAG), *values))[4:])
+    return _CODEC.message_frame("control", (int(message.TAG), *values))
 
 
-def recv_control(conn: Connection) -> GroupMessage | SupervisorMessage:
-    """Receive one control message, every field checked.
+def send_control(conn: Connection, message: GroupMessage | SupervisorMessage) -> None:
+    """Send one control message over ``conn`` (blocking until written).
 
     Raises:
-        EOFError: the other side is gone.
+        OSError: the other side is gone.
+    """
+    view = memoryview(encode_control(message))
+    while view:
+        view = view[os.write(conn.fileno(), view):]
+
+
+def decode_control(body: bytes | bytearray) -> GroupMessage | SupervisorMessage:
+    """The control message in a frame's body, every field checked.
+
+    Raises:
         DecodeError: the bytes are not a well-formed control message.
     """
-    kind, value = _CODEC.decode_body(conn.recv_bytes())
+    kind, value = _CODEC.decode_body(body)
     if kind != FrameKind.MESSAGE or not isinstance(value[1], tuple) or not value[1]:
         raise DecodeError("a control message must be a tuple (tag, fields...)")
     tag, *values = value[1]
@@ -150,6 +170,45 @@ def recv_control(conn: Connection) -> GroupMessage | SupervisorMessage:
         if not _fits(item, hints[f.name]):
             raise DecodeError(f"{cls.__name__}.{f.name}: expected {hints[f.name]}, got {item!r:.80}")
     return cls(**{f.name: item for f, item in zip(fields, values, strict=True)})  # type: ignore[no-any-return]
+
+
+class FrameReader:
+    """Reads length-prefixed frames from a descriptor without ever blocking on a partial one.
+
+    Call :meth:`read` when the descriptor is readable: it reads what is there and
+    returns the complete frames. ``partial_since`` says since when a frame has been
+    incomplete (None when none is), so the caller can give up on a sender that stops
+    halfway; a frame announced over :data:`MAX_CONTROL_FRAME` is a :class:`DecodeError`.
+    """
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.eof = False
+        self.partial_since: float | None = None
+        self._buffer = bytearray()
+
+    @property
+    def pending(self) -> bool:
+        """Some bytes of an incomplete frame are buffered."""
+        return bool(self._buffer)
+
+    def read(self) -> list[bytes]:
+        """Read once (blocks only if the descriptor has nothing); return the complete frames."""
+        data = os.read(self.fd, 65536)
+        if not data:
+            self.eof = True
+        self._buffer += data
+        frames = []
+        while len(self._buffer) >= _LENGTH.size:
+            (length,) = _LENGTH.unpack_from(self._buffer)
+            if length > MAX_CONTROL_FRAME:
+                raise DecodeError(f"a control frame of {length} bytes, over the {MAX_CONTROL_FRAME} byte limit")
+            if len(self._buffer) < _LENGTH.size + length:
+                break
+            frames.append(bytes(self._buffer[_LENGTH.size:_LENGTH.size + length]))
+            del self._buffer[:_LENGTH.size + length]
+        self.partial_since = (self.partial_since or time.monotonic()) if self._buffer else None
+        return frames
 
 
 def _fits(value: object, hint: Any) -> bool:

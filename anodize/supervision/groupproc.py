@@ -21,6 +21,8 @@ run code in the supervisor.
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import errno
 import functools
 import os
 import signal
@@ -38,6 +40,7 @@ from sessiontypes import StateMachine
 from ..errors import MemoryBoundError, error_to_data
 from ..isolation.memory import data_size, limit_data
 from ..isolation.sched import apply_thread_scheduling
+from ..isolation.tree import become_subreaper, kill_tree
 from ..session.endpoint import Endpoint
 from ..session.payloads import resolve_class, with_field_classes
 from ..transport.codec import Codec, DecodeError
@@ -46,6 +49,7 @@ from ..transport.shm import ArrayRing, RingReader
 from .control import (
     Beat,
     Crash,
+    FrameReader,
     Go,
     GroupMessage,
     MemoryExceeded,
@@ -53,7 +57,8 @@ from .control import (
     Ready,
     RoleEnded,
     Stop,
-    recv_control,
+    SupervisorMessage,
+    decode_control,
     send_control,
 )
 from .group import resolve_function
@@ -64,6 +69,7 @@ __all__ = ["GroupSpec", "group_main", "EXIT_MEMORY", "HEARTBEAT"]
 
 EXIT_MEMORY = 87  # the exit status of a group stopped for exceeding its memory bound
 HEARTBEAT = 0.25  # seconds
+_PR_SET_PDEATHSIG = 1  # prctl option (linux/prctl.h)
 _RESERVE = 4 * 2**20  # freed on MemoryError so that reporting it can allocate
 
 
@@ -90,6 +96,9 @@ class GroupSpec:
 def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
     """The entry point of a group's process (the target multiprocessing runs)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle
+    _bind_to_supervisor()
+    for conn in (control, *pipes.values()):  # received over a socket: inheritable, unless told
+        os.set_inheritable(conn.fileno(), False)
     for path in reversed(spec.sys_path):
         if path not in sys.path:
             sys.path.insert(0, path)
@@ -98,8 +107,24 @@ def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str]
     except BaseException as error:  # a failure of the group itself: say so, then go
         with contextlib.suppress(OSError):
             send_control(control, Crash(error=error_to_data(error)))
+        kill_tree(os.getpid(), include_root=False)
         os._exit(1)
+    kill_tree(os.getpid(), include_root=False)  # a process a role left running ends with the group
     os._exit(0)
+
+
+def _bind_to_supervisor() -> None:
+    """Adopt what our roles start (so the supervisor can kill the whole tree) and die with the
+    supervisor (a killed supervisor must not leave groups running on)."""
+    supervisor = os.getppid()
+    become_subreaper()
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass  # not Linux: the control connection's end-of-file still ends us (see _read_control)
+    if os.getppid() != supervisor:  # it died before the signal was armed
+        os._exit(1)
 
 
 class _GroupProcess:
@@ -177,9 +202,15 @@ class _GroupProcess:
 
     def _thread_failed(self, args: threading.ExceptHookArgs) -> None:
         """A thread a role started died: past the memory bound, the whole group stops."""
-        if isinstance(args.exc_value, MemoryError):
+        if self._out_of_memory(args.exc_value):
             self._memory_exceeded(args.thread.name if args.thread is not None else "a thread")
         threading.__excepthook__(args)
+
+    def _out_of_memory(self, error: BaseException | None) -> bool:
+        """MemoryError, or (under a bound) a mapping the kernel refused: ``mmap`` raises OSError
+        ENOMEM where ``RLIMIT_DATA`` stops it."""
+        return isinstance(error, MemoryError) or (
+            self.spec.memory is not None and isinstance(error, OSError) and error.errno == errno.ENOMEM)
 
     def _role_thread(self, role: str, function: Any, endpoint: Endpoint) -> None:
         self.gate.wait()
@@ -196,7 +227,7 @@ class _GroupProcess:
                 next_beat = time.monotonic() + HEARTBEAT
                 continue
             reported += 1
-            if isinstance(report.error, MemoryError):
+            if self._out_of_memory(report.error):
                 self._memory_exceeded(report.name)
             # The supervisor hears of a failure before the peers do: the root cause, not
             # the peers' PeerFailedErrors, is then what its policy acts on.
@@ -225,23 +256,31 @@ class _GroupProcess:
         os._exit(EXIT_MEMORY)  # every thread stops; the OS takes the memory back
 
     def _read_control(self) -> None:
+        reader = FrameReader(self.control.fileno())
         while True:
             try:
-                message = recv_control(self.control)
+                frames = reader.read()
+                messages = [decode_control(frame) for frame in frames]
+                if reader.eof:
+                    raise EOFError
             except (EOFError, OSError, DecodeError):
                 self.network.stop()  # the supervisor is gone: do not linger
                 time.sleep(2.0)
                 os._exit(1)
-            match message:
-                case Go():
-                    self.gate.set()
-                case PeerFailed():
-                    self.network.fail(message.role, message.cause)
-                case Stop():
-                    self.gate.set()  # a group stopped before "go" must still end
-                    self.network.stop()
-                case _:
-                    pass  # a group's message sent to a group: not ours to act on
+            for message in messages:
+                self._obey(message)
+
+    def _obey(self, message: GroupMessage | SupervisorMessage) -> None:
+        match message:
+            case Go():
+                self.gate.set()
+            case PeerFailed():
+                self.network.fail(message.role, message.cause)
+            case Stop():
+                self.gate.set()  # a group stopped before "go" must still end
+                self.network.stop()
+            case _:
+                pass  # a group's message sent to a group: not ours to act on
 
     def _send(self, message: GroupMessage) -> None:
         # OSError: the supervisor is gone; the control reader ends the process.

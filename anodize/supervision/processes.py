@@ -23,7 +23,8 @@ from typing import Any
 from sessiontypes import StateMachine
 
 from ..errors import MemoryBoundError, RoleError, error_from_data
-from ..isolation.memory import CGROUP_SLACK, Cgroup, make_cgroup, remove_stale_cgroups, rss
+from ..isolation.memory import CGROUP_SLACK, Cgroup, make_cgroup, peak_rss, remove_stale_cgroups, rss
+from ..isolation.tree import descendants, kill_tree
 from ..isolation.watchdog import Watchdog, rt_throttling
 from ..transport.codec import DecodeError
 from ..transport.shm import remove_run_segments, remove_stale_segments
@@ -36,6 +37,7 @@ from .supervisor import Counts, Event, GroupExited, GroupFailed, Note, Ready, Ro
 __all__ = ["ProcessRunner", "WATCHDOG_LIMIT"]
 
 WATCHDOG_LIMIT = 0.5  # seconds a FIFO group may keep a CPU busy before it is demoted (< RT throttling's 0.95 s)
+_MEMORY_EVERY = 0.1  # seconds between two measurements of every group's memory
 _START_TIMEOUT = 60.0  # seconds for a group's process to import its roles and report ready
 
 
@@ -47,8 +49,12 @@ class _Incarnation:
         self.number = number
         self.process: Any = process
         self.control: Connection | None = control_end
+        self.reader: control.FrameReader | None = control.FrameReader(control_end.fileno())
+        self.last_heard = time.monotonic()
         self.pid: int | None = process.pid
         self.baseline = 0
+        self.baseline_resident = 0
+        self.resident = 0
         self.peak = 0
         self.cgroup: Cgroup | None = None
         self.started_at = time.monotonic()
@@ -64,8 +70,9 @@ class ProcessRunner:
     transport = "process"
 
     def __init__(self, protocol: str, machines: dict[str, StateMachine], channels: Sequence[tuple[str, str]],
-                 groups: dict[str, Group], monitors: bool) -> None:
+                 groups: dict[str, Group], monitors: bool, liveness: float = 2.0) -> None:
         self.protocol = protocol
+        self.liveness = liveness
         self.machines = machines
         self.channels = tuple(channels)
         self.groups = groups
@@ -75,6 +82,7 @@ class ProcessRunner:
         self.context = multiprocessing.get_context("spawn")  # a fresh interpreter: nothing shared
         self.current: dict[str, _Incarnation] = {}
         self.pending: list[Event] = []
+        self.next_memory_check = 0.0
         self.watchdog = Watchdog(WATCHDOG_LIMIT, self._demoted)
         remove_stale_segments()  # of earlier runs whose supervisor was killed
         remove_stale_cgroups()
@@ -114,9 +122,15 @@ class ProcessRunner:
     def _on_ready(self, inc: _Incarnation, ready: control.Ready) -> None:
         inc.ready = True
         inc.baseline = ready.baseline
+        inc.baseline_resident = rss(inc.pid or 0) or 0
         note = ready.memory_note
         if inc.group.memory is not None:
             note += self._add_cgroup(inc)
+            note += (f"; the bound covers resident memory above the {inc.baseline_resident / 2**20:.1f} MiB "
+                     f"baseline (heap, mappings, shared-memory rings, its children), checked every "
+                     f"{_MEMORY_EVERY:g} s by the supervisor")
+            if inc.cgroup is None:
+                note += " (with no cgroup, a burst faster than that can pass the bound before the group is stopped)"
         if ready.scheduling.startswith("SCHED_FIFO") and inc.pid:
             self.watchdog.watch(inc.group.name, inc.pid)
         self.pending.append(Ready(group=inc.group.name, incarnation=inc.number, scheduling=ready.scheduling,
@@ -127,7 +141,7 @@ class ProcessRunner:
         if cgroup is None:
             return f"; no cgroup backstop ({how})"
         try:
-            limit = (rss(inc.pid or 0) or 0) + (inc.group.memory or 0) + CGROUP_SLACK
+            limit = inc.baseline_resident + (inc.group.memory or 0) + CGROUP_SLACK
             cgroup.set_limit(limit)
             cgroup.add(inc.pid or 0)
         except OSError as error:
@@ -161,27 +175,40 @@ class ProcessRunner:
         elif not by_object and not self.pending:
             time.sleep(min(timeout, 0.01))
         self._check_start_timeouts()
+        self._check_liveness()
+        self._account_memory()
         found, self.pending = self.pending, []
         return found
 
     def _read(self, inc: _Incarnation) -> None:
-        assert inc.control is not None
+        """Read what the group's control connection holds (it is readable): never blocks on
+        a partial message."""
+        assert inc.control is not None and inc.reader is not None
         try:
-            message = control.recv_control(inc.control)
-        except (EOFError, OSError):
+            frames = inc.reader.read()
+            messages = [control.decode_control(frame) for frame in frames]
+        except OSError:
             inc.control = None  # the process is ending; its sentinel tells the rest
             return
         except DecodeError as error:  # a group that garbles its reports is not trusted to run on
             self._fail(inc, RoleError("ControlError", f"garbled control message: {error}"))
+            self.kill(inc.group.name)
             return
+        if inc.reader.eof:
+            inc.control = None
+        if frames:
+            inc.last_heard = time.monotonic()
+        for message in messages:
+            self._on_message(inc, message)
+
+    def _on_message(self, inc: _Incarnation, message: control.GroupMessage | control.SupervisorMessage) -> None:
         name, number = inc.group.name, inc.number
         match message:
             case control.Ready():
                 self._on_ready(inc, message)
-            case control.Beat():
-                inc.peak = max(inc.peak, message.peak)
+            case control.Beat():  # counts from the group; memory is measured here, from the kernel
                 self.pending.append(Counts(group=name, incarnation=number, at=message.at, sent=message.sent,
-                                           received=message.received, memory=message.memory, peak=message.peak))
+                                           received=message.received, memory=inc.resident, peak=inc.peak))
             case control.RoleEnded():
                 self.pending.append(RoleEnded(group=name, incarnation=number, report=_role_report(name, message)))
             case control.MemoryExceeded():
@@ -190,6 +217,50 @@ class ProcessRunner:
                 self._fail(inc, error_from_data(message.error))
             case _:
                 self._fail(inc, RoleError("ControlError", f"a group may not send {type(message).__name__}"))
+                self.kill(inc.group.name)
+
+    def _account_memory(self) -> None:
+        """Measure what each group holds (resident memory of its process tree, from the kernel,
+        so no call holding the group's GIL can hide it), keep the true peak, enforce the bound."""
+        now = time.monotonic()
+        if now < self.next_memory_check:
+            return
+        self.next_memory_check = now + _MEMORY_EVERY
+        for inc in self.current.values():
+            if inc.ended or not inc.ready or inc.pid is None:
+                continue
+            tree = [inc.pid, *descendants(inc.pid)]
+            resident = sum(rss(pid) or 0 for pid in tree) - inc.baseline_resident
+            kernel_peak = (peak_rss(inc.pid) or 0) - inc.baseline_resident  # the root's high-water mark
+            cgroup_peak = ((inc.cgroup.peak() or 0) - inc.baseline_resident) if inc.cgroup is not None else 0
+            inc.resident = max(0, resident)
+            inc.peak = max(inc.peak, inc.resident, kernel_peak, cgroup_peak)
+            self.pending.append(Counts(group=inc.group.name, incarnation=inc.number, at=now,
+                                       memory=inc.resident, peak=inc.peak))
+            bound = inc.group.memory
+            if bound is not None and inc.resident > bound and not inc.failed:
+                self._fail(inc, MemoryBoundError(inc.group.name, bound, inc.peak))
+                self.kill(inc.group.name)
+
+    def _check_liveness(self) -> None:
+        """A group silent past its deadline is failed: frozen (SIGSTOP), or a call holding the GIL,
+        or half a control message and nothing more."""
+        now = time.monotonic()
+        for inc in self.current.values():
+            if inc.ended or inc.failed or not inc.ready:
+                continue
+            silent = now - inc.last_heard
+            if silent <= self.liveness:
+                continue
+            partial = inc.reader.partial_since if inc.reader is not None else None
+            if partial is not None:
+                self._fail(inc, RoleError("ControlError", f"group {inc.group.name} sent part of a control "
+                                                          f"message and nothing more for {now - partial:.1f} s"))
+            else:
+                self._fail(inc, RoleError("Unresponsive", f"group {inc.group.name} sent no heartbeat for "
+                                                          f"{silent:.1f} s (the limit is {self.liveness:g} s): "
+                                                          "frozen, stopped (SIGSTOP), or a call that holds the GIL"))
+            self.kill(inc.group.name)
 
     def _fail(self, inc: _Incarnation, error: BaseException) -> None:
         if not inc.failed:
@@ -205,6 +276,8 @@ class ProcessRunner:
         inc.process.join(1.0)
         code = inc.process.exitcode
         inc.ended = True
+        if inc.cgroup is not None:
+            inc.cgroup.kill_all()
         self.watchdog.forget(inc.group.name)
         if code != 0:
             self._fail(inc, self._death_cause(inc, code))
@@ -223,7 +296,7 @@ class ProcessRunner:
     def _death_cause(self, inc: _Incarnation, code: int | None) -> BaseException:
         name = inc.group.name
         if inc.cgroup is not None and inc.cgroup.oom_killed():
-            peak = max(inc.peak, (inc.cgroup.peak() or 0) - inc.baseline)
+            peak = max(inc.peak, (inc.cgroup.peak() or 0) - inc.baseline_resident)
             return MemoryBoundError(name, inc.group.memory or 0, peak)
         if code == EXIT_MEMORY:
             return MemoryBoundError(name, inc.group.memory or 0, inc.peak)
@@ -261,9 +334,13 @@ class ProcessRunner:
         self._tell(self.current[group], control.Stop())
 
     def kill(self, group: str) -> None:
+        """SIGKILL the group's whole process tree (its process adopts what its roles start)
+        and, where it has one, every process in its cgroup."""
         inc = self.current[group]
-        if inc.process is not None and inc.process.is_alive():
-            inc.process.kill()
+        if inc.process is not None and inc.process.is_alive() and inc.pid is not None:
+            kill_tree(inc.pid)  # it adopts what its roles start: the tree is the whole group
+        if inc.cgroup is not None:
+            inc.cgroup.kill_all()
 
     def _tell(self, inc: _Incarnation, message: control.SupervisorMessage) -> None:
         if inc.control is None or inc.deaf or inc.ended:
@@ -282,10 +359,11 @@ class ProcessRunner:
 
     def close(self) -> None:
         self.watchdog.stop()
-        for inc in self.current.values():
+        for name, inc in self.current.items():
             if inc.process is not None and inc.process.is_alive():
-                inc.process.kill()
+                self.kill(name)
                 inc.process.join(5.0)
+
             if inc.cgroup is not None:
                 inc.cgroup.remove()
             self._close(inc)

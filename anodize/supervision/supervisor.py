@@ -68,8 +68,8 @@ class Counts:
     group: str
     incarnation: int
     at: float  # time.monotonic() when the counts were taken
-    sent: dict[str, int]
-    received: dict[str, int]
+    sent: dict[str, int] | None = None  # None: this event only measures memory
+    received: dict[str, int] | None = None
     memory: int | None = None
     peak: int | None = None
 
@@ -308,14 +308,16 @@ class Supervisor:
                 self._exited(record, event.unreported)
 
     def _counts(self, record: _GroupRecord, counts: Counts) -> None:
-        for channel, n in counts.sent.items():
-            record.sent[channel] = record.sent_before.get(channel, 0) + n
-        for channel, n in counts.received.items():
-            record.received[channel] = record.received_before.get(channel, 0) + n
         if counts.memory is not None:
             record.memory = counts.memory
         if counts.peak is not None:
             record.peak = max(record.peak or 0, counts.peak)
+        if counts.sent is None or counts.received is None:
+            return
+        for channel, n in counts.sent.items():
+            record.sent[channel] = record.sent_before.get(channel, 0) + n
+        for channel, n in counts.received.items():
+            record.received[channel] = record.received_before.get(channel, 0) + n
         stretch = record.stretches[-1] if record.steady and self.state is RunState.RUNNING else None
         if stretch is not None and counts.at >= record.steady_since:  # not counted before "go"
             stretch.append((counts.at, sum(record.sent.values())))

@@ -101,7 +101,8 @@ class System:
         self._placed[role] = group.name
 
     def run(self, timeout: float | None = None, grace: float = 2.0,
-            on_status: Callable[[dict[str, GroupStatus]], None] | None = None) -> RunReport:
+            on_status: Callable[[dict[str, GroupStatus]], None] | None = None,
+            liveness: float = 2.0) -> RunReport:
         """Run every role to the end of its local type (or until ``timeout`` seconds).
 
         Roles still running at the timeout are stopped (``RoleStopped`` is raised in
@@ -112,11 +113,15 @@ class System:
         transport) or abandoned (inproc). Ctrl-C stops the run the same way and the
         report is marked interrupted. ``on_status``, if given, is called about twice a
         second with a :class:`GroupStatus` per group (from the supervising thread: keep
-        it quick).
+        it quick). With ``transport="process"`` a group that sends no heartbeat for
+        ``liveness`` seconds (frozen, stopped, or in a call that holds the GIL) is failed
+        and its policy applies.
 
         Raises:
             AnodizeError: some role of the global type is in no group.
         """
+        if not liveness > 0:
+            raise ConfigurationError(f"liveness {liveness!r}: expected a number of seconds > 0")
         gt = self.global_type
         missing = [r for r in gt.roles if r not in self._placed]
         if missing:
@@ -127,7 +132,7 @@ class System:
         if self.transport == "process":
             from .processes import ProcessRunner  # the inproc path never needs it
 
-            runner = ProcessRunner(gt.name, machines, channels, self.groups, self.monitors)
+            runner = ProcessRunner(gt.name, machines, channels, self.groups, self.monitors, liveness)
         else:
             runner = ThreadRunner(gt, machines, channels, self.groups, self.monitors)
         return Supervisor(gt.name, gt.roles, self.groups, channels, runner, timeout, grace, on_status).run()

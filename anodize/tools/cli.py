@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import shlex
 import shutil
 import sys
@@ -431,7 +432,14 @@ class LiveStatus:
 
 def run() -> NoReturn:
     """Console-script entry point."""
+    # SIGTERM (a service manager, a container stop) ends a run as Ctrl-C does: the groups
+    # are stopped, cgroups and rings removed, and the report still printed and written.
+    signal.signal(signal.SIGTERM, _terminated)
     sys.exit(main())
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":

@@ -137,8 +137,13 @@ class PipeReceiver:
         self._pushed: deque[object] = deque()  # sentinels put back so later receives see them too
         self._eof = False
         self._poll = select.poll()
+        # Rung by the supervisor's word that the sender failed: a forked child of the sender's
+        # group may keep the pipe's write end open, so end-of-file alone cannot be waited for.
+        self.notice_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self._poll.register(fd, select.POLLIN)
         self._poll.register(network.wake_fd, select.POLLIN)
+        self._poll.register(self.notice_fd, select.POLLIN)
+        network.listen_for_failure(sender, self.notice_fd)
 
     def put(self, item: object) -> None:
         """Put back a sentinel (a failure or STOP) for the next receive."""
@@ -164,6 +169,9 @@ class PipeReceiver:
                 if cause is None:
                     return STOP  # the sender's group ended because the run is stopping
                 return PeerFailure(self.sender, cause)
+            failed = self.network.failed.get(self.sender)
+            if failed is not None and not self._fill(0):  # all it wrote before failing is read
+                return PeerFailure(self.sender, failed)
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
             if not self._fill(left) and deadline is not None and time.monotonic() >= deadline:
                 raise Empty
@@ -218,6 +226,9 @@ class PipeReceiver:
         Also returns (False) when woken by a stop, so the caller looks again.
         """
         ready = self._poll.poll(None if timeout is None else max(0, int(timeout * 1000)))
+        if any(fd == self.notice_fd for fd, _ in ready):
+            with contextlib.suppress(BlockingIOError):
+                os.eventfd_read(self.notice_fd)  # the caller now sees the failure in network.failed
         if not any(fd == self.fd for fd, _ in ready):
             return False
         try:
@@ -255,6 +266,7 @@ class ProcessNetwork(InprocNetwork):
         super().__init__(local_pairs, [r for r in doorbell_roles if r in self.local_roles])
         self.wake_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self._cause_arrived = threading.Condition()
+        self._failure_listeners: dict[str, list[int]] = {}
         self.bridges: list[threading.Thread] = []
         self.incoming_fds = {pair: fd for pair, fd in pipes.items() if pair[1] in self.local_roles}
         for role, cause in dead.items():
@@ -324,11 +336,18 @@ class ProcessNetwork(InprocNetwork):
                 self.ring(receiver, sender)
 
     def note_failed(self, role: str, cause: str) -> None:
-        """Record why a remote role failed (from its failure frame or the supervisor)."""
+        """Record why a remote role failed (from its failure frame or the supervisor), and wake
+        its receivers here."""
         with self._cause_arrived:
             self.failed.setdefault(role, cause)
             self.alarm = True
             self._cause_arrived.notify_all()
+        for fd in self._failure_listeners.get(role, ()):
+            os.eventfd_write(fd, 1)
+
+    def listen_for_failure(self, sender: str, fd: int) -> None:
+        """Have ``fd`` (an eventfd) written when ``sender`` is noted failed."""
+        self._failure_listeners.setdefault(sender, []).append(fd)
 
     def wait_for_cause(self, role: str, default: str) -> str | None:
         """Why ``role`` failed; wait briefly for the supervisor to say, when its process died.

@@ -539,9 +539,10 @@ def test_installed_command_in_a_subprocess() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("transport", ["inproc", "process"])
+@pytest.mark.parametrize(("transport", "signum"), [("inproc", signal.SIGINT), ("process", signal.SIGINT),
+                                                   ("process", signal.SIGTERM)])
 def test_ctrl_c_stops_the_run_and_still_prints_and_writes_the_report(
-        system_file: Callable[..., Path], tmp_path: Path, transport: str) -> None:
+        system_file: Callable[..., Path], tmp_path: Path, transport: str, signum: int) -> None:
     path = system_file("cli_run_roles:forever", "cli_run_roles:consumer")
     path.write_text(path.read_text(encoding="utf-8").replace('transport = "inproc"', f'transport = "{transport}"'),
                     encoding="utf-8")
@@ -555,7 +556,7 @@ def test_ctrl_c_stops_the_run_and_still_prints_and_writes_the_report(
         for line in process.stdout:  # the live status says when the roles run
             if line.split()[1:2] == ["running"]:
                 break
-        process.send_signal(signal.SIGINT)
+        process.send_signal(signum)
         out, err = process.communicate(timeout=60)
     finally:
         process.kill()
