@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import shlex
 import shutil
+import signal
 import sys
 import time
 from collections.abc import Callable, Sequence

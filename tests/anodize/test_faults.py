@@ -11,10 +11,10 @@ import textwrap
 import time
 from pathlib import Path
 
+import fault_roles as roles
 import pytest
 
 import anodize
-import fault_roles as roles
 import sessiontypes
 from anodize import PeerFailedError
 from anodize.errors import RoleError
