@@ -43,7 +43,7 @@ from ..isolation.sched import apply_thread_scheduling
 from ..isolation.tree import become_subreaper, kill_tree
 from ..session.endpoint import Endpoint
 from ..session.payloads import resolve_class, with_field_classes
-from ..transport.codec import Codec, DecodeError
+from ..transport.codec import MAX_FRAME, Codec, DecodeError
 from ..transport.process import ProcessNetwork, make_codec
 from ..transport.shm import ArrayRing, RingReader
 from .control import (
@@ -163,16 +163,19 @@ class _GroupProcess:
     def _network(self) -> ProcessNetwork:
         spec = self.spec
         classes = _payload_classes(spec.machines.values())
-        reader = RingReader()
         local = set(spec.roles)
 
         def codec_for(pair: tuple[str, str]) -> Codec:
             sender, receiver = pair
             # A channel's rings are named after it: a receiver maps no other ring.
             prefix = f"anodize-{spec.run_id}-{sender.encode().hex()}-{receiver.encode().hex()}-"
+            inbox = f"{prefix}{spec.incarnation}"  # where the sender hands the rings' memory over
             if sender not in local:
+                reader = RingReader(inbox)  # bound now: before any group is told to go
                 return make_codec(classes, None, functools.partial(reader.read, prefix=prefix))
-            ring = ArrayRing(f"{prefix}{spec.incarnation}", peer_gone=lambda: self._gone(receiver))
+            # With every slot held, an array up to a frame's size (less room for the rest) goes inline.
+            ring = ArrayRing(f"{prefix}{spec.incarnation}", peer_gone=lambda: self._gone(receiver), inbox=inbox,
+                             channel=f"{sender}->{receiver}", inline_max=MAX_FRAME - 2**20)
             return make_codec(classes, ring, None)
 
         fds = {pair: conn.fileno() for pair, conn in self.pipes.items()}

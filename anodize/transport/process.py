@@ -27,11 +27,13 @@ from .codec import HEADER, MAX_FRAME, Codec, DecodeError, EncodeError, FrameKind
 from .inproc import InprocNetwork
 from .shm import ArrayRing
 
-__all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "PayloadError"]
+__all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "PayloadError", "BridgeQueue"]
 
 # Reads of at most 64 KiB: larger ones make malloc mmap and munmap a buffer on every call.
 _READ_SIZE = 64 * 1024
 _PIPE_SIZE = 1 << 20  # ask the kernel for 1 MiB pipes: fewer blocked senders when streaming
+BRIDGE_MESSAGES = 256  # a bridged channel's queue holds at most this many messages...
+BRIDGE_BYTES = 4 * 2**20  # ...and this many bytes of frames: then the pipe fills and its sender blocks
 _EOF_CAUSE_WAIT = 2.0  # seconds to wait for the supervisor's word on why a peer's process ended
 
 
@@ -134,6 +136,7 @@ class PipeReceiver:
         self.sender = sender
         self._buffer = bytearray()
         self._at = 0
+        self.frame_size = 0  # bytes of the last frame taken (a bridge's queue is bounded by these)
         self._pushed: deque[object] = deque()  # sentinels put back so later receives see them too
         self._eof = False
         self._poll = select.poll()
@@ -206,6 +209,7 @@ class PipeReceiver:
             return None
         body = buffer[at + 4:end]
         self._at = end
+        self.frame_size = 4 + length
         if end > 4 * _READ_SIZE:  # drop what was consumed now and then, not on every frame
             del buffer[:end]
             self._at = 0
@@ -287,20 +291,29 @@ class ProcessNetwork(InprocNetwork):
                 gone.put(PeerFailure(sender, dead.get(sender, "not running")))
                 self.queues[(sender, receiver)] = gone
 
-    def _bridge(self, source: PipeReceiver, sender: str, receiver: str) -> SimpleQueue[object]:
-        """A thread moving frames from a pipe into a local queue, ringing the doorbell."""
-        target: SimpleQueue[object] = SimpleQueue()
+    def _bridge(self, source: PipeReceiver, sender: str, receiver: str) -> BridgeQueue:
+        """A thread moving frames from a pipe into a local queue, ringing the doorbell.
+
+        The queue is bounded: when the role falls behind, the thread stops reading, the
+        pipe fills and the sender blocks (back pressure), as on a channel without a bridge.
+        """
+        target = BridgeQueue()
 
         def pump() -> None:
             while True:
                 try:
                     item = source.get()
+                except MemoryError:
+                    raise  # our group's own bound, not the sender's fault: the thread hook reports it
                 except Exception as error:  # never die silently: the receiver must hear of it
                     item = Corrupt(f"{type(error).__name__}: {error}")
                     target.put(item)
                     self.ring(receiver, sender)
                     return
-                target.put(item)
+                if type(item) is tuple or isinstance(item, Corrupt):
+                    target.put_message(item, source.frame_size)  # waits while the queue is full
+                else:
+                    target.put(item)  # a failure or STOP: never waits
                 self.ring(receiver, sender)
                 if type(item) is not tuple and not isinstance(item, Corrupt):
                     return  # a failure or STOP ends the channel
@@ -408,3 +421,70 @@ def make_codec(classes: Iterable[type], ring: ArrayRing | None,
     """A channel's codec: arrays go to ``ring`` when sending, come from ``read_array`` when receiving."""
     return Codec(classes, ring, read_array)
 
+
+class BridgeQueue:
+    """A bridged channel's local queue, bounded by message count and frame bytes.
+
+    The bridge thread waits in :meth:`put_message` while the queue is full; signals
+    (a failure, STOP, a corrupt frame) and what a receiver puts back go in with
+    :meth:`put`, which never waits, so they always get through.
+
+    Args:
+        messages: at most this many messages wait...
+        budget: ...holding at most this many bytes of frames (one bigger message may
+            still wait alone).
+    """
+
+    def __init__(self, messages: int = BRIDGE_MESSAGES, budget: int = BRIDGE_BYTES) -> None:
+        self._items: deque[tuple[object, int]] = deque()
+        self._bytes = 0
+        self._messages = messages
+        self._budget = budget
+        self._lock = threading.Lock()
+        self._not_empty = threading.Condition(self._lock)
+        self._not_full = threading.Condition(self._lock)
+
+    def put_message(self, item: object, size: int) -> None:
+        """Queue a message of ``size`` frame bytes, waiting for room."""
+        with self._not_full:
+            while self._items and (len(self._items) >= self._messages or self._bytes + size > self._budget):
+                self._not_full.wait()
+            self._items.append((item, size))
+            self._bytes += size
+            self._not_empty.notify()
+
+    def put(self, item: object) -> None:
+        """Queue a signal (or put one back): never waits."""
+        with self._lock:
+            self._items.append((item, 0))
+            self._not_empty.notify()
+
+    def get(self, *, timeout: float | None = None) -> object:
+        """The next item, waiting up to ``timeout`` seconds (None: for ever).
+
+        Raises:
+            queue.Empty: nothing arrived in time.
+        """
+        with self._not_empty:
+            if not self._not_empty.wait_for(lambda: self._items, timeout):
+                raise Empty
+            item, size = self._items.popleft()
+            self._bytes -= size
+            self._not_full.notify()
+            return item
+
+    def get_nowait(self) -> object:
+        """The next item, without waiting.
+
+        Raises:
+            queue.Empty: nothing is waiting.
+        """
+        return self.get(timeout=0)
+
+    def empty(self) -> bool:
+        """Whether nothing is waiting."""
+        return not self._items
+
+    def qsize(self) -> int:
+        """How many items wait."""
+        return len(self._items)

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import contextlib
+import enum
 import gc
 import math
 import os
 import pickle
+import re
 import secrets
 from dataclasses import dataclass
 
@@ -288,3 +290,198 @@ def test_a_sent_buffer_collected_late_does_not_free_a_newer_claim_of_its_slot(ri
 def test_an_ndarray_sort_still_travels_as_an_array() -> None:
     _, got = round_trip(Codec([np.ndarray]), "image", np.arange(6).reshape(2, 3))
     assert isinstance(got, np.ndarray) and got.tolist() == [[0, 1, 2], [3, 4, 5]]
+
+
+# ---- pickle on the wire (issue 11) ------------------------------------------------------------
+def pickled_body(cls_name: str, data: bytes, label: bytes = b"p") -> bytes:
+    """A message body whose payload claims to be a pickled ``cls_name`` and carries ``data``."""
+    import struct
+
+    name = cls_name.encode()
+    return (bytes([FrameKind.MESSAGE]) + struct.pack("<I", len(label)) + label + bytes([19])
+            + struct.pack("<I", len(name)) + name + struct.pack("<I", len(data)) + data)
+
+
+def name_of(cls: type) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+class Other:
+    def __init__(self, value: int) -> None:
+        self.value = value
+
+
+SET_STATE_RAN: list[object] = []
+
+
+@dataclass
+class Flagged:
+    """A dataclass whose unpickling would show: __init__ and __setstate__ leave a mark."""
+
+    value: int
+
+    def __post_init__(self) -> None:
+        SET_STATE_RAN.append("init")
+
+    def __setstate__(self, state: object) -> None:
+        SET_STATE_RAN.append(state)
+
+
+# PROTO 5, NONE, LONG_BINPUT 2**27, STOP: the unpickler would grow its memo to 2**28 slots (2 GiB).
+MEMO_BOMB = b"\x80\x05N" + b"r" + (2**27).to_bytes(4, "little") + b"."
+
+
+@pytest.mark.parametrize("codec", [Codec([Plain]), Codec()], ids=["Plain named", "nothing named"])
+def test_a_memo_index_bomb_is_refused_without_allocating(codec: Codec) -> None:
+    import resource
+    import tracemalloc
+
+    body = pickled_body(name_of(Plain), MEMO_BOMB)
+    assert len(body) < 60
+    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB
+    tracemalloc.start()
+    try:
+        with pytest.raises(DecodeError, match=r"memo index 134217728 out of sequence|not named by the protocol"):
+            codec.decode_body(body)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2**20
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss_before < 100 * 2**10
+
+
+def test_a_codec_without_pickled_classes_never_unpickles() -> None:
+    harmless = pickle.dumps([1, 2, 3], protocol=5)  # loads no class: the old unpickler took it
+    for codec in (Codec(), Codec([Pose])):  # nothing, or only a dataclass, named
+        with pytest.raises(DecodeError, match=r"^pickled payload class 'test_codec:Plain' is not named by the "
+                                              r"protocol; nothing travels pickled on this channel$"):
+            codec.decode_body(pickled_body(name_of(Plain), harmless))
+    with pytest.raises(DecodeError, match=r"^pickled payload class 'builtins:dict' never travels pickled "
+                                          r"\(it has its own tag\)$"):
+        Codec([dict]).decode_body(pickled_body("builtins:dict", pickle.dumps({}, protocol=5)))
+
+
+def test_a_frame_naming_one_class_carrying_another_is_refused() -> None:
+    codec = Codec([Plain, Other])
+    with pytest.raises(DecodeError, match=r"^pickled payload of class 'test_codec:Plain' refused: it refers to "
+                                          r"test_codec\.Other, not to the payload's class$"):
+        codec.decode_body(pickled_body(name_of(Plain), pickle.dumps(Other(1), protocol=5)))
+    with pytest.raises(DecodeError, match="does not hold exactly one instance"):  # data, not a Plain
+        codec.decode_body(pickled_body(name_of(Plain), pickle.dumps([1, 2], protocol=5)))
+    _, got = round_trip(codec, "o", Other(5))
+    assert isinstance(got, Other) and got.value == 5
+
+
+def test_a_dataclass_never_arrives_pickled_and_none_of_its_code_runs() -> None:
+    codec = Codec([Flagged])
+    data = pickle.dumps(Flagged(1), protocol=5)
+    SET_STATE_RAN.clear()
+    with pytest.raises(DecodeError, match=r"^pickled payload class 'test_codec:Flagged' never travels pickled "
+                                          r"\(a dataclass travels field by field\)$"):
+        codec.decode_body(pickled_body(name_of(Flagged), data))
+    assert SET_STATE_RAN == []
+    frame = codec.message_frame("f", Flagged(2))  # as it does travel: field by field, no code of its own
+    SET_STATE_RAN.clear()
+    _, got = codec.decode_body(frame[4:])[1]
+    assert isinstance(got, Flagged) and got.value == 2 and SET_STATE_RAN == []
+
+
+def test_the_control_channel_refuses_pickle() -> None:
+    from anodize.supervision.control import ControlTag, decode_control
+
+    go = pickle.dumps((int(ControlTag.GO),), protocol=5)  # a well-formed Go, had it been unpickled
+    with pytest.raises(DecodeError, match="nothing travels pickled on this channel"):
+        decode_control(pickled_body(name_of(Plain), go, label=b"control"))
+    with pytest.raises(DecodeError, match="nothing travels pickled on this channel"):
+        decode_control(pickled_body(name_of(Plain), MEMO_BOMB, label=b"control"))
+
+
+class Slotted:
+    __slots__ = ("a", "b")
+
+    def __init__(self, a: int, b: object) -> None:
+        self.a, self.b = a, b
+
+
+class Shade(enum.Enum):
+    DARK = 1
+
+
+class Bag(list[int]):
+    pass
+
+
+class Holder:
+    def __init__(self) -> None:
+        self.data = [1, 2.5, "x", b"b", None, True, (1, 2, 3, 4), {1, 2}, frozenset({3}),
+                     bytearray(b"q"), 10**30, {"k": [1]}, -(2**70)]
+        self.me = self
+        self.kids = [Holder.__new__(Holder) for _ in range(3)]
+
+
+@pytest.mark.parametrize("value", [Plain(7), Slotted(1, "b"), Shade.DARK, Bag([1, 2]), Holder()],
+                         ids=lambda v: type(v).__name__)
+def test_what_plain_classes_pickle_to_passes_the_scan(value: object) -> None:
+    _, got = round_trip(Codec([type(value)]), "v", value)
+    assert type(got) is type(value)
+    if isinstance(value, Holder):
+        assert got.me is got and got.data == value.data and len(got.kids) == 3
+    if isinstance(value, Bag):
+        assert got == [1, 2]
+
+
+class Tampering:
+    def __reduce__(self) -> tuple[object, ...]:
+        import collections
+
+        return (collections.OrderedDict, ())
+
+
+def test_a_sender_whose_pickle_refers_to_another_class_is_refused_at_the_sender() -> None:
+    with pytest.raises(EncodeError, match=r"^cannot send a pickled Tampering: it refers to "
+                                          r"collections\.OrderedDict, not to the payload's class$"):
+        Codec([Tampering]).message_frame("t", Tampering())
+
+
+STR = lambda text: b"\x8c" + bytes([len(text)]) + text.encode()  # noqa: E731 (SHORT_BINUNICODE)
+
+
+@pytest.mark.parametrize(("data", "reason"), [
+    # BUILD on the class itself would set class attributes in the receiver.
+    (b"\x80\x05" + STR("test_codec") + STR("Plain") + b"\x93" + b"N}" + STR("x") + b"Ks" + b"\x86b.",
+     "BUILD of something other than an instance of the payload's class"),
+    # A frame claiming more bytes than there are.
+    (b"\x80\x05\x95" + (2**40).to_bytes(8, "little") + b"N.", "a frame of 1099511627776 bytes, more than"),
+    # A bytearray crossing its frame's end (CPython 3.11's unpickler then frees it while exported).
+    (b"\x80\x05\x95" + (5).to_bytes(8, "little") + b"\x96" + (1).to_bytes(8, "little") + b"q.",
+     "an opcode crosses the end of its frame at byte 16"),
+    # A BINBYTES claiming 2 GiB: refused without reading (or allocating) them.
+    (b"\x80\x05B" + (2**31).to_bytes(4, "little") + b"x.", "malformed pickle: expected 2147483648 bytes"),
+    # Opcodes of older protocols and of other machinery.
+    (b"cos\nsystem\n(S'echo pwned'\ntR.", "pickle protocol 0 or 1 (only 2 to 5)"),
+    (b"\x80\x05" + b"cos\nsystem\n.", "it refers to os.system, not to the payload's class"),
+    (b"\x80\x05" + b"\x82\x01.", "opcode EXT1 is not allowed"),
+    (b"\x80\x05" + b"N" + b"Q.", "opcode BINPERSID is not allowed"),
+    (b"\x80\x05" + b"\x97.", "opcode NEXT_BUFFER is not allowed"),
+    # REDUCE of something that is not the class; a memo read of nothing.
+    (b"\x80\x05" + STR("x") + b")R.", "REDUCE of something other than the payload's class"),
+    (b"\x80\x05h\x00.", "memo index 0 was never stored"),
+    # Bytes after the end; a huge int.
+    (b"\x80\x05" + STR("test_codec") + STR("Plain") + b"\x93)\x81.junk", "4 bytes after the pickle's end"),
+    (b"\x80\x05\x8b" + (4096).to_bytes(4, "little") + b"\x01" * 4096 + b".", "an int of more than 2048 bytes"),
+])
+def test_the_scan_refuses_what_a_plain_pickle_never_holds(data: bytes, reason: str) -> None:
+    with pytest.raises(DecodeError, match=re.escape(reason)):
+        Codec([Plain]).decode_body(pickled_body(name_of(Plain), data))
+
+
+@settings(max_examples=examples(300), deadline=None)
+@given(position=st.integers(min_value=0), value=st.integers(min_value=0, max_value=255))
+def test_a_mutated_pickle_is_refused_or_is_still_one_plain(position: int, value: int) -> None:
+    data = bytearray(pickle.dumps(Plain(7), protocol=5))
+    data[position % len(data)] = value
+    try:
+        _, (_, got) = Codec([Plain]).decode_body(pickled_body(name_of(Plain), bytes(data)))
+    except DecodeError:
+        return
+    assert type(got) is Plain
