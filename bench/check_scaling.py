@@ -2,7 +2,7 @@
 """How parse, check and projection scale with protocol size.
 
 Generates protocol TEXT of N interactions (N = number of ``->`` in the text)
-for three shapes and times, as separate phases, with the median of --repeat
+for five shapes and times, as separate phases, with the median of --repeat
 runs:
 
   parse        ``sessiontypes.parse.parse_file(text, path)``
@@ -37,13 +37,19 @@ Shapes (all texts are linear in N; every generated protocol is well formed):
                                out.   q -> r : out.   tJ,   (J random in 1..K)
                                down.  q -> r : down.  <level K+1>}
             so variables of outer loops are used deep inside.
+  ref-dag   N declarations, each referring twice to the next one:
+              global G0(A, B) = A -> B : {l. G1, r. G1}   ...   global GN = end
+            Written out, G0 is a tree of 2^N interactions (issue 11).
+  ref-chain N declarations, each referring to the next one:
+              global G0(A, B) = A -> B : x. G1   ...   global GN = end
+            Written out, the N globals hold N^2/2 interactions together.
 
 Each (shape, size) runs in a fresh subprocess (isolation, memory, --timeout);
 a failure or timeout is printed in the table instead of stopping the run.
 
 Usage:
   .venv/bin/python bench/check_scaling.py [--sizes 100,1000,10000,100000]
-      [--repeat N] [--json PATH] [--shapes sequence,choices,deep-rec]
+      [--repeat N] [--json PATH] [--shapes sequence,choices,deep-rec,ref-dag,ref-chain]
       [--timeout SECONDS]
   .venv/bin/python bench/check_scaling.py --profile SHAPE[:SIZE] [--top 15]
       cProfile of one parse + check_file + project-all (default size 10000).
@@ -82,7 +88,7 @@ if str(IMPL) not in sys.path:
     sys.path.insert(0, str(IMPL))
 
 DEFAULT_SIZES = (100, 1_000, 10_000, 100_000)
-SHAPES = ("sequence", "choices", "deep-rec")
+SHAPES = ("sequence", "choices", "deep-rec", "ref-dag", "ref-chain")
 DEFAULT_JSON = REPO / "bench" / "results" / "check_scaling.json"
 
 # ---------------------------------------------------------------------------
@@ -160,10 +166,26 @@ def gen_deep_rec(n: int, seed: int = 3) -> tuple[str, list[str]]:
     return "".join(out), roles
 
 
+def gen_ref_dag(n: int) -> tuple[str, list[str]]:
+    """n declarations, each referring twice to the next: a DAG of declarations."""
+    lines = [f"global G{i}(A, B) = A -> B : {{l. G{i + 1}, r. G{i + 1}}}" for i in range(n)]
+    lines.append(f"global G{n} = end")
+    return "\n".join(lines) + "\n", ["A", "B"]
+
+
+def gen_ref_chain(n: int) -> tuple[str, list[str]]:
+    """n declarations, each referring to the next."""
+    lines = [f"global G{i}(A, B) = A -> B : x. G{i + 1}" for i in range(n)]
+    lines.append(f"global G{n} = end")
+    return "\n".join(lines) + "\n", ["A", "B"]
+
+
 GENERATORS: dict[str, Callable[[int], tuple[str, list[str]]]] = {
     "sequence": gen_sequence,
     "choices": gen_choices,
     "deep-rec": gen_deep_rec,
+    "ref-dag": gen_ref_dag,
+    "ref-chain": gen_ref_chain,
 }
 
 
@@ -247,7 +269,7 @@ def measure_once(text: str, path: str) -> dict[str, float]:
     # check without the projectability pass, then projection onto every role of
     # that (unprojected) module: the two pieces of work separately.
     real = check_module._check_projectable
-    check_module._check_projectable = lambda *args, **kwargs: None  # type: ignore[assignment]
+    check_module._check_projectable = lambda *args, **kwargs: None
     try:
         times["check"], (module, diagnostics) = _timed("check", check_file, source)
     finally:
@@ -300,8 +322,9 @@ def run_case(shape: str, n: int, repeat: int) -> dict[str, Any]:
         result["text_lines"] = text.count("\n")
         _, roles = GENERATORS[shape](min(n, 100))
         result["roles"] = len(roles)
-        # Warm-up on a small protocol of the same shape (imports, first-call costs).
-        measure_once(generate(shape, 50), f"<{shape}-warmup>")
+        # Warm-up on a small protocol of the same shape (imports, first-call costs);
+        # never larger than the case: an implementation may be exponential in it.
+        measure_once(generate(shape, min(50, n)), f"<{shape}-warmup>")
         runs = [measure_once(text, f"<{shape}-{n}>") for _ in range(repeat)]
         result["runs"] = runs
         result["median"] = {phase: statistics.median(r[phase] for r in runs) for phase in runs[0]}

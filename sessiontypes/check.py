@@ -16,7 +16,8 @@ from . import syntax as s
 from .deep import run_deep
 from .errors import Diagnostic, ProjectionError
 from .location import Location
-from .resolve import Reporter, SortTable, _Walk, resolve_global, resolve_local
+from .resolve import Reporter, SortTable, global_walk, local_walk, resolve_global, resolve_local
+from .sharing import Sharing
 from .sorts import BUILTIN_SORTS, Sort
 
 __all__ = ["ProtocolModule", "check_file"]
@@ -58,27 +59,29 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
     sorts = SortTable(types, reporter)
     names = {kind: set(decls) for kind, decls in by_kind.items()}
 
-    global_walk: _Walk[s.GlobalDecl, g.GlobalTerm] = _Walk(
-        reporter, sorts, globals_, "global", names["local"] | names["type"])
+    globals_walk = global_walk(reporter, sorts, globals_, names["local"] | names["type"])
+    # The declaration bodies resolution shares between uses (it adds to them as
+    # it goes); every pass below memoises on them, across all the globals.
+    shared = Sharing(globals_walk.shared)
     global_types: dict[str, g.GlobalType] = {}
     for decl in globals_.values():
         before = len(reporter.diagnostics)
-        body = resolve_global(decl, global_walk)
-        roles = _check_roles(decl, body, reporter)
-        _check_parallel_global(body, reporter)
+        body = resolve_global(decl, globals_walk)
+        roles = _check_roles(decl, body, reporter, shared)
+        _check_parallel_global(body, reporter, shared)
         global_type = g.GlobalType(decl.name.text, roles, body, decl.location, sorts.defined(),
-                                   source.lines)
+                                   source.lines, shared)
         global_types[decl.name.text] = global_type
         if not _has_error(reporter.diagnostics[before:]):
             _check_projectable(global_type, reporter)
 
-    local_walk: _Walk[s.LocalDecl, lt.LocalTerm] = _Walk(
-        reporter, sorts, locals_, "local", names["global"] | names["type"])
+    locals_walk = local_walk(reporter, sorts, locals_, names["global"] | names["type"])
+    shared_l = Sharing(locals_walk.shared)
     local_types: dict[str, lt.LocalType] = {}
     for ldecl in locals_.values():
-        body_l = resolve_local(ldecl, local_walk)
-        _check_local_forms(ldecl, body_l, reporter)
-        _check_parallel_local(body_l, reporter)
+        body_l = resolve_local(ldecl, locals_walk)
+        _check_local_forms(ldecl, body_l, reporter, shared_l)
+        _check_parallel_local(body_l, reporter, shared_l)
         role = ldecl.role.text if ldecl.role else None
         local_types[ldecl.name.text] = lt.LocalType(ldecl.name.text, role, body_l, "", ldecl.location)
 
@@ -113,9 +116,10 @@ def _declarations(source: s.SourceFile, reporter: Reporter) -> dict[str, dict[st
     return by_kind
 
 
-def _check_roles(decl: s.GlobalDecl, body: g.GlobalTerm, reporter: Reporter) -> tuple[str, ...]:
+def _check_roles(decl: s.GlobalDecl, body: g.GlobalTerm, reporter: Reporter,
+                 shared: Sharing) -> tuple[str, ...]:
     """Roles in print order; reports undeclared, unused and repeated roles."""
-    occurring = _roles_in_order(body)
+    occurring = _roles_in_order(body, shared)
     if decl.roles is None:
         return tuple(occurring)
     declared: list[str] = []
@@ -134,64 +138,102 @@ def _check_roles(decl: s.GlobalDecl, body: g.GlobalTerm, reporter: Reporter) -> 
     return tuple(declared)
 
 
-def _roles_in_order(term: g.GlobalTerm) -> dict[str, Location]:
+def _roles_in_order(term: g.GlobalTerm, shared: Sharing) -> dict[str, Location]:
     """Every role with the location of its first occurrence, in order of first occurrence."""
     found: dict[str, Location] = {}
-
-    def visit(node: g.GlobalTerm) -> None:
-        while True:  # a loop along sequences: they can be very long
-            match node:
-                case g.Choice(sender=sender, receiver=receiver, branches=branches):
-                    found.setdefault(sender, node.location)
-                    found.setdefault(receiver, node.receiver_location)
-                    if len(branches) > 1:
-                        for branch in branches:
-                            visit(branch.continuation)
-                        return
-                    node = branches[0].continuation
-                case g.Rec(body=body):
-                    node = body
-                case g.Parallel(branches=parts):
-                    for part in parts:
-                        visit(part)
-                    return
-                case _:
-                    return
-
-    visit(term)
+    _collect_roles(term, found, shared, summarising=False)
     return found
 
 
-def _channels(term: g.GlobalTerm) -> set[tuple[str, str]]:
+def _collect_roles(node: g.GlobalTerm, found: dict[str, Location], shared: Sharing,
+                   summarising: bool) -> None:
+    """Add the roles of ``node`` to ``found``; a shared node's roles are collected once."""
+    while True:  # a loop along sequences: they can be very long
+        if id(node) in shared.nodes and not summarising:
+            summary: dict[str, Location] | None = shared.get("roles", node)
+            if summary is None:
+                summary = {}
+                _collect_roles(node, summary, shared, summarising=True)
+                shared.put("roles", node, summary)
+            for role, location in summary.items():
+                found.setdefault(role, location)
+            return
+        summarising = False
+        match node:
+            case g.Choice(sender=sender, receiver=receiver, branches=branches):
+                found.setdefault(sender, node.location)
+                found.setdefault(receiver, node.receiver_location)
+                if len(branches) > 1:
+                    for branch in branches:
+                        _collect_roles(branch.continuation, found, shared, False)
+                    return
+                node = branches[0].continuation
+            case g.Rec(body=body):
+                node = body
+            case g.Parallel(branches=parts):
+                for part in parts:
+                    _collect_roles(part, found, shared, False)
+                return
+            case _:
+                return
+
+
+def _channels(term: g.GlobalTerm, shared: Sharing) -> frozenset[tuple[str, str]]:
+    known: frozenset[tuple[str, str]] | None = shared.get("channels", term) if id(term) in shared.nodes else None
+    if known is not None:
+        return known
     match term:
         case g.Choice(sender=sender, receiver=receiver, branches=branches):
-            out = {(sender, receiver)}
-            for b in branches:
-                out |= _channels(b.continuation)
-            return out
+            found = frozenset({(sender, receiver)}).union(
+                *([_channels(b.continuation, shared) for b in branches]))
         case g.Rec(body=body):
-            return _channels(body)
+            found = _channels(body, shared)
         case g.Parallel(branches=parts):
-            return set().union(*([_channels(p) for p in parts]))
-    return set()
+            found = frozenset().union(*([_channels(p, shared) for p in parts]))
+        case _:
+            found = frozenset()
+    if id(term) in shared.nodes:
+        shared.put("channels", term, found)
+    return found
 
 
-def _check_parallel_global(term: g.GlobalTerm, reporter: Reporter) -> None:
+def _check_parallel_global(term: g.GlobalTerm, reporter: Reporter, shared: Sharing) -> None:
     """Parallel branches must not share a directed channel."""
+    if id(term) in shared.nodes:
+        _once(term, reporter, shared, "parallel", lambda: _check_parallel_in(term, reporter, shared))
+    else:
+        _check_parallel_in(term, reporter, shared)
+
+
+def _check_parallel_in(term: g.GlobalTerm, reporter: Reporter, shared: Sharing) -> None:
     match term:
         case g.Choice(branches=branches):
             for b in branches:
-                _check_parallel_global(b.continuation, reporter)
+                _check_parallel_global(b.continuation, reporter, shared)
         case g.Rec(body=body):
-            _check_parallel_global(body, reporter)
+            _check_parallel_global(body, reporter, shared)
         case g.Parallel(branches=parts, location=location):
-            _report_shared([_channels(p) for p in parts], location, reporter,
+            _report_shared([_channels(p, shared) for p in parts], location, reporter,
                            lambda c: f"{c[0]} -> {c[1]}")
             for part in parts:
-                _check_parallel_global(part, reporter)
+                _check_parallel_global(part, reporter, shared)
 
 
-def _report_shared(channel_sets: list[set[tuple[str, str]]], location: Location,
+def _once(node: object, reporter: Reporter, shared: Sharing, table: str, check: Callable[[], None]) -> None:
+    """Run ``check`` on a shared node once; replay its diagnostics on later visits.
+
+    Replayed, not skipped: the caller looks at the diagnostics of each global.
+    """
+    done: tuple[Diagnostic, ...] | None = shared.get(table, node)
+    if done is not None:
+        reporter.diagnostics.extend(done)
+        return
+    mark = len(reporter.diagnostics)
+    check()
+    shared.put(table, node, tuple(reporter.diagnostics[mark:]))
+
+
+def _report_shared(channel_sets: list[frozenset[tuple[str, str]]], location: Location,
                    reporter: Reporter, show: Callable[[tuple[str, str]], str]) -> None:
     for i, first in enumerate(channel_sets):
         for j in range(i + 1, len(channel_sets)):
@@ -200,41 +242,56 @@ def _report_shared(channel_sets: list[set[tuple[str, str]]], location: Location,
                                f"{show(channel)}; each channel must belong to one branch")
 
 
-def _local_channels(term: lt.LocalTerm) -> set[tuple[str, str]]:
+def _local_channels(term: lt.LocalTerm, shared: Sharing) -> frozenset[tuple[str, str]]:
+    known: frozenset[tuple[str, str]] | None = shared.get("channels", term) if id(term) in shared.nodes else None
+    if known is not None:
+        return known
     match term:
         case lt.Send(peer=peer, continuation=cont):
-            return {("!", peer or "")} | _local_channels(cont)
+            found = frozenset({("!", peer or "")}) | _local_channels(cont, shared)
         case lt.Recv(peer=peer, continuation=cont):
-            return {("?", peer or "")} | _local_channels(cont)
+            found = frozenset({("?", peer or "")}) | _local_channels(cont, shared)
         case lt.Select(peer=peer, branches=branches) | lt.Offer(peer=peer, branches=branches):
             arrow = "!" if isinstance(term, lt.Select) else "?"
-            return {(arrow, peer or "")}.union(*([_local_channels(b.continuation) for b in branches]))
+            found = frozenset({(arrow, peer or "")}).union(
+                *([_local_channels(b.continuation, shared) for b in branches]))
         case lt.Rec(body=body):
-            return _local_channels(body)
+            found = _local_channels(body, shared)
         case lt.Parallel(branches=parts):
-            return set().union(*([_local_channels(p) for p in parts]))
-    return set()
+            found = frozenset().union(*([_local_channels(p, shared) for p in parts]))
+        case _:
+            found = frozenset()
+    if id(term) in shared.nodes:
+        shared.put("channels", term, found)
+    return found
 
 
-def _check_parallel_local(term: lt.LocalTerm, reporter: Reporter) -> None:
+def _check_parallel_local(term: lt.LocalTerm, reporter: Reporter, shared: Sharing) -> None:
+    if id(term) in shared.nodes:
+        _once(term, reporter, shared, "parallel", lambda: _check_parallel_local_in(term, reporter, shared))
+    else:
+        _check_parallel_local_in(term, reporter, shared)
+
+
+def _check_parallel_local_in(term: lt.LocalTerm, reporter: Reporter, shared: Sharing) -> None:
     match term:
         case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
-            _check_parallel_local(cont, reporter)
+            _check_parallel_local(cont, reporter, shared)
         case lt.Select(branches=branches) | lt.Offer(branches=branches):
             for b in branches:
-                _check_parallel_local(b.continuation, reporter)
+                _check_parallel_local(b.continuation, reporter, shared)
         case lt.Rec(body=body):
-            _check_parallel_local(body, reporter)
+            _check_parallel_local(body, reporter, shared)
         case lt.Parallel(branches=parts, location=location):
-            _report_shared([_local_channels(p) for p in parts], location, reporter,
+            _report_shared([_local_channels(p, shared) for p in parts], location, reporter,
                            lambda c: ("sending to " if c[0] == "!" else "receiving from ") + (c[1] or "the peer"))
             for part in parts:
-                _check_parallel_local(part, reporter)
+                _check_parallel_local(part, reporter, shared)
 
 
-def _check_local_forms(decl: s.LocalDecl, body: lt.LocalTerm, reporter: Reporter) -> None:
+def _check_local_forms(decl: s.LocalDecl, body: lt.LocalTerm, reporter: Reporter, shared: Sharing) -> None:
     """A local type is binary (no peers) or multiparty (every action names a peer), not both."""
-    peers = {peer for _, peer in _local_channels(body)}
+    peers = {peer for _, peer in _local_channels(body, shared)}
     if "" in peers and len(peers) > 1:
         reporter.error(decl.name.location, f"local {decl.name.text} mixes the binary form (no peer) "
                        "with the multiparty form (!Peer(msg)); use one of them")

@@ -16,6 +16,7 @@ from typing import Any, Literal
 from . import local_types as lt
 from .deep import run_deep
 from .location import Location
+from .printer import describe_local
 from .sorts import Message, Sort
 
 __all__ = ["Action", "Transition", "StateMachine", "build_state_machine", "build_term_machine"]
@@ -92,8 +93,8 @@ class StateMachine:
         return sorted(self.table[state].values(), key=lambda t: (t.action, t.peer or "", t.label))
 
     def describe(self, state: int) -> str:
-        """The remaining local type at ``state`` (its canonical print)."""
-        return str(self.terms[state])
+        """The remaining local type at ``state``: its canonical print, or its first step if very long."""
+        return describe_local(self.terms[state])
 
     # ---- export ----
     def to_dict(self) -> dict[str, Any]:

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from .location import NOWHERE, Location
+from .sharing import Sharing
 from .sorts import Message, Sort
 
 if TYPE_CHECKING:
@@ -92,6 +93,9 @@ class GlobalType:
         location: where the declaration starts.
         sorts: every sort declared in the file, by name.
         source_lines: the file's lines, for error messages.
+        shared: the nodes ``body`` shares with itself and with the other
+            globals of its file (a declaration referred to in several places
+            is one node), and projections of them, so projecting stays linear.
     """
 
     name: str
@@ -100,6 +104,7 @@ class GlobalType:
     location: Location = NOWHERE
     sorts: Mapping[str, Sort] = field(default_factory=dict, repr=False)
     source_lines: tuple[str, ...] = field(default=(), repr=False)
+    shared: Sharing = field(default_factory=Sharing, repr=False)
     # Projections are pure functions of the type; the check computes them all once.
     cached_projections: dict[str, LocalType] = field(default_factory=dict, init=False, repr=False)
 

@@ -16,6 +16,7 @@ from .errors import ProjectionError, UnknownRoleError
 from .location import Location
 from .merge import MergeError, merge
 from .recursion import free_vars, substitute, unfold  # re-exported
+from .sharing import Sharing, find_shared
 
 __all__ = ["project_global", "project", "merge", "MergeError", "unfold", "substitute", "free_vars"]
 
@@ -32,7 +33,7 @@ def project_global(global_type: g.GlobalType, role: str) -> lt.LocalType:
         return cached
     if role not in global_type.roles:
         raise UnknownRoleError(global_type.name, role, global_type.roles)
-    projector = _Projector(global_type.name, role, global_type.source_lines)
+    projector = _Projector(global_type.name, role, global_type.source_lines, global_type.shared)
     body = run_deep(projector.project, global_type.body)
     local = lt.LocalType(role, role, body, global_type.name, global_type.location)
     global_type.cached_projections[role] = local
@@ -41,7 +42,20 @@ def project_global(global_type: g.GlobalType, role: str) -> lt.LocalType:
 
 def project(term: g.GlobalTerm, role: str, protocol: str = "<global>") -> lt.LocalTerm:
     """Project a global type term onto ``role`` (see :func:`project_global`)."""
-    return run_deep(_Projector(protocol, role, ()).project, term)
+    nodes = find_shared(term, _children)
+    shared = Sharing(nodes)
+    return run_deep(_Projector(protocol, role, (), shared).project, term)
+
+
+def _children(term: g.GlobalTerm) -> list[g.GlobalTerm]:
+    match term:
+        case g.Choice(branches=branches):
+            return [b.continuation for b in branches]
+        case g.Rec(body=body):
+            return [body]
+        case g.Parallel(branches=parts):
+            return list(parts)
+    return []
 
 
 @dataclass
@@ -49,14 +63,35 @@ class _Projector:
     protocol: str
     role: str
     source_lines: tuple[str, ...]
+    # Nodes in several places (a declaration used twice): projected once, for
+    # every global of the module (see sessiontypes.sharing).
+    shared: Sharing
     _occurs: dict[int, bool] = field(default_factory=dict)
 
     def project(self, term: g.GlobalTerm) -> lt.LocalTerm:
         role = self.role
-        # Fast path: most interactions of a large protocol do not involve the role.
-        while (isinstance(term, g.Choice) and len(term.branches) == 1
-               and term.sender != role and term.receiver != role):
+        shared = self.shared.nodes
+        passed: list[g.GlobalTerm] | None = None  # shared nodes that project to the same
+        while True:
+            if shared and id(term) in shared:
+                known: lt.LocalTerm | None = self.shared.get(("project", role), term)
+                if known is not None:
+                    break
+                if passed is None:
+                    passed = []
+                passed.append(term)
+            # Fast path: most interactions of a large protocol do not involve the role.
+            if not (isinstance(term, g.Choice) and len(term.branches) == 1
+                    and term.sender != role and term.receiver != role):
+                known = self._project_node(term)
+                break
             term = term.branches[0].continuation
+        for node in passed or ():
+            self.shared.put(("project", role), node, known)
+        return known
+
+    def _project_node(self, term: g.GlobalTerm) -> lt.LocalTerm:
+        role = self.role
         if isinstance(term, g.Choice) and len(term.branches) == 1:
             only = term.branches[0]
             make = lt.Send if term.sender == role else lt.Recv
@@ -132,7 +167,7 @@ class _Projector:
         projectable.
         """
         exits: dict[str, g.Choice | None] = {}
-        self._collect_exits(loop.body, {loop.var: 1}, None, exits)
+        self._collect_exits(loop.body, {loop.var: 1}, None, exits, summarising=False)
         if len(exits) > 1:
             raise self._blame_exits(loop, exits)
         if not exits or "end" in exits:
@@ -141,15 +176,27 @@ class _Projector:
         return lt.Var(name, loop.location)
 
     def _collect_exits(self, term: g.GlobalTerm, bound: dict[str, int], choice: g.Choice | None,
-                       exits: dict[str, g.Choice | None]) -> None:
+                       exits: dict[str, g.Choice | None], summarising: bool) -> None:
         """Record where ``term`` can leave to; ``bound`` counts the loops entered per name.
 
         ``bound`` is one mutable counter, entered and left as the walk goes, so deep
-        nests of loops stay linear.
+        nests of loops stay linear. A shared node's exits are collected once, as
+        if no loop were entered (``summarising``), then filtered per use.
         """
         entered: list[str] = []
         try:
             while True:
+                if id(term) in self.shared.nodes and not summarising:
+                    summary: dict[str, g.Choice | None] | None = self.shared.get("exits", term)
+                    if summary is None:
+                        summary = {}
+                        self._collect_exits(term, {}, None, summary, summarising=True)
+                        self.shared.put("exits", term, summary)
+                    for name, inner in summary.items():
+                        if not bound.get(name):
+                            exits.setdefault(name, inner if inner is not None else choice)
+                    return
+                summarising = False
                 match term:
                     case g.End() | g.Parallel():  # a parallel composition ends when its branches do
                         exits.setdefault("end", choice)
@@ -165,7 +212,7 @@ class _Projector:
                     case g.Choice(branches=branches):
                         if len(branches) > 1:
                             for branch in branches:
-                                self._collect_exits(branch.continuation, bound, term, exits)
+                                self._collect_exits(branch.continuation, bound, term, exits, False)
                             return
                         term = branches[0].continuation
                     case _:
@@ -188,13 +235,15 @@ class _Projector:
 
     def _leads_to(self, term: g.GlobalTerm, exit_name: str) -> bool:
         found: dict[str, g.Choice | None] = {}
-        self._collect_exits(term, {}, None, found)
+        self._collect_exits(term, {}, None, found, summarising=False)
         return exit_name in found
 
     def occurs(self, term: g.GlobalTerm) -> bool:
         """Whether the role sends or receives anywhere in ``term``."""
         key = id(term)
         cached = self._occurs.get(key)
+        if cached is None and id(term) in self.shared.nodes:
+            cached = self.shared.get(("occurs", self.role), term)
         if cached is None:
             match term:
                 case g.Choice(sender=sender, receiver=receiver, branches=branches):
@@ -209,4 +258,6 @@ class _Projector:
                 case _:
                     cached = False
             self._occurs[key] = cached
+            if id(term) in self.shared.nodes:
+                self.shared.put(("occurs", self.role), term, cached)
         return cached

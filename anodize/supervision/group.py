@@ -6,6 +6,7 @@ import importlib
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from decimal import Decimal
 from enum import StrEnum
 from typing import Any
 
@@ -41,25 +42,44 @@ class FailurePolicy(StrEnum):
                                  f"{', '.join(p.value for p in cls)}, got {value!r}")
 
 
+# The largest limit a cgroup (an int64 of bytes, page aligned) can hold: a bound
+# above it could not be enforced, and is surely a typo.
+MAX_MEMORY_BOUND = 2**63 - 2**12
+
+
 def parse_memory(value: int | str | None) -> int | None:
     """``"64MiB"`` -> 67108864; ints are bytes; None stays None.
 
+    Decimal arithmetic, so ``"1.5GiB"`` is exact and no size overflows a float.
+
     Raises:
-        ValueError: not a size.
+        ConfigurationError: not a size, not positive, or above MAX_MEMORY_BOUND.
     """
     if value is None:
         return None
     if isinstance(value, int) and not isinstance(value, bool):
-        if value <= 0:
-            raise ConfigurationError(f"memory bound {value}: expected a positive number of bytes")
-        return value
-    if not isinstance(value, str):
-        raise ConfigurationError(f"memory bound {value!r}: expected a size such as 64MiB, 512KiB or 1GB")
-    match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([KkMmGg]i?[Bb]|[Bb])?\s*", value)
-    if not match or float(match.group(1)) <= 0:
-        raise ConfigurationError(f"memory bound {value!r}: expected a size such as 64MiB, 512KiB or 1GB")
-    number, unit = match.groups()
-    return int(float(number) * _UNITS[(unit or "").lower()])
+        size = value
+    elif isinstance(value, str):
+        match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([KkMmGg]i?[Bb]|[Bb])?\s*", value)
+        if not match:
+            raise ConfigurationError(f"memory bound {_shorten(value)}: expected a size such as 64MiB, "
+                                     "512KiB or 1GB")
+        number, unit = match.groups()
+        size = int(Decimal(number) * _UNITS[(unit or "").lower()])
+    else:
+        raise ConfigurationError(f"memory bound {_shorten(value)}: expected a size such as 64MiB, 512KiB or 1GB")
+    if size <= 0:
+        raise ConfigurationError(f"memory bound {_shorten(value)}: expected a positive size")
+    if size > MAX_MEMORY_BOUND:
+        raise ConfigurationError(f"memory bound {_shorten(value)}: larger than any limit the kernel can "
+                                 f"enforce ({MAX_MEMORY_BOUND} bytes, about 8 EiB)")
+    return size
+
+
+def _shorten(value: object) -> str:
+    """``repr(value)``, with the middle of a very long one left out."""
+    text = repr(value)
+    return text if len(text) <= 60 else f"{text[:28]}...{text[-28:]} ({len(text)} characters)"
 
 
 def resolve_function(reference: str) -> Callable[..., Any]:

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, NoReturn, TextIO
 import sessiontypes
 from sessiontypes import ProtocolError, ProtocolModule
 from sessiontypes.codegen import GeneratedModule, generate_modules
+from sessiontypes.printer import PrintTooLongError, print_local
 
 from ..errors import AnodizeError
 
@@ -200,10 +201,24 @@ def _project(args: argparse.Namespace) -> int:
     for gt in chosen:
         if len(chosen) > 1:
             lines.append(f"# {gt.name}")
-        lines.extend(f"{role} = {gt.project(role)}" for role in gt.roles if args.role is None or role == args.role)
+        lines.extend(f"{role} = {_printed(gt, role)}" for role in gt.roles if args.role is None or role == args.role)
     if lines:
         print("\n".join(lines))
     return EXIT_OK
+
+
+# A projection prints every use of a declaration in full: a file of n declarations
+# each using the next twice prints 2**n interactions. Refuse rather than run for ever.
+PRINT_LIMIT = 64 * 2**20
+
+
+def _printed(global_type: sessiontypes.GlobalType, role: str) -> str:
+    try:
+        return print_local(global_type.project(role).body, PRINT_LIMIT)
+    except PrintTooLongError:
+        raise AnodizeError(f"{global_type.name} projected onto {role} is longer than {PRINT_LIMIT} "
+                           "characters written out (declarations used in many places print in full at "
+                           "every use); 'anodize fsm' shows it as a state machine") from None
 
 
 def _generate(args: argparse.Namespace, modules: list[GeneratedModule]) -> int:

@@ -257,9 +257,9 @@ class _Reader:
         memory = table.get("memory")
         try:
             memory_bytes = parse_memory(memory)
-        except ValueError:
+        except ConfigurationError:
             raise self.error(f"{prefix}.memory", "expected a size such as \"64MiB\", \"512KiB\" or a "
-                                                 f"number of bytes, got {_show(memory)}") from None
+                                                 f"number of bytes, at most 8 EiB, got {_show(memory)}") from None
         on_failure = table.get("on_failure", "stop")
         if on_failure not in {p.value for p in FailurePolicy}:
             raise self.error(f"{prefix}.on_failure", f"expected one of "
@@ -304,6 +304,8 @@ def _show(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
+        if len(value) > 60:  # a mistake thousands of characters long need not be repeated whole
+            return f"{_show(value[:24])[:-1]}...{_show(value[-24:])[1:]} ({len(value)} characters)"
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(value, int | float):
         return repr(value)

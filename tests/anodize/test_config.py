@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from anodize.errors import ConfigurationError
+from anodize.supervision.group import parse_memory
 from anodize.tools.config import ConfigError, GroupConfig, SystemConfig, build_system, load_config
 from sessiontypes import ProtocolError
 
@@ -145,7 +147,17 @@ BAD = {
                        "groups.g.priority: expected an int 1..99, got 5.0"),
     "memory": (MINIMAL + GROUP + 'memory = "lots"\n',
                ('groups.g.memory: expected a size such as "64MiB", "512KiB" or a number of bytes, '
-                'got "lots"')),
+                'at most 8 EiB, got "lots"')),
+    "memory_overflowing_a_float": (MINIMAL + GROUP + f'memory = "{"9" * 400}MiB"\n',
+                                   ('groups.g.memory: expected a size such as "64MiB", "512KiB" or a number '
+                                    'of bytes, at most 8 EiB, got "999999999999999999999999...'
+                                    '999999999999999999999MiB" (403 characters)')),
+    "memory_beyond_any_limit": (MINIMAL + GROUP + 'memory = "1000000000000000000000GiB"\n',
+                                ('groups.g.memory: expected a size such as "64MiB", "512KiB" or a number '
+                                 'of bytes, at most 8 EiB, got "1000000000000000000000GiB"')),
+    "memory_beyond_any_limit_in_bytes": (MINIMAL + GROUP + "memory = 9223372036854775807\n",
+                                         ('groups.g.memory: expected a size such as "64MiB", "512KiB" or a '
+                                          'number of bytes, at most 8 EiB, got 9223372036854775807')),
     "cpus": (MINIMAL + GROUP + "cpus = [0, -1]\n",
              "groups.g.cpus: expected a non-empty array of CPU numbers, got [0, -1]"),
     "cpus_empty": (MINIMAL + GROUP + "cpus = []\n",
@@ -282,3 +294,21 @@ def test_the_example_in_the_readme_is_a_valid_system_file(tmp_path: Path) -> Non
     assert example, "README.md has a 'System files' section with a TOML example"
     config = load_config(write(tmp_path, example))
     assert (config.global_name, list(config.groups)) == ("Pipeline", ["control", "logging"])
+
+
+# ---- memory sizes -------------------------------------------------------------------
+
+@pytest.mark.parametrize(("text", "size"), [("64MiB", 64 * 2**20), ("1.5GiB", 3 * 2**29), ("1GB", 10**9),
+                                            ("512 KiB", 2**19), (4096, 4096), ("0.5b", 0)])
+def test_memory_sizes_are_exact(text: str | int, size: int) -> None:
+    if size == 0:
+        with pytest.raises(ConfigurationError, match="expected a positive size"):
+            parse_memory(text)
+    else:
+        assert parse_memory(text) == size
+
+
+@pytest.mark.parametrize("text", ["9" * 400 + "MiB", "1000000000000000000000GiB", 2**63, "8589934592GiB"])
+def test_a_memory_size_no_kernel_can_enforce_is_refused(text: str | int) -> None:
+    with pytest.raises(ConfigurationError, match="larger than any limit the kernel can enforce"):
+        parse_memory(text)

@@ -175,9 +175,10 @@ def test_names_of_awkward_labels_and_payload_types() -> None:
                      "def send_goal_pose(self, payload: State0_2) -> State7:",
                      "def recv_ok_prime(self, *, timeout: float | None = None) -> tuple[int, State8]:",
                      'self._recv("C", ("ok\'",), timeout)',
-                     "def fork(self) -> tuple[State9Branch1State0, State9Branch2State0]:",
-                     "def fork(self) -> tuple[State9Branch2Branch1State0, State9Branch2Branch2State0]:",
-                     "def select_stop(self, payload: bool) -> State9Branch1State1:"]:
+                     # both branches' `Parallel` is one shared fork state, so one fork
+                     "def fork(self) -> tuple[Branch1State0, Branch2State0]:",
+                     "def fork(self) -> tuple[Branch2Branch1State0, Branch2Branch2State0]:",
+                     "def select_stop(self, payload: bool) -> Branch1State1:"]:
         assert fragment in text
     assert snake_case("GoalPose") == "goal_pose"
     assert snake_case("HTTPRequest") == "http_request"
