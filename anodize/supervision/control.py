@@ -23,7 +23,7 @@ from typing import Any, ClassVar
 from ..transport.codec import Codec, DecodeError, FrameKind
 
 __all__ = [
-    "ControlTag", "Ready", "Beat", "RoleEnded", "MemoryExceeded", "Crash", "Go", "PeerFailed", "Stop",
+    "ControlTag", "Ready", "Beat", "RoleEnded", "MemoryExceeded", "Crash", "Notice", "Go", "PeerFailed", "Stop",
     "GroupMessage", "SupervisorMessage", "encode_control", "send_control", "decode_control", "FrameReader",
     "MAX_CONTROL_FRAME",
 ]
@@ -37,6 +37,7 @@ class ControlTag(IntEnum):
     ROLE_ENDED = 3
     MEMORY_EXCEEDED = 4
     CRASH = 5
+    NOTICE = 6
     GO = 20
     PEER_FAILED = 21
     STOP = 22
@@ -97,6 +98,14 @@ class Crash:
     error: dict[str, Any]
 
 
+@dataclass(frozen=True, kw_only=True)
+class Notice:
+    """A fact the group reports about its channels (e.g. samples rejected from a foreign DDS writer)."""
+
+    TAG: ClassVar[ControlTag] = ControlTag.NOTICE
+    text: str
+
+
 # ---- from the supervisor to a group ----------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class Go:
@@ -121,10 +130,10 @@ class Stop:
     TAG: ClassVar[ControlTag] = ControlTag.STOP
 
 
-GroupMessage = Ready | Beat | RoleEnded | MemoryExceeded | Crash
+GroupMessage = Ready | Beat | RoleEnded | MemoryExceeded | Crash | Notice
 SupervisorMessage = Go | PeerFailed | Stop
 _CLASSES: dict[int, type[Any]] = {cls.TAG: cls for cls in (Ready, Beat, RoleEnded, MemoryExceeded, Crash,
-                                                           Go, PeerFailed, Stop)}
+                                                           Notice, Go, PeerFailed, Stop)}
 _CODEC = Codec()  # no payload classes: control messages are plain data only
 
 

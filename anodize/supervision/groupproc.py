@@ -53,6 +53,7 @@ from .control import (
     Go,
     GroupMessage,
     MemoryExceeded,
+    Notice,
     PeerFailed,
     Ready,
     RoleEnded,
@@ -164,6 +165,16 @@ class _GroupProcess:
         spec = self.spec
         classes = _payload_classes(spec.machines.values())
         local = set(spec.roles)
+        doorbell_roles = [r for r, m in spec.machines.items() if m.forks]
+        dds = spec.extra.get("dds")
+        if dds is not None:  # every channel between groups is a DDS topic; arrays travel in the frames
+            from ..transport.dds import DdsNetwork
+
+            network = DdsNetwork(dds, spec.name, spec.incarnation, spec.roles, spec.channels, spec.dead,
+                                 lambda pair: make_codec(classes, None, None), doorbell_roles,
+                                 report=lambda line: self._send(Notice(text=line)))
+            network.wait_for_peers()  # the start barrier: "ready" means every peer has appeared
+            return network
 
         def codec_for(pair: tuple[str, str]) -> Codec:
             sender, receiver = pair
@@ -179,7 +190,6 @@ class _GroupProcess:
             return make_codec(classes, ring, None)
 
         fds = {pair: conn.fileno() for pair, conn in self.pipes.items()}
-        doorbell_roles = [r for r, m in spec.machines.items() if m.forks]
         return ProcessNetwork(spec.roles, spec.channels, fds, spec.dead, codec_for, doorbell_roles)
 
     def _gone(self, receiver: str) -> str | None:
@@ -241,6 +251,9 @@ class _GroupProcess:
             if report.status is RoleStatus.FAILED:
                 self.network.fail(report.name, describe_error(report.error))
         self._heartbeat(final=True)
+        close = getattr(self.network, "close", None)
+        if close is not None:  # a DDS network: what was written reaches its readers before we exit
+            close()
 
     def _heartbeat(self, final: bool = False) -> None:
         used = max(0, (data_size() or self.baseline) - self.baseline)

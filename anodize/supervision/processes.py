@@ -84,6 +84,7 @@ class ProcessRunner:
         self.pending: list[Event] = []
         self.next_memory_check = 0.0
         self.watchdog = Watchdog(WATCHDOG_LIMIT, self._demoted)
+        self.start_timeout = _START_TIMEOUT
         remove_stale_segments()  # of earlier runs whose supervisor was killed
         remove_stale_cgroups()
 
@@ -215,6 +216,8 @@ class ProcessRunner:
                 self._fail(inc, error_from_data(message.error))
             case control.Crash():
                 self._fail(inc, error_from_data(message.error))
+            case control.Notice():  # the group's own words: shown as what it says, not as a finding
+                self.pending.append(Note(group=name, text=f"group {name} reports: {message.text[:2000]}"))
             case _:
                 self._fail(inc, RoleError("ControlError", f"a group may not send {type(message).__name__}"))
                 self.kill(inc.group.name)
@@ -312,9 +315,9 @@ class ProcessRunner:
 
     def _check_start_timeouts(self) -> None:
         for inc in self.current.values():
-            if not inc.ready and not inc.ended and time.monotonic() - inc.started_at > _START_TIMEOUT:
+            if not inc.ready and not inc.ended and time.monotonic() - inc.started_at > self.start_timeout:
                 self._fail(inc, RoleError("StartTimeout", f"group {inc.group.name}'s process did not get ready "
-                                                          f"within {_START_TIMEOUT:g} s (importing its roles?)"))
+                                                          f"within {self.start_timeout:g} s (importing its roles?)"))
                 self.kill(inc.group.name)
 
     @staticmethod

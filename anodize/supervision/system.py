@@ -10,9 +10,10 @@ builds the :class:`RunReport`. ``run`` always returns a report.
 from __future__ import annotations
 
 import os
+import socket
 from collections.abc import Callable
 
-from sessiontypes import GlobalType
+from sessiontypes import GlobalType, StateMachine
 from sessiontypes.graph import communication_graph
 
 from ..errors import AnodizeError, ConfigurationError
@@ -23,7 +24,7 @@ from .threads import ThreadRunner
 
 __all__ = ["System"]
 
-TRANSPORTS = ("inproc", "process")
+TRANSPORTS = ("inproc", "process", "dds")
 
 
 class System:
@@ -31,23 +32,34 @@ class System:
 
     Args:
         global_type: the checked global type every channel follows.
-        transport: ``"inproc"`` (every role is a thread of this process) or
-            ``"process"`` (each group is its own OS process; its roles are threads in it).
+        transport: ``"inproc"`` (every role is a thread of this process),
+            ``"process"`` (each group is its own OS process; its roles are threads in it)
+            or ``"dds"`` (as "process", but channels between groups are DDS topics on
+            Cyclone DDS, so groups may run on several hosts).
         monitors: False turns the run-time checks off (for measurements only).
+        domain: ``transport="dds"``: the DDS domain id (the environment variable
+            ``ANODIZE_DDS_DOMAIN`` overrides it).
+        run_id: ``transport="dds"``: keeps two runs of the same system on one domain
+            apart; every host of a run must use the same one.
     """
 
-    def __init__(self, global_type: GlobalType, transport: str = "inproc", monitors: bool = True) -> None:
+    def __init__(self, global_type: GlobalType, transport: str = "inproc", monitors: bool = True,
+                 domain: int = 0, run_id: str = "") -> None:
         if transport not in TRANSPORTS:
             raise ConfigurationError(f"transport {transport!r}: expected one of {', '.join(TRANSPORTS)}")
+        if isinstance(domain, bool) or not isinstance(domain, int) or not 0 <= domain <= 232:
+            raise ConfigurationError(f"domain {domain!r}: expected a DDS domain id 0..232")
         self.global_type = global_type
         self.transport = transport
         self.monitors = monitors
+        self.domain = domain
+        self.run_id = run_id or global_type.name
         self.groups: dict[str, Group] = {}
         self._placed: dict[str, str] = {}
 
     def group(self, name: str, priority: int | None = None, memory: int | str | None = None,
               cpus: set[int] | frozenset[int] | None = None, on_failure: str = FailurePolicy.STOP,
-              max_restarts: int = 3) -> Group:
+              max_restarts: int = 3, host: str | None = None) -> Group:
         """Declare a group; add its roles with ``.role(name, function)``.
 
         Args:
@@ -58,6 +70,7 @@ class System:
             on_failure: ``"stop"`` (the group stops, its peers get ``PeerFailedError``),
                 ``"restart"`` (it starts again from its initial states, at most
                 ``max_restarts`` times) or ``"stop-system"`` (every group stops).
+            host: ``transport="dds"``: the host it runs on (see :meth:`run`'s ``host``).
 
         Raises:
             ConfigurationError: (a ``ValueError``) a duplicate name, a priority outside 1..99, a bad memory size,
@@ -80,7 +93,9 @@ class System:
             if not cpus or not cpus <= available or any(isinstance(c, bool) for c in cpus):
                 raise ConfigurationError(f"group {name}: cpus {sorted(cpus)} must be a non-empty subset of "
                                  f"the CPUs this process may use {sorted(available)}")
-        group = Group(name, priority, parse_memory(memory), cpus or None, policy, max_restarts,
+        if host is not None and (not isinstance(host, str) or not host.isidentifier()):
+            raise ConfigurationError(f"group {name}: host {host!r}: expected a name such as robot or base_1")
+        group = Group(name, priority, parse_memory(memory), cpus or None, policy, max_restarts, host,
                       _system=self)
         self.groups[name] = group
         return group
@@ -96,13 +111,13 @@ class System:
             resolve_function(function)  # fail now, not in the group's process
         elif not callable(function):
             raise ConfigurationError(f"role {role}: expected a function, got {type(function).__name__}")
-        if self.transport == "process":
+        if self.transport != "inproc":
             reference_of(function)  # another process must be able to import it
         self._placed[role] = group.name
 
     def run(self, timeout: float | None = None, grace: float = 2.0,
             on_status: Callable[[dict[str, GroupStatus]], None] | None = None,
-            liveness: float = 2.0) -> RunReport:
+            liveness: float = 2.0, host: str | None = None, wait: float = 30.0) -> RunReport:
         """Run every role to the end of its local type (or until ``timeout`` seconds).
 
         Roles still running at the timeout are stopped (``RoleStopped`` is raised in
@@ -117,6 +132,12 @@ class System:
         ``liveness`` seconds (frozen, stopped, or in a call that holds the GIL) is failed
         and its policy applies.
 
+        With ``transport="dds"``, ``host`` runs only the groups placed on that host
+        (the others are started on theirs, with the same run id and domain); None runs
+        every group here. The roles start once every group has found its peers on
+        the domain; a group whose peers do not all appear within ``wait`` seconds
+        fails, naming the groups and hosts that never did.
+
         Raises:
             AnodizeError: some role of the global type is in no group.
         """
@@ -129,6 +150,8 @@ class System:
         machines = {role: gt.project(role).fsm() for role in gt.roles}
         channels = tuple(communication_graph(gt).edges)
         runner: Runner
+        if self.transport == "dds":
+            return self._run_dds(machines, channels, timeout, grace, on_status, liveness, host, wait)
         if self.transport == "process":
             from .processes import ProcessRunner  # the inproc path never needs it
 
@@ -136,3 +159,35 @@ class System:
         else:
             runner = ThreadRunner(gt, machines, channels, self.groups, self.monitors)
         return Supervisor(gt.name, gt.roles, self.groups, channels, runner, timeout, grace, on_status).run()
+
+    def _run_dds(self, machines: dict[str, StateMachine], channels: tuple[tuple[str, str], ...],
+                 timeout: float | None, grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None,
+                 liveness: float, host: str | None, wait: float) -> RunReport:
+        from ..transport.dds import DOMAIN_ENV, DdsSettings  # only a DDS run loads Cyclone DDS
+        from .ddsrunner import DdsRunner
+
+        if not wait > 0:
+            raise ConfigurationError(f"wait {wait!r}: expected a number of seconds > 0")
+        hosts = {g.host for g in self.groups.values() if g.host is not None}
+        if host is not None and host not in hosts:
+            raise ConfigurationError(f"no group runs on host {host!r}; the system's hosts are "
+                                     f"{', '.join(sorted(hosts)) or 'none (give groups a host)'}")
+        here = socket.gethostname() if host is None else host
+        host_of = {name: g.host or here for name, g in self.groups.items()}
+        local = {name: g for name, g in self.groups.items() if host is None or g.host == host}
+        domain = self.domain
+        if os.environ.get(DOMAIN_ENV):
+            try:
+                domain = int(os.environ[DOMAIN_ENV])
+            except ValueError:
+                raise ConfigurationError(f"{DOMAIN_ENV}={os.environ[DOMAIN_ENV]!r}: expected a DDS domain id") from None
+        settings = DdsSettings(domain=domain, run_id=self.run_id, host=here,
+                               group_of=dict(self._placed),
+                               host_of=host_of, wait=wait)
+        elsewhere = {name: host_of[name] for name in self.groups if name not in local}
+        local_roles = [role for role in self.global_type.roles if self._placed[role] in local]
+        local_channels = tuple((a, b) for a, b in channels if a in local_roles and b in local_roles)
+        runner = DdsRunner(self.global_type.name, machines, channels, local, self.monitors, settings, elsewhere,
+                           liveness)
+        return Supervisor(self.global_type.name, local_roles, local, local_channels, runner, timeout, grace,
+                          on_status).run()

@@ -18,16 +18,17 @@ import select
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from queue import Empty, SimpleQueue
+from typing import Any, Protocol, runtime_checkable
 
 from ..errors import AnodizeError, PeerFailedError, RoleStopped
-from ..session.channel import STOP, Corrupt, PeerFailure
+from ..session.channel import STOP, Channel, Corrupt, PeerFailure
 from .codec import HEADER, MAX_FRAME, Codec, DecodeError, EncodeError, FrameKind
 from .inproc import InprocNetwork
 from .shm import ArrayRing
 
-__all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "PayloadError", "BridgeQueue"]
+__all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "PayloadError", "BridgeQueue", "FailureWriter"]
 
 # Reads of at most 64 KiB: larger ones make malloc mmap and munmap a buffer on every call.
 _READ_SIZE = 64 * 1024
@@ -35,6 +36,13 @@ _PIPE_SIZE = 1 << 20  # ask the kernel for 1 MiB pipes: fewer blocked senders wh
 BRIDGE_MESSAGES = 256  # a bridged channel's queue holds at most this many messages...
 BRIDGE_BYTES = 4 * 2**20  # ...and this many bytes of frames: then the pipe fills and its sender blocks
 _EOF_CAUSE_WAIT = 2.0  # seconds to wait for the supervisor's word on why a peer's process ended
+
+
+@runtime_checkable
+class FailureWriter(Protocol):
+    """The sending end of a channel to another process: it can say, from any thread, that its role failed."""
+
+    def put_failure(self, cause: str) -> None: ...
 
 
 class PayloadError(AnodizeError):
@@ -254,7 +262,7 @@ class ProcessNetwork(InprocNetwork):
         channels: every ordered pair the global type connects.
         pipes: for each pair with one end here and the other in another group, the
             pipe's file descriptor (the write end for our senders, the read end for
-            our receivers).
+            our receivers); a subclass's own link (see ``_writer`` / ``_reader``).
         dead: pairs whose other end cannot be reached (its group did not start with
             this one), with the reason; sending or receiving there fails at once.
         codec_for: builds the codec of a channel (its payload classes and rings).
@@ -263,7 +271,7 @@ class ProcessNetwork(InprocNetwork):
     """
 
     def __init__(self, local_roles: Iterable[str], channels: Iterable[tuple[str, str]],
-                 pipes: dict[tuple[str, str], int], dead: dict[str, str],
+                 pipes: Mapping[tuple[str, str], Any], dead: dict[str, str],
                  codec_for: Callable[[tuple[str, str]], Codec], doorbell_roles: Iterable[str] = ()) -> None:
         self.local_roles = frozenset(local_roles)
         local_pairs = [(a, b) for a, b in channels if a in self.local_roles and b in self.local_roles]
@@ -276,22 +284,34 @@ class ProcessNetwork(InprocNetwork):
         for role, cause in dead.items():
             self.failed[role] = cause
             self.alarm = True
-        for (sender, receiver), fd in pipes.items():
+        for (sender, receiver), link in pipes.items():
             codec = codec_for((sender, receiver))
             if sender in self.local_roles:
-                self.queues[(sender, receiver)] = PipeSender(fd, codec, self, sender, receiver)
+                self.queues[(sender, receiver)] = self._writer(link, codec, sender, receiver)
             elif receiver in self.doorbells:
-                self.queues[(sender, receiver)] = self._bridge(PipeReceiver(fd, codec, self, sender),
+                self.queues[(sender, receiver)] = self._bridge(self._reader(link, codec, sender, receiver),
                                                                sender, receiver)
             else:
-                self.queues[(sender, receiver)] = PipeReceiver(fd, codec, self, sender)
+                self.queues[(sender, receiver)] = self._reader(link, codec, sender, receiver)
         for sender, receiver in channels:  # channels to or from a peer that is not there
             if (sender, receiver) not in self.queues and receiver in self.local_roles:
                 gone: SimpleQueue[object] = SimpleQueue()
                 gone.put(PeerFailure(sender, dead.get(sender, "not running")))
                 self.queues[(sender, receiver)] = gone
 
-    def _bridge(self, source: PipeReceiver, sender: str, receiver: str) -> BridgeQueue:
+    # The two ends of a channel between processes; another transport gives its own.
+    def _writer(self, link: Any, codec: Codec, sender: str, receiver: str) -> Channel:
+        return PipeSender(link, codec, self, sender, receiver)
+
+    def _reader(self, link: Any, codec: Codec, sender: str, receiver: str) -> Channel:
+        return PipeReceiver(link, codec, self, sender)
+
+    def _silence(self, pair: tuple[str, str]) -> None:
+        """Our receiver of ``pair`` failed: its blocked senders in other processes must notice."""
+        if pair in self.incoming_fds:
+            _silence(self.incoming_fds[pair])  # its blocked senders get EPIPE
+
+    def _bridge(self, source: Any, sender: str, receiver: str) -> BridgeQueue:
         """A thread moving frames from a pipe into a local queue, ringing the doorbell.
 
         The queue is bounded: when the role falls behind, the thread stops reading, the
@@ -338,11 +358,11 @@ class ProcessNetwork(InprocNetwork):
             self.failed[role] = cause
             self.alarm = True
         for (sender, receiver), channel in self.queues.items():
-            if receiver == role and (sender, receiver) in self.incoming_fds:
-                _silence(self.incoming_fds[(sender, receiver)])  # its blocked senders get EPIPE
+            if receiver == role:
+                self._silence((sender, receiver))
             if sender != role:
                 continue
-            if isinstance(channel, PipeSender):
+            if isinstance(channel, FailureWriter):
                 channel.put_failure(cause)
             else:
                 channel.put(PeerFailure(role, cause))

@@ -1,0 +1,74 @@
+"""The runner of ``transport="dds"``: the groups of this host as processes, joined to the rest by DDS.
+
+It is the process runner (:mod:`.processes`: isolation, memory bounds, priorities,
+liveness of the local groups) without pipes: each group's process joins the
+run's DDS domain, opens a topic per channel it has with another group, and
+reports ready only once every peer has appeared (the start barrier,
+:meth:`anodize.transport.dds.DdsNetwork.wait_for_peers`). Groups placed on other
+hosts are started there, by ``anodize run ... --host``; this host's report names
+them as running elsewhere.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+from sessiontypes import StateMachine
+
+from ..transport.dds import DdsSettings
+from . import processes
+from .group import Group, reference_of
+from .groupproc import GroupSpec, group_main
+from .processes import ProcessRunner, _Incarnation, _sys_path
+
+__all__ = ["DdsRunner"]
+
+
+class DdsRunner(ProcessRunner):
+    """Starts this host's groups; see the module docstring.
+
+    Args:
+        settings: the run's DDS settings (``host`` is this host).
+        elsewhere: the groups of the system that run on other hosts, by name -> host.
+    """
+
+    transport = "dds"
+
+    def __init__(self, protocol: str, machines: dict[str, StateMachine], channels: Sequence[tuple[str, str]],
+                 groups: dict[str, Group], monitors: bool, settings: DdsSettings, elsewhere: dict[str, str],
+                 liveness: float = 2.0) -> None:
+        super().__init__(protocol, machines, channels, groups, monitors, liveness)
+        self.settings = settings
+        self.elsewhere = elsewhere
+        # The start barrier may wait for other hosts: the start-up deadline allows for it.
+        self.start_timeout = processes._START_TIMEOUT + settings.wait
+
+    def start(self, groups: Sequence[str], incarnation: int) -> None:
+        """Start ``groups``; their channels to every other group are DDS topics."""
+        for name in groups:
+            group = self.groups[name]
+            spec = GroupSpec(
+                run_id=self.run_id, name=name, incarnation=incarnation, protocol=self.protocol,
+                roles={role: reference_of(fn) for role, fn in group.roles.items()},
+                machines={role: self.machines[role] for role in group.roles},
+                channels=self.channels, dead={}, monitors=self.monitors,
+                priority=group.priority, cpus=group.cpus, memory=group.memory,
+                sys_path=tuple(p for p in _sys_path() if p),
+                extra={"dds": replace(self.settings, host=self.settings.host_of.get(name, self.settings.host))})
+            parent_end, child_end = self.context.Pipe()
+            process = self.context.Process(target=group_main, args=(spec, child_end, {}),
+                                           name=f"anodize:{name}", daemon=True)
+            process.start()
+            child_end.close()
+            self.current[name] = _Incarnation(group, incarnation, process, parent_end)
+
+    def notes(self) -> list[str]:
+        notes = super().notes()
+        settings = self.settings
+        notes.append(f"DDS domain {settings.domain}, run {settings.run_id}, host {settings.host}; "
+                     f"liveliness lease {settings.lease:g} s; start barrier waits {settings.wait:g} s")
+        if self.elsewhere:
+            notes.append("groups running elsewhere: " + ", ".join(
+                f"{name} on host {host}" for name, host in sorted(self.elsewhere.items())))
+        return notes

@@ -1,0 +1,495 @@
+"""Channels between groups as DDS topics on Cyclone DDS: ``transport="dds"``.
+
+Each group is still its own process (as with ``transport="process"``); channels
+inside it stay queues, and every channel between roles of different groups is
+one DDS topic, ``anodize/<run id>/<sender>/<receiver>``, with one writer (in the
+sender's group) and one reader (in the receiver's). The groups may run on other
+hosts: they find each other by DDS discovery on the run's domain.
+
+- **Nothing lost, duplicated or reordered**: reliable, keep-all history on both
+  ends. The reader's resource limits bound what waits at the receiver; when it is
+  full the writer's unacknowledged data grows until Cyclone refuses a write, and
+  the sender waits (back pressure), retrying in short steps that release the GIL
+  (a blocking write in the Python binding would hold it).
+- **Raw bytes**: the topic type is ``anodize::Frame { sequence<octet> data; }``;
+  frames of :mod:`.codec` are written as CDR built here and taken as raw CDR, so a
+  900 KB array costs a copy, not the binding's element-by-element encoding.
+- **Who may speak**: every writer carries its identity in its USER_DATA QoS (run
+  id, group, incarnation, host, pid). A reader accepts samples only from the one
+  writer of the expected group, chosen at the start barrier; samples from any
+  other writer are dropped, counted and reported with the writer's GUID and
+  claimed identity. This keeps other runs and stray programs out; it is not
+  security: anyone on the network can claim an identity first (see the README).
+- **Failures**: writers assert liveliness automatically with a lease of
+  ``lease`` seconds and the participant's discovery lease is the same, so a group
+  whose process dies, freezes or is cut off loses its writers and readers within
+  about one lease; a blocked receiver then gets a :class:`PeerFailure`, a blocked
+  sender a ``PeerFailedError``. A role that fails in a live process has a failure
+  frame written after its last message, as with pipes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import struct
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from queue import Empty
+from typing import Any
+
+from cyclonedds._clayer import ddspy_take, ddspy_write
+from cyclonedds.core import DDSException, InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from ..errors import AnodizeError, PeerFailedError, RoleStopped
+from ..session.channel import STOP, Corrupt, PeerFailure
+from .codec import HEADER, MAX_FRAME, Codec, DecodeError, EncodeError, FrameKind
+from .dds_types import Frame
+from .process import PayloadError, ProcessNetwork
+
+__all__ = ["DdsSettings", "DdsNetwork", "DdsSender", "DdsReceiver", "Frame", "topic_name", "identity_of",
+           "participant_config", "DOMAIN_ENV", "StartBarrierError"]
+
+DOMAIN_ENV = "ANODIZE_DDS_DOMAIN"  # overrides the system file's domain
+_TIMEOUT = -10  # DDS_RETCODE_TIMEOUT: a write found no room within its blocking time
+_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+_READER_SAMPLES = 64  # samples waiting at a receiver before its writer is held back
+_WRITE_BLOCK = duration(milliseconds=2)  # the longest a write holds the GIL waiting for room
+_POLL = 0.05  # seconds between looks at a peer's liveliness while waiting
+_TAKE = 32  # samples taken per call
+_LENGTH = struct.Struct("<I")
+
+
+_CDR_HEADER = Frame(data=[]).serialize()[:4]  # type: ignore[arg-type]  # the encapsulation the binding itself writes
+
+
+class StartBarrierError(AnodizeError):
+    """Peers of a group did not appear on the DDS domain in time."""
+
+
+@dataclass(frozen=True)
+class DdsSettings:
+    """What a group's process needs to join its run on DDS (picklable, in the group's spec).
+
+    Attributes:
+        domain: the DDS domain id.
+        run_id: keeps two runs of the same system apart (part of every topic name).
+        host: the host this group runs on (for messages and identities).
+        group_of: role -> group, for every role of the system.
+        host_of: group -> host, for every group of the system.
+        lease: seconds of liveliness lease (a silent peer is failed after about this).
+        wait: seconds the start barrier waits for every peer.
+    """
+
+    domain: int
+    run_id: str
+    host: str
+    group_of: Mapping[str, str]
+    host_of: Mapping[str, str]
+    lease: float = 1.0
+    wait: float = 30.0
+    extra_config: str = field(default="")
+
+    def where(self, role: str) -> str:
+        group = self.group_of[role]
+        return f"group {group} on host {self.host_of.get(group, '?')}"
+
+
+def topic_name(run_id: str, sender: str, receiver: str) -> str:
+    """The channel's topic: DDS names allow letters, digits, ``_`` and ``/``."""
+    return "anodize/" + "/".join(_safe(part) for part in (run_id, sender, receiver))
+
+
+def _safe(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_]", lambda m: f"_{ord(m.group()):x}_", text)
+
+
+def identity_of(run_id: str, group: str, incarnation: int, host: str) -> bytes:
+    """What a writer says it is (its USER_DATA)."""
+    return f"anodize1;{run_id};{group};{incarnation};{host};{os.getpid()}".encode()
+
+
+def _parse_identity(data: bytes | None) -> tuple[str, str, int, str, int] | None:
+    try:
+        tag, run_id, group, incarnation, host, pid = (data or b"").decode().split(";")
+        return (run_id, group, int(incarnation), host, int(pid)) if tag == "anodize1" else None
+    except (UnicodeDecodeError, ValueError):
+        return None
+
+
+def participant_config(lease: float) -> str:
+    """Cyclone configuration for a group: a discovery lease of ``lease`` seconds, so a vanished
+    participant (process killed, host cut off) is dropped, and its endpoints unmatched, that fast."""
+    return (f"<CycloneDDS><Domain id=\"any\"><Discovery><LeaseDuration>{lease:g}s</LeaseDuration>"
+            "</Discovery></Domain></CycloneDDS>")
+
+
+class _Endpoints:
+    """A group's participant, and the QoS of its channels."""
+
+    def __init__(self, settings: DdsSettings, group: str, incarnation: int) -> None:
+        self.settings = settings
+        # Ours last: Cyclone merges comma-separated configurations, later ones winning.
+        previous = os.environ.get("CYCLONEDDS_URI", "")
+        os.environ["CYCLONEDDS_URI"] = ",".join(p for p in (previous, participant_config(settings.lease)) if p)
+        self.participant = DomainParticipant(settings.domain)
+        lease = duration(seconds=settings.lease)
+        self.identity = identity_of(settings.run_id, group, incarnation, settings.host)
+        self.writer_qos = Qos(Policy.Reliability.Reliable(_WRITE_BLOCK), Policy.History.KeepAll,
+                              Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
+        self.reader_qos = Qos(Policy.Reliability.Reliable(_WRITE_BLOCK), Policy.History.KeepAll,
+                              Policy.ResourceLimits(max_samples=_READER_SAMPLES),
+                              Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
+        self.topics: dict[tuple[str, str], Topic[Frame]] = {}
+
+    def topic(self, pair: tuple[str, str]) -> Topic[Frame]:
+        if pair not in self.topics:
+            self.topics[pair] = Topic(self.participant, topic_name(self.settings.run_id, *pair), Frame)
+        return self.topics[pair]
+
+
+class DdsSender:
+    """The writing end of a channel to a role in another group (over DDS)."""
+
+    def __init__(self, endpoints: _Endpoints, codec: Codec, network: DdsNetwork, sender: str, receiver: str) -> None:
+        self.codec = codec
+        self.network = network
+        self.sender = sender
+        self.receiver = receiver
+        self.writer: DataWriter[Frame] = DataWriter(endpoints.participant, endpoints.topic((sender, receiver)),
+                                                    qos=endpoints.writer_qos)
+        self._ref = self.writer._ref
+        self._lock = threading.Lock()  # a failure frame must not interleave with a message
+        self.matched = False  # the start barrier saw the receiver's reader
+
+    def put(self, item: object) -> None:
+        """Send ``(label, payload)``, or a :class:`PeerFailure` saying why we stop.
+
+        Raises:
+            PayloadError: the payload cannot travel (nothing was sent).
+            PeerFailedError: the receiver's reader is gone (its group ended or was cut off).
+        """
+        if type(item) is tuple:
+            try:
+                frame = self.codec.message_frame(item[0], item[1])
+            except EncodeError as error:
+                raise PayloadError(f"role {self.sender}: cannot send {item[0]} to {self.receiver}: "
+                                   f"{error}") from None
+        elif isinstance(item, PeerFailure):
+            frame = Codec.failure_frame(item.cause)
+        else:
+            return  # STOP is local to each process
+        with self._lock:
+            self._write(_cdr(frame))
+
+    def _write(self, sample: bytes, give_up: float | None = None) -> None:
+        pause = 0.0002
+        while True:
+            if self.matched and _matched_readers(self.writer) == 0:
+                raise self._peer_gone()
+            ret = ddspy_write(self._ref, sample)
+            if ret == 0:
+                return
+            if ret != _TIMEOUT:
+                raise AnodizeError(f"DDS write on {self.sender}->{self.receiver} failed: {DDSException(ret)}")
+            if self.network.stopping:
+                raise RoleStopped(f"interrupted sending to {self.receiver}")
+            if self.receiver in self.network.failed:
+                raise self._peer_gone()
+            if give_up is not None and time.monotonic() > give_up:
+                return
+            time.sleep(pause)  # releases the GIL: the group's other threads run on
+            pause = min(pause * 2, 0.005)
+
+    def put_failure(self, cause: str) -> None:
+        """Best effort, from another thread: tell the receiver this sender failed."""
+        if self._lock.acquire(timeout=1.0):
+            try:
+                with contextlib.suppress(AnodizeError, PeerFailedError, RoleStopped):
+                    self._write(_cdr(Codec.failure_frame(cause)), give_up=time.monotonic() + 1.0)
+            finally:
+                self._lock.release()
+
+    def buffer(self, shape: tuple[int, ...], dtype: object) -> object:
+        """A numpy array to fill and send (DDS copies it into the sample anyway)."""
+        import numpy as np
+
+        return np.empty(shape, dtype)  # type: ignore[call-overload]
+
+    def get(self, *, timeout: float | None = None) -> object:
+        """Never used: this is the writing end.
+
+        Raises:
+            AnodizeError: always.
+        """
+        raise AnodizeError(f"the channel {self.sender}->{self.receiver} is read in {self.receiver}'s group")
+
+    def get_nowait(self) -> object:
+        """Never used: as :meth:`get`."""
+        return self.get()
+
+    def empty(self) -> bool:
+        """True: nothing arrives at the writing end."""
+        return True
+
+    def _peer_gone(self) -> BaseException:
+        cause = self.network.failed.get(self.receiver)
+        if cause is None:
+            cause = (f"its reader went away ({self.network.settings.where(self.receiver)} ended, "
+                     "or stopped answering, or was cut off)")
+        return PeerFailedError(self.sender, self.receiver, cause)
+
+
+class DdsReceiver:
+    """The reading end of a channel from a role in another group (one reading thread)."""
+
+    def __init__(self, endpoints: _Endpoints, codec: Codec, network: DdsNetwork, sender: str, receiver: str) -> None:
+        self.codec = codec
+        self.network = network
+        self.sender = sender
+        self.receiver = receiver
+        self.reader: DataReader[Frame] = DataReader(endpoints.participant, endpoints.topic((sender, receiver)),
+                                                    qos=endpoints.reader_qos)
+        self._ref = self.reader._ref
+        self.waitset = WaitSet(endpoints.participant)
+        self.waitset.attach(ReadCondition(self.reader, _ANY))
+        self.accepted: int | None = None  # the publication handle of the one writer we listen to
+        self.accepted_guid = ""
+        self.frame_size = 0
+        self._samples: deque[bytes] = deque()
+        self._pushed: deque[object] = deque()
+        self._lost: str | None = None
+        self.rejected: dict[str, list[Any]] = {}  # foreign writer GUID -> [count, identity]
+
+    # ---- start barrier --------------------------------------------------------------------
+    def find_writer(self) -> bool:
+        """Accept the writer of the expected group, if it has matched (the start barrier)."""
+        if self.accepted is not None:
+            return True
+        settings = self.network.settings
+        expected = settings.group_of[self.sender]
+        for handle in self.reader.get_matched_publications():
+            data = self.reader.get_matched_publication_data(handle)
+            if data is None:
+                continue
+            identity = _parse_identity(_userdata(data.qos))
+            if identity is not None and identity[0] == settings.run_id and identity[1] == expected:
+                self.accepted, self.accepted_guid = handle, str(data.key)
+                return True
+        return False
+
+    # ---- the Channel protocol ---------------------------------------------------------------
+    def put(self, item: object) -> None:
+        """Put back a sentinel (a failure or STOP) for the next receive."""
+        self._pushed.append(item)
+
+    def get(self, timeout: float | None = None) -> object:
+        """The next message ``(label, payload)``, or a sentinel.
+
+        Raises:
+            queue.Empty: nothing arrived within ``timeout`` seconds.
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            if self._pushed:
+                return self._pushed.popleft()
+            if self._samples or self._take():
+                return self._decode(self._samples.popleft())
+            if self.network.stopping:
+                return STOP
+            failed = self.network.failed.get(self.sender)
+            if failed is not None:
+                return PeerFailure(self.sender, failed)
+            lost = self._writer_lost()
+            if lost is not None and not self._take():  # all it wrote before going is read
+                self.network.note_failed(self.sender, lost)
+                return PeerFailure(self.sender, lost)
+            left = _POLL if deadline is None else min(_POLL, deadline - time.monotonic())
+            if left <= 0:
+                raise Empty
+            self.waitset.wait(duration(seconds=left))  # releases the GIL
+
+    def get_nowait(self) -> object:
+        return self.get(timeout=0)
+
+    def empty(self) -> bool:
+        """True when nothing (no message, no failure, no stop) is waiting."""
+        if self._pushed or self._samples or self.network.stopping or self.sender in self.network.failed:
+            return False
+        return not self._take()
+
+    def _take(self) -> bool:
+        """Move what the reader holds from the accepted writer into our queue; False if none."""
+        taken = ddspy_take(self._ref, _ANY, _TAKE)
+        if type(taken) is int:
+            raise AnodizeError(f"DDS take on {self.sender}->{self.receiver} failed: {DDSException(taken)}")
+        for data, info in taken:
+            if not info.valid_data:
+                continue
+            if info.publication_handle != self.accepted:
+                self._reject(info.publication_handle)
+                continue
+            self._samples.append(data)
+        return bool(self._samples)
+
+    def _reject(self, handle: int) -> None:
+        data = self.reader.get_matched_publication_data(handle)
+        guid = str(data.key) if data is not None else f"handle {handle}"
+        claimed = _userdata(data.qos).decode(errors="replace") if data is not None else ""
+        entry = self.rejected.setdefault(guid, [0, claimed])
+        entry[0] += 1
+        if entry[0] == 1:
+            self.network.report(f"rejected samples on {self.sender}->{self.receiver} from DDS writer {guid} "
+                                f"(it claims {claimed or 'nothing'!r}); only {self.accepted_guid} "
+                                f"({self.network.settings.where(self.sender)}) may write there")
+
+    def _decode(self, data: bytes) -> object:
+        if len(data) < 8:
+            return Corrupt(f"a DDS sample of {len(data)} bytes")
+        (length,) = _LENGTH.unpack_from(data, 4)
+        if length > MAX_FRAME + 4 or 8 + length > len(data) or length < 4:
+            return Corrupt(f"a DDS sample whose sequence length {length} does not fit its {len(data)} bytes")
+        (body_length,) = HEADER.unpack_from(data, 8)
+        if body_length != length - 4:
+            return Corrupt("a DDS sample whose frame length does not match its sequence length")
+        self.frame_size = length
+        try:
+            kind, value = self.codec.decode_body(memoryview(data)[12:8 + length])
+        except DecodeError as error:
+            return Corrupt(str(error))
+        if kind == FrameKind.FAILURE:
+            self.network.note_failed(self.sender, value)
+            return PeerFailure(self.sender, value)
+        message: tuple[str, object] = value
+        return message
+
+    def _writer_lost(self) -> str | None:
+        """Why the accepted writer is gone (deleted, lease expired), or None while it lives."""
+        if self._lost is not None or self.accepted is None:
+            return self._lost
+        if self.accepted not in self.reader.get_matched_publications():
+            self._lost = (f"its DDS writer went away: {self.network.settings.where(self.sender)} ended, "
+                          "or stopped answering, or was cut off")
+        else:
+            status = self.reader.get_liveliness_changed_status()  # type: ignore[no-untyped-call]
+            if status.alive_count == 0 and status.not_alive_count > 0:
+                self._lost = (f"{self.network.settings.where(self.sender)} stopped answering: its DDS "
+                              f"liveliness lease ({self.network.settings.lease:g} s) expired")
+        return self._lost
+
+
+class DdsNetwork(ProcessNetwork):
+    """The channels of one group's process with ``transport="dds"``.
+
+    Args:
+        settings: the run's DDS settings.
+        group, incarnation: this group.
+        local_roles, channels, dead, codec_for, doorbell_roles: as for
+            :class:`~anodize.transport.process.ProcessNetwork`.
+        report: called with a line for the group's report (e.g. a rejected writer).
+    """
+
+    def __init__(self, settings: DdsSettings, group: str, incarnation: int, local_roles: Iterable[str],
+                 channels: Iterable[tuple[str, str]], dead: dict[str, str],
+                 codec_for: Callable[[tuple[str, str]], Codec], doorbell_roles: Iterable[str] = (),
+                 report: Callable[[str], None] = lambda line: None) -> None:
+        self.settings = settings
+        self.report = report
+        self.endpoints = _Endpoints(settings, group, incarnation)
+        local = frozenset(local_roles)
+        channels = tuple(channels)
+        remote = {pair: self.endpoints for pair in channels
+                  if (pair[0] in local) != (pair[1] in local) and not ({pair[0], pair[1]} & set(dead))}
+        self.senders: list[DdsSender] = []
+        self.receivers: list[DdsReceiver] = []
+        super().__init__(local, channels, remote, dead, codec_for, doorbell_roles)
+
+    def _writer(self, link: Any, codec: Codec, sender: str, receiver: str) -> DdsSender:
+        channel = DdsSender(link, codec, self, sender, receiver)
+        self.senders.append(channel)
+        return channel
+
+    def _reader(self, link: Any, codec: Codec, sender: str, receiver: str) -> DdsReceiver:
+        channel = DdsReceiver(link, codec, self, sender, receiver)
+        self.receivers.append(channel)
+        return channel
+
+    def _silence(self, pair: tuple[str, str]) -> None:
+        # Our receiver failed: delete its reader, so its writer sees it unmatched and stops.
+        for receiver in self.receivers:
+            if (receiver.sender, receiver.receiver) == pair:
+                with contextlib.suppress(DDSException):
+                    receiver.reader.__del__()
+
+    def wait_for_peers(self) -> None:
+        """The start barrier: every channel's other end has appeared, or the wait is over.
+
+        Raises:
+            StartBarrierError: naming the groups and hosts that never appeared.
+        """
+        deadline = time.monotonic() + self.settings.wait
+        while True:
+            missing = self._missing()
+            if not missing:
+                return
+            if time.monotonic() > deadline:
+                settings = self.settings
+                raise StartBarrierError(
+                    f"after {settings.wait:g} s on DDS domain {settings.domain} (run {settings.run_id}), "
+                    f"no sign of {'; '.join(missing)}: is it started (anodize run ... --host), with the same "
+                    f"run id, domain and network?")
+            time.sleep(0.02)
+
+    def _missing(self) -> list[str]:
+        missing: dict[str, list[str]] = {}
+        for sender in self.senders:
+            if _matched_readers(sender.writer) == 0:
+                missing.setdefault(self.settings.where(sender.receiver), []).append(
+                    f"{sender.sender}->{sender.receiver}")
+            else:
+                sender.matched = True
+        for receiver in self.receivers:
+            if not receiver.find_writer():
+                missing.setdefault(self.settings.where(receiver.sender), []).append(
+                    f"{receiver.sender}->{receiver.receiver}")
+        return [f"{where} (for {', '.join(pairs)})" for where, pairs in sorted(missing.items())]
+
+    def stop(self) -> None:
+        super().stop()  # the receivers poll ``stopping`` at least every _POLL seconds
+
+    def close(self, linger: float = 2.0) -> None:
+        """Wait (bounded) until every sample written has been acknowledged, before the process ends."""
+        for sender in self.senders:
+            with contextlib.suppress(DDSException):
+                sender.writer.wait_for_acks(duration(seconds=linger))
+
+
+def _cdr(frame: bytes) -> bytes:
+    """A codec frame (4-byte length, body) as the CDR of an ``anodize::Frame`` sample."""
+    sample = _CDR_HEADER + _LENGTH.pack(len(frame)) + frame
+    return sample + b"\0" * (-len(sample) % 4)
+
+
+def _matched_readers(writer: DataWriter[Frame]) -> int:
+    count: int = writer.get_publication_matched_status().current_count  # type: ignore[no-untyped-call]
+    return count
+
+
+def _userdata(qos: Qos | None) -> bytes:
+    if qos is None:
+        return b""
+    try:
+        policy = qos[Policy.Userdata]
+    except (KeyError, TypeError):
+        return b""
+    data = getattr(policy, "data", b"")
+    return data if isinstance(data, bytes) else b""
