@@ -126,6 +126,10 @@ def _parser() -> argparse.ArgumentParser:
                             help="stop roles still running after S seconds (default: the file's timeout)")
     run_system.add_argument("--json", metavar="FILE", help="also write the run report as JSON to FILE")
     run_system.add_argument("--quiet", action="store_true", help="no live status lines")
+    run_system.add_argument("--host", metavar="NAME",
+                            help='transport = "dds": run only the groups placed on host NAME (default: every group)')
+    run_system.add_argument("--wait", type=float, metavar="S", default=30.0,
+                            help='transport = "dds": how long the groups wait for their peers to appear (default 30)')
     run_system.set_defaults(run=_run)
     return parser
 
@@ -329,10 +333,15 @@ def _run(args: argparse.Namespace) -> int:
 
     if args.timeout is not None and not args.timeout > 0:
         raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
+    if not args.wait > 0:
+        raise UsageError(f"--wait {args.wait}: expected a number of seconds > 0")
     config = load_config(_system_file(args.file, named=True))
+    if args.host is not None and config.transport != "dds":
+        raise UsageError(f"--host needs transport = \"dds\"; {config.path} uses {config.transport!r}")
     system = build_system(config)
     timeout = args.timeout if args.timeout is not None else config.timeout
-    report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout))
+    report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout),
+                        host=args.host, wait=args.wait)
     print(report.summary())
     if args.json:
         out = Path(args.json)

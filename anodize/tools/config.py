@@ -42,8 +42,8 @@ from ..supervision.system import TRANSPORTS, System
 __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
            "add_pythonpath"]
 
-_TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups")
-_GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles")
+_TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id")
+_GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host")
 _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
 _TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
 
@@ -93,6 +93,7 @@ class GroupConfig:
         max_restarts: how often ``on_failure = "restart"`` restarts the group.
         roles: role name -> ``"module:function"``, in file order.
         location: where the group is written, for messages: ``"path: groups.NAME"``.
+        host: ``transport = "dds"``: the host the group runs on, or None.
     """
 
     name: str
@@ -103,6 +104,7 @@ class GroupConfig:
     max_restarts: int
     roles: dict[str, str]
     location: str
+    host: str | None = None
 
 
 @dataclass(frozen=True)
@@ -118,6 +120,8 @@ class SystemConfig:
         monitors: whether endpoints check the protocol at run time.
         pythonpath: absolute dirs to put in front of ``sys.path``.
         groups: group name -> its configuration, in file order.
+        domain: ``transport = "dds"``: the DDS domain id.
+        run_id: ``transport = "dds"``: the run id every host of the run uses ("" = the global's name).
     """
 
     path: Path
@@ -128,6 +132,8 @@ class SystemConfig:
     monitors: bool
     pythonpath: tuple[Path, ...]
     groups: dict[str, GroupConfig]
+    domain: int = 0
+    run_id: str = ""
 
     def group_of(self, role: str) -> str | None:
         """The group that runs ``role``, or None."""
@@ -195,12 +201,18 @@ class _Reader:
         monitors = data.get("monitors", True)
         if not isinstance(monitors, bool):
             raise self.error("monitors", f"expected true or false, got {_show(monitors)}")
+        domain = data.get("domain", 0)
+        if not _is_int(domain) or not 0 <= domain <= 232:
+            raise self.error("domain", f"expected a DDS domain id 0..232, got {_show(domain)}")
+        run_id = self.string(data, "run_id") or ""
+        if run_id and not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", run_id):
+            raise self.error("run_id", f"expected up to 64 letters, digits, '_', '.' or '-', got {_show(run_id)}")
         return SystemConfig(
             path=Path(self.shown), protocol=Path(os.path.normpath(self.directory / protocol)),
             global_name=global_name, transport=transport,
             timeout=None if timeout is None else float(timeout), monitors=monitors,
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
-            groups=self.groups(data.get("groups")))
+            groups=self.groups(data.get("groups")), domain=domain, run_id=run_id)
 
     def known_keys(self, table: dict[str, Any], allowed: tuple[str, ...], prefix: str | None) -> None:
         for key in table:
@@ -267,9 +279,12 @@ class _Reader:
         max_restarts = table.get("max_restarts", 3)
         if not _is_int(max_restarts) or max_restarts < 0:
             raise self.error(f"{prefix}.max_restarts", f"expected an int >= 0, got {_show(max_restarts)}")
+        host = table.get("host")
+        if host is not None and (not isinstance(host, str) or not host.isidentifier()):
+            raise self.error(f"{prefix}.host", f"expected a name such as \"robot\", got {_show(host)}")
         return GroupConfig(name, priority, memory_bytes, self.cpus(prefix, table.get("cpus")),
                            on_failure, max_restarts, self.roles(prefix, table),
-                           f"{self.shown}: {prefix}")
+                           f"{self.shown}: {prefix}", host)
 
     def cpus(self, prefix: str, value: Any) -> tuple[int, ...] | None:
         if value is None:
@@ -344,12 +359,14 @@ def build_system(config: SystemConfig) -> System:
                                            f"expected one of {', '.join(module.globals) or '(none)'}")
     global_type = module.globals[config.global_name]
     add_pythonpath(config)
-    system = System(global_type, transport=config.transport, monitors=config.monitors)
+    system = System(global_type, transport=config.transport, monitors=config.monitors, domain=config.domain,
+                    run_id=config.run_id)
     for group in config.groups.values():
         try:
             declared = system.group(group.name, priority=group.priority, memory=group.memory,
                                     cpus=set(group.cpus) if group.cpus else None,
-                                    on_failure=group.on_failure, max_restarts=group.max_restarts)
+                                    on_failure=group.on_failure, max_restarts=group.max_restarts,
+                                    host=group.host)
             for role, reference in group.roles.items():
                 declared.role(role, reference)
         except (ValueError, AnodizeError) as error:

@@ -283,7 +283,7 @@ class DdsReceiver:
                 continue
             identity = _parse_identity(_userdata(data.qos))
             if identity is not None and identity[0] == settings.run_id and identity[1] == expected:
-                self.accepted, self.accepted_guid = handle, str(data.key)
+                self.accepted, self.accepted_guid = _handle(handle), str(data.key)
                 return True
         return False
 
@@ -335,14 +335,15 @@ class DdsReceiver:
         for data, info in taken:
             if not info.valid_data:
                 continue
-            if info.publication_handle != self.accepted:
+            if _handle(info.publication_handle) != self.accepted:
                 self._reject(info.publication_handle)
                 continue
             self._samples.append(data)
         return bool(self._samples)
 
     def _reject(self, handle: int) -> None:
-        data = self.reader.get_matched_publication_data(handle)
+        matched = [h for h in self.reader.get_matched_publications() if _handle(h) == _handle(handle)]
+        data = self.reader.get_matched_publication_data(matched[0]) if matched else None
         guid = str(data.key) if data is not None else f"handle {handle}"
         claimed = _userdata(data.qos).decode(errors="replace") if data is not None else ""
         entry = self.rejected.setdefault(guid, [0, claimed])
@@ -376,7 +377,7 @@ class DdsReceiver:
         """Why the accepted writer is gone (deleted, lease expired), or None while it lives."""
         if self._lost is not None or self.accepted is None:
             return self._lost
-        if self.accepted not in self.reader.get_matched_publications():
+        if self.accepted not in {_handle(h) for h in self.reader.get_matched_publications()}:
             self._lost = (f"its DDS writer went away: {self.network.settings.where(self.sender)} ended, "
                           "or stopped answering, or was cut off")
         else:
@@ -477,6 +478,12 @@ def _cdr(frame: bytes) -> bytes:
     """A codec frame (4-byte length, body) as the CDR of an ``anodize::Frame`` sample."""
     sample = _CDR_HEADER + _LENGTH.pack(len(frame)) + frame
     return sample + b"\0" * (-len(sample) % 4)
+
+
+def _handle(handle: int) -> int:
+    """An instance handle as one number: the binding gives the same 64 bits signed in one
+    place and unsigned in another."""
+    return handle & 0xFFFF_FFFF_FFFF_FFFF
 
 
 def _matched_readers(writer: DataWriter[Frame]) -> int:
