@@ -277,14 +277,23 @@ class DdsReceiver:
             return True
         settings = self.network.settings
         expected = settings.group_of[self.sender]
+        claims = []
         for handle in self.reader.get_matched_publications():
             data = self.reader.get_matched_publication_data(handle)
             if data is None:
                 continue
             identity = _parse_identity(_userdata(data.qos))
             if identity is not None and identity[0] == settings.run_id and identity[1] == expected:
-                self.accepted, self.accepted_guid = _handle(handle), str(data.key)
-                return True
+                claims.append((_handle(handle), str(data.key), identity))
+        if len(claims) > 1:  # never guess which one is genuine
+            raise StartBarrierError(
+                f"{len(claims)} DDS writers claim to be {settings.where(self.sender)} on "
+                f"{self.sender}->{self.receiver}: " + ", ".join(f"{guid} (pid {identity[4]} on {identity[3]})"
+                                                                 for _, guid, identity in claims)
+                + "; is the same run started twice, or is someone forging it?")
+        if claims:
+            (self.accepted, self.accepted_guid, _), = claims
+            return True
         return False
 
     # ---- the Channel protocol ---------------------------------------------------------------

@@ -1,0 +1,84 @@
+"""Roles for the DDS transport tests (imported by name in the groups' processes)."""
+
+from __future__ import annotations
+
+import os
+import zlib
+
+import numpy as np
+
+from anodize import Endpoint
+
+STREAM = ('type Image = "numpy:ndarray"\n'
+          "global Stream(P, C) = mu t. P -> C : {data(int). t, frame(Image). t, stop}")
+
+
+def _count() -> int:
+    return int(os.environ.get("DDS_TEST_COUNT", "1000"))
+
+
+def producer(ep: Endpoint) -> None:
+    """Send the numbers 0..n-1 (each message's payload is its place in the stream)."""
+    for i in range(_count()):
+        ep.send("C", "data", i)
+    ep.send("C", "stop")
+
+
+def consumer(ep: Endpoint) -> None:
+    """Check that every number arrives once and in order."""
+    expected = 0
+    while True:
+        label, value = ep.recv("P")
+        if label == "stop":
+            break
+        if value != expected:
+            raise AssertionError(f"expected message {expected}, got {value}: lost, duplicated or reordered")
+        expected += 1
+    if expected != _count():
+        raise AssertionError(f"{expected} messages arrived, {_count()} were sent")
+
+
+def frame_producer(ep: Endpoint) -> None:
+    """Send frames whose first 8 bytes number them and whose last 4 are a CRC of the rest."""
+    rng = np.random.default_rng(1)
+    for i in range(_count()):
+        frame = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
+        flat = frame.reshape(-1)
+        flat[:8] = np.frombuffer(i.to_bytes(8, "little"), np.uint8)
+        flat[-4:] = np.frombuffer(zlib.crc32(flat[:-4].tobytes()).to_bytes(4, "little"), np.uint8)
+        ep.send("C", "frame", frame)
+    ep.send("C", "stop")
+
+
+def frame_consumer(ep: Endpoint) -> None:
+    expected = 0
+    while True:
+        label, frame = ep.recv("P")
+        if label == "stop":
+            break
+        flat = frame.reshape(-1)
+        number = int.from_bytes(flat[:8].tobytes(), "little")
+        if number != expected:
+            raise AssertionError(f"expected frame {expected}, got {number}")
+        if zlib.crc32(flat[:-4].tobytes()) != int.from_bytes(flat[-4:].tobytes(), "little"):
+            raise AssertionError(f"frame {number} arrived damaged")
+        expected += 1
+    if expected != _count():
+        raise AssertionError(f"{expected} frames arrived, {_count()} were sent")
+
+
+def slow_producer(ep: Endpoint) -> None:
+    """Stream for ever, slowly: the test kills this group, or cuts it off."""
+    i = 0
+    while True:
+        ep.send("C", "data", i)
+        i += 1
+        ep.sleep(0.01)
+
+
+def slow_producer_of_count(ep: Endpoint) -> None:
+    """Send 0..n-1 a little apart (so that samples of a forger arrive in between); then stop."""
+    for i in range(_count()):
+        ep.send("C", "data", i)
+        ep.sleep(0.005)
+    ep.send("C", "stop")
