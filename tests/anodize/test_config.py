@@ -105,11 +105,11 @@ GROUP = '[groups.g]\nroles = { A = "m:f" }\n'
 BAD = {
     "unknown_top_key": (
         MINIMAL + "protocl = 1\n" + GROUP,
-        ("protocl: unknown key; expected one of global, groups, monitors, protocol, pythonpath, "
-         "timeout, transport")),
+        ("protocl: unknown key; expected one of domain, global, groups, monitors, protocol, pythonpath, "
+         "run_id, timeout, transport")),
     "unknown_group_key": (
         MINIMAL + GROUP + "prio = 3\n",
-        ("groups.g.prio: unknown key; expected one of cpus, max_restarts, memory, on_failure, "
+        ("groups.g.prio: unknown key; expected one of cpus, host, max_restarts, memory, on_failure, "
          "priority, roles")),
     "missing_protocol": ('global = "G"\n' + GROUP, "protocol: missing (it is required)"),
     "missing_global": ('protocol = "p.proto"\n' + GROUP, "global: missing (it is required)"),
@@ -131,7 +131,11 @@ BAD = {
     "empty_global": ('protocol = "p.proto"\nglobal = ""\n' + GROUP,
                      'global: expected a non-empty string, got ""'),
     "transport": (MINIMAL + 'transport = "tcp"\n' + GROUP,
-                  'transport: expected "inproc" or "process", got "tcp"'),
+                  'transport: expected "inproc" or "process" or "dds", got "tcp"'),
+    "domain": (MINIMAL + "domain = 300\n" + GROUP, "domain: expected a DDS domain id 0..232, got 300"),
+    "run_id": (MINIMAL + 'run_id = "a b"\n' + GROUP,
+               "run_id: expected up to 64 letters, digits, '_', '.' or '-', got \"a b\""),
+    "host": (MINIMAL + GROUP + 'host = "robot 1"\n', 'groups.g.host: expected a name such as "robot", got "robot 1"'),
     "timeout_negative": (MINIMAL + "timeout = -1\n" + GROUP,
                          "timeout: expected a number of seconds > 0, got -1"),
     "timeout_bool": (MINIMAL + "timeout = true\n" + GROUP,
