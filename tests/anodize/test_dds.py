@@ -15,6 +15,7 @@ from pathlib import Path
 
 import dds_roles
 import pytest
+from dds_hosts import domain, finish, start_host, wait_for_group, write_system
 
 import anodize
 import sessiontypes
@@ -23,12 +24,6 @@ from anodize.supervision.report import RoleStatus
 
 STREAM = sessiontypes.loads(dds_roles.STREAM, "stream.proto").globals["Stream"]
 REPO = Path(__file__).resolve().parents[2]
-HERE = Path(__file__).resolve().parent
-
-
-def domain() -> int:
-    """A domain of this test process: runs of parallel test sessions do not meet."""
-    return 1 + os.getpid() % 200
 
 
 def stream_system(producer: object, consumer: object, run_id: str) -> anodize.System:
@@ -79,60 +74,6 @@ def test_an_unknown_host_is_a_configuration_error() -> None:
     system = stream_system(dds_roles.producer, dds_roles.consumer, "x")
     with pytest.raises(anodize.ConfigurationError, match="no group runs on host 'moon'"):
         system.run(host="moon")
-
-
-SYSTEM_FILE = """\
-protocol = "stream.proto"
-global = "Stream"
-transport = "dds"
-domain = {domain}
-run_id = "{run_id}"
-timeout = 120
-pythonpath = ["{here}"]
-
-[groups.producing]
-host = "A"
-roles = {{ P = "dds_roles:{producer}" }}
-
-[groups.consuming]
-host = "B"
-roles = {{ C = "dds_roles:consumer" }}
-"""
-
-
-def write_system(directory: Path, producer: str, run_id: str) -> Path:
-    (directory / "stream.proto").write_text(dds_roles.STREAM + "\n")
-    path = directory / "system.toml"
-    path.write_text(SYSTEM_FILE.format(domain=domain(), run_id=run_id, here=HERE, producer=producer))
-    return path
-
-
-def start_host(system: Path, host: str, report: Path, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
-    return subprocess.Popen([sys.executable, "-m", "anodize.tools.cli", "run", "--quiet", str(system),
-                             "--host", host, "--wait", "30", "--json", str(report)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env={**os.environ, **(env or {})})
-
-
-def wait_for_group(process: subprocess.Popen[str], seconds: float) -> int:
-    """The pid of the host's one group process (a spawned child; not multiprocessing's helpers)."""
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        for pid in Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split():
-            if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
-                return int(pid)
-        time.sleep(0.05)
-    raise AssertionError("the host's group never started")
-
-
-def finish(process: subprocess.Popen[str], seconds: float) -> str:
-    try:
-        out, _ = process.communicate(timeout=seconds)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        out, _ = process.communicate()
-        raise AssertionError(f"still running after {seconds} s:\n{out}") from None
-    return out
 
 
 def test_a_killed_host_is_reported_to_the_other_as_a_peer_failure(tmp_path: Path) -> None:

@@ -1,0 +1,81 @@
+"""Running the halves of a two-host DDS system as separate `anodize run --host` processes (test helpers)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import dds_roles
+
+HERE = Path(__file__).resolve().parent
+
+
+def domain() -> int:
+    """A domain of this test process: runs of parallel test sessions do not meet."""
+    return 1 + os.getpid() % 200
+
+
+SYSTEM_FILE = """\
+protocol = "stream.proto"
+global = "Stream"
+transport = "dds"
+domain = {domain}
+run_id = "{run_id}"
+timeout = 120
+pythonpath = ["{here}"]
+
+[groups.producing]
+host = "A"
+roles = {{ P = "dds_roles:{producer}" }}
+
+[groups.consuming]
+host = "B"
+roles = {{ C = "dds_roles:{consumer}" }}
+"""
+
+
+def write_system(directory: Path, producer: str, run_id: str, consumer: str = "consumer") -> Path:
+    (directory / "stream.proto").write_text(dds_roles.STREAM + "\n")
+    path = directory / "system.toml"
+    path.write_text(SYSTEM_FILE.format(domain=domain(), run_id=run_id, here=HERE, producer=producer,
+                                       consumer=consumer))
+    return path
+
+
+def start_host(system: Path, host: str, report: Path, env: dict[str, str] | None = None,
+               namespace: str | None = None) -> subprocess.Popen[str]:
+    """``anodize run SYSTEM --host HOST`` (in network namespace ``namespace``, if given)."""
+    prefix = ["ip", "netns", "exec", namespace] if namespace else []
+    return subprocess.Popen([*prefix, sys.executable, "-m", "anodize.tools.cli", "run", "--quiet", str(system),
+                             "--host", host, "--wait", "30", "--json", str(report)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, **(env or {})})
+
+
+def wait_for_group(process: subprocess.Popen[str], seconds: float) -> int:
+    """The pid of the host's one group process (a spawned child; not multiprocessing's helpers).
+
+    ``process`` may be ``ip netns exec``, which execs the command in place (same pid).
+    """
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        for pid in Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split():
+            if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                return int(pid)
+        time.sleep(0.05)
+    raise AssertionError("the host's group never started")
+
+
+def finish(process: subprocess.Popen[str], seconds: float) -> str:
+    try:
+        out, _ = process.communicate(timeout=seconds)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        out, _ = process.communicate()
+        raise AssertionError(f"still running after {seconds} s:\n{out}") from None
+    return out
+
+
