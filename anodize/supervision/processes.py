@@ -299,8 +299,11 @@ class ProcessRunner:
     def _death_cause(self, inc: _Incarnation, code: int | None) -> BaseException:
         name = inc.group.name
         if inc.cgroup is not None and inc.cgroup.oom_killed():
-            peak = max(inc.peak, (inc.cgroup.peak() or 0) - inc.baseline_resident)
-            return MemoryBoundError(name, inc.group.memory or 0, peak)
+            inc.peak = max(inc.peak, (inc.cgroup.peak() or 0) - inc.baseline_resident)
+            # The report's peak is the one the error names (the last sample may predate the kill).
+            self.pending.append(Counts(group=name, incarnation=inc.number, at=time.monotonic(),
+                                       memory=inc.resident, peak=inc.peak))
+            return MemoryBoundError(name, inc.group.memory or 0, inc.peak)
         if code == EXIT_MEMORY:
             return MemoryBoundError(name, inc.group.memory or 0, inc.peak)
         if code is not None and code < 0:
