@@ -473,9 +473,6 @@ class DdsNetwork(ProcessNetwork):
                     f"{receiver.sender}->{receiver.receiver}")
         return [f"{where} (for {', '.join(pairs)})" for where, pairs in sorted(missing.items())]
 
-    def stop(self) -> None:
-        super().stop()  # the receivers poll ``stopping`` at least every _POLL seconds
-
     def close(self, linger: float = 2.0) -> None:
         """Wait (bounded) until every sample written has been acknowledged, before the process ends."""
         for sender in self.senders:
