@@ -172,6 +172,10 @@ class System:
         if host is not None and host not in hosts:
             raise ConfigurationError(f"no group runs on host {host!r}; the system's hosts are "
                                      f"{', '.join(sorted(hosts)) or 'none (give groups a host)'}")
+        unplaced = sorted(name for name, g in self.groups.items() if g.host is None)
+        if host is not None and unplaced:  # no host would run them
+            raise ConfigurationError(f"--host {host}: groups {', '.join(unplaced)} have no host; give every "
+                                     "group a host, or run without --host")
         here = socket.gethostname() if host is None else host
         host_of = {name: g.host or here for name, g in self.groups.items()}
         local = {name: g for name, g in self.groups.items() if host is None or g.host == host}
@@ -179,6 +183,8 @@ class System:
         if os.environ.get(DOMAIN_ENV):
             try:
                 domain = int(os.environ[DOMAIN_ENV])
+                if not 0 <= domain <= 232:
+                    raise ValueError
             except ValueError:
                 raise ConfigurationError(f"{DOMAIN_ENV}={os.environ[DOMAIN_ENV]!r}: expected a DDS domain id") from None
         settings = DdsSettings(domain=domain, run_id=self.run_id, host=here,

@@ -133,3 +133,11 @@ def test_a_forged_writer_is_rejected_and_reported(tmp_path: Path, monkeypatch: p
     note = report.groups["consuming"].memory_note  # where a group's notes are reported
     assert "rejected samples on P->C from DDS writer" in note, note
     assert "it claims 'anodize1;other;intruder;0;X;1'" in note, note
+
+
+def test_with_a_host_given_every_group_needs_one() -> None:
+    system = anodize.System(STREAM, transport="dds", domain=domain(), run_id="half")
+    system.group("producing", host="robot").role("P", dds_roles.producer)
+    system.group("consuming").role("C", dds_roles.consumer)
+    with pytest.raises(anodize.ConfigurationError, match="groups consuming have no host"):
+        system.run(host="robot")
