@@ -269,13 +269,15 @@ class Walk(Generic[Decl, Term]):
                 self.shared[id(body)] = body
         return body, recursive
 
-    def with_mu(self, var: str, scope: Scope, depth: int, parallel_depth: int,
+    def with_mu(self, var: str, body: s.GSyntax | s.LSyntax, scope: Scope, depth: int, parallel_depth: int,
                 build: Callable[[str], Term]) -> Term:
         """Resolve a ``mu var.`` body; rename ``var`` if it would capture a declaration name.
 
         Renaming happens only when an expanded declaration refers, through
         ``var``'s name, to an enclosing declaration; otherwise the written name
-        is kept. The body's own uses of ``var`` stand for the renamed variable.
+        is kept. The body's own uses of ``var`` stand for the renamed variable;
+        the new name is none in scope and none written in the body (an inner
+        ``mu`` of that name would capture them).
         """
         name = var
         while True:
@@ -289,11 +291,46 @@ class Walk(Generic[Decl, Term]):
                 del self.reporter.diagnostics[mark:]
                 # What is taken depends on the scope around: not memoisable.
                 self._renames += 1
-                taken = set(scope.top) | set(self.declarations)
+                taken = (set(scope.top) | {b.var for b in scope.top.values()} | set(self.declarations)
+                         | _written_names(body))
                 while name in taken:
                     name += "'"
             finally:
                 scope.unbind(binder)
+
+
+def _written_names(body: s.GSyntax | s.LSyntax) -> set[str]:
+    """Every name written in a body: references and ``mu`` variables."""
+    names: set[str] = set()
+    stack: list[s.GSyntax | s.LSyntax | None] = [body]
+    while stack:
+        node = stack.pop()
+        match node:
+            case s.GRef(name=name) | s.LRef(name=name):
+                names.add(name.text)
+            case s.GRec(var=var, body=inner) | s.LRec(var=var, body=inner):
+                names.add(var.text)
+                stack.append(inner)
+            case _:
+                stack.extend(_children(node))
+    return names
+
+
+def _children(node: s.GSyntax | s.LSyntax | None) -> list[s.GSyntax | s.LSyntax | None]:
+    match node:
+        case s.GInteraction(branches=gbranches):
+            return [b.continuation for b in gbranches]
+        case s.LChoice(branches=lbranches):
+            return [b.continuation for b in lbranches]
+        case s.LAction(continuation=rest):
+            return [rest]
+        case s.GRec(body=inner) | s.LRec(body=inner):
+            return [inner]
+        case s.GParallel(branches=gparts):
+            return list(gparts)
+        case s.LParallel(branches=lparts):
+            return list(lparts)
+    return []
 
 
 def _references(body: s.GSyntax | s.LSyntax, declarations: Mapping[str, object]) -> list[str]:
@@ -306,18 +343,8 @@ def _references(body: s.GSyntax | s.LSyntax, declarations: Mapping[str, object])
             case s.GRef(name=name) | s.LRef(name=name):
                 if name.text in declarations:
                     found.append(name.text)
-            case s.GInteraction(branches=gbranches):
-                stack.extend([b.continuation for b in gbranches])
-            case s.LChoice(branches=lbranches):
-                stack.extend([b.continuation for b in lbranches])
-            case s.LAction(continuation=rest):
-                stack.append(rest)
-            case s.GRec(body=inner) | s.LRec(body=inner):
-                stack.append(inner)
-            case s.GParallel(branches=gparts):
-                stack.extend(gparts)
-            case s.LParallel(branches=lparts):
-                stack.extend(lparts)
+            case _:
+                stack.extend(_children(node))
     return found
 
 

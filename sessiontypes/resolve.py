@@ -142,7 +142,7 @@ def _resolve_g(walk: GlobalWalk, node: s.GSyntax | None,
                          b.message.label.location)
                 for b in branches]), location, receiver.location)
         case s.GRec(var=var, body=body, location=location):
-            return walk.with_mu(var.text, scope, depth, parallel_depth,
+            return walk.with_mu(var.text, body, scope, depth, parallel_depth,
                                 lambda name: g.Rec(name, _resolve_g(walk, body, scope, depth,
                                                                     parallel_depth), location))
         case s.GParallel(branches=branches, location=location):
@@ -211,7 +211,7 @@ def _resolve_l(walk: LocalWalk, node: s.LSyntax | None,
             make_choice = lt.select if kind == "+" else lt.offer
             return make_choice(peer.text if peer else None, resolved_branches, location)
         case s.LRec(var=var, body=body, location=location):
-            return walk.with_mu(var.text, scope, depth, parallel_depth,
+            return walk.with_mu(var.text, body, scope, depth, parallel_depth,
                                 lambda name: lt.Rec(name, _resolve_l(walk, body, scope, depth,
                                                                      parallel_depth), location))
         case s.LParallel(branches=branches, location=location):

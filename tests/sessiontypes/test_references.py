@@ -206,3 +206,16 @@ def test_prints_of_shared_types_are_bounded(tmp_path, capsys) -> None:
     path.write_text(dag(60))
     assert main(["project", str(path), "--global", "G0"]) == 1
     assert "G0 projected onto A is longer than 67108864 characters written out" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("text", "role", "projection"), [
+    # The loop named like its declaration is renamed; the new name must not be one
+    # an inner mu binds, else that mu captures the loop's uses (found by differential fuzzing).
+    ("global M(A, B) = mu M. B -> A : {r. mu M'. M, ok. K}\nglobal K(A, B) = M\n",
+     "A", "mu M.mu M''.&B{r.M'', ok.M}"),
+    ("global G(A, B) = mu G. A -> B : {l. mu G'. G, r. K}\nglobal K(A, B) = B -> A : n. G\n",
+     "B", "mu G.mu G''.&A{l.G'', r.!A(n).G}"),
+])
+def test_a_renamed_loop_is_not_captured_by_an_inner_one(text: str, role: str, projection: str) -> None:
+    glob = sessiontypes.loads(text, "capture.proto").globals[text.split()[1].split("(")[0]]
+    assert print_local(glob.project(role).body) == projection
