@@ -8,7 +8,7 @@ Each measure is taken three ways, interleaved in every repetition (so drift hits
   raw Cyclone      two spawned processes, a writer/reader pair per direction on topics
                    of type ``anodize.transport.dds.Frame``, written with
                    ``cyclonedds._clayer.ddspy_write`` as CDR bytes built as the transport
-                   builds them (``_cdr``), taken with ``ddspy_take`` after a WaitSet wait;
+                   builds them (``cdr_sample``), taken with ``ddspy_take`` after a WaitSet wait;
                    the transport's QoS (reliable, keep-all, reader resource limits 64,
                    automatic liveliness 1 s) and discovery lease; no monitors, no codec.
   anodize process  the same anodize system with ``transport="process"`` (pipes, and

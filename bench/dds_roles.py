@@ -39,7 +39,7 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from anodize import Endpoint
-from anodize.transport.dds import Frame, _cdr, participant_config
+from anodize.transport.dds import Frame, cdr_sample, participant_config
 
 ENV = "ANODIZE_BENCH_DDS"
 HEIGHT, WIDTH, CHANNELS = 480, 640, 3
@@ -247,8 +247,8 @@ def raw_int_producer(domain: int, prefix: str, barrier: Any, n: int, out: str, t
     give_up = time.monotonic() + timeout
     report("start", {"start": time.monotonic()}, out)
     for i in range(n):
-        peer.write(_cdr(INT.pack(i)), give_up)
-    peer.write(_cdr(INT.pack(STOP)), give_up)
+        peer.write(cdr_sample(INT.pack(i)), give_up)
+    peer.write(cdr_sample(INT.pack(STOP)), give_up)
     peer.flush()
 
 
@@ -273,8 +273,8 @@ def raw_frame_producer(domain: int, prefix: str, barrier: Any, n: int, out: str,
     give_up = time.monotonic() + timeout
     report("start", {"start": time.monotonic()}, out)
     for i in range(n):
-        peer.write(_cdr(stamp(pool[i % POOL], i).reshape(-1).data), give_up)  # type: ignore[arg-type]
-    peer.write(_cdr(INT.pack(STOP)), give_up)
+        peer.write(cdr_sample(stamp(pool[i % POOL], i).reshape(-1).data), give_up)  # type: ignore[arg-type]
+    peer.write(cdr_sample(INT.pack(STOP)), give_up)
     peer.flush()
 
 
@@ -297,14 +297,14 @@ def raw_ping_client(domain: int, prefix: str, barrier: Any, rounds: int, warmup:
     barrier.wait(timeout)
     give_up = time.monotonic() + timeout
     for i in range(warmup):
-        peer.write(_cdr(INT.pack(i)), give_up)
+        peer.write(cdr_sample(INT.pack(i)), give_up)
         peer.take(give_up)
     start = time.perf_counter()
     for i in range(rounds):
-        peer.write(_cdr(INT.pack(i)), give_up)
+        peer.write(cdr_sample(INT.pack(i)), give_up)
         peer.take(give_up)
     seconds = time.perf_counter() - start
-    peer.write(_cdr(INT.pack(STOP)), give_up)
+    peer.write(cdr_sample(INT.pack(STOP)), give_up)
     peer.flush()
     report("pingpong", {"rounds": rounds, "seconds": seconds}, out)
 
@@ -315,5 +315,5 @@ def raw_ping_server(domain: int, prefix: str, barrier: Any, out: str, timeout: f
     barrier.wait(timeout)
     give_up = time.monotonic() + timeout
     while (value := _int_of(peer.take(give_up))) != STOP:
-        peer.write(_cdr(INT.pack(value)), give_up)
+        peer.write(cdr_sample(INT.pack(value)), give_up)
     peer.flush()

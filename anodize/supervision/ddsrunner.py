@@ -20,6 +20,7 @@ from ..transport.dds import DdsSettings
 from . import processes
 from .group import Group, reference_of
 from .groupproc import GroupSpec, group_main
+from .hostlink import HostLink
 from .processes import ProcessRunner, _Incarnation, _sys_path
 
 __all__ = ["DdsRunner"]
@@ -41,18 +42,28 @@ class DdsRunner(ProcessRunner):
         super().__init__(protocol, machines, channels, groups, monitors, liveness)
         self.settings = settings
         self.elsewhere = elsewhere
+        # The supervisors of the other hosts: policies that reach beyond a group act there too.
+        self.link = HostLink(settings, set(settings.host_of.values())) if elsewhere else None
         # The start barrier may wait for other hosts: the start-up deadline allows for it.
         self.start_timeout = processes._START_TIMEOUT + settings.wait
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
-        """Start ``groups``; their channels to every other group are DDS topics."""
+        """Start ``groups`` (of a batch that may span hosts); their channels to the other groups
+        of the batch are DDS topics, to groups outside it gone (as with pipes)."""
+        if self.link is not None and incarnation in self.link.batches:
+            batch = self.link.batches[incarnation]
+        else:  # every group starts as incarnation 0; with every group here, a restart's batch is ours
+            batch = frozenset(self.settings.host_of) if incarnation == 0 else frozenset(groups)
+        group_of = self.settings.group_of
         for name in groups:
             group = self.groups[name]
+            dead = {role: f"group {group_of[role]} did not start again with group {name}"
+                    for role in self.machines if group_of[role] not in batch}
             spec = GroupSpec(
                 run_id=self.run_id, name=name, incarnation=incarnation, protocol=self.protocol,
                 roles={role: reference_of(fn) for role, fn in group.roles.items()},
                 machines={role: self.machines[role] for role in group.roles},
-                channels=self.channels, dead={}, monitors=self.monitors,
+                channels=self.channels, dead=dead, monitors=self.monitors,
                 priority=group.priority, cpus=group.cpus, memory=group.memory,
                 sys_path=tuple(p for p in _sys_path() if p),
                 extra={"dds": replace(self.settings, host=self.settings.host_of.get(name, self.settings.host))})
@@ -71,4 +82,13 @@ class DdsRunner(ProcessRunner):
         if self.elsewhere:
             notes.append("groups running elsewhere: " + ", ".join(
                 f"{name} on host {host}" for name, host in sorted(self.elsewhere.items())))
+        if self.link is not None:
+            notes.extend(self.link.notes)
         return notes
+
+    def close(self) -> None:
+        try:
+            super().close()
+        finally:
+            if self.link is not None:
+                self.link.close()

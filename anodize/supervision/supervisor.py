@@ -33,7 +33,7 @@ from .report import GroupReport, GroupState, GroupStatus, RoleReport, RoleStatus
 from .roles import describe_error
 
 __all__ = ["Supervisor", "Runner", "RunState", "Event", "Ready", "Counts", "RoleEnded", "GroupFailed",
-           "GroupExited", "Note", "window_rates"]
+           "GroupExited", "Note", "window_rates", "Link", "Elsewhere", "StopWord", "RestartWord", "Word"]
 
 TICK = 0.1           # seconds between two looks at the clock when nothing happens
 STATUS_EVERY = 0.5   # seconds between two on_status calls
@@ -116,6 +116,64 @@ class Note:
 Event = Ready | Counts | RoleEnded | GroupFailed | GroupExited | Note
 
 
+# ---- what supervisors on other hosts say (transport="dds", anodize run --host) ----------------
+@dataclass(frozen=True)
+class StopWord:
+    """Every group of the run stops."""
+
+    host: str
+    why: str
+
+
+@dataclass(frozen=True)
+class RestartWord:
+    """The groups of ``groups``, wherever they run, start again as incarnation ``incarnation``."""
+
+    host: str
+    groups: tuple[str, ...]
+    incarnation: int
+    why: str
+
+
+Word = StopWord | RestartWord
+
+
+class Link(Protocol):
+    """This host's line to the supervisors of the same run on other hosts."""
+
+    host: str
+
+    def say(self, word: Word) -> None:
+        """Tell every other host."""
+
+    def words(self) -> list[Word]:
+        """What the others said since the last call."""
+
+
+@dataclass(frozen=True)
+class Elsewhere:
+    """The whole system, when some of its groups run on other hosts under their own supervisors.
+
+    Attributes:
+        link: to those supervisors.
+        groups: every group of the system (their policies decide restart sets).
+        channels: every channel of the system.
+    """
+
+    link: Link
+    groups: dict[str, Group]
+    channels: tuple[tuple[str, str], ...]
+
+
+@dataclass
+class _Remote:
+    """What this host knows of a group that runs on another."""
+
+    group: Group
+    incarnation: int = 0
+    restarts: int = 0
+
+
 class Runner(Protocol):
     """What a transport does for the supervisor."""
 
@@ -174,6 +232,7 @@ class _GroupRecord:
     memory_note: str = ""
     pid: int | None = None
     restarts: int = 0
+    restart_as: int | None = None  # the incarnation a restart decided across hosts gives it
     failures: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     memory: int | None = None
@@ -193,16 +252,20 @@ class Supervisor:
 
     def __init__(self, protocol: str, roles: Sequence[str], groups: dict[str, Group],
                  channels: Sequence[tuple[str, str]], runner: Runner, timeout: float | None,
-                 grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None) -> None:
+                 grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None,
+                 elsewhere: Elsewhere | None = None) -> None:
         self.protocol = protocol
         self.roles = tuple(roles)
         self.channels = tuple(channels)
+        self.elsewhere = elsewhere
         self.runner = runner
         self.timeout = timeout
         self.grace = grace
         self.on_status = on_status
         self.records = {name: _GroupRecord(group) for name, group in groups.items()}
-        self.group_of = {role: g.name for g in groups.values() for role in g.roles}
+        everyone = groups if elsewhere is None else elsewhere.groups
+        self.group_of = {role: g.name for g in everyone.values() for role in g.roles}
+        self.remote = {name: _Remote(g) for name, g in everyone.items() if name not in groups}
         self.state = RunState.STARTING
         self.started = time.monotonic()
         self.went: float | None = None
@@ -243,6 +306,9 @@ class Supervisor:
             self._stop_all("the timeout passed")
         for event in self.runner.events(TICK):
             self._handle(event)
+        if self.elsewhere is not None:
+            for word in self.elsewhere.link.words():
+                self._heard(word)
         if self.state is RunState.STOPPING and time.monotonic() - self.stop_since > self.grace:
             for name in self._running():
                 self._end(name, _Why.STOP)
@@ -255,15 +321,20 @@ class Supervisor:
 
     # ---- starting --------------------------------------------------------------------------
     def _start(self, names: list[str]) -> None:
+        # One incarnation number per batch, above each member's last (a runner names the
+        # batch's channels by it, and its events carry it): the number a restart decided
+        # across hosts gave the batch, if any.
+        chosen = [r.restart_as for r in (self.records[n] for n in names) if r.restart_as is not None]
+        incarnation = max(chosen, default=max(self.records[n].incarnation + 1 for n in names))
         for name in names:
             record = self.records[name]
-            record.incarnation += 1
-            record.state = GroupState.STARTING if record.incarnation == 0 else GroupState.RESTARTING
+            record.incarnation = incarnation
+            record.restart_as = None
+            record.state = GroupState.STARTING if incarnation == 0 else GroupState.RESTARTING
             record.ready = record.ended = False
             record.why, record.killed, record.error, record.reports = _Why.NONE, False, None, {}
             record.steady = False
-        # One incarnation number per batch: a runner names the batch's channels by it.
-        self.runner.start(names, max(self.records[n].incarnation for n in names))
+        self.runner.start(names, incarnation)
 
     def _maybe_go(self) -> None:
         """Once no group is still starting, let the ready ones go together."""
@@ -385,36 +456,75 @@ class Supervisor:
             if whole_group:
                 self._end(record.group.name, _Why.FAILED)
             return
+        if record.why is _Why.RESTART:
+            return  # a restart (of a set it is in) is under way: this failure is that set's too
         policy = record.group.on_failure
         if policy is FailurePolicy.STOP_SYSTEM:
             self._stop_all(f"group {record.group.name} failed and its policy is stop-system")
             if whole_group:
                 self._end(record.group.name, _Why.FAILED)
         elif policy is FailurePolicy.RESTART and record.restarts < record.group.max_restarts:
-            for name in self._restart_set(record.group.name):
-                other = self.records[name]
-                if other.ended:
-                    other.why = _Why.RESTART
-                else:
-                    self._end(name, _Why.RESTART)
+            members = self._restart_set(record.group.name)
+            incarnation = None
+            if self.elsewhere is not None:  # the groups of the set elsewhere restart as the same incarnation
+                incarnation = 1 + max([r.incarnation if r.restart_as is None else r.restart_as
+                                       for r in self.records.values()] + [r.incarnation for r in self.remote.values()])
+                self.elsewhere.link.say(RestartWord(self.elsewhere.link.host, tuple(members), incarnation, what))
+                self._restarted_elsewhere(members, incarnation)
+            for name in members:
+                if name in self.records:
+                    self._mark_restart(name, incarnation)
             self._restart_when_ready()
         elif whole_group:
             self._end(record.group.name, _Why.FAILED)  # stopped as a whole: all its threads, all its memory
 
+    def _mark_restart(self, name: str, incarnation: int | None) -> None:
+        record = self.records[name]
+        record.restart_as = incarnation
+        if record.ended:
+            record.why = _Why.RESTART
+        else:
+            self._end(name, _Why.RESTART)
+
     def _restart_set(self, name: str) -> list[str]:
-        """``name`` and the groups connected to it through channels that also restart."""
+        """``name`` and the groups connected to it through channels that also restart (on any host)."""
+        channels = self.channels if self.elsewhere is None else self.elsewhere.channels
         found, todo = {name}, [name]
         while todo:
             current = todo.pop()
-            for sender, receiver in self.channels:
+            for sender, receiver in channels:
                 for a, b in ((sender, receiver), (receiver, sender)):
                     ga, gb = self.group_of[a], self.group_of[b]
-                    other = self.records[gb]
+                    other = self.records.get(gb) or self.remote[gb]
                     if (ga == current and gb not in found and other.group.on_failure is FailurePolicy.RESTART
                             and other.restarts < other.group.max_restarts):
                         found.add(gb)
                         todo.append(gb)
         return sorted(found)
+
+    # ---- what other hosts said -------------------------------------------------------------
+    def _heard(self, word: Word) -> None:
+        if isinstance(word, StopWord):
+            self._stop_all(f"{word.why} (on host {word.host})", tell=False)
+            return
+        self._restarted_elsewhere(word.groups, word.incarnation)
+        if self.state is RunState.STOPPING:
+            return
+        for name in word.groups:
+            record = self.records.get(name)
+            if record is None or max(record.incarnation, record.restart_as or 0) >= word.incarnation:
+                continue  # not ours, or restarted as this incarnation already (we decided it too)
+            record.notes.append(f"restarted as incarnation {word.incarnation} with groups "
+                                f"{', '.join(word.groups)}, decided on host {word.host}: {word.why}")
+            self._mark_restart(name, word.incarnation)
+        self._restart_when_ready()
+
+    def _restarted_elsewhere(self, groups: Sequence[str], incarnation: int) -> None:
+        for name in groups:
+            remote = self.remote.get(name)
+            if remote is not None and remote.incarnation < incarnation:
+                remote.incarnation = incarnation
+                remote.restarts += 1
 
     def _restart_when_ready(self) -> None:
         """Start the groups marked for restart once every one of them has ended."""
@@ -436,9 +546,11 @@ class Supervisor:
             record.killed = True
             self.runner.kill(name)
 
-    def _stop_all(self, why: str) -> None:
+    def _stop_all(self, why: str, tell: bool = True) -> None:
         if self.state is RunState.STOPPING:
             return
+        if tell and self.elsewhere is not None:
+            self.elsewhere.link.say(StopWord(self.elsewhere.link.host, why))
         self.state = RunState.STOPPING
         self.stop_since = time.monotonic()
         self.notes.append(f"stopping every group: {why}")

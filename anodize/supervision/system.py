@@ -19,7 +19,7 @@ from sessiontypes.graph import communication_graph
 from ..errors import AnodizeError, ConfigurationError
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
 from .report import GroupStatus, RunReport
-from .supervisor import Runner, Supervisor
+from .supervisor import Elsewhere, Runner, Supervisor
 from .threads import ThreadRunner
 
 __all__ = ["System"]
@@ -195,5 +195,6 @@ class System:
         local_channels = tuple((a, b) for a, b in channels if a in local_roles and b in local_roles)
         runner = DdsRunner(self.global_type.name, machines, channels, local, self.monitors, settings, elsewhere,
                            liveness)
+        everywhere = (Elsewhere(runner.link, dict(self.groups), channels) if runner.link is not None else None)
         return Supervisor(self.global_type.name, local_roles, local, local_channels, runner, timeout, grace,
-                          on_status).run()
+                          on_status, everywhere).run()

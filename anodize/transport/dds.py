@@ -57,11 +57,12 @@ from .dds_types import Frame
 from .process import PayloadError, ProcessNetwork
 
 __all__ = ["DdsSettings", "DdsNetwork", "DdsSender", "DdsReceiver", "Frame", "topic_name", "identity_of",
-           "participant_config", "DOMAIN_ENV", "StartBarrierError"]
+           "participant_config", "DOMAIN_ENV", "StartBarrierError", "ANY_SAMPLE", "cdr_sample",
+           "instance_handle", "userdata_of"]
 
 DOMAIN_ENV = "ANODIZE_DDS_DOMAIN"  # overrides the system file's domain
 _TIMEOUT = -10  # DDS_RETCODE_TIMEOUT: a write found no room within its blocking time
-_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any
 _READER_SAMPLES = 64  # samples waiting at a receiver before its writer is held back
 _WRITE_BLOCK = duration(milliseconds=2)  # the longest a write holds the GIL waiting for room
 _POLL = 0.05  # seconds between looks at a peer's liveliness (asking Cyclone costs tens of µs)
@@ -169,7 +170,7 @@ class DdsSender:
                                                     qos=endpoints.writer_qos)
         self._ref = self.writer._ref
         self._lock = threading.Lock()  # a failure frame must not interleave with a message
-        self.matched = False  # the start barrier saw the receiver's reader
+        self.accepted: int | None = None  # the subscription handle of the receiver's reader
         self._next_check = 0.0  # when to look again whether the receiver's reader is still there
 
     def put(self, item: object) -> None:
@@ -190,7 +191,7 @@ class DdsSender:
         else:
             return  # STOP is local to each process
         with self._lock:
-            self._write(_cdr(frame))
+            self._write(cdr_sample(frame))
 
     def _write(self, sample: bytes, give_up: float | None = None) -> None:
         pause = 0.0002
@@ -198,9 +199,9 @@ class DdsSender:
             # A reader gone since the last look takes what is written meanwhile nowhere;
             # its group is gone too, so this only bounds how soon the sender hears of it.
             now = time.monotonic()
-            if self.matched and now >= self._next_check:
+            if self.accepted is not None and now >= self._next_check:
                 self._next_check = now + _POLL
-                if _matched_readers(self.writer) == 0:
+                if self.accepted not in {instance_handle(h) for h in self.writer.get_matched_subscriptions()}:
                     raise self._peer_gone()
             ret = ddspy_write(self._ref, sample)
             if ret == 0:
@@ -217,12 +218,22 @@ class DdsSender:
             time.sleep(pause)  # releases the GIL: the group's other threads run on
             pause = min(pause * 2, 0.005)
 
+    def find_reader(self) -> bool:
+        """Accept the reader of the receiver's group of our incarnation, if it has matched (the
+        start barrier): until then nothing is written, so nothing goes only to a reader of an
+        incarnation that is ending (a restart), and nothing is missed by the new one."""
+        if self.accepted is None:
+            self.accepted = _find_peer(self.network, self.receiver, f"{self.sender}->{self.receiver}",
+                                       self.writer.get_matched_subscriptions(),
+                                       self.writer.get_matched_subscription_data)[0]
+        return self.accepted is not None
+
     def put_failure(self, cause: str) -> None:
         """Best effort, from another thread: tell the receiver this sender failed."""
         if self._lock.acquire(timeout=1.0):
             try:
                 with contextlib.suppress(AnodizeError, PeerFailedError, RoleStopped):
-                    self._write(_cdr(Codec.failure_frame(cause)), give_up=time.monotonic() + 1.0)
+                    self._write(cdr_sample(Codec.failure_frame(cause)), give_up=time.monotonic() + 1.0)
             finally:
                 self._lock.release()
 
@@ -268,7 +279,7 @@ class DdsReceiver:
                                                     qos=endpoints.reader_qos)
         self._ref = self.reader._ref
         self.waitset = WaitSet(endpoints.participant)
-        self.waitset.attach(ReadCondition(self.reader, _ANY))
+        self.waitset.attach(ReadCondition(self.reader, ANY_SAMPLE))
         self.accepted: int | None = None  # the publication handle of the one writer we listen to
         self.accepted_guid = ""
         self.frame_size = 0
@@ -281,28 +292,12 @@ class DdsReceiver:
     # ---- start barrier --------------------------------------------------------------------
     def find_writer(self) -> bool:
         """Accept the writer of the expected group, if it has matched (the start barrier)."""
-        if self.accepted is not None:
-            return True
-        settings = self.network.settings
-        expected = settings.group_of[self.sender]
-        claims = []
-        for handle in self.reader.get_matched_publications():
-            data = self.reader.get_matched_publication_data(handle)
-            if data is None:
-                continue
-            identity = _parse_identity(_userdata(data.qos))
-            if identity is not None and identity[0] == settings.run_id and identity[1] == expected:
-                claims.append((_handle(handle), str(data.key), identity))
-        if len(claims) > 1:  # never guess which one is genuine
-            raise StartBarrierError(
-                f"{len(claims)} DDS writers claim to be {settings.where(self.sender)} on "
-                f"{self.sender}->{self.receiver}: " + ", ".join(f"{guid} (pid {identity[4]} on {identity[3]})"
-                                                                 for _, guid, identity in claims)
-                + "; is the same run started twice, or is someone forging it?")
-        if claims:
-            (self.accepted, self.accepted_guid, _), = claims
-            return True
-        return False
+        if self.accepted is None:
+            self.accepted, self.accepted_guid = _find_peer(self.network, self.sender,
+                                                           f"{self.sender}->{self.receiver}",
+                                                           self.reader.get_matched_publications(),
+                                                           self.reader.get_matched_publication_data)
+        return self.accepted is not None
 
     # ---- the Channel protocol ---------------------------------------------------------------
     def put(self, item: object) -> None:
@@ -346,23 +341,23 @@ class DdsReceiver:
 
     def _take(self) -> bool:
         """Move what the reader holds from the accepted writer into our queue; False if none."""
-        taken = ddspy_take(self._ref, _ANY, _TAKE)
+        taken = ddspy_take(self._ref, ANY_SAMPLE, _TAKE)
         if type(taken) is int:
             raise AnodizeError(f"DDS take on {self.sender}->{self.receiver} failed: {DDSException(taken)}")
         for data, info in taken:
             if not info.valid_data:
                 continue
-            if _handle(info.publication_handle) != self.accepted:
+            if instance_handle(info.publication_handle) != self.accepted:
                 self._reject(info.publication_handle)
                 continue
             self._samples.append(data)
         return bool(self._samples)
 
     def _reject(self, handle: int) -> None:
-        matched = [h for h in self.reader.get_matched_publications() if _handle(h) == _handle(handle)]
+        matched = [h for h in self.reader.get_matched_publications() if instance_handle(h) == instance_handle(handle)]
         data = self.reader.get_matched_publication_data(matched[0]) if matched else None
         guid = str(data.key) if data is not None else f"handle {handle}"
-        claimed = _userdata(data.qos).decode(errors="replace") if data is not None else ""
+        claimed = userdata_of(data.qos).decode(errors="replace") if data is not None else ""
         entry = self.rejected.setdefault(guid, [0, claimed])
         entry[0] += 1
         if entry[0] == 1:
@@ -400,7 +395,7 @@ class DdsReceiver:
         if self._lost is not None or self.accepted is None or now < self._next_check:
             return self._lost
         self._next_check = now + _POLL
-        if self.accepted not in {_handle(h) for h in self.reader.get_matched_publications()}:
+        if self.accepted not in {instance_handle(h) for h in self.reader.get_matched_publications()}:
             self._lost = (f"its DDS writer went away: {self.network.settings.where(self.sender)} ended, "
                           "or stopped answering, or was cut off")
         else:
@@ -428,6 +423,7 @@ class DdsNetwork(ProcessNetwork):
                  report: Callable[[str], None] = lambda line: None) -> None:
         self.settings = settings
         self.report = report
+        self.incarnation = incarnation
         self.endpoints = _Endpoints(settings, group, incarnation)
         local = frozenset(local_roles)
         channels = tuple(channels)
@@ -476,11 +472,9 @@ class DdsNetwork(ProcessNetwork):
     def _missing(self) -> list[str]:
         missing: dict[str, list[str]] = {}
         for sender in self.senders:
-            if _matched_readers(sender.writer) == 0:
+            if not sender.find_reader():
                 missing.setdefault(self.settings.where(sender.receiver), []).append(
                     f"{sender.sender}->{sender.receiver}")
-            else:
-                sender.matched = True
         for receiver in self.receivers:
             if not receiver.find_writer():
                 missing.setdefault(self.settings.where(receiver.sender), []).append(
@@ -494,24 +488,48 @@ class DdsNetwork(ProcessNetwork):
                 sender.writer.wait_for_acks(duration(seconds=linger))
 
 
-def _cdr(frame: bytes) -> bytes:
+def _find_peer(network: DdsNetwork, role: str, channel: str, handles: Iterable[int],
+               data_of: Callable[[int], Any]) -> tuple[int | None, str]:
+    """The handle and GUID of the one matched endpoint that says it is ``role``'s group of
+    our run and incarnation, or (None, "") while there is none.
+
+    Raises:
+        StartBarrierError: several claim it (never guess which one is genuine).
+    """
+    settings = network.settings
+    expected = settings.group_of[role]
+    claims = []
+    for handle in handles:
+        data = data_of(handle)
+        identity = _parse_identity(userdata_of(data.qos)) if data is not None else None
+        # A restart starts its batch of groups as one incarnation: an endpoint of an older
+        # one is the session we left, not a peer of this one.
+        if identity is not None and identity[:3] == (settings.run_id, expected, network.incarnation):
+            claims.append((instance_handle(handle), str(data.key), identity))
+    if len(claims) > 1:
+        raise StartBarrierError(
+            f"{len(claims)} DDS endpoints on {channel} claim to be {settings.where(role)}: "
+            + ", ".join(f"{guid} (pid {identity[4]} on {identity[3]})" for _, guid, identity in claims)
+            + "; is the same run started twice, or is someone forging it?")
+    if claims:
+        handle, guid, _ = claims[0]
+        return handle, guid
+    return None, ""
+
+
+def cdr_sample(frame: bytes) -> bytes:
     """A codec frame (4-byte length, body) as the CDR of an ``anodize::Frame`` sample."""
     sample = _CDR_HEADER + _LENGTH.pack(len(frame)) + frame
     return sample + b"\0" * (-len(sample) % 4)
 
 
-def _handle(handle: int) -> int:
+def instance_handle(handle: int) -> int:
     """An instance handle as one number: the binding gives the same 64 bits signed in one
     place and unsigned in another."""
     return handle & 0xFFFF_FFFF_FFFF_FFFF
 
 
-def _matched_readers(writer: DataWriter[Frame]) -> int:
-    count: int = writer.get_publication_matched_status().current_count  # type: ignore[no-untyped-call]
-    return count
-
-
-def _userdata(qos: Qos | None) -> bytes:
+def userdata_of(qos: Qos | None) -> bytes:
     if qos is None:
         return b""
     try:

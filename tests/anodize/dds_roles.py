@@ -82,3 +82,42 @@ def slow_producer_of_count(ep: Endpoint) -> None:
         ep.send("C", "data", i)
         ep.sleep(0.005)
     ep.send("C", "stop")
+
+
+STREAM_AND_TICKS = ("global Both(P, C, Q, R) = (mu t. P -> C : {data(int). t, stop} "
+                    "|| mu u. Q -> R : {tick(int). u, done})")
+
+
+def failing_producer(ep: Endpoint) -> None:
+    """Send a few numbers, then fail."""
+    for i in range(5):
+        ep.send("C", "data", i)
+        ep.sleep(0.05)
+    raise RuntimeError("the producer gives up")
+
+
+def failing_once_producer(ep: Endpoint) -> None:
+    """Fail after a few numbers the first time ($DDS_TEST_MARKER does not exist yet); then be
+    :func:`producer`."""
+    marker = os.environ["DDS_TEST_MARKER"]
+    if not os.path.exists(marker):
+        with open(marker, "w", encoding="utf-8"):
+            pass
+        for i in range(5):
+            ep.send("C", "data", i)
+        raise RuntimeError("the first incarnation fails")
+    producer(ep)
+
+
+def ticker(ep: Endpoint) -> None:
+    """Tick for ever (until stopped)."""
+    i = 0
+    while True:
+        ep.send("R", "tick", i)
+        i += 1
+        ep.sleep(0.01)
+
+
+def tick_counter(ep: Endpoint) -> None:
+    while ep.recv("Q")[0] == "tick":
+        pass
