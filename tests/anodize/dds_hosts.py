@@ -69,6 +69,16 @@ def wait_for_group(process: subprocess.Popen[str], seconds: float) -> int:
     raise AssertionError("the host's group never started")
 
 
+def wait_until_flowing(marker: Path, process: subprocess.Popen[str], seconds: float = 90) -> None:
+    """Until :func:`dds_roles.slow_producer` has sent its first message (bounded)."""
+    deadline = time.monotonic() + seconds
+    while not marker.exists():
+        if process.poll() is not None or time.monotonic() > deadline:
+            out = process.communicate()[0] if process.poll() is not None else "(still running)"
+            raise AssertionError(f"the stream never started within {seconds} s:\n{out}")
+        time.sleep(0.05)
+
+
 def finish(process: subprocess.Popen[str], seconds: float) -> str:
     try:
         out, _ = process.communicate(timeout=seconds)

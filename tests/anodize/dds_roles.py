@@ -68,10 +68,14 @@ def frame_consumer(ep: Endpoint) -> None:
 
 
 def slow_producer(ep: Endpoint) -> None:
-    """Stream for ever, slowly: the test kills this group, or cuts it off."""
+    """Stream for ever, slowly: the test kills this group, freezes it or cuts it off. Once the
+    first message is out (the start barrier has passed), the file $DDS_TEST_FLOWING is made."""
     i = 0
     while True:
         ep.send("C", "data", i)
+        if i == 0 and os.environ.get("DDS_TEST_FLOWING"):
+            with open(os.environ["DDS_TEST_FLOWING"], "w", encoding="utf-8"):
+                pass
         i += 1
         ep.sleep(0.01)
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import dds_roles
 import pytest
-from dds_hosts import domain, finish, start_host, wait_for_group, write_system
+from dds_hosts import domain, finish, start_host, wait_for_group, wait_until_flowing, write_system
 
 import anodize
 import sessiontypes
@@ -78,14 +78,15 @@ def test_an_unknown_host_is_a_configuration_error() -> None:
 
 def test_a_killed_host_is_reported_to_the_other_as_a_peer_failure(tmp_path: Path) -> None:
     system = write_system(tmp_path, "slow_producer", "killed")
-    consumer = start_host(system, "B", tmp_path / "b.json")
-    producer = start_host(system, "A", tmp_path / "a.json")
+    flowing = {"DDS_TEST_FLOWING": str(tmp_path / "flowing")}
+    consumer = start_host(system, "B", tmp_path / "b.json", flowing)
+    producer = start_host(system, "A", tmp_path / "a.json", flowing)
     try:
-        group = wait_for_group(producer, 30)
-        time.sleep(2.0)  # the stream is flowing (the start barrier has passed)
+        group = wait_for_group(producer, 60)
+        wait_until_flowing(tmp_path / "flowing", producer)  # past the start barrier
         os.kill(group, signal.SIGKILL)
         killed_at = time.monotonic()
-        out = finish(consumer, 15)  # bounded: a hang fails here
+        out = finish(consumer, 30)  # bounded: a hang fails here
         noticed_after = time.monotonic() - killed_at
     finally:
         for process in (producer, consumer):

@@ -10,12 +10,11 @@ import re
 import shutil
 import signal
 import subprocess
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from dds_hosts import finish, start_host, wait_for_group, write_system
+from dds_hosts import finish, start_host, wait_for_group, wait_until_flowing, write_system
 
 from anodize import PeerFailedError
 from anodize.supervision.report import RoleStatus
@@ -135,20 +134,27 @@ def test_messages_and_frames_cross_in_order(hosts: Hosts, tmp_path: Path, loss: 
         assert hosts.dropped() > 1000  # the link really lost packets
 
 
-@pytest.mark.parametrize("how", ["kill", "cut"])
+@pytest.mark.parametrize("how", ["kill", "freeze", "cut"])
 def test_a_lost_host_is_reported_to_the_other(hosts: Hosts, tmp_path: Path, how: str) -> None:
     system = write_system(tmp_path, "slow_producer", f"lost-{how}")
-    consumer = start_host(system, "B", tmp_path / "b.json", namespace=hosts.b)
-    producer = start_host(system, "A", tmp_path / "a.json", namespace=hosts.a)
+    flowing = {"DDS_TEST_FLOWING": str(tmp_path / "flowing")}
+    consumer = start_host(system, "B", tmp_path / "b.json", flowing, namespace=hosts.b)
+    producer = start_host(system, "A", tmp_path / "a.json", flowing, namespace=hosts.a)
+    group = 0
     try:
-        group = wait_for_group(producer, 30)
-        time.sleep(2.0)  # past the start barrier: the stream flows
+        group = wait_for_group(producer, 60)
+        wait_until_flowing(tmp_path / "flowing", producer)  # past the start barrier
         if how == "kill":
             os.kill(group, signal.SIGKILL)
+        elif how == "freeze":  # stops answering: every thread of the group's process stands still
+            os.kill(group, signal.SIGSTOP)
         else:
             hosts.cut()
-        out = finish(consumer, 15)  # bounded: a hang fails here
+        out = finish(consumer, 30)  # bounded: a hang fails here
     finally:
+        if how == "freeze" and group:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(group, signal.SIGKILL)
         for process in (producer, consumer):
             with contextlib.suppress(ProcessLookupError):
                 process.kill()
