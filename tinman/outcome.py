@@ -55,7 +55,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "violation_messages": violations,
         "messages": dict(report.messages),
         "groups": {name: {key: group[key] for key in (
-            "status", "scheduling", "peak_memory", "memory_bound", "memory_note", "error", "restarts",
+            "status", "scheduling", "peak_memory", "memory_bound", "memory_note", "notes", "error", "restarts",
             "messages", "rate_hz", "rate_min_hz")} for name, group in run["groups"].items()},
         "roles": {name: {"group": role["group"], "status": role["status"], "error": role["error"]}
                   for name, role in run["roles"].items()},

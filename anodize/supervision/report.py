@@ -73,6 +73,8 @@ class GroupReport:
             process's baseline (interpreter and imported modules); None where not measured.
         memory_bound: the bound in bytes, or None.
         memory_note: how the bound was enforced, or why it was not.
+        notes: other facts about the group (e.g. a demotion by the watchdog, samples
+            rejected from a foreign DDS writer, a restart decided on another host).
         error: the group-level failure (e.g. a ``MemoryBoundError``), or None.
         restarts: how many times the group was started again (``on_failure="restart"``).
         failures: one line per failure that led to a restart or a stop, oldest first.
@@ -90,6 +92,7 @@ class GroupReport:
     peak_memory: int | None = None
     memory_note: str = ""
     memory_bound: int | None = None
+    notes: tuple[str, ...] = ()
     error: BaseException | None = None
     restarts: int = 0
     failures: tuple[str, ...] = ()
@@ -200,7 +203,7 @@ class RunReport:
             "received": dict(self.received),
             "groups": {name: {
                 "status": str(g.status), "scheduling": g.scheduling, "peak_memory": g.peak_memory,
-                "memory_bound": g.memory_bound, "memory_note": g.memory_note,
+                "memory_bound": g.memory_bound, "memory_note": g.memory_note, "notes": list(g.notes),
                 "error": _error(g.error), "restarts": g.restarts, "failures": list(g.failures),
                 "messages": g.messages, "received": g.received, "rate_hz": g.rate_hz,
                 "rate_min_hz": g.rate_min_hz, "pid": g.pid,
@@ -237,6 +240,7 @@ def _group_details(group: GroupReport) -> str:
         details.append(f"peak {_mib(group.peak_memory)}{bound}")
     if group.memory_note:
         details.append(group.memory_note)
+    details.extend(group.notes)
     if group.restarts:
         details.append(f"restarted {group.restarts}x")
     return "; ".join(details)

@@ -580,7 +580,7 @@ class Supervisor:
             rates = [rate for stretch in r.stretches for rate in window_rates(stretch)]
             groups[name] = GroupReport(
                 name=name, status=r.state, scheduling=r.scheduling, peak_memory=r.peak,
-                memory_note="; ".join(filter(None, [r.memory_note, *r.notes])), memory_bound=r.group.memory,
+                memory_note=r.memory_note, notes=tuple(r.notes), memory_bound=r.group.memory,
                 error=r.error, restarts=r.restarts, failures=tuple(r.failures),
                 messages=sum(r.sent.values()), received=sum(r.received.values()),
                 rate_hz=statistics.median(rates) if rates else None,

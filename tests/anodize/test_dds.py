@@ -131,7 +131,7 @@ def test_a_forged_writer_is_rejected_and_reported(tmp_path: Path, monkeypatch: p
         forger.kill()
         forger.wait()
     assert report.ok, report.summary()  # the consumer saw 0..299 in order: no forged sample got in
-    note = report.groups["consuming"].memory_note  # where a group's notes are reported
+    note = "; ".join(report.groups["consuming"].notes)
     assert "rejected samples on P->C from DDS writer" in note, note
     assert "it claims 'anodize1;other;intruder;0;X;1'" in note, note
 
