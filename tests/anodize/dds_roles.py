@@ -125,3 +125,34 @@ def ticker(ep: Endpoint) -> None:
 def tick_counter(ep: Endpoint) -> None:
     while ep.recv("Q")[0] == "tick":
         pass
+
+
+def _progress() -> str:
+    return os.environ["DDS_TEST_PROGRESS"]
+
+
+def eager_producer(ep: Endpoint) -> None:
+    """Send as fast as sends return; after each, check how far ahead of the consumer we are
+    (the consumer writes its count to $DDS_TEST_PROGRESS) and remember the most."""
+    ahead = 0
+    for i in range(_count()):
+        ep.send("C", "data", i)
+        with open(_progress(), encoding="utf-8") as progress:
+            consumed = int(progress.read() or 0)
+        ahead = max(ahead, i + 1 - consumed)
+    ep.send("C", "stop")
+    with open(_progress() + ".ahead", "w", encoding="utf-8") as out:
+        out.write(str(ahead))
+
+
+def slow_consumer(ep: Endpoint) -> None:
+    """:func:`consumer`, taking 2 ms over each message and saying how many it has had."""
+    expected = 0
+    while ep.recv("P")[0] != "stop":
+        expected += 1
+        with open(_progress() + ".tmp", "w", encoding="utf-8") as progress:
+            progress.write(str(expected))
+        os.replace(_progress() + ".tmp", _progress())
+        ep.sleep(0.002)
+    if expected != _count():
+        raise AssertionError(f"{expected} messages arrived, {_count()} were sent")

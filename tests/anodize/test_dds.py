@@ -49,6 +49,19 @@ def test_the_two_hosts_example_runs_here_with_both_groups() -> None:
     assert "protocol Teleop: ok" in result.stdout
 
 
+def test_a_slow_receiver_holds_the_sender_back(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("DDS_TEST_COUNT", "400")
+    progress = tmp_path / "consumed"
+    progress.write_text("0")
+    monkeypatch.setenv("DDS_TEST_PROGRESS", str(progress))
+    report = stream_system(dds_roles.eager_producer, dds_roles.slow_consumer, "backpressure").run(timeout=60, wait=20)
+    assert report.ok, report.summary()
+    # The sender is at most the credit window (48) plus one take (32) ahead of what the
+    # consumer has had: memory stays bounded (without flow control it ran ahead by hundreds).
+    ahead = int((tmp_path / "consumed.ahead").read_text())
+    assert ahead <= 48 + 32 + 1, ahead
+
+
 @pytest.mark.slow
 def test_100000_messages_and_1000_frames_cross_in_order(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DDS_TEST_COUNT", "100000")
