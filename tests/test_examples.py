@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -36,11 +37,15 @@ def test_generated_example_code_is_up_to_date(proto: str, monkeypatch: pytest.Mo
 
 
 @pytest.mark.slow
-def test_mixed_criticality_example_stops_the_memory_hog_and_not_the_control_loop(tmp_path: Path) -> None:
+@pytest.mark.parametrize("transport", ["process", "dds"])
+def test_mixed_criticality_example_stops_the_memory_hog_and_not_the_control_loop(tmp_path: Path,
+                                                                                  transport: str) -> None:
     report_path = tmp_path / "report.json"
     done = subprocess.run([str(Path(sys.executable).parent / "anodize"), "run",
-                           "examples/mixed_criticality/system.toml", "--json", str(report_path)],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+                           "examples/mixed_criticality/system.toml", "--transport", transport,
+                           "--json", str(report_path)],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT,
+                          env={**os.environ, "ANODIZE_DDS_DOMAIN": str(1 + os.getpid() % 200)})
     assert done.returncode == 1, done.stdout + done.stderr  # not ok: a group failed, as it should
     report = json.loads(report_path.read_text())
     groups = report["groups"]

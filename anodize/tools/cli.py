@@ -7,6 +7,7 @@ has errors (printed as ``path:line:col: error: ...``), 2 usage errors.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import shlex
 import shutil
@@ -126,6 +127,9 @@ def _parser() -> argparse.ArgumentParser:
                             help="stop roles still running after S seconds (default: the file's timeout)")
     run_system.add_argument("--json", metavar="FILE", help="also write the run report as JSON to FILE")
     run_system.add_argument("--quiet", action="store_true", help="no live status lines")
+    run_system.add_argument("--transport", choices=("inproc", "process", "dds"),
+                            help="run on this transport instead of the file's (e.g. dds, to try a system across "
+                                 "hosts on one)")
     run_system.add_argument("--host", metavar="NAME",
                             help='transport = "dds": run only the groups placed on host NAME (default: every group)')
     run_system.add_argument("--wait", type=float, metavar="S", default=30.0,
@@ -336,6 +340,8 @@ def _run(args: argparse.Namespace) -> int:
     if not args.wait > 0:
         raise UsageError(f"--wait {args.wait}: expected a number of seconds > 0")
     config = load_config(_system_file(args.file, named=True))
+    if args.transport is not None:
+        config = dataclasses.replace(config, transport=args.transport)
     if args.host is not None and config.transport != "dds":
         raise UsageError(f"--host needs transport = \"dds\"; {config.path} uses {config.transport!r}")
     system = build_system(config)

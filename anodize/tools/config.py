@@ -4,7 +4,7 @@ A system file is TOML. Paths in it are relative to the file itself::
 
     protocol = "../protocols/stream.proto"   # the .proto file (required)
     global = "Pipeline"                      # the global type's name in it (required)
-    transport = "process"                    # "process" (default) or "inproc"
+    transport = "process"                    # "process" (default), "inproc" or "dds"
     timeout = 10.0                           # seconds; roles still running then are stopped
     monitors = true                          # run-time protocol checks (default true)
     pythonpath = ["."]                       # dirs prepended to sys.path (default: the file's dir)
@@ -115,7 +115,7 @@ class SystemConfig:
         path: the system file, as given.
         protocol: the ``.proto`` file (relative paths are taken from the system file's dir).
         global_name: the global type's name.
-        transport: ``"process"`` or ``"inproc"``.
+        transport: ``"process"``, ``"inproc"`` or ``"dds"``.
         timeout: seconds after which running roles are stopped, or None.
         monitors: whether endpoints check the protocol at run time.
         pythonpath: absolute dirs to put in front of ``sys.path``.
