@@ -1,6 +1,10 @@
 #!/usr/bin/env python3
 """What crossing a process boundary costs with ``transport="process"``, against multiprocessing.
 
+(``transport="dds"`` is measured by ``bench/dds.py``, side by side with this transport and
+with raw Cyclone DDS, its own baseline, in one run: the same three workloads, small
+messages, round trip and frames.)
+
 Three measurements, each against a baseline measured in the same run (the
 anodize and the baseline repetitions are interleaved, so drift hits both):
 
