@@ -10,6 +10,7 @@ import re
 import shutil
 import signal
 import subprocess
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -98,9 +99,14 @@ def hosts() -> Iterator[Hosts]:
         made.delete()
 
 
-def run_both(system: Path, hosts: Hosts, tmp_path: Path, seconds: float = 240) -> tuple[dict, dict, str]:
-    b = start_host(system, "B", tmp_path / "b.json", namespace=hosts.b)
-    a = start_host(system, "A", tmp_path / "a.json", namespace=hosts.a)
+def run_both(system: Path, hosts: Hosts, tmp_path: Path, seconds: float = 240,
+             first: str = "B") -> tuple[dict, dict, str]:
+    started = {}
+    for host in sorted("AB", key=lambda h: h != first):
+        started[host] = start_host(system, host, tmp_path / f"{host.lower()}.json",
+                                   namespace=hosts.a if host == "A" else hosts.b)
+        time.sleep(0.5)  # the first really is up first
+    a, b = started["A"], started["B"]
     try:
         out = finish(a, seconds) + finish(b, seconds)
     finally:
@@ -110,9 +116,10 @@ def run_both(system: Path, hosts: Hosts, tmp_path: Path, seconds: float = 240) -
     return json.loads((tmp_path / "a.json").read_text()), json.loads((tmp_path / "b.json").read_text()), out
 
 
-def test_the_two_hosts_example_across_namespaces(hosts: Hosts, tmp_path: Path) -> None:
+@pytest.mark.parametrize("first", ["A", "B"])
+def test_the_two_hosts_example_across_namespaces(hosts: Hosts, tmp_path: Path, first: str) -> None:
     system = REPO / "examples/two_hosts/two_hosts.toml"
-    a, b, out = run_both(system, hosts, tmp_path, 120)
+    a, b, out = run_both(system, hosts, tmp_path, 120, first)
     assert a["ok"] and b["ok"], out
 
 
