@@ -9,10 +9,13 @@ Each measure is taken three ways, interleaved in every repetition (so drift hits
                    of type ``anodize.transport.dds.Frame``, written with
                    ``cyclonedds._clayer.ddspy_write`` as CDR bytes built as the transport
                    builds them (``cdr_sample``), taken with ``ddspy_take`` after a WaitSet wait;
-                   the transport's QoS (reliable, keep-all, reader resource limits 64,
+                   the transport's QoS (reliable, keep-all, reader resource limits ``READER_SAMPLES``,
                    automatic liveliness 1 s) and discovery lease; no monitors, no codec.
   anodize process  the same anodize system with ``transport="process"`` (pipes, and
                    shared memory for large arrays).
+  raw, unbounded   (streams only) raw Cyclone with its default reader, which holds whatever
+                   arrives: no back pressure, memory grows with the backlog. Shown for
+                   information, as what Cyclone does when nothing bounds the receiver.
 
 Measures:
 
@@ -76,6 +79,9 @@ from anodize import System  # noqa: E402
 DEFAULT_JSON = BENCH / "results" / "dds.json"
 DOMAIN = 1 + os.getpid() % 232  # DDS domain ids are 0..232; 0 is everyone's default
 WAYS = ("dds", "raw", "process")
+# Streams only: Cyclone's own default reader, which holds whatever arrives. It has no back
+# pressure (memory grows with the backlog), so it is shown for information, not as the target.
+STREAM_WAYS = (*WAYS, "raw_unbounded")
 TARGET = 1.25
 MIN_FPS = 30.0
 GLOBALS = sessiontypes.loads("""
@@ -152,9 +158,9 @@ def _one_way(found: Callable[[str], dict[str, Any]], n: int) -> dict[str, Any]:
 
 def messages(way: str, n: int, timeout: float) -> dict[str, Any]:
     with bench_env(messages=n) as (out, found):
-        if way == "raw":
+        if way in ("raw", "raw_unbounded"):
             barrier = multiprocessing.get_context("spawn").Barrier(2)
-            args = (DOMAIN, _prefix("messages"), barrier, n, out, timeout)
+            args = (DOMAIN, _prefix("messages"), barrier, n, out, timeout, way == "raw")
             run_raw([(roles.raw_int_producer, args), (roles.raw_int_consumer, args)], timeout + 30)
         else:
             run_anodize(way, "Stream", {"producing": ("P", roles.int_producer),
@@ -164,9 +170,9 @@ def messages(way: str, n: int, timeout: float) -> dict[str, Any]:
 
 def frames(way: str, n: int, timeout: float) -> dict[str, Any]:
     with bench_env(frames=n) as (out, found):
-        if way == "raw":
+        if way in ("raw", "raw_unbounded"):
             barrier = multiprocessing.get_context("spawn").Barrier(2)
-            args = (DOMAIN, _prefix("frames"), barrier, n, out, timeout)
+            args = (DOMAIN, _prefix("frames"), barrier, n, out, timeout, way == "raw")
             run_raw([(roles.raw_frame_producer, args), (roles.raw_frame_consumer, args)], timeout + 30)
         else:
             run_anodize(way, "Frames", {"camera": ("P", roles.frame_producer),
@@ -197,11 +203,12 @@ def attempt(measure: Callable[[], dict[str, Any]]) -> dict[str, Any]:
         return {"error": f"{type(error).__name__}: {error}", "traceback": traceback.format_exc()}
 
 
-def measure(name: str, key: str, repeat: int, run: Callable[[str], dict[str, Any]]) -> dict[str, Any]:
+def measure(name: str, key: str, repeat: int, run: Callable[[str], dict[str, Any]],
+            ways: tuple[str, ...] = WAYS) -> dict[str, Any]:
     """``repeat`` interleaved samples of every way; the median of ``key`` over the good ones."""
-    samples: dict[str, list[dict[str, Any]]] = {way: [] for way in WAYS}
+    samples: dict[str, list[dict[str, Any]]] = {way: [] for way in ways}
     for r in range(repeat):
-        for way in WAYS:
+        for way in ways:
             print(f"{name}: {way}, repetition {r + 1}/{repeat}", file=sys.stderr, flush=True)
             samples[way].append(attempt(lambda way=way: run(way)))  # type: ignore[misc]
     median = {way: (statistics.median(s[key] for s in got if "error" not in s)
@@ -225,6 +232,13 @@ def table(results: dict[str, dict[str, Any]]) -> list[list[str]]:
         rows.append([label, _fmt(med["dds"], spec), _fmt(med["raw"], spec),
                      _fmt(ratio, ".2f") + ("x (raw/dds)" if ratio is not None else ""),
                      _fmt(med["process"], spec), f"raw/dds <= {TARGET}x", yes[found["met"]]])
+        unbounded = med.get("raw_unbounded")
+        if unbounded is not None or "raw_unbounded" in med:
+            ratio = unbounded / med["dds"] if unbounded and med["dds"] else None
+            found["ratio_unbounded"] = ratio
+            rows.append([f"{label}, raw reader unbounded", _fmt(med["dds"], spec), _fmt(unbounded, spec),
+                         _fmt(ratio, ".2f") + ("x (raw/dds)" if ratio is not None else ""), "",
+                         "information: no back pressure", ""])
 
     rate_row("messages/s, small ints", results["messages"], ",.0f")
     rt = results["round_trip"]
@@ -274,11 +288,11 @@ def main(argv: list[str] | None = None) -> int:
     started = time.monotonic()
     results = {
         "messages": measure("messages", "per_second", args.repeat,
-                            lambda way: messages(way, args.messages, args.timeout)),
+                            lambda way: messages(way, args.messages, args.timeout), STREAM_WAYS),
         "round_trip": measure("round trip", "microseconds", args.repeat,
                               lambda way: round_trip(way, args.rounds, args.warmup, args.timeout)),
         "frames": measure("frames", "per_second", args.repeat,
-                          lambda way: frames(way, args.frames, args.timeout)),
+                          lambda way: frames(way, args.frames, args.timeout), STREAM_WAYS),
     }
     rows = table(results)
     cyclone = importlib.metadata.version("cyclonedds")

@@ -15,7 +15,7 @@ The raw baseline (:class:`RawPeer`) uses what ``anodize.transport.dds`` uses: th
 topic type ``anodize::Frame``, samples written as CDR bytes with
 ``cyclonedds._clayer.ddspy_write`` (retrying in short sleeps while the reader is
 full), taken as raw CDR with ``ddspy_take`` after a ``WaitSet`` wait, and the same
-QoS (reliable, keep-all, reader resource limits 64, automatic liveliness 1 s) and
+QoS (reliable, keep-all, reader resource limits ``READER_SAMPLES``, automatic liveliness 1 s) and
 participant configuration (discovery lease 1 s). No monitors, no codec, no
 identity checks: a payload is 8 bytes of int, or the frame's bytes.
 """
@@ -39,13 +39,12 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from anodize import Endpoint
-from anodize.transport.dds import Frame, cdr_sample, participant_config
+from anodize.transport.dds import READER_SAMPLES, Frame, cdr_sample, participant_config
 
 ENV = "ANODIZE_BENCH_DDS"
 HEIGHT, WIDTH, CHANNELS = 480, 640, 3
 POOL = 8  # distinct frames the sender cycles through (made before the clock starts)
 LEASE = 1.0  # seconds: liveliness and discovery lease, as the transport's default
-READER_SAMPLES = 64
 WRITE_BLOCK = duration(milliseconds=2)
 TAKE = 32
 TIMEOUT_RET = -10  # DDS_RETCODE_TIMEOUT
@@ -155,7 +154,7 @@ class RawPeer:
     Topics are ``<prefix>/<name>`` of type ``anodize::Frame``, with the transport's QoS.
     """
 
-    def __init__(self, domain: int, prefix: str, write: str | None, read: str | None) -> None:
+    def __init__(self, domain: int, prefix: str, write: str | None, read: str | None, bounded: bool = True) -> None:
         previous = os.environ.get("CYCLONEDDS_URI", "")
         os.environ["CYCLONEDDS_URI"] = ",".join(p for p in (previous, participant_config(LEASE)) if p)
         self.participant = DomainParticipant(domain)
@@ -168,8 +167,10 @@ class RawPeer:
             self.writer = DataWriter(self.participant, Topic(self.participant, f"{prefix}/{write}", Frame), qos=qos)
             self._wref = self.writer._ref
         if read is not None:
-            qos = Qos(Policy.Reliability.Reliable(WRITE_BLOCK), Policy.History.KeepAll,
-                      Policy.ResourceLimits(max_samples=READER_SAMPLES), Policy.Liveliness.Automatic(lease))
+            # Unbounded: Cyclone's own default, a reader that holds whatever arrives (no back pressure).
+            limits = [Policy.ResourceLimits(max_samples=READER_SAMPLES)] if bounded else []
+            qos = Qos(Policy.Reliability.Reliable(WRITE_BLOCK), Policy.History.KeepAll, *limits,
+                      Policy.Liveliness.Automatic(lease))
             self.reader = DataReader(self.participant, Topic(self.participant, f"{prefix}/{read}", Frame), qos=qos)
             self._rref = self.reader._ref
             self.waitset = WaitSet(self.participant)
@@ -240,8 +241,9 @@ def _int_of(sample: bytes) -> int:
     return value
 
 
-def raw_int_producer(domain: int, prefix: str, barrier: Any, n: int, out: str, timeout: float) -> None:
-    peer = RawPeer(domain, prefix, "data", None)
+def raw_int_producer(domain: int, prefix: str, barrier: Any, n: int, out: str, timeout: float,
+                     bounded: bool = True) -> None:
+    peer = RawPeer(domain, prefix, "data", None, bounded)
     peer.wait_matched(timeout)
     barrier.wait(timeout)
     give_up = time.monotonic() + timeout
@@ -252,8 +254,9 @@ def raw_int_producer(domain: int, prefix: str, barrier: Any, n: int, out: str, t
     peer.flush()
 
 
-def raw_int_consumer(domain: int, prefix: str, barrier: Any, n: int, out: str, timeout: float) -> None:
-    peer = RawPeer(domain, prefix, None, "data")
+def raw_int_consumer(domain: int, prefix: str, barrier: Any, n: int, out: str, timeout: float,
+                     bounded: bool = True) -> None:
+    peer = RawPeer(domain, prefix, None, "data", bounded)
     peer.wait_matched(timeout)
     barrier.wait(timeout)
     give_up = time.monotonic() + timeout
@@ -265,8 +268,9 @@ def raw_int_consumer(domain: int, prefix: str, barrier: Any, n: int, out: str, t
     report("end", {"end": time.monotonic(), "count": count, "bad": bad}, out)
 
 
-def raw_frame_producer(domain: int, prefix: str, barrier: Any, n: int, out: str, timeout: float) -> None:
-    peer = RawPeer(domain, prefix, "frames", None)
+def raw_frame_producer(domain: int, prefix: str, barrier: Any, n: int, out: str, timeout: float,
+                       bounded: bool = True) -> None:
+    peer = RawPeer(domain, prefix, "frames", None, bounded)
     pool = frame_pool()
     peer.wait_matched(timeout)
     barrier.wait(timeout)
@@ -278,8 +282,9 @@ def raw_frame_producer(domain: int, prefix: str, barrier: Any, n: int, out: str,
     peer.flush()
 
 
-def raw_frame_consumer(domain: int, prefix: str, barrier: Any, n: int, out: str, timeout: float) -> None:
-    peer = RawPeer(domain, prefix, None, "frames")
+def raw_frame_consumer(domain: int, prefix: str, barrier: Any, n: int, out: str, timeout: float,
+                       bounded: bool = True) -> None:
+    peer = RawPeer(domain, prefix, None, "frames", bounded)
     peer.wait_matched(timeout)
     barrier.wait(timeout)
     give_up = time.monotonic() + timeout

@@ -8,12 +8,14 @@ hosts: they find each other by DDS discovery on the run's domain.
 
 - **Nothing lost, duplicated or reordered**: reliable, keep-all history on both
   ends. **Back pressure** by credits: the receiver tells the sender, on the
-  channel's ``.../credit`` topic (keep-last 1), how many samples it has taken; the
-  sender writes at most ``_WINDOW`` samples ahead of that, fewer than the reader's
-  resource limit, and otherwise waits on the credit reader (in steps that look at
-  failures and stops). The reader thus never rejects a sample; should it (a failure
-  frame does not wait for credit), Cyclone's own reliability brings it again, and a
-  write that finds no room is retried in short sleeps that release the GIL.
+  channel's ``.../credit`` topic (keep-last 1), how many samples it has handed on
+  to its role; the sender writes at most ``_WINDOW`` samples (and about
+  ``_WINDOW_BYTES``) ahead of that, fewer than the reader's resource limit, so a
+  receiver that falls behind holds bounded memory; otherwise the sender waits on
+  the credit reader (in steps that look at failures and stops). The reader thus
+  never rejects a sample; should it (a failure frame does not wait for credit),
+  Cyclone's own reliability brings it again, and a write that finds no room is
+  retried in short sleeps that release the GIL.
 - **Raw bytes**: the topic type is ``anodize::Frame { sequence<octet> data; }``;
   frames of :mod:`.codec` are written as CDR built here and taken as raw CDR, so a
   900 KB array costs a copy, not the binding's element-by-element encoding.
@@ -61,18 +63,21 @@ from .process import PayloadError, ProcessNetwork
 
 __all__ = ["DdsSettings", "DdsNetwork", "DdsSender", "DdsReceiver", "Frame", "topic_name", "identity_of",
            "participant_config", "DOMAIN_ENV", "StartBarrierError", "ANY_SAMPLE", "cdr_sample",
-           "instance_handle", "userdata_of"]
+           "instance_handle", "userdata_of", "READER_SAMPLES"]
 
 DOMAIN_ENV = "ANODIZE_DDS_DOMAIN"  # overrides the system file's domain
 _TIMEOUT = -10  # DDS_RETCODE_TIMEOUT: a write found no room within its blocking time
 ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any
-_READER_SAMPLES = 64  # samples a receiver's DDS reader holds at most
-# Credits: a sender has at most _WINDOW samples that its receiver has not taken yet, so the
-# reader never has to reject one (Cyclone then recovers only by NACK and retransmission, which
-# made back pressure cost about 100 us a message); the receiver says how many it has taken
-# every _CREDIT_EVERY samples.
-_WINDOW = 48
-_CREDIT_EVERY = 16
+READER_SAMPLES = 256  # samples a receiver's DDS reader holds at most
+# Credits: a sender has at most _WINDOW samples, and about _WINDOW_BYTES, that its receiver has
+# not taken yet, so the reader never has to reject one (Cyclone then recovers only by NACK and
+# retransmission, which made back pressure cost about 100 us a message) and a receiver that falls
+# behind holds bounded memory (a few large frames, or many small messages); the receiver says
+# how many it has taken every _CREDIT_EVERY samples or _CREDIT_BYTES bytes.
+_WINDOW = 224
+_WINDOW_BYTES = 16 << 20
+_CREDIT_EVERY = 32
+_CREDIT_BYTES = _WINDOW_BYTES // 4
 _COUNT = struct.Struct("<Q")
 _WRITE_BLOCK = duration(milliseconds=2)  # the longest a write holds the GIL waiting for room
 _POLL = 0.05  # seconds between looks at a peer's liveliness (asking Cyclone costs tens of µs)
@@ -158,7 +163,7 @@ class _Endpoints:
         self.writer_qos = Qos(Policy.Reliability.Reliable(_WRITE_BLOCK), Policy.History.KeepAll,
                               Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
         self.reader_qos = Qos(Policy.Reliability.Reliable(_WRITE_BLOCK), Policy.History.KeepAll,
-                              Policy.ResourceLimits(max_samples=_READER_SAMPLES),
+                              Policy.ResourceLimits(max_samples=READER_SAMPLES),
                               Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
         self.credit_qos = Qos(Policy.Reliability.Reliable(_WRITE_BLOCK), Policy.History.KeepLast(1),
                               Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
@@ -194,6 +199,8 @@ class DdsSender:
         self._credit_wait.attach(ReadCondition(self.credits, ANY_SAMPLE))
         self.written = 0  # messages written
         self.taken = 0    # of those, how many the receiver says it has taken
+        self._in_flight: deque[int] = deque()  # the sizes of the samples written but not taken
+        self._in_flight_bytes = 0
 
     def put(self, item: object) -> None:
         """Send ``(label, payload)``, or a :class:`PeerFailure` saying why we stop.
@@ -208,11 +215,14 @@ class DdsSender:
             except EncodeError as error:
                 raise PayloadError(f"role {self.sender}: cannot send {item[0]} to {self.receiver}: "
                                    f"{error}") from None
+            sample = cdr_sample(frame)
             with self._lock:
-                if self.written - self.taken >= _WINDOW:
+                if self.written - self.taken >= _WINDOW or self._in_flight_bytes >= _WINDOW_BYTES:
                     self._await_credit()
-                self._write(cdr_sample(frame))
+                self._write(sample)
                 self.written += 1
+                self._in_flight.append(len(sample))
+                self._in_flight_bytes += len(sample)
             return
         if isinstance(item, PeerFailure):
             with self._lock:
@@ -252,7 +262,7 @@ class DdsSender:
         """
         while True:
             self._take_credits()
-            if self.written - self.taken < _WINDOW:
+            if self.written - self.taken < _WINDOW and self._in_flight_bytes < _WINDOW_BYTES:
                 return
             if self.network.stopping:
                 raise RoleStopped(f"interrupted sending to {self.receiver}")
@@ -273,7 +283,9 @@ class DdsSender:
         for data, info in taken:
             # Only the receiver's own credit writer counts: forged credits could overrun its reader.
             if info.valid_data and instance_handle(info.publication_handle) == self.credit_writer and len(data) >= 16:
-                self.taken = max(self.taken, _COUNT.unpack_from(data, 8)[0])
+                self.taken = max(self.taken, min(_COUNT.unpack_from(data, 8)[0], self.written))
+        while len(self._in_flight) > self.written - self.taken:
+            self._in_flight_bytes -= self._in_flight.popleft()
 
     def find_reader(self) -> bool:
         """Accept the reader of the receiver's group of our incarnation, if it has matched (the
@@ -341,8 +353,9 @@ class DdsReceiver:
         self._ref = self.reader._ref
         self.credit_writer: DataWriter[Frame] = DataWriter(
             endpoints.participant, endpoints.topic((sender, receiver), "/credit"), qos=endpoints.credit_qos)
-        self.taken = 0     # samples of the accepted writer taken so far
+        self.taken = 0     # samples of the accepted writer handed on so far
         self.credited = 0  # the count last told to the sender
+        self._uncredited_bytes = 0  # taken since then
         self.waitset = WaitSet(endpoints.participant)
         self.waitset.attach(ReadCondition(self.reader, ANY_SAMPLE))
         self.accepted: int | None = None  # the publication handle of the one writer we listen to
@@ -380,7 +393,7 @@ class DdsReceiver:
             if self._pushed:
                 return self._pushed.popleft()
             if self._samples or self._take():
-                return self._decode(self._samples.popleft())
+                return self._decode(self._next_sample())
             if self.network.stopping:
                 return STOP
             failed = self.network.failed.get(self.sender)
@@ -416,11 +429,19 @@ class DdsReceiver:
                 self._reject(info.publication_handle)
                 continue
             self._samples.append(data)
-            self.taken += 1
-        if self.taken - self.credited >= _CREDIT_EVERY:
-            self.credited = self.taken
-            ddspy_write(self.credit_writer._ref, cdr_sample(_COUNT.pack(self.taken)))  # keep-last 1: no wait
         return bool(self._samples)
+
+    def _next_sample(self) -> bytes:
+        """The oldest sample taken, now handed on: credit counts what is handed on, not what is
+        taken, so the sender's window covers the samples we hold too (bounded memory)."""
+        data = self._samples.popleft()
+        self.taken += 1
+        self._uncredited_bytes += len(data)
+        if self.taken - self.credited >= _CREDIT_EVERY or self._uncredited_bytes >= _CREDIT_BYTES:
+            self.credited = self.taken
+            self._uncredited_bytes = 0
+            ddspy_write(self.credit_writer._ref, cdr_sample(_COUNT.pack(self.taken)))  # keep-last 1: no wait
+        return data
 
     def _reject(self, handle: int) -> None:
         matched = [h for h in self.reader.get_matched_publications() if instance_handle(h) == instance_handle(handle)]

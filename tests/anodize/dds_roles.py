@@ -132,11 +132,16 @@ def _progress() -> str:
 
 
 def eager_producer(ep: Endpoint) -> None:
-    """Send as fast as sends return; after each, check how far ahead of the consumer we are
-    (the consumer writes its count to $DDS_TEST_PROGRESS) and remember the most."""
+    """Send as fast as sends return (numbers, or 640x480x3 frames if $DDS_TEST_FRAMES is set);
+    after each, check how far ahead of the consumer we are (the consumer writes its count to
+    $DDS_TEST_PROGRESS) and remember the most."""
     ahead = 0
+    frame = np.zeros((480, 640, 3), np.uint8) if os.environ.get("DDS_TEST_FRAMES") else None
     for i in range(_count()):
-        ep.send("C", "data", i)
+        if frame is None:
+            ep.send("C", "data", i)
+        else:
+            ep.send("C", "frame", frame)
         with open(_progress(), encoding="utf-8") as progress:
             consumed = int(progress.read() or 0)
         ahead = max(ahead, i + 1 - consumed)
