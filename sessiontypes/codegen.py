@@ -50,6 +50,10 @@ GENERATOR_VERSION = "anodize-codegen 2"
 
 _BUILTIN_TYPES = {"int": "int", "nat": "int", "bool": "bool", "str": "str", "float": "float",
                   "bytes": "bytes"}
+# A "ros:pkg/msg/Name" sort is typed with rosbags' class of the message in this distribution
+# (anodize.ros.DEFAULT_DISTRO: the runtime checks payloads against the same one). The module
+# path is text: sessiontypes imports neither anodize nor rosbags.
+_ROS_MESSAGES_MODULE = "rosbags.typesys.stores.ros2_jazzy"
 # Names the generated text uses itself; nothing generated or imported may take them.
 _RESERVED = frozenset({
     "annotations", "TYPE_CHECKING", "Any", "final", "dataclass", "Endpoint", "Message",
@@ -359,18 +363,25 @@ class _Writer:
         if sort.target is None:
             return _BUILTIN_TYPES[sort.key]
         if sort.target.startswith("ros:"):
-            self.uses_any = True
-            return "Any"
+            package, kind, message = sort.target[4:].split("/")
+            if kind != "msg":  # a service or an action: no message class to name
+                self.uses_any = True
+                return "Any"
+            return self.imported(_ROS_MESSAGES_MODULE, f"{package}__msg__{message}", message)
         module, qualified = sort.target.split(":")
         bad = [w for w in f"{module}.{qualified}".split(".") if keyword.iskeyword(w)]
         if bad:
             raise _error(self.global_type, f"type {sort.key} is bound to {sort.target!r}, which "
                          f"Python cannot import ('{bad[0]}' is a keyword)")
         top, *rest = qualified.split(".")
-        local = self.imports.get((module, top))
+        return ".".join([self.imported(module, top, top), *rest])
+
+    def imported(self, module: str, name: str, wanted: str) -> str:
+        """The local name of ``module.name`` (imported for typing), ``wanted`` unless it is taken."""
+        local = self.imports.get((module, name))
         if local is None:
-            local = self.imports[module, top] = self.names.claim(top)
-        return ".".join([local, *rest])
+            local = self.imports[module, name] = self.names.claim(wanted)
+        return local
 
     # ---- one state ----
 

@@ -3,8 +3,10 @@
 Builtin sorts map to Python types (``nat`` is an ``int >= 0``; ``float``
 also takes an ``int``); a declared sort ``"module:QualifiedName"`` is checked
 with ``isinstance`` against that class, imported once when a monitor is
-built. ROS 2 sorts (``"ros:pkg/msg/Name"``) cannot be checked without ROS:
-any payload is accepted for them.
+built. A ROS 2 sort (``"ros:pkg/msg/Name"``) is the message type of that name in
+ROS 2 Jazzy, resolved through rosbags (:mod:`anodize.ros`): a payload must be an
+instance of its rosbags class whose fields fit the definition, checked field by
+field (ranges, array lengths, bounds, nested messages).
 
 A dataclass payload is also checked field by field against its annotations
 (see :func:`check_fields`), so a ``Point`` whose ``x: int`` holds a string is
@@ -26,6 +28,7 @@ from collections.abc import Callable, Iterable
 from sessiontypes import Sort
 
 from ..errors import AnodizeError
+from ..ros import ros_type  # rosbags itself is imported only when a ROS sort is resolved
 
 __all__ = ["Validator", "validator_for", "exact_types_for", "resolve_class", "with_field_classes", "check_fields"]
 
@@ -59,10 +62,6 @@ _BUILTIN: dict[str, Validator] = {
     "float": _of(float, int, name="float"),
     "bytes": _of(bytes, name="bytes"),
 }
-
-
-def _anything(payload: object) -> str | None:
-    return None
 
 
 def resolve_class(target: str) -> type:
@@ -117,14 +116,18 @@ def validator_for(sort: Sort | None) -> Validator:
     """The payload check for a transition carrying ``sort`` (None: no payload).
 
     For a class sort: an instance of the class, and if it is a dataclass, fields that fit
-    their annotations (:func:`check_fields`).
+    their annotations (:func:`check_fields`). For a ROS 2 sort: :meth:`anodize.ros.RosType.check`.
+
+    Raises:
+        AnodizeError: the sort's class cannot be imported, or its ROS 2 type cannot be
+            resolved (rosbags missing, no such message).
     """
     if sort is None:
         return _no_payload
     if sort.target is None:
         return _BUILTIN[sort.key]
     if sort.target.startswith("ros:"):
-        return _anything
+        return ros_type(sort.target).check
     cls = resolve_class(sort.target)
     is_instance = _of(cls, name=f"{sort.spelling} ({sort.target})")
     fields = _fields_check(cls)  # compiled now: the first message should not pay for it
@@ -153,14 +156,16 @@ _EXACT: dict[str, frozenset[type]] = {
 def exact_types_for(sort: Sort | None) -> frozenset[type]:
     """Types whose instances fit ``sort`` without calling its validator (a fast path).
 
-    Empty when every payload needs the full check: ``nat`` (which must be >= 0), and a
-    dataclass with annotated fields (its fields are checked on every message).
+    Empty when every payload needs the full check: ``nat`` (which must be >= 0), a
+    dataclass with annotated fields and a ROS 2 message (their fields are checked on
+    every message).
     """
     if sort is None:
         return frozenset({type(None)})
     if sort.target is None:
         return _EXACT.get(sort.key, frozenset())
     if sort.target.startswith("ros:"):
+        ros_type(sort.target)  # resolved now, so that an unknown type fails when the monitor is built
         return frozenset()
     cls = resolve_class(sort.target)
     # A dataclass with checkable fields always takes the full check: its type alone says nothing

@@ -41,6 +41,7 @@ from ..errors import MemoryBoundError, error_to_data
 from ..isolation.memory import data_size, limit_data
 from ..isolation.sched import apply_thread_scheduling
 from ..isolation.tree import become_subreaper, kill_tree
+from ..ros import RosType, ros_type
 from ..session.endpoint import Endpoint
 from ..session.payloads import resolve_class, with_field_classes
 from ..transport.codec import MAX_FRAME, Codec, DecodeError
@@ -164,6 +165,7 @@ class _GroupProcess:
     def _network(self) -> ProcessNetwork:
         spec = self.spec
         classes = _payload_classes(spec.machines.values())
+        ros_types = _payload_ros_types(spec.machines.values())
         local = set(spec.roles)
         doorbell_roles = [r for r, m in spec.machines.items() if m.forks]
         dds = spec.extra.get("dds")
@@ -171,7 +173,7 @@ class _GroupProcess:
             from ..transport.dds import DdsNetwork
 
             network = DdsNetwork(dds, spec.name, spec.incarnation, spec.roles, spec.channels, spec.dead,
-                                 lambda pair: make_codec(classes, None, None), doorbell_roles,
+                                 lambda pair: make_codec(classes, None, None, ros_types), doorbell_roles,
                                  report=lambda line: self._send(Notice(text=line)))
             network.wait_for_peers()  # the start barrier: "ready" means every peer has appeared
             return network
@@ -183,11 +185,11 @@ class _GroupProcess:
             inbox = f"{prefix}{spec.incarnation}"  # where the sender hands the rings' memory over
             if sender not in local:
                 reader = RingReader(inbox)  # bound now: before any group is told to go
-                return make_codec(classes, None, functools.partial(reader.read, prefix=prefix))
+                return make_codec(classes, None, functools.partial(reader.read, prefix=prefix), ros_types)
             # With every slot held, an array up to a frame's size (less room for the rest) goes inline.
             ring = ArrayRing(f"{prefix}{spec.incarnation}", peer_gone=lambda: self._gone(receiver), inbox=inbox,
                              channel=f"{sender}->{receiver}", inline_max=MAX_FRAME - 2**20)
-            return make_codec(classes, ring, None)
+            return make_codec(classes, ring, None, ros_types)
 
         fds = {pair: conn.fileno() for pair, conn in self.pipes.items()}
         return ProcessNetwork(spec.roles, spec.channels, fds, spec.dead, codec_for, doorbell_roles)
@@ -309,3 +311,10 @@ def _payload_classes(machines: Iterable[StateMachine]) -> list[type]:
     targets = {t.sort.target for machine in machines for t in machine.all_transitions()
                if t.sort is not None and t.sort.target and not t.sort.target.startswith("ros:")}
     return with_field_classes(resolve_class(t) for t in sorted(targets))
+
+
+def _payload_ros_types(machines: Iterable[StateMachine]) -> list[RosType]:
+    """The ROS 2 message types named as sorts by the local types (they travel as CDR)."""
+    targets = {t.sort.target for machine in machines for t in machine.all_transitions()
+               if t.sort is not None and t.sort.target and t.sort.target.startswith("ros:")}
+    return [ros_type(t) for t in sorted(targets)]

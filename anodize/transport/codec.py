@@ -10,6 +10,10 @@ the payload in a small tagged format:
   shared-memory slot when large (see :mod:`anodize.transport.shm`); numpy scalars inline;
 - instances of dataclasses the protocol names as sorts are encoded field by
   field and rebuilt without calling their ``__init__``;
+- ROS 2 messages of the ``"ros:pkg/msg/Name"`` sorts the protocol names travel as
+  the CDR bytes ROS 2 publishes (:meth:`anodize.ros.RosType.serialize`), held in a
+  uint8 array (so a large one, an image, goes through shared memory like any
+  array), and are rebuilt by the type's CDR decoder (:meth:`~anodize.ros.RosType.deserialize`);
 - instances of other classes the protocol names (not dataclasses) are pickled. A
   pickled payload is accepted only on a codec given that very class; before it is
   unpickled it is scanned (:func:`_scan_pickle`): only the opcodes of builtin data
@@ -33,9 +37,12 @@ import struct
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from enum import IntEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..errors import AnodizeError
+
+if TYPE_CHECKING:
+    from ..ros import RosType
 
 __all__ = ["Codec", "DecodeError", "EncodeError", "INLINE_ARRAY_LIMIT", "MAX_FRAME", "HEADER", "FrameKind", "Tag"]
 
@@ -82,6 +89,7 @@ class Tag(IntEnum):
     NUMPY_SCALAR = 17
     DATACLASS = 18
     PICKLED = 19
+    ROS = 20          # a ROS 2 message: its type's name, then its CDR as an array (ARRAY or SHARED_ARRAY)
 
 
 _TAG_BYTE = {tag: bytes((tag,)) for tag in Tag}  # one-byte prefixes, built once
@@ -109,11 +117,14 @@ class Codec:
         ring: the sender's shared-memory ring (an :class:`anodize.transport.shm.ArrayRing`),
             where large arrays go (None: always inline).
         read_array: how a receiver maps a shared-memory slot (None: refuse them).
+        ros_types: the ROS 2 message types the protocol names (``ros:pkg/msg/Name`` sorts).
     """
 
     def __init__(self, classes: Iterable[type] = (), ring: Any = None,
-                 read_array: ArrayReader | None = None) -> None:
+                 read_array: ArrayReader | None = None, ros_types: Iterable[RosType] = ()) -> None:
         self.classes = {_name_of(c): c for c in classes}
+        self.ros_types = {f"{r.distro}:{r.name}": r for r in ros_types}
+        self._ros_ids = {r.cls: (name.encode(), r) for name, r in self.ros_types.items()}
         self._class_ids = {c: name for name, c in self.classes.items()}
         # The classes that travel pickled: the only ones a pickled payload may name.
         self._pickled = {name: c for name, c in self.classes.items() if _travels_pickled(c)}
@@ -229,6 +240,8 @@ class Codec:
                 self._encode(item, out, depth + 1)
         elif self._is_numpy(value):  # before named classes: a "numpy:ndarray" sort is still an array
             self._encode_numpy(value, out)
+        elif kind in self._ros_ids:  # before named classes: a rosbags message is a dataclass too
+            self._encode_ros(value, kind, out)
         elif kind in self._class_ids:
             self._encode_named(value, kind, out, depth)
         else:
@@ -256,6 +269,16 @@ class Codec:
             if reason is not None:
                 raise EncodeError(f"cannot send a pickled {kind.__qualname__}: {reason}")
             out.write(_U32.pack(len(data)) + data)
+
+    def _encode_ros(self, value: object, kind: type, out: io.BytesIO) -> None:
+        name, ros = self._ros_ids[kind]
+        try:
+            data = ros.serialize(value)
+        except AnodizeError as error:
+            raise EncodeError(str(error)) from None
+        self._write_blob(Tag.ROS, name, out)
+        self._numpy = np = sys.modules["numpy"]  # rosbags imported it
+        self._encode_numpy(np.frombuffer(data, np.uint8), out)
 
     def _is_numpy(self, value: object) -> bool:
         if self._numpy is None:
@@ -338,7 +361,25 @@ class Codec:
             return self._decode_dataclass(buf, at, depth)
         if tag == Tag.PICKLED:
             return self._decode_pickled(buf, at)
+        if tag == Tag.ROS:
+            return self._decode_ros(buf, at)
         raise DecodeError(f"unknown payload tag {tag}")
+
+    def _decode_ros(self, buf: Any, at: int) -> tuple[Any, int]:
+        raw, at = _read_blob(buf, at)
+        name = raw.decode(errors="replace")
+        ros = self.ros_types.get(name)
+        if ros is None:
+            raise DecodeError(f"ROS message type {name!r} is not named by the protocol")
+        if buf[at] not in (Tag.ARRAY, Tag.SHARED_ARRAY):
+            raise DecodeError(f"the {ros.name} message's data is not an array")
+        data, at = self._decode_numpy(buf[at], buf, at + 1)
+        if data.dtype.str != "|u1" or data.ndim != 1:
+            raise DecodeError(f"the {ros.name} message's data is a {data.dtype} array of {data.ndim} dimensions")
+        try:  # arrays in the message view ``data``: a private copy, or a shared-memory slot held while they live
+            return ros.deserialize(memoryview(data)), at
+        except AnodizeError as error:
+            raise DecodeError(str(error)) from None
 
     def _decode_pickled(self, buf: Any, at: int) -> tuple[Any, int]:
         raw, at = _read_blob(buf, at)

@@ -20,13 +20,16 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from queue import Empty, SimpleQueue
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from ..errors import AnodizeError, PeerFailedError, RoleStopped
 from ..session.channel import STOP, Channel, Corrupt, PeerFailure
 from .codec import HEADER, MAX_FRAME, Codec, DecodeError, EncodeError, FrameKind
 from .inproc import InprocNetwork
 from .shm import ArrayRing
+
+if TYPE_CHECKING:
+    from ..ros import RosType
 
 __all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "PayloadError", "BridgeQueue", "FailureWriter"]
 
@@ -437,9 +440,9 @@ def _grow_pipe(fd: int) -> None:
 
 
 def make_codec(classes: Iterable[type], ring: ArrayRing | None,
-               read_array: Callable[..., object] | None) -> Codec:
+               read_array: Callable[..., object] | None, ros_types: Iterable[RosType] = ()) -> Codec:
     """A channel's codec: arrays go to ``ring`` when sending, come from ``read_array`` when receiving."""
-    return Codec(classes, ring, read_array)
+    return Codec(classes, ring, read_array, ros_types)
 
 
 class BridgeQueue:
