@@ -58,7 +58,7 @@ class DdsRunner(ProcessRunner):
         for name in groups:
             group = self.groups[name]
             dead = {role: f"group {group_of[role]} did not start again with group {name}"
-                    for role in self.machines if group_of[role] not in batch}
+                    for role in self.machines if role in group_of and group_of[role] not in batch}
             spec = GroupSpec(
                 run_id=self.run_id, name=name, incarnation=incarnation, protocol=self.protocol,
                 roles={role: reference_of(fn) for role, fn in group.roles.items()},
@@ -79,6 +79,13 @@ class DdsRunner(ProcessRunner):
         settings = self.settings
         notes.append(f"DDS domain {settings.domain}, run {settings.run_id}, host {settings.host}; "
                      f"liveliness lease {settings.lease:g} s; start barrier waits {settings.wait:g} s")
+        if settings.ros is not None:
+            ros = settings.ros
+            notes.append(f"ROS 2 topics on domain {ros.domain}: " + (", ".join(
+                f"{topic.name} ({sender}->{receiver}: {label}, {topic.type_name})"
+                for (sender, receiver, label), topic in sorted(ros.topics.items())) or "none"))
+            if ros.external:
+                notes.append("external roles, played by ROS 2 nodes: " + ", ".join(sorted(ros.external)))
         if self.elsewhere:
             notes.append("groups running elsewhere: " + ", ".join(
                 f"{name} on host {host}" for name, host in sorted(self.elsewhere.items())))

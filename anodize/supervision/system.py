@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import os
 import socket
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
+from typing import TYPE_CHECKING
 
 from sessiontypes import GlobalType, StateMachine
 from sessiontypes.graph import communication_graph
@@ -21,6 +22,9 @@ from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_fun
 from .report import GroupStatus, RunReport
 from .supervisor import Elsewhere, Runner, Supervisor
 from .threads import ThreadRunner
+
+if TYPE_CHECKING:
+    from ..transport.ros_lanes import RosSettings
 
 __all__ = ["System"]
 
@@ -41,10 +45,21 @@ class System:
             ``ANODIZE_DDS_DOMAIN`` overrides it).
         run_id: ``transport="dds"``: keeps two runs of the same system on one domain
             apart; every host of a run must use the same one.
+        ros_topics: ``transport="dds"``: labels of channels published as ROS 2 topics,
+            ``{"Move->Gazebo": "/cmd_vel", "Camera->VisOdom:color": "/camera/color/image_raw"}``
+            (a channel with one label may leave the label out). The run then lives on the
+            ROS domain (``ROS_DOMAIN_ID``, else ``ros_domain``, else 0). Other transports
+            run the same system without ROS topics.
+        external: ``transport="dds"``: roles that ROS 2 nodes play; anodize runs no code for
+            them, and every message to or from them must be on a ROS topic.
+        ros_distro: the ROS 2 distribution whose message definitions are used ("" for the
+            default, Jazzy).
+        ros_domain: the ROS domain when ``ROS_DOMAIN_ID`` is not set.
     """
 
     def __init__(self, global_type: GlobalType, transport: str = "inproc", monitors: bool = True,
-                 domain: int = 0, run_id: str = "") -> None:
+                 domain: int = 0, run_id: str = "", ros_topics: Mapping[str, str] | None = None,
+                 external: Iterable[str] = (), ros_distro: str = "", ros_domain: int | None = None) -> None:
         if transport not in TRANSPORTS:
             raise ConfigurationError(f"transport {transport!r}: expected one of {', '.join(TRANSPORTS)}")
         if isinstance(domain, bool) or not isinstance(domain, int) or not 0 <= domain <= 232:
@@ -54,6 +69,17 @@ class System:
         self.monitors = monitors
         self.domain = domain
         self.run_id = run_id or global_type.name
+        self.ros_topics = dict(ros_topics or {})
+        self.external = frozenset(external)
+        self.ros_distro = ros_distro
+        self.ros_domain = ros_domain
+        unknown = sorted(self.external - set(global_type.roles))
+        if unknown:
+            raise ConfigurationError(f"external role {unknown[0]}: global {global_type.name} has no such role; "
+                                     f"expected one of {', '.join(global_type.roles)}")
+        if self.external and transport != "dds":
+            raise ConfigurationError(f"external roles ({', '.join(sorted(self.external))}) are ROS 2 nodes: they need "
+                                     f"transport \"dds\", not {transport!r}")
         self.groups: dict[str, Group] = {}
         self._placed: dict[str, str] = {}
 
@@ -107,6 +133,8 @@ class System:
                              f"{', '.join(self.global_type.roles)}")
         if role in self._placed:
             raise ConfigurationError(f"role {role} is already in group {self._placed[role]}")
+        if role in self.external:
+            raise ConfigurationError(f"role {role} is external (a ROS 2 node plays it): it runs in no group")
         if isinstance(function, str):
             resolve_function(function)  # fail now, not in the group's process
         elif not callable(function):
@@ -144,7 +172,7 @@ class System:
         if not liveness > 0:
             raise ConfigurationError(f"liveness {liveness!r}: expected a number of seconds > 0")
         gt = self.global_type
-        missing = [r for r in gt.roles if r not in self._placed]
+        missing = [r for r in gt.roles if r not in self._placed and r not in self.external]
         if missing:
             raise AnodizeError(f"global {gt.name}: roles {', '.join(missing)} are in no group")
         machines = {role: gt.project(role).fsm() for role in gt.roles}
@@ -159,6 +187,22 @@ class System:
         else:
             runner = ThreadRunner(gt, machines, channels, self.groups, self.monitors)
         return Supervisor(gt.name, gt.roles, self.groups, channels, runner, timeout, grace, on_status).run()
+
+    def ros_settings(self, machines: dict[str, StateMachine] | None = None,
+                     channels: tuple[tuple[str, str], ...] | None = None) -> RosSettings | None:
+        """The checked ROS side of the system (None without ROS topics or external roles).
+
+        Raises:
+            ConfigurationError: a topic entry or an external role that cannot be, naming it.
+        """
+        if not (self.ros_topics or self.external) or self.transport != "dds":
+            return None
+        from ..transport.ros_lanes import ros_settings
+
+        gt = self.global_type
+        machines = machines if machines is not None else {role: gt.project(role).fsm() for role in gt.roles}
+        channels = channels if channels is not None else tuple(communication_graph(gt).edges)
+        return ros_settings(machines, channels, self.ros_topics, self.external, self.ros_distro, self.ros_domain)
 
     def _run_dds(self, machines: dict[str, StateMachine], channels: tuple[tuple[str, str], ...],
                  timeout: float | None, grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None,
@@ -187,11 +231,15 @@ class System:
                     raise ValueError
             except ValueError:
                 raise ConfigurationError(f"{DOMAIN_ENV}={os.environ[DOMAIN_ENV]!r}: expected a DDS domain id") from None
+        ros = self.ros_settings(machines, channels)
+        if ros is not None:
+            domain = ros.domain  # ROS 2 nodes meet on their domain; anodize's own topics are there too
         settings = DdsSettings(domain=domain, run_id=self.run_id, host=here,
                                group_of=dict(self._placed),
-                               host_of=host_of, wait=wait)
+                               host_of=host_of, wait=wait, ros=ros)
         elsewhere = {name: host_of[name] for name in self.groups if name not in local}
-        local_roles = [role for role in self.global_type.roles if self._placed[role] in local]
+        local_roles = [role for role in self.global_type.roles
+                       if role not in self.external and self._placed[role] in local]
         local_channels = tuple((a, b) for a, b in channels if a in local_roles and b in local_roles)
         runner = DdsRunner(self.global_type.name, machines, channels, local, self.monitors, settings, elsewhere,
                            liveness)

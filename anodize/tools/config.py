@@ -29,7 +29,7 @@ import os
 import re
 import sys
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +42,9 @@ from ..supervision.system import TRANSPORTS, System
 __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
            "add_pythonpath"]
 
-_TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id")
+_TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id",
+             "ros")
+_ROS_KEYS = ("topics", "external", "distro", "domain")
 _GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host")
 _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
 _TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
@@ -122,6 +124,10 @@ class SystemConfig:
         groups: group name -> its configuration, in file order.
         domain: ``transport = "dds"``: the DDS domain id.
         run_id: ``transport = "dds"``: the run id every host of the run uses ("" = the global's name).
+        ros_topics: ``[ros.topics]``: ``"Sender->Receiver[:label]"`` -> ROS topic name.
+        external: ``[ros] external``: roles that ROS 2 nodes play.
+        ros_distro: ``[ros] distro``: the ROS 2 distribution of the message definitions.
+        ros_domain: ``[ros] domain``: the ROS domain when ``ROS_DOMAIN_ID`` is not set.
     """
 
     path: Path
@@ -134,6 +140,10 @@ class SystemConfig:
     groups: dict[str, GroupConfig]
     domain: int = 0
     run_id: str = ""
+    ros_topics: dict[str, str] = field(default_factory=dict)
+    external: tuple[str, ...] = ()
+    ros_distro: str = ""
+    ros_domain: int | None = None
 
     def group_of(self, role: str) -> str | None:
         """The group that runs ``role``, or None."""
@@ -207,12 +217,34 @@ class _Reader:
         run_id = self.string(data, "run_id") or ""
         if run_id and not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", run_id):
             raise self.error("run_id", f"expected up to 64 letters, digits, '_', '.' or '-', got {_show(run_id)}")
+        ros = self.ros(data.get("ros", {}))
         return SystemConfig(
             path=Path(self.shown), protocol=Path(os.path.normpath(self.directory / protocol)),
             global_name=global_name, transport=transport,
             timeout=None if timeout is None else float(timeout), monitors=monitors,
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
-            groups=self.groups(data.get("groups")), domain=domain, run_id=run_id)
+            groups=self.groups(data.get("groups")), domain=domain, run_id=run_id, **ros)
+
+    def ros(self, table: Any) -> dict[str, Any]:
+        """The ``[ros]`` table: what is checked here is its shape; the topics against the protocol
+        are checked when the system is built."""
+        if not isinstance(table, dict):
+            raise self.error("ros", f"expected a table [ros], got {_show(table)}")
+        self.known_keys(table, _ROS_KEYS, "ros")
+        topics = table.get("topics", {})
+        if not isinstance(topics, dict) or not all(isinstance(v, str) for v in topics.values()):
+            raise self.error("ros.topics", 'expected a table such as { "Move->Gazebo" = "/cmd_vel" }, '
+                                           f"got {_show(topics)}")
+        external = table.get("external", [])
+        if not isinstance(external, list) or not all(isinstance(r, str) and r for r in external):
+            raise self.error("ros.external", f'expected an array of role names such as ["Joy"], got {_show(external)}')
+        distro = table.get("distro", "")
+        if not isinstance(distro, str):
+            raise self.error("ros.distro", f'expected a ROS 2 distribution such as "jazzy", got {_show(distro)}')
+        domain = table.get("domain")
+        if domain is not None and (not _is_int(domain) or not 0 <= domain <= 232):
+            raise self.error("ros.domain", f"expected a DDS domain id 0..232, got {_show(domain)}")
+        return {"ros_topics": dict(topics), "external": tuple(external), "ros_distro": distro, "ros_domain": domain}
 
     def known_keys(self, table: dict[str, Any], allowed: tuple[str, ...], prefix: str | None) -> None:
         for key in table:
@@ -359,8 +391,13 @@ def build_system(config: SystemConfig) -> System:
                                            f"expected one of {', '.join(module.globals) or '(none)'}")
     global_type = module.globals[config.global_name]
     add_pythonpath(config)
-    system = System(global_type, transport=config.transport, monitors=config.monitors, domain=config.domain,
-                    run_id=config.run_id)
+    try:
+        system = System(global_type, transport=config.transport, monitors=config.monitors, domain=config.domain,
+                        run_id=config.run_id, ros_topics=config.ros_topics, external=config.external,
+                        ros_distro=config.ros_distro, ros_domain=config.ros_domain)
+        system.ros_settings()  # the topics against the protocol, now rather than when the run starts
+    except ConfigurationError as error:
+        raise ConfigError(shown, "ros", str(error)) from None
     for group in config.groups.values():
         try:
             declared = system.group(group.name, priority=group.priority, memory=group.memory,
@@ -371,7 +408,7 @@ def build_system(config: SystemConfig) -> System:
                 declared.role(role, reference)
         except (ValueError, AnodizeError) as error:
             raise ConfigError(shown, f"groups.{group.name}", str(error)) from None
-    missing = [role for role in global_type.roles if config.group_of(role) is None]
+    missing = [role for role in global_type.roles if config.group_of(role) is None and role not in config.external]
     if missing:
         raise ConfigError(shown, "groups", f"{'role' if len(missing) == 1 else 'roles'} "
                                            f"{', '.join(missing)} of global {global_type.name} "

@@ -45,7 +45,7 @@ from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from queue import Empty
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cyclonedds._clayer import ddspy_take, ddspy_write
 from cyclonedds.core import DDSException, InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
@@ -60,6 +60,10 @@ from ..session.channel import STOP, Corrupt, PeerFailure
 from .codec import HEADER, MAX_FRAME, Codec, DecodeError, EncodeError, FrameKind
 from .dds_types import Frame
 from .process import PayloadError, ProcessNetwork
+from .ros_lanes import LanePlan, RosSettings, RosTopic, dds_topic_of
+
+if TYPE_CHECKING:
+    from ..ros import RosType
 
 __all__ = ["DdsSettings", "DdsNetwork", "DdsSender", "DdsReceiver", "Frame", "topic_name", "identity_of",
            "participant_config", "DOMAIN_ENV", "StartBarrierError", "ANY_SAMPLE", "cdr_sample",
@@ -83,6 +87,8 @@ _WRITE_BLOCK = duration(milliseconds=2)  # the longest a write holds the GIL wai
 _POLL = 0.05  # seconds between looks at a peer's liveliness (asking Cyclone costs tens of µs)
 _TAKE = 32  # samples taken per call
 _LENGTH = struct.Struct("<I")
+# ROS 2 publishes plain CDR (XCDR1): its readers do not accept a writer that offers only XCDR2.
+_XCDR1 = (Policy.DataRepresentation(use_cdrv0_representation=True),)
 
 
 _CDR_HEADER = Frame(data=[]).serialize()[:4]  # type: ignore[arg-type]  # the encapsulation the binding itself writes
@@ -104,6 +110,7 @@ class DdsSettings:
         host_of: group -> host, for every group of the system.
         lease: seconds of liveliness lease (a silent peer is failed after about this).
         wait: seconds the start barrier waits for every peer.
+        ros: the channels' labels that are ROS 2 topics, and the roles ROS 2 nodes play.
     """
 
     domain: int
@@ -114,10 +121,16 @@ class DdsSettings:
     lease: float = 1.0
     wait: float = 30.0
     extra_config: str = field(default="")
+    ros: RosSettings | None = None
 
     def where(self, role: str) -> str:
+        if self.is_external(role):
+            return f"external role {role} (a ROS 2 node)"
         group = self.group_of[role]
         return f"group {group} on host {self.host_of.get(group, '?')}"
+
+    def is_external(self, role: str) -> bool:
+        return self.ros is not None and role in self.ros.external
 
 
 def topic_name(run_id: str, sender: str, receiver: str) -> str:
@@ -134,9 +147,27 @@ def identity_of(run_id: str, group: str, incarnation: int, host: str) -> bytes:
     return f"anodize1;{run_id};{group};{incarnation};{host};{os.getpid()}".encode()
 
 
+def ros_userdata(type_hash: str, identity: bytes) -> bytes:
+    """The USER_DATA of an endpoint on a ROS topic: ``key=value;`` pairs, as ROS 2 reads them
+    (``typehash=RIHS01_...;``, Iron and later), and anodize's identity as one more key."""
+    return f"typehash={type_hash};anodize={identity.decode().replace(';', ',')};".encode()
+
+
+def userdata_fields(data: bytes | None) -> dict[str, str]:
+    """The ``key=value;`` pairs of a ROS 2 endpoint's USER_DATA (empty if it has none)."""
+    try:
+        text = (data or b"").decode()
+    except UnicodeDecodeError:
+        return {}
+    return dict(part.split("=", 1) for part in text.split(";") if "=" in part)
+
+
 def _parse_identity(data: bytes | None) -> tuple[str, str, int, str, int] | None:
     try:
-        tag, run_id, group, incarnation, host, pid = (data or b"").decode().split(";")
+        text = (data or b"").decode()
+        if not text.startswith("anodize1;"):  # on a ROS topic, one key among ROS 2's
+            text = userdata_fields(data).get("anodize", "").replace(",", ";")
+        tag, run_id, group, incarnation, host, pid = text.split(";")
         return (run_id, group, int(incarnation), host, int(pid)) if tag == "anodize1" else None
     except (UnicodeDecodeError, ValueError):
         return None
@@ -167,7 +198,7 @@ class _Endpoints:
                               Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
         self.credit_qos = Qos(Policy.Reliability.Reliable(_WRITE_BLOCK), Policy.History.KeepLast(1),
                               Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
-        self.topics: dict[str, Topic[Frame]] = {}
+        self.topics: dict[str, Topic[Any]] = {}
 
     def topic(self, pair: tuple[str, str], suffix: str = "") -> Topic[Frame]:
         name = topic_name(self.settings.run_id, *pair) + suffix
@@ -175,32 +206,80 @@ class _Endpoints:
             self.topics[name] = Topic(self.participant, name, Frame)
         return self.topics[name]
 
+    def ros_topic(self, topic: RosTopic) -> tuple[Topic[Any], RosType]:
+        """The DDS topic of a ROS topic (``rt/...``, the ROS type's DDS name and layout)."""
+        from ..ros import ros_type  # only a run with ROS topics needs the message definitions
+
+        assert self.settings.ros is not None
+        kind = ros_type(topic.type_name, self.settings.ros.distro or None)
+        name = dds_topic_of(topic.name)
+        if name not in self.topics:
+            self.topics[name] = Topic(self.participant, name, kind.idl_class())
+        return self.topics[name], kind
+
+    def ros_qos(self, kind: RosType, writer: bool) -> Qos:
+        """QoS that ROS 2's default and sensor-data profiles match: reliable, volatile. Writers
+        assert liveliness as on anodize's own topics; readers ask for none, since a ROS 2
+        writer offers an infinite lease and a reader asking for less would not match it."""
+        userdata = Policy.Userdata(ros_userdata(kind.type_hash, self.identity))
+        if writer:
+            return Qos(Policy.Reliability.Reliable(_WRITE_BLOCK), Policy.History.KeepAll, Policy.Durability.Volatile,
+                       Policy.Liveliness.Automatic(duration(seconds=self.settings.lease)), userdata, *_XCDR1)
+        return Qos(Policy.Reliability.Reliable(_WRITE_BLOCK), Policy.History.KeepAll, Policy.Durability.Volatile,
+                   Policy.ResourceLimits(max_samples=READER_SAMPLES), userdata, *_XCDR1)
+
+
+class _OutLane:
+    """One topic a sender writes: the channel's own (codec frames) or a ROS topic (one label's CDR)."""
+
+    def __init__(self, writer: DataWriter[Any], kind: RosType | None, topic: str) -> None:
+        self.writer = writer
+        self.ref = writer._ref
+        self.kind = kind  # None: the channel's own topic
+        self.topic = topic
+        self.accepted: int | None = None  # the subscription handle of the receiver's reader (None: any, external)
+
 
 class DdsSender:
-    """The writing end of a channel to a role in another group (over DDS)."""
+    """The writing end of a channel to a role in another group, or to an external role (over DDS)."""
 
     def __init__(self, endpoints: _Endpoints, codec: Codec, network: DdsNetwork, sender: str, receiver: str) -> None:
         self.codec = codec
         self.network = network
         self.sender = sender
         self.receiver = receiver
-        self.writer: DataWriter[Frame] = DataWriter(endpoints.participant, endpoints.topic((sender, receiver)),
-                                                    qos=endpoints.writer_qos)
-        self._ref = self.writer._ref
+        settings = network.settings
+        self.external = settings.is_external(receiver)  # a ROS node: only ROS topics, no credits
         self._lock = threading.Lock()  # a failure frame must not interleave with a message
-        self.accepted: int | None = None  # the subscription handle of the receiver's reader
-        self._next_check = 0.0  # when to look again whether the receiver's reader is still there
-        self.credits: DataReader[Frame] = DataReader(endpoints.participant, endpoints.topic((sender, receiver),
-                                                                                            "/credit"),
-                                                     qos=endpoints.credit_qos)
-        self._credits_ref = self.credits._ref
+        self._next_check = 0.0  # when to look again whether the receiver's readers are still there
+        self.frames: _OutLane | None = None
+        if not self.external:
+            self.frames = _OutLane(DataWriter(endpoints.participant, endpoints.topic((sender, receiver)),
+                                              qos=endpoints.writer_qos), None, "")
+        self.ros: dict[str, _OutLane] = {}  # label -> its ROS topic's writer
+        if settings.ros is not None:
+            for label, topic in settings.ros.channel_topics(sender, receiver).items():
+                dds_topic, kind = endpoints.ros_topic(topic)
+                self.ros[label] = _OutLane(DataWriter(endpoints.participant, dds_topic,
+                                                      qos=endpoints.ros_qos(kind, writer=True)), kind, topic.name)
+        self.lanes = [lane for lane in (self.frames, *self.ros.values()) if lane is not None]
+        self.credits: DataReader[Frame] | None = None
         self.credit_writer: int | None = None  # the publication handle of the receiver's credit writer
-        self._credit_wait = WaitSet(endpoints.participant)
-        self._credit_wait.attach(ReadCondition(self.credits, ANY_SAMPLE))
+        if not self.external:
+            self.credits = DataReader(endpoints.participant, endpoints.topic((sender, receiver), "/credit"),
+                                      qos=endpoints.credit_qos)
+            self._credits_ref = self.credits._ref
+            self._credit_wait = WaitSet(endpoints.participant)
+            self._credit_wait.attach(ReadCondition(self.credits, ANY_SAMPLE))
         self.written = 0  # messages written
         self.taken = 0    # of those, how many the receiver says it has taken
         self._in_flight: deque[int] = deque()  # the sizes of the samples written but not taken
         self._in_flight_bytes = 0
+
+    @property
+    def writer(self) -> DataWriter[Any]:
+        """The writer of the channel's own topic (or of its first ROS topic, into an external role)."""
+        return self.lanes[0].writer
 
     def put(self, item: object) -> None:
         """Send ``(label, payload)``, or a :class:`PeerFailure` saying why we stop.
@@ -210,35 +289,45 @@ class DdsSender:
             PeerFailedError: the receiver's reader is gone (its group ended or was cut off).
         """
         if type(item) is tuple:
+            lane = self.ros.get(item[0]) if self.ros else None
             try:
-                frame = self.codec.message_frame(item[0], item[1])
-            except EncodeError as error:
+                sample = (cdr_sample(self.codec.message_frame(item[0], item[1])) if lane is None
+                          else ros_sample(lane.kind.serialize(item[1])))  # type: ignore[union-attr]
+            except (EncodeError, AnodizeError) as error:
                 raise PayloadError(f"role {self.sender}: cannot send {item[0]} to {self.receiver}: "
                                    f"{error}") from None
-            sample = cdr_sample(frame)
             with self._lock:
-                if self.written - self.taken >= _WINDOW or self._in_flight_bytes >= _WINDOW_BYTES:
+                if self.credits is not None and (self.written - self.taken >= _WINDOW
+                                                 or self._in_flight_bytes >= _WINDOW_BYTES):
                     self._await_credit()
-                self._write(sample)
-                self.written += 1
-                self._in_flight.append(len(sample))
-                self._in_flight_bytes += len(sample)
+                self._write(lane or self.frames, sample)  # type: ignore[arg-type]
+                if self.credits is not None:
+                    self.written += 1
+                    self._in_flight.append(len(sample))
+                    self._in_flight_bytes += len(sample)
             return
-        if isinstance(item, PeerFailure):
+        if isinstance(item, PeerFailure) and self.frames is not None:
             with self._lock:
-                self._write(cdr_sample(Codec.failure_frame(item.cause)))
+                self._settle_ros_lanes()
+                self._write(self.frames, cdr_sample(Codec.failure_frame(item.cause)))
 
-    def _write(self, sample: bytes, give_up: float | None = None) -> None:
+    def _settle_ros_lanes(self, seconds: float = 1.0) -> None:
+        """Before a failure frame: what the ROS topics carry has reached the receiver, which
+        then finds it there before it reads of the failure on the channel's own topic."""
+        for lane in self.ros.values():
+            with contextlib.suppress(DDSException):
+                lane.writer.wait_for_acks(duration(seconds=seconds))
+
+    def _write(self, lane: _OutLane, sample: bytes, give_up: float | None = None) -> None:
         pause = 0.0002
         while True:
             # A reader gone since the last look takes what is written meanwhile nowhere;
             # its group is gone too, so this only bounds how soon the sender hears of it.
             now = time.monotonic()
-            if self.accepted is not None and now >= self._next_check:
+            if now >= self._next_check:
                 self._next_check = now + _POLL
-                if self.accepted not in {instance_handle(h) for h in self.writer.get_matched_subscriptions()}:
-                    raise self._peer_gone()
-            ret = ddspy_write(self._ref, sample)
+                self._check_readers()
+            ret = ddspy_write(lane.ref, sample)
             if ret == 0:
                 return
             if ret != _TIMEOUT:
@@ -252,6 +341,17 @@ class DdsSender:
                 return
             time.sleep(pause)  # releases the GIL: the group's other threads run on
             pause = min(pause * 2, 0.005)
+
+    def _check_readers(self) -> None:
+        """Raise if the receiver's reader of any lane is gone (an external role: if no ROS node
+        subscribes a topic any more)."""
+        for lane in self.lanes:
+            matched = lane.writer.get_matched_subscriptions()
+            if lane.accepted is None:
+                if self.external and not matched:
+                    raise self._peer_gone(f"no ROS 2 node subscribes {lane.topic} any more")
+            elif lane.accepted not in {instance_handle(h) for h in matched}:
+                raise self._peer_gone()
 
     def _await_credit(self) -> None:
         """Until the receiver has taken enough for another sample to fit its window.
@@ -271,8 +371,7 @@ class DdsSender:
             now = time.monotonic()
             if now >= self._next_check:
                 self._next_check = now + _POLL
-                if self.accepted not in {instance_handle(h) for h in self.writer.get_matched_subscriptions()}:
-                    raise self._peer_gone()
+                self._check_readers()
             self._credit_wait.wait(duration(seconds=_POLL))  # releases the GIL
 
     def _take_credits(self) -> None:
@@ -288,25 +387,33 @@ class DdsSender:
             self._in_flight_bytes -= self._in_flight.popleft()
 
     def find_reader(self) -> bool:
-        """Accept the reader of the receiver's group of our incarnation, if it has matched (the
+        """Accept the readers of the receiver's group of our incarnation, if they have matched (the
         start barrier): until then nothing is written, so nothing goes only to a reader of an
-        incarnation that is ending (a restart), and nothing is missed by the new one."""
-        channel = f"{self.sender}->{self.receiver}"
-        if self.accepted is None:
-            self.accepted = _find_peer(self.network, self.receiver, channel, self.writer.get_matched_subscriptions(),
-                                       self.writer.get_matched_subscription_data)[0]
-        if self.credit_writer is None:
-            self.credit_writer = _find_peer(self.network, self.receiver, channel + " (credits)",
+        incarnation that is ending (a restart), and nothing is missed by the new one. Into an
+        external role: some ROS node subscribes each topic."""
+        found = True
+        for lane in self.lanes:
+            channel = f"{self.sender}->{self.receiver}" + (f" ({lane.topic})" if lane.kind is not None else "")
+            matched = lane.writer.get_matched_subscriptions()
+            if self.external:
+                found = found and bool(matched)
+            elif lane.accepted is None:
+                lane.accepted = _find_peer(self.network, self.receiver, channel, matched,
+                                           lane.writer.get_matched_subscription_data)[0]
+                found = found and lane.accepted is not None
+        if self.credits is not None and self.credit_writer is None:
+            self.credit_writer = _find_peer(self.network, self.receiver, f"{self.sender}->{self.receiver} (credits)",
                                             self.credits.get_matched_publications(),
                                             self.credits.get_matched_publication_data)[0]
-        return self.accepted is not None and self.credit_writer is not None
+        return found and (self.credits is None or self.credit_writer is not None)
 
     def put_failure(self, cause: str) -> None:
         """Best effort, from another thread: tell the receiver this sender failed."""
-        if self._lock.acquire(timeout=1.0):
+        if self.frames is not None and self._lock.acquire(timeout=1.0):
             try:
                 with contextlib.suppress(AnodizeError, PeerFailedError, RoleStopped):
-                    self._write(cdr_sample(Codec.failure_frame(cause)), give_up=time.monotonic() + 1.0)
+                    self._settle_ros_lanes()
+                    self._write(self.frames, cdr_sample(Codec.failure_frame(cause)), give_up=time.monotonic() + 1.0)
             finally:
                 self._lock.release()
 
@@ -332,50 +439,101 @@ class DdsSender:
         """True: nothing arrives at the writing end."""
         return True
 
-    def _peer_gone(self) -> BaseException:
+    def _peer_gone(self, why: str = "") -> BaseException:
         cause = self.network.failed.get(self.receiver)
         if cause is None:
-            cause = (f"its reader went away ({self.network.settings.where(self.receiver)} ended, "
-                     "or stopped answering, or was cut off)")
+            cause = why or (f"its reader went away ({self.network.settings.where(self.receiver)} ended, "
+                            "or stopped answering, or was cut off)")
         return PeerFailedError(self.sender, self.receiver, cause)
 
 
+class _InLane:
+    """One topic a receiver reads: the channel's own (codec frames) or a ROS topic (one label)."""
+
+    def __init__(self, reader: DataReader[Any], label: str | None, kind: RosType | None, topic: str) -> None:
+        self.reader = reader
+        self.ref = reader._ref
+        self.label = label  # the one label a ROS topic carries (None: the channel's own topic)
+        self.kind = kind
+        self.topic = topic
+        self.samples: deque[bytes | Corrupt] = deque()
+        self.accepted: set[int] = set()  # publication handles of the writers we listen to
+        self.accepted_guid = ""
+        self.refused: dict[int, str | None] = {}  # other writers: None (dropped) or why their samples are wrong
+
+
 class DdsReceiver:
-    """The reading end of a channel from a role in another group (one reading thread)."""
+    """The reading end of a channel from a role in another group, or from an external role (one
+    reading thread). A channel whose labels go on several topics is read lane by lane, each message
+    from the topic its plan (:mod:`.ros_lanes`) says comes next."""
 
     def __init__(self, endpoints: _Endpoints, codec: Codec, network: DdsNetwork, sender: str, receiver: str) -> None:
         self.codec = codec
         self.network = network
         self.sender = sender
         self.receiver = receiver
-        self.reader: DataReader[Frame] = DataReader(endpoints.participant, endpoints.topic((sender, receiver)),
-                                                    qos=endpoints.reader_qos)
-        self._ref = self.reader._ref
-        self.credit_writer: DataWriter[Frame] = DataWriter(
-            endpoints.participant, endpoints.topic((sender, receiver), "/credit"), qos=endpoints.credit_qos)
+        settings = network.settings
+        self.external = settings.is_external(sender)  # a ROS node: only ROS topics, no credits
+        self.waitset = WaitSet(endpoints.participant)
+        self.frames: _InLane | None = None
+        if not self.external:
+            self.frames = _InLane(DataReader(endpoints.participant, endpoints.topic((sender, receiver)),
+                                             qos=endpoints.reader_qos), None, None, "")
+        self.ros: dict[str, _InLane] = {}  # ROS topic name -> its lane
+        self.plan: LanePlan | None = None
+        if settings.ros is not None:
+            for label, topic in settings.ros.channel_topics(sender, receiver).items():
+                dds_topic, kind = endpoints.ros_topic(topic)
+                self.ros[topic.name] = _InLane(DataReader(endpoints.participant, dds_topic,
+                                                          qos=endpoints.ros_qos(kind, writer=False)),
+                                               label, kind, topic.name)
+            self.plan = settings.ros.plans.get((sender, receiver))
+        self.lanes = [lane for lane in (self.frames, *self.ros.values()) if lane is not None]
+        for lane in self.lanes:
+            self.waitset.attach(ReadCondition(lane.reader, ANY_SAMPLE))
+        self.state = self.plan.initial if self.plan is not None else 0
+        self.credit_writer: DataWriter[Frame] | None = None
+        if not self.external:
+            self.credit_writer = DataWriter(endpoints.participant, endpoints.topic((sender, receiver), "/credit"),
+                                            qos=endpoints.credit_qos)
         self.taken = 0     # samples of the accepted writer handed on so far
         self.credited = 0  # the count last told to the sender
         self._uncredited_bytes = 0  # taken since then
-        self.waitset = WaitSet(endpoints.participant)
-        self.waitset.attach(ReadCondition(self.reader, ANY_SAMPLE))
-        self.accepted: int | None = None  # the publication handle of the one writer we listen to
-        self.accepted_guid = ""
         self.frame_size = 0
-        self._samples: deque[bytes] = deque()
         self._pushed: deque[object] = deque()
         self._lost: str | None = None
         self._next_check = 0.0  # when to look again whether the accepted writer is still there
         self.rejected: dict[str, list[Any]] = {}  # foreign writer GUID -> [count, identity]
 
+    @property
+    def reader(self) -> DataReader[Any]:
+        """The reader of the channel's own topic (or of its first ROS topic, from an external role)."""
+        return self.lanes[0].reader
+
+    def _lane(self) -> _InLane:
+        """The lane the next message comes on."""
+        if self.plan is None:
+            return self.lanes[0]
+        topic = self.plan.lanes[self.state]
+        return self.frames if topic is None and self.frames is not None else self.ros.get(topic or "", self.lanes[0])
+
     # ---- start barrier --------------------------------------------------------------------
     def find_writer(self) -> bool:
-        """Accept the writer of the expected group, if it has matched (the start barrier)."""
-        if self.accepted is None:
-            self.accepted, self.accepted_guid = _find_peer(self.network, self.sender,
-                                                           f"{self.sender}->{self.receiver}",
-                                                           self.reader.get_matched_publications(),
-                                                           self.reader.get_matched_publication_data)
-        return self.accepted is not None
+        """Accept the writer of the expected group on every lane, if it has matched (the start
+        barrier); from an external role, some ROS node publishing each topic."""
+        found = True
+        for lane in self.lanes:
+            matched = lane.reader.get_matched_publications()
+            if self.external:
+                found = found and bool(matched)
+            elif not lane.accepted:
+                channel = f"{self.sender}->{self.receiver}" + (f" ({lane.topic})" if lane.kind is not None else "")
+                handle, lane.accepted_guid = _find_peer(self.network, self.sender, channel, matched,
+                                                        lane.reader.get_matched_publication_data)
+                if handle is not None:
+                    lane.accepted.add(handle)
+                found = found and handle is not None
+        return found
 
     # ---- the Channel protocol ---------------------------------------------------------------
     def put(self, item: object) -> None:
@@ -392,15 +550,22 @@ class DdsReceiver:
         while True:
             if self._pushed:
                 return self._pushed.popleft()
-            if self._samples or self._take():
-                return self._decode(self._next_sample())
+            lane = self._lane()
+            if lane.samples or self._take(lane):
+                return self._hand_on(lane)
+            if lane is not self.frames and self.frames is not None and self._failure_waiting():
+                # The sender settled its ROS topics before it wrote the failure: a message it sent
+                # there before failing is in our reader by now.
+                if self._take(lane):
+                    return self._hand_on(lane)
+                return self._hand_on(self.frames)
             if self.network.stopping:
                 return STOP
             failed = self.network.failed.get(self.sender)
             if failed is not None:
                 return PeerFailure(self.sender, failed)
-            lost = self._writer_lost()
-            if lost is not None and not self._take():  # all it wrote before going is read
+            lost = self._writer_lost(lane)
+            if lost is not None and not self._take(lane):  # all it wrote before going is read
                 self.network.note_failed(self.sender, lost)
                 return PeerFailure(self.sender, lost)
             left = _POLL if deadline is None else min(_POLL, deadline - time.monotonic())
@@ -413,47 +578,102 @@ class DdsReceiver:
 
     def empty(self) -> bool:
         """True when nothing (no message, no failure, no stop) is waiting."""
-        if self._pushed or self._samples or self.network.stopping or self.sender in self.network.failed:
+        if self._pushed or self.network.stopping or self.sender in self.network.failed:
             return False
-        return not self._take()
+        lane = self._lane()
+        if lane.samples or self._take(lane):
+            return False
+        return not (lane is not self.frames and self.frames is not None and self._failure_waiting())
 
-    def _take(self) -> bool:
-        """Move what the reader holds from the accepted writer into our queue; False if none."""
-        taken = ddspy_take(self._ref, ANY_SAMPLE, _TAKE)
+    def _failure_waiting(self) -> bool:
+        """Whether the channel's own topic holds a failure frame (when the next message is due on
+        a ROS topic: messages on the own topic wait for their turn, a failure ends the channel)."""
+        frames = self.frames
+        assert frames is not None
+        self._take(frames)
+        if not frames.samples:
+            return False
+        last = frames.samples[-1]
+        return isinstance(last, bytes) and len(last) > 12 and last[12] == FrameKind.FAILURE
+
+    def _take(self, lane: _InLane) -> bool:
+        """Move what a lane's reader holds from accepted writers into its queue; False if none."""
+        taken = ddspy_take(lane.ref, ANY_SAMPLE, _TAKE)
         if type(taken) is int:
             raise AnodizeError(f"DDS take on {self.sender}->{self.receiver} failed: {DDSException(taken)}")
         for data, info in taken:
             if not info.valid_data:
                 continue
-            if instance_handle(info.publication_handle) != self.accepted:
-                self._reject(info.publication_handle)
-                continue
-            self._samples.append(data)
-        return bool(self._samples)
+            handle = instance_handle(info.publication_handle)
+            if handle in lane.accepted:
+                lane.samples.append(data)
+            elif self._admit(lane, handle):
+                reason = lane.refused.get(handle)
+                lane.samples.append(data if reason is None else Corrupt(reason))
+        return bool(lane.samples)
 
-    def _next_sample(self) -> bytes:
-        """The oldest sample taken, now handed on: credit counts what is handed on, not what is
+    def _admit(self, lane: _InLane, handle: int) -> bool:
+        """Whether a sample from a writer we have not accepted is handed on: from an external role,
+        any ROS writer that claims no anodize identity is (one advertising another type hash, as a
+        node built against another definition does, has its samples handed on as corrupt: the
+        monitor blames the external role); any other writer's samples are dropped and reported."""
+        if handle in lane.refused:
+            return lane.refused[handle] is not None
+        data = self._publication(lane, handle)
+        claimed = userdata_of(data.qos) if data is not None else b""
+        if self.external and data is not None and _parse_identity(claimed) is None:
+            assert lane.kind is not None
+            advertised = userdata_fields(claimed).get("typehash")
+            if advertised is None or advertised == lane.kind.type_hash:
+                lane.accepted.add(handle)
+                return True
+            lane.refused[handle] = (f"the ROS 2 writer {data.key} on {lane.topic} advertises type hash "
+                                    f"{advertised}, but {lane.kind.name} ({lane.kind.distro}) is "
+                                    f"{lane.kind.type_hash}: it was built against another definition")
+            return True
+        lane.refused[handle] = None
+        self._reject(lane, handle, data)
+        return False
+
+    def _publication(self, lane: _InLane, handle: int) -> Any:
+        matched = [h for h in lane.reader.get_matched_publications() if instance_handle(h) == handle]
+        return lane.reader.get_matched_publication_data(matched[0]) if matched else None
+
+    def _hand_on(self, lane: _InLane) -> object:
+        """The oldest sample of a lane, decoded. Credit counts what is handed on, not what is
         taken, so the sender's window covers the samples we hold too (bounded memory)."""
-        data = self._samples.popleft()
+        data = lane.samples.popleft()
+        if isinstance(data, Corrupt):
+            return data
         self.taken += 1
         self._uncredited_bytes += len(data)
-        if self.taken - self.credited >= _CREDIT_EVERY or self._uncredited_bytes >= _CREDIT_BYTES:
+        if self.credit_writer is not None and (self.taken - self.credited >= _CREDIT_EVERY
+                                               or self._uncredited_bytes >= _CREDIT_BYTES):
             self.credited = self.taken
             self._uncredited_bytes = 0
             ddspy_write(self.credit_writer._ref, cdr_sample(_COUNT.pack(self.taken)))  # keep-last 1: no wait
-        return data
+        item = self._decode(data) if lane.kind is None else self._decode_ros(lane, data)
+        if self.plan is not None and type(item) is tuple:
+            self.state = self.plan.after(self.state, item[0])
+        return item
 
-    def _reject(self, handle: int) -> None:
-        matched = [h for h in self.reader.get_matched_publications() if instance_handle(h) == instance_handle(handle)]
-        data = self.reader.get_matched_publication_data(matched[0]) if matched else None
+    def _decode_ros(self, lane: _InLane, data: bytes) -> object:
+        assert lane.kind is not None and lane.label is not None
+        self.frame_size = len(data)
+        try:
+            return (lane.label, lane.kind.deserialize(data))
+        except AnodizeError as error:
+            return Corrupt(f"a sample on ROS topic {lane.topic} that is not a {lane.kind.name}: {error}")
+
+    def _reject(self, lane: _InLane, handle: int, data: Any) -> None:
         guid = str(data.key) if data is not None else f"handle {handle}"
         claimed = userdata_of(data.qos).decode(errors="replace") if data is not None else ""
         entry = self.rejected.setdefault(guid, [0, claimed])
         entry[0] += 1
-        if entry[0] == 1:
-            self.network.report(f"rejected samples on {self.sender}->{self.receiver} from DDS writer {guid} "
-                                f"(it claims {claimed or 'nothing'!r}); only {self.accepted_guid} "
-                                f"({self.network.settings.where(self.sender)}) may write there")
+        where = f" ({lane.topic})" if lane.kind is not None else ""
+        self.network.report(f"rejected samples on {self.sender}->{self.receiver}{where} from DDS writer {guid} "
+                            f"(it claims {claimed or 'nothing'!r}); only {lane.accepted_guid} "
+                            f"({self.network.settings.where(self.sender)}) may write there")
 
     def _decode(self, data: bytes) -> object:
         if len(data) < 8:
@@ -475,24 +695,29 @@ class DdsReceiver:
         message: tuple[str, object] = value
         return message
 
-    def _writer_lost(self) -> str | None:
-        """Why the accepted writer is gone (deleted, lease expired), or None while it lives.
+    def _writer_lost(self, lane: _InLane) -> str | None:
+        """Why the writer of the lane due next is gone (deleted, lease expired), or None while it
+        lives; from an external role: why no ROS node publishes there any more.
 
         Asks Cyclone at most every ``_POLL`` seconds: a receive that finds nothing
         and waits would otherwise pay for the question every time.
         """
         now = time.monotonic()
-        if self._lost is not None or self.accepted is None or now < self._next_check:
+        if self._lost is not None or now < self._next_check:
             return self._lost
         self._next_check = now + _POLL
-        if self.accepted not in {instance_handle(h) for h in self.reader.get_matched_publications()}:
-            self._lost = (f"its DDS writer went away: {self.network.settings.where(self.sender)} ended, "
-                          "or stopped answering, or was cut off")
-        else:
-            status = self.reader.get_liveliness_changed_status()  # type: ignore[no-untyped-call]
+        matched = {instance_handle(h) for h in lane.reader.get_matched_publications()}
+        where = self.network.settings.where(self.sender)
+        if self.external:
+            if not matched:
+                self._lost = f"no ROS 2 node publishes {lane.topic} any more"
+        elif lane.accepted and not lane.accepted & matched:
+            self._lost = f"its DDS writer went away: {where} ended, or stopped answering, or was cut off"
+        elif self.frames is not None:  # our own writers assert liveliness on the channel's own topic
+            status = self.frames.reader.get_liveliness_changed_status()  # type: ignore[no-untyped-call]
             if status.alive_count == 0 and status.not_alive_count > 0:
-                self._lost = (f"{self.network.settings.where(self.sender)} stopped answering: its DDS "
-                              f"liveliness lease ({self.network.settings.lease:g} s) expired")
+                self._lost = (f"{where} stopped answering: its DDS liveliness lease "
+                              f"({self.network.settings.lease:g} s) expired")
         return self._lost
 
 
@@ -537,8 +762,9 @@ class DdsNetwork(ProcessNetwork):
         # Our receiver failed: delete its reader, so its writer sees it unmatched and stops.
         for receiver in self.receivers:
             if (receiver.sender, receiver.receiver) == pair:
-                with contextlib.suppress(DDSException):
-                    receiver.reader.__del__()
+                for lane in receiver.lanes:
+                    with contextlib.suppress(DDSException):
+                        lane.reader.__del__()
 
     def wait_for_peers(self) -> None:
         """The start barrier: every channel's other end has appeared, or the wait is over.
@@ -564,18 +790,24 @@ class DdsNetwork(ProcessNetwork):
         for sender in self.senders:
             if not sender.find_reader():
                 missing.setdefault(self.settings.where(sender.receiver), []).append(
-                    f"{sender.sender}->{sender.receiver}")
+                    f"{sender.sender}->{sender.receiver}" + _on_topics(sender.ros))
         for receiver in self.receivers:
             if not receiver.find_writer():
                 missing.setdefault(self.settings.where(receiver.sender), []).append(
-                    f"{receiver.sender}->{receiver.receiver}")
+                    f"{receiver.sender}->{receiver.receiver}" + _on_topics(receiver.ros.values()))
         return [f"{where} (for {', '.join(pairs)})" for where, pairs in sorted(missing.items())]
 
     def close(self, linger: float = 2.0) -> None:
         """Wait (bounded) until every sample written has been acknowledged, before the process ends."""
         for sender in self.senders:
-            with contextlib.suppress(DDSException):
-                sender.writer.wait_for_acks(duration(seconds=linger))
+            for lane in sender.lanes:
+                with contextlib.suppress(DDSException):
+                    lane.writer.wait_for_acks(duration(seconds=linger))
+
+
+def _on_topics(lanes: Iterable[_OutLane | _InLane] | Mapping[str, _OutLane]) -> str:
+    topics = [lane.topic for lane in (lanes.values() if isinstance(lanes, Mapping) else lanes)]
+    return f" on ROS topic{'s' if len(topics) > 1 else ''} {', '.join(topics)}" if topics else ""
 
 
 def _find_peer(network: DdsNetwork, role: str, channel: str, handles: Iterable[int],
@@ -611,6 +843,15 @@ def cdr_sample(frame: bytes) -> bytes:
     """A codec frame (4-byte length, body) as the CDR of an ``anodize::Frame`` sample."""
     sample = _CDR_HEADER + _LENGTH.pack(len(frame)) + frame
     return sample + b"\0" * (-len(sample) % 4)
+
+
+def ros_sample(cdr: bytes) -> bytes:
+    """Serialized ROS data padded to a multiple of 4 bytes, the padding counted in the low bits of the
+    encapsulation options (as XTypes says and Cyclone's own serializer does)."""
+    pad = -len(cdr) % 4
+    if not pad:
+        return cdr
+    return cdr[:3] + bytes((cdr[3] | pad,)) + cdr[4:] + b"\0" * pad
 
 
 def instance_handle(handle: int) -> int:

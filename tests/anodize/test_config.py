@@ -106,7 +106,19 @@ BAD = {
     "unknown_top_key": (
         MINIMAL + "protocl = 1\n" + GROUP,
         ("protocl: unknown key; expected one of domain, global, groups, monitors, protocol, pythonpath, "
-         "run_id, timeout, transport")),
+         "ros, run_id, timeout, transport")),
+    "unknown_ros_key": (
+        MINIMAL + "[ros]\ntopic = {}\n" + GROUP,
+        "ros.topic: unknown key; expected one of distro, domain, external, topics"),
+    "ros_topics_not_a_table": (
+        MINIMAL + "[ros]\ntopics = [\"/cmd_vel\"]\n" + GROUP,
+        'ros.topics: expected a table such as { "Move->Gazebo" = "/cmd_vel" }, got ["/cmd_vel"]'),
+    "ros_external_not_names": (
+        MINIMAL + "[ros]\nexternal = \"Joy\"\n" + GROUP,
+        'ros.external: expected an array of role names such as ["Joy"], got "Joy"'),
+    "ros_domain_out_of_range": (
+        MINIMAL + "[ros]\ndomain = 300\n" + GROUP,
+        "ros.domain: expected a DDS domain id 0..232, got 300"),
     "unknown_group_key": (
         MINIMAL + GROUP + "prio = 3\n",
         ("groups.g.prio: unknown key; expected one of cpus, host, max_restarts, memory, on_failure, "
