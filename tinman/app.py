@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from anodize import AnodizeError, GroupStatus, RunReport
-from anodize.tools.config import build_system, load_config
+from anodize.tools.config import SystemConfig, build_system, load_config
 from anodize.tools.named import Finished, Prepared
 
 from .outcome import build_report
@@ -60,6 +60,12 @@ class TinMan:
                                  "generated and cached on first use)")
         parser.add_argument("--planner", choices=("rrt", "astar"), default="rrt",
                             help="RRT-Connect with shortcut smoothing (default) or grid A*")
+        parser.add_argument("--transport", choices=("process", "dds"), default=None,
+                            help="process pipes and shared memory (tinman.toml's, the default) or DDS, "
+                                 "where the channels are ROS 2 topics ([ros.topics] in tinman.toml)")
+        parser.add_argument("--external", action="append", default=[], metavar="ROLE",
+                            help="with --transport dds: a ROS 2 node on the network plays ROLE (e.g. Joy: a "
+                                 "joy_node on /joy; Gazebo: a simulator on /cmd_vel); TinMan does not run it")
 
     def prepare(self, args: argparse.Namespace, log: Callable[[str], None]) -> Prepared:
         if not args.duration > 0:
@@ -67,6 +73,10 @@ class TinMan:
         config = load_config(SYSTEM_FILE)
         if args.paper:
             config = dataclasses.replace(config, global_name=PAPER_GLOBAL)
+        if getattr(args, "transport", None) is not None:
+            config = dataclasses.replace(config, transport=args.transport)
+        if args.external:
+            config = _external(config, args.external)
         groups = {role: group.name for group in config.groups.values() for role in group.roles}
         inject = _faults(args.inject, sorted(config.groups))
         if args.teleop:
@@ -116,6 +126,25 @@ def _faults(requests: list[str], groups: list[str]) -> dict[str, str]:
             raise TinManError(f"--inject {request}: no group {group!r}; expected one of {', '.join(groups)}")
         faults[group] = fault
     return faults
+
+
+def _external(config: SystemConfig, roles: list[str]) -> SystemConfig:
+    """The system with ``roles`` played by ROS 2 nodes: out of their groups (a group left with no
+    role is dropped), and named external.
+
+    Raises:
+        TinManError: not on DDS, or not a role of TinMan.
+    """
+    if config.transport != "dds":
+        raise TinManError("--external needs --transport dds: a ROS 2 node plays the role on TinMan's ROS topics")
+    every = [role for group in config.groups.values() for role in group.roles]
+    unknown = [role for role in roles if role not in every]
+    if unknown:
+        raise TinManError(f"--external {unknown[0]}: TinMan has no role {unknown[0]}; its roles are {', '.join(every)}")
+    groups = {name: dataclasses.replace(group, roles={r: f for r, f in group.roles.items() if r not in roles})
+              for name, group in config.groups.items()}
+    return dataclasses.replace(config, groups={name: g for name, g in groups.items() if g.roles},
+                               external=tuple(dict.fromkeys(roles)))
 
 
 def _check_terminal() -> None:

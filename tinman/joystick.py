@@ -12,6 +12,10 @@ now and then, the rest of the time the planner drives.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+import numpy as np
+
 __all__ = ["AXES", "BUTTONS", "LINEAR_AXIS", "ANGULAR_AXIS", "DEADMAN_BUTTON", "DEADZONE",
            "JoyWindow", "JOY_SCRIPT", "scripted_joy", "twist_from_joy"]
 
@@ -60,7 +64,7 @@ def _outside_deadzone(value: float) -> float:
     return 0.0 if abs(value) < DEADZONE else max(-1.0, min(1.0, value))
 
 
-def twist_from_joy(axes: tuple[float, ...] | list[float], buttons: tuple[int, ...] | list[int],
+def twist_from_joy(axes: Sequence[float] | np.ndarray, buttons: Sequence[int] | np.ndarray,
                    max_linear: float = 0.5, max_angular: float = 1.5) -> tuple[float, float, bool]:
     """The Control role's mapping of the gamepad to a velocity command.
 
@@ -69,14 +73,14 @@ def twist_from_joy(axes: tuple[float, ...] | list[float], buttons: tuple[int, ..
     robot. Axes or buttons missing from a short message count as centred/released.
 
     Args:
-        axes, buttons: a ``sensor_msgs/Joy``'s fields.
+        axes, buttons: a ``sensor_msgs/Joy``'s fields (its numpy arrays, or sequences).
         max_linear, max_angular: the speeds of a stick pushed all the way (m/s, rad/s).
 
     Returns:
         ``(v, w, active)``; ``(0.0, 0.0, False)`` when the driver is not driving.
     """
-    forward = _outside_deadzone(axes[LINEAR_AXIS]) if len(axes) > LINEAR_AXIS else 0.0
-    turn = _outside_deadzone(axes[ANGULAR_AXIS]) if len(axes) > ANGULAR_AXIS else 0.0
+    forward = _outside_deadzone(float(axes[LINEAR_AXIS])) if len(axes) > LINEAR_AXIS else 0.0
+    turn = _outside_deadzone(float(axes[ANGULAR_AXIS])) if len(axes) > ANGULAR_AXIS else 0.0
     deadman = len(buttons) > DEADMAN_BUTTON and bool(buttons[DEADMAN_BUTTON])
     if not deadman and forward == 0.0 and turn == 0.0:
         return 0.0, 0.0, False

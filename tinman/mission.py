@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .joystick import JOY_SCRIPT, JoyWindow, scripted_joy, twist_from_joy
-from .messages import Header, Path, Time, Twist
+from .messages import Header, path_through, stamp_from_seconds, twist_planar
 from .mixer import Mixer
 from .planning import NoPathError, Patrol, Planner
 from .pursuit import PurePursuit
@@ -123,10 +123,10 @@ def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate:
                 failures.append(str(error))
             else:
                 plans.append((t, path))
-                mixer.set_path(Path.through(path, Header(Time.from_seconds(t), "map")))
+                mixer.set_path(path_through(path, Header(stamp=stamp_from_seconds(t), frame_id="map")))
         axes, buttons = scripted_joy(t, script)
         v, w, _ = twist_from_joy(axes, buttons)
-        _, source = mixer.step(Twist.planar(v, w))
+        _, source = mixer.step(twist_planar(v, w))
         teleop[step] = source == "teleop"
     teleop[steps] = teleop[steps - 1] if steps else False
     return MissionTrace(stamps=stamps, poses=poses, teleop=teleop, plans=plans,

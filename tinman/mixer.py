@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 
-from .messages import Path, Twist
+from .messages import Path, Twist, path_points, twist_planar
 from .pursuit import PurePursuit
 from .sim import DiffDrive
 from .world import World
@@ -43,7 +43,7 @@ class Mixer:
 
     def set_path(self, path: Path) -> None:
         """Follow ``path`` from now on (the latest plan always wins)."""
-        points = path.points()
+        points = path_points(path)
         with self._lock:
             self._path = points
             self.paths_received += 1
@@ -63,4 +63,4 @@ class Mixer:
                 v, w, source = 0.0, 0.0, "idle"
         self.model.step(v, w, self.period)
         self.sources[source] += 1
-        return Twist.planar(v, w), source
+        return twist_planar(v, w), source

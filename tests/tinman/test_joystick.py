@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -15,6 +17,7 @@ from tinman.joystick import (
     scripted_joy,
     twist_from_joy,
 )
+from tinman.messages import Header, Time, joy
 
 RELEASED = (0,) * 8
 DEADMAN = tuple(1 if i == DEADMAN_BUTTON else 0 for i in range(8))
@@ -92,3 +95,10 @@ def test_a_custom_script_is_played():
     script = ((1.0, 2.0, sticks(0.2, 0.0), RELEASED),)
     assert scripted_joy(1.5, script) == (sticks(0.2, 0.0), RELEASED)
     assert scripted_joy(6.5, script) == ((0.0,) * 6, (0,) * 8)
+
+
+def test_a_joy_messages_numpy_arrays_map_to_python_floats() -> None:
+    message = joy(Header(stamp=Time(sec=0, nanosec=0), frame_id="joy"), sticks(0.6, 0.3), DEADMAN)
+    v, w, active = twist_from_joy(message.axes, message.buttons)
+    assert type(v) is float and type(w) is float and active
+    assert math.isclose(v, 0.3, rel_tol=1e-6) and math.isclose(w, 0.45, rel_tol=1e-6)

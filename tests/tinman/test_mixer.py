@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from tinman.messages import Header, Path, Pose, PoseStamped, Twist
+from tinman.messages import Header, Path, Time, path_through, twist_planar
 from tinman.mixer import Mixer
 from tinman.world import DEFAULT_WORLD
 
@@ -12,13 +12,13 @@ PERIOD = 0.02
 
 
 def path_of(points: list[tuple[float, float]]) -> Path:
-    return Path(Header(), tuple(PoseStamped(Header(), Pose.planar(x, y, 0.0)) for x, y in points))
+    return path_through(points, Header(stamp=Time(sec=0, nanosec=0), frame_id="map"))
 
 
 def test_without_a_path_or_a_stick_the_robot_stays_put() -> None:
     mixer = Mixer(DEFAULT_WORLD, PERIOD)
-    command, source = mixer.step(Twist())
-    assert (command, source) == (Twist.planar(0.0, 0.0), "idle")
+    command, source = mixer.step(twist_planar(0.0, 0.0))
+    assert (command, source) == (twist_planar(0.0, 0.0), "idle")
     assert mixer.model.pose == DEFAULT_WORLD.start
 
 
@@ -28,8 +28,8 @@ def test_the_robot_follows_the_latest_path_to_its_end() -> None:
     mixer.set_path(path_of([(x, y), (x + 0.5, y + 2.0)]))  # superseded before it is used
     mixer.set_path(path_of([(x, y), (x + 1.5, y)]))
     for _ in range(int(20 / PERIOD)):
-        command, source = mixer.step(Twist())
-    assert source == "idle" and command == Twist.planar(0.0, 0.0)  # arrived: stopped
+        command, source = mixer.step(twist_planar(0.0, 0.0))
+    assert source == "idle" and command == twist_planar(0.0, 0.0)  # arrived: stopped
     assert math.dist(mixer.model.pose[:2], (x + 1.5, y)) < 0.2
     assert mixer.sources["path"] > 0 and mixer.paths_received == 2
 
@@ -38,8 +38,8 @@ def test_teleop_wins_over_the_path_while_it_commands_anything() -> None:
     mixer = Mixer(DEFAULT_WORLD, PERIOD)
     x, y, _ = DEFAULT_WORLD.start
     mixer.set_path(path_of([(x, y), (x + 2.0, y)]))
-    command, source = mixer.step(Twist.planar(0.0, 0.8))
-    assert (command, source) == (Twist.planar(0.0, 0.8), "teleop")
-    command, source = mixer.step(Twist())  # the stick is back in the centre: the path resumes
+    command, source = mixer.step(twist_planar(0.0, 0.8))
+    assert (command, source) == (twist_planar(0.0, 0.8), "teleop")
+    command, source = mixer.step(twist_planar(0.0, 0.0))  # the stick is back in the centre: the path resumes
     assert source == "path" and command.linear.x >= 0.0
     assert mixer.sources == {"teleop": 1, "path": 1, "idle": 0}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -43,9 +44,10 @@ def test_tinman_runs_with_every_group_and_no_violation(
     for channel in ("Joy->Control", "Control->Move", "Move->Gazebo", "Camera->VisOdom",
                     "VisOdom->Visualizer", "VisOdom->Planner", "Planner->Move"):
         assert report["messages"][channel] > 0, channel
-    # The control loop outpaces the camera loop, which outpaces the planning loop.
-    assert report["messages"]["Move->Gazebo"] > report["messages"]["Camera->VisOdom"] > \
-        report["messages"]["Planner->Move"]
+    # The control loop outpaces the camera loop, which outpaces the planning loop; a camera
+    # frame is two messages (its colour and its depth Image).
+    frames = report["messages"]["Camera->VisOdom"] / 2
+    assert report["messages"]["Move->Gazebo"] > frames > report["messages"]["Planner->Move"]
     assert report["control"]["sources"]["path"] > 0  # the robot followed plans
     assert report["robot"]["distance_m"] > 0.3 and report["robot"]["bumps"] == 0
 
@@ -72,5 +74,18 @@ def test_the_papers_single_loop_also_runs(monkeypatch: pytest.MonkeyPatch, tmp_p
     # camera's pace (30 Hz at most) while the joystick's queue up at 50 Hz.
     messages = report["messages"]
     assert abs(messages["Move->Gazebo"] - messages["Planner->Move"]) <= 1
-    assert messages["Move->Gazebo"] <= messages["Camera->VisOdom"]
+    assert messages["Move->Gazebo"] <= messages["Camera->VisOdom"] / 2  # colour and depth per frame
     assert messages["Move->Gazebo"] < 0.8 * messages["Joy->Control"]
+
+
+def test_tinman_runs_on_dds_with_its_channels_as_ros_topics(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, sequence: Path) -> None:
+    # A ROS domain of this test process's own (never 0, where real ROS nodes may be): the topics
+    # (/joy, /cmd_vel, ...) are the same for every TinMan run, so parallel runs must not meet.
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(1 + os.getpid() % 200))
+    report = run_tinman(monkeypatch, tmp_path, sequence, "--duration", "4", "--transport", "dds")
+    assert report["ok"], report["problems"]
+    assert report["transport"] == "dds" and report["violations"] == 0 and report["frames_processed"] > 10
+    for channel in ("Joy->Control", "Control->Move", "Move->Gazebo", "Camera->VisOdom",
+                    "VisOdom->Visualizer", "VisOdom->Planner", "Planner->Move"):
+        assert report["messages"][channel] > 0, channel

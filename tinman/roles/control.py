@@ -12,7 +12,8 @@ from anodize import Endpoint, PeerFailedError, RoleStopped
 from ..faults import start_faults
 from ..joystick import scripted_joy, twist_from_joy
 from ..keyboard import Keyboard
-from ..messages import Header, Joy, Time, Twist
+from ..messages import Header, Joy, Path, Twist, stamp_now, twist_planar
+from ..messages import joy as joy_message
 from ..mission import patrol_pursuit
 from ..mixer import Mixer
 from ..records import percentiles, save_record
@@ -34,7 +35,7 @@ def joy(ep: Endpoint) -> None:
     try:
         while True:
             axes, buttons = read(time.monotonic() - start)
-            ep.send("Control", "Joy", Joy(Header(Time.now(), "joy"), axes, buttons))
+            ep.send("Control", "Joy", joy_message(Header(stamp=stamp_now(), frame_id="joy"), axes, buttons))
             tick += 1
             late = time.monotonic() - (start + tick * period)
             if late > period:  # fell behind (e.g. the machine was busy): do not burst to catch up
@@ -49,9 +50,9 @@ def control(ep: Endpoint) -> None:
     """Joystick to velocity command."""
     start_faults("Control")
     while True:
-        state = ep.recv("Joy").payload
+        state: Joy = ep.recv("Joy").payload
         v, w, _ = twist_from_joy(state.axes, state.buttons)
-        ep.send("Move", "Twist", Twist.planar(v, w))
+        ep.send("Move", "Twist", twist_planar(v, w))
 
 
 def move(ep: Endpoint) -> None:
@@ -68,9 +69,10 @@ def move(ep: Endpoint) -> None:
     teleop_after_loss = 0
     try:
         while True:
-            teleop = ep.recv("Control").payload
+            teleop: Twist = ep.recv("Control").payload
             if settings.paper:
-                mixer.set_path(ep.recv("Planner").payload)
+                path: Path = ep.recv("Planner").payload
+                mixer.set_path(path)
             command, source = mixer.step(teleop)
             ep.send("Gazebo", "Twist", command)
             sent.append(time.monotonic())

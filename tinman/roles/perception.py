@@ -14,21 +14,28 @@ from anodize import Endpoint, PeerFailedError, RoleStopped
 from ..dataset import TumSequence
 from ..faults import start_faults
 from ..geometry import depth_metres
-from ..messages import Header, Image, Pose, PoseStamped, RGBDFrame, Time
+from ..messages import Header, Image, PoseStamped, image_array, image_of, pose_from_matrix, seconds, stamp_from_seconds
 from ..records import percentiles, save_record
 from ..settings import current
 from ..tum import write_trajectory
 from ..vo import VisualOdometry
 
-__all__ = ["camera", "visodom", "STALE_FRAMES"]
+__all__ = ["camera", "visodom", "STALE_FRAMES", "OPTICAL_FRAME", "Lateness"]
 
-STALE_FRAMES = 2.0  # a frame older than this many frame periods is dropped, not tracked
+STALE_FRAMES = 2.0  # a frame later than this many frame periods is dropped, not tracked
+OPTICAL_FRAME = "camera_optical"  # the images' frame_id: depth is registered to colour, as TUM's is
 
 cv2.setNumThreads(1)  # one core per role: the group's CPU use stays what its threads are
 
 
 def camera(ep: Endpoint) -> None:
-    """Replays the RGB-D sequence at its frame rate, as a camera driver publishes frames."""
+    """Replays the RGB-D sequence at its frame rate, as an RGB-D camera driver publishes it.
+
+    Every frame is two ``sensor_msgs/Image`` messages, colour (``rgb8``) then depth
+    (``16UC1``, 5000 units per metre), each stamped with its capture time in the
+    sequence (as a rosbag replay keeps them): the colour and the depth stamp of the
+    associated pair. A frame is read before it is due and sent when it is due.
+    """
     settings = current()
     start_faults("Camera")
     sequence = TumSequence.open(settings.dataset)
@@ -42,11 +49,14 @@ def camera(ep: Endpoint) -> None:
             if time.monotonic() - due > period:  # reading fell behind: a real camera drops frames
                 skipped += 1
                 continue
+            color = image_of(sequence.rgb(index), "rgb8",
+                             Header(stamp=stamp_from_seconds(float(stamp)), frame_id=OPTICAL_FRAME))
+            depth = image_of(sequence.depth_raw(index), "16UC1",
+                             Header(stamp=stamp_from_seconds(float(sequence.depth_stamps[index])),
+                                    frame_id=OPTICAL_FRAME))
             ep.sleep(due - time.monotonic())
-            captured = Header(Time.from_seconds(float(stamp)), "camera_optical")
-            rgb = Image.of(sequence.rgb(index), "rgb8", captured)
-            depth = Image.of(sequence.depth_raw(index), "16UC1", captured)
-            ep.send("VisOdom", "Image", RGBDFrame(Header(Time.now(), "camera"), rgb, depth, index))
+            ep.send("VisOdom", "color", color)
+            ep.send("VisOdom", "depth", depth)
             published += 1
         ep.sleep(math.inf)  # the sequence is over: the camera stays silent until the run stops
     finally:
@@ -72,20 +82,25 @@ def visodom(ep: Endpoint) -> None:
     poses: list[np.ndarray] = []
     track_ms: list[float] = []
     dropped = 0
+    lateness = Lateness()
     last: PoseStamped | None = None
     try:
         while True:
-            frame: RGBDFrame = ep.recv("Camera").payload
-            late = time.time() - frame.header.stamp.seconds()
+            color: Image = ep.recv("Camera").payload  # the protocol's order: colour, then depth
+            depth: Image = ep.recv("Camera").payload
+            captured = seconds(color.header.stamp)
+            # Late against its capture stamp, not a publish stamp (an Image has none): see Lateness.
+            late = lateness(captured, time.monotonic())
             if last is not None and late > STALE_FRAMES * period:
                 dropped += 1  # catch up: the Visualizer gets the latest estimate again
             else:
                 began = time.perf_counter()
-                pose = odometry.track(frame.rgb.data, depth_metres(frame.depth.data))
+                pose = odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")))
                 track_ms.append((time.perf_counter() - began) * 1000.0)
-                stamps.append(frame.rgb.header.stamp.seconds())
+                stamps.append(captured)
                 poses.append(pose)
-                last = PoseStamped(Header(frame.rgb.header.stamp, "map"), Pose.from_matrix(pose))
+                last = PoseStamped(header=Header(stamp=color.header.stamp, frame_id="map"),
+                                   pose=pose_from_matrix(pose))
                 latest.set(last)
             ep.send("Visualizer", "Pose", last)
             if settings.paper:
@@ -97,6 +112,38 @@ def visodom(ep: Endpoint) -> None:
         save_record("VisOdom", {
             "frames_processed": len(stamps), "frames_dropped": dropped, "track_ms": percentiles(track_ms),
             "lost_frames": odometry.failures})
+
+
+class Lateness:
+    """How late a frame reaches VisOdom, from its capture stamp and VisOdom's own clock.
+
+    A frame used to carry the time it was published, on the wall clock both roles
+    share; a ``sensor_msgs/Image`` carries only its capture stamp, on the camera's
+    clock (for a replayed sequence, the dataset's times, years ago). The two clocks'
+    offset plus the least transport delay is estimated as the smallest ``arrived -
+    captured`` seen so far (the quickest frame); a frame is late by how much longer
+    than that it took. This needs no shared clock, and it counts what matters for
+    dropping: frames queued behind a slow tracker arrive ever later against their
+    capture times. Until a quicker frame comes, the first frame is the reference: a
+    first frame that was itself slow makes the next ones look early, never late.
+    """
+
+    def __init__(self) -> None:
+        self._offset = math.inf
+
+    def __call__(self, captured: float, arrived: float) -> float:
+        """Seconds by which a frame captured at ``captured`` (camera clock) that arrived at
+        ``arrived`` (this role's monotonic clock) is later than the quickest frame so far."""
+        delay = arrived - captured
+        self._offset = min(self._offset, delay)
+        return delay - self._offset
+
+
+def _pixels(image: Image, encoding: str) -> np.ndarray:
+    """The image's pixels (a view of its data), which must be in ``encoding``."""
+    if image.encoding != encoding:
+        raise ValueError(f"VisOdom takes {encoding} images on this channel, got {image.encoding}")
+    return image_array(image)
 
 
 class _Latest:

@@ -8,7 +8,7 @@ from anodize import Endpoint
 
 from ..faults import start_faults
 from ..geometry import robot_pose
-from ..messages import Header, Path, Time
+from ..messages import Header, Path, PoseStamped, path_through, pose_matrix, seconds, stamp_now
 from ..mission import WAYPOINT_TOLERANCE
 from ..planning import NoPathError, Patrol, Planner
 from ..records import save_record
@@ -28,16 +28,16 @@ def planner(ep: Endpoint) -> None:
     start_faults("Planner")
     planning = Planner(DEFAULT_WORLD, method=settings.planner, seed=settings.seed)
     patrol = Patrol(DEFAULT_WORLD, tolerance=WAYPOINT_TOLERANCE)
-    path = Path(Header(Time.now(), "map"))
+    path = Path(header=Header(stamp=stamp_now(), frame_id="map"), poses=[])  # no plan yet: Move stays idle
     planned_at = -float("inf")
     plans: list[dict[str, object]] = []
     failures: list[str] = []
     plan_ms: list[float] = []
     while True:
-        pose = ep.recv("VisOdom").payload
+        pose: PoseStamped = ep.recv("VisOdom").payload
         if time.monotonic() - planned_at >= settings.replan_period:
             planned_at = time.monotonic()
-            x, y, _ = robot_pose(pose.pose.matrix())
+            x, y, _ = robot_pose(pose_matrix(pose.pose))
             goal = patrol.goal_for(x, y)
             began = time.perf_counter()
             try:
@@ -46,9 +46,9 @@ def planner(ep: Endpoint) -> None:
                 failures.append(str(error))
             else:
                 plan_ms.append((time.perf_counter() - began) * 1000.0)
-                header = Header(pose.header.stamp, "map")
-                path = Path.through(points, header)
-                plans.append({"stamp": pose.header.stamp.seconds(), "goal": list(goal),
+                header = Header(stamp=pose.header.stamp, frame_id="map")
+                path = path_through(points, header)
+                plans.append({"stamp": seconds(pose.header.stamp), "goal": list(goal),
                               "points": [[round(px, 3), round(py, 3)] for px, py in points]})
             # Written at every plan: a planner stopped by its memory bound leaves its record.
             save_record("Planner", {"method": settings.planner, "plans": len(plans),

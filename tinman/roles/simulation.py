@@ -7,6 +7,7 @@ import time
 from anodize import Endpoint
 
 from ..faults import start_faults
+from ..messages import PoseStamped, Twist, seconds
 from ..picture import draw_run
 from ..records import save_record
 from ..settings import current
@@ -28,7 +29,7 @@ def gazebo(ep: Endpoint) -> None:
     trace: list[list[float]] = []
     try:
         while True:
-            twist = ep.recv("Move").payload
+            twist: Twist = ep.recv("Move").payload
             x, y, theta = robot.step(twist.linear.x, twist.angular.z, period)
             trace.append([round(time.monotonic() - start, 3), round(x, 4), round(y, 4), round(theta, 4),
                           round(robot.velocity[0], 3), round(robot.velocity[1], 3)])
@@ -42,13 +43,13 @@ def visualizer(ep: Endpoint) -> None:
     settings = current()
     start_faults("Visualizer")
     estimate: list[tuple[float, float, float, float]] = []
-    last_stamp = None
+    last_stamp: float | None = None
     next_draw = time.monotonic() + REDRAW_PERIOD
     live = settings.records / "live.png"
     try:
         while True:
-            pose = ep.recv("VisOdom").payload
-            stamp = pose.header.stamp.seconds()
+            pose: PoseStamped = ep.recv("VisOdom").payload
+            stamp = seconds(pose.header.stamp)
             if stamp != last_stamp:  # a dropped frame repeats the last estimate
                 last_stamp = stamp
                 p = pose.pose.position
