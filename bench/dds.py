@@ -51,14 +51,11 @@ import json
 import multiprocessing
 import os
 import platform
-import shutil
 import statistics
 import sys
-import tempfile
 import time
 import traceback
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -72,6 +69,7 @@ os.environ["PYTHONPATH"] = os.pathsep.join(
 
 import dds_roles as roles  # noqa: E402
 import numpy as np  # noqa: E402
+from runs import bench_env  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import System  # noqa: E402
@@ -94,25 +92,6 @@ _runs = itertools.count()
 
 
 # ---- running one measurement ----------------------------------------------------------------
-@contextmanager
-def bench_env(**settings: Any) -> Iterator[tuple[str, Callable[[str], dict[str, Any]]]]:
-    """Settings for the roles in ``$ANODIZE_BENCH_DDS``; yields the output folder and a reader."""
-    out = Path(tempfile.mkdtemp(prefix="anodize-bench-dds-"))
-    os.environ[roles.ENV] = json.dumps({"out": str(out), **settings})
-
-    def result(name: str) -> dict[str, Any]:
-        path = out / f"{name}.json"
-        if not path.exists():
-            raise RuntimeError(f"the run produced no {name}.json")
-        return json.loads(path.read_text(encoding="utf-8"))  # type: ignore[no-any-return]
-
-    try:
-        yield str(out), result
-    finally:
-        os.environ.pop(roles.ENV, None)
-        shutil.rmtree(out, ignore_errors=True)
-
-
 def run_anodize(transport: str, global_name: str, groups: dict[str, tuple[str, Callable[..., None]]],
                 timeout: float) -> None:
     """Run a two-group system; raise if it did not end well."""
@@ -157,7 +136,7 @@ def _one_way(found: Callable[[str], dict[str, Any]], n: int) -> dict[str, Any]:
 
 
 def messages(way: str, n: int, timeout: float) -> dict[str, Any]:
-    with bench_env(messages=n) as (out, found):
+    with bench_env(roles.ENV, messages=n) as (out, found):
         if way in ("raw", "raw_unbounded"):
             barrier = multiprocessing.get_context("spawn").Barrier(2)
             args = (DOMAIN, _prefix("messages"), barrier, n, out, timeout, way == "raw")
@@ -169,7 +148,7 @@ def messages(way: str, n: int, timeout: float) -> dict[str, Any]:
 
 
 def frames(way: str, n: int, timeout: float) -> dict[str, Any]:
-    with bench_env(frames=n) as (out, found):
+    with bench_env(roles.ENV, frames=n) as (out, found):
         if way in ("raw", "raw_unbounded"):
             barrier = multiprocessing.get_context("spawn").Barrier(2)
             args = (DOMAIN, _prefix("frames"), barrier, n, out, timeout, way == "raw")
@@ -181,7 +160,7 @@ def frames(way: str, n: int, timeout: float) -> dict[str, Any]:
 
 
 def round_trip(way: str, rounds: int, warmup: int, timeout: float) -> dict[str, Any]:
-    with bench_env(rounds=rounds, warmup=warmup) as (out, found):
+    with bench_env(roles.ENV, rounds=rounds, warmup=warmup) as (out, found):
         if way == "raw":
             barrier = multiprocessing.get_context("spawn").Barrier(2)
             prefix = _prefix("pingpong")

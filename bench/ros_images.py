@@ -52,14 +52,11 @@ import itertools
 import json
 import os
 import platform
-import shutil
 import statistics
 import sys
-import tempfile
 import time
 import traceback
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -78,6 +75,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402  # ros_peer reports a missing compiler or Fast DDS as a pytest skip
 import ros_images_roles as roles  # noqa: E402
 from ros_peer import finish_peer, ros_peer_binary, start_peer  # noqa: E402
+from runs import bench_env  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import System  # noqa: E402
@@ -112,28 +110,9 @@ class SkippedError(Exception):
 
 
 # ---- running one measurement ----------------------------------------------------------------
-@contextmanager
-def bench_env(**settings: Any) -> Iterator[tuple[str, Callable[[str], dict[str, Any]]]]:
-    """Settings for the roles in ``$ANODIZE_BENCH_ROS_IMAGES``; yields the output folder and a reader."""
-    out = Path(tempfile.mkdtemp(prefix="anodize-bench-ros-images-"))
-    os.environ[roles.ENV] = json.dumps({"out": str(out), **settings})
-
-    def result(name: str) -> dict[str, Any]:
-        path = out / f"{name}.json"
-        if not path.exists():
-            raise RuntimeError(f"the run produced no {name}.json")
-        return json.loads(path.read_text(encoding="utf-8"))  # type: ignore[no-any-return]
-
-    try:
-        yield str(out), result
-    finally:
-        os.environ.pop(roles.ENV, None)
-        shutil.rmtree(out, ignore_errors=True)
-
-
 def anodize_to_anodize(transport: str, n: int, timeout: float) -> dict[str, Any]:
     """Ways 1 and 3: two groups; the viewer's first and last receipt, and the producer's start."""
-    with bench_env(images=n) as (_, found):
+    with bench_env(roles.ENV, images=n) as (_, found):
         if transport == "dds":
             system = System(GLOBALS["internal"], transport="dds", run_id=f"rosimg{os.getpid()}_{next(_runs)}",
                             ros_topics=roles.CAMERA_TOPICS)
@@ -185,7 +164,7 @@ def anodize_to_fastdds(n: int, rcvbuf: int) -> dict[str, Any]:
     peer_binary()  # skipped (or failed) before anything starts
     run_timeout = external_timeout(n)
     peer_timeout = int(WAIT + run_timeout + 10)  # from the peer's own start: it outlives the run
-    with bench_env(images=n) as (_, found):
+    with bench_env(roles.ENV, images=n) as (_, found):
         peer = start_peer("listen-image", topic=DDS_TOPIC, domain=DOMAIN, count=n, timeout=peer_timeout,
                           rcvbuf=rcvbuf)
         try:
