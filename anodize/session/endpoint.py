@@ -54,6 +54,10 @@ class Endpoint:
                      for p in sends_to if (role, p) in queues}
         self._in = {p: queues[(p, role)] for p in receives_from if (p, role) in queues}
         self.sent: dict[str, int] = dict.fromkeys(self._out, 0)
+        # Channels that can say how many messages wait in them (queues between threads, DDS with
+        # credits; not pipes): the most seen just after a send is the channel's high-water mark.
+        self._waiting = {p: channel.qsize for p, (channel, _) in self._out.items() if hasattr(channel, "qsize")}
+        self.high_water: dict[str, int] = dict.fromkeys(self._waiting, 0)
         self.received: dict[str, int] = dict.fromkeys(self._in, 0)
         self._stop_event = network.stop_event_for(role)
         self._plain = not machine.forks  # no parallel composition: skip the routing checks
@@ -93,6 +97,9 @@ class Endpoint:
         # and a backlog of tracked objects slows every collection.
         channel.put((label, payload))
         self.sent[to] += 1
+        waiting = self._waiting.get(to)
+        if waiting is not None and (size := waiting()) > self.high_water[to]:
+            self.high_water[to] = size
         if doorbell is not None:
             doorbell.put(self.role)
 
@@ -262,6 +269,14 @@ class Endpoint:
             for peer, n in branch.sent_counts().items():
                 counts[peer] = counts.get(peer, 0) + n
         return counts
+
+    def high_water_marks(self) -> dict[str, int]:
+        """Per peer, the most messages that waited in the channel to it (where that is known)."""
+        marks = dict(self.high_water)
+        for branch in self._branches or ():
+            for peer, n in branch.high_water_marks().items():
+                marks[peer] = max(marks.get(peer, 0), n)
+        return marks
 
     def received_counts(self) -> dict[str, int]:
         """Messages received per peer, this endpoint's and its branches'."""

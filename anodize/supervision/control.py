@@ -65,6 +65,7 @@ class Beat:
     peak: int
     sent: dict[str, int] = field(default_factory=dict)
     received: dict[str, int] = field(default_factory=dict)
+    waiting: dict[str, int] = field(default_factory=dict)  # per channel, the most messages waiting so far
     final: bool = False  # the last beat: every role has ended
 
 

@@ -38,8 +38,8 @@ class DdsRunner(ProcessRunner):
 
     def __init__(self, protocol: str, machines: dict[str, StateMachine], channels: Sequence[tuple[str, str]],
                  groups: dict[str, Group], monitors: bool, settings: DdsSettings, elsewhere: dict[str, str],
-                 liveness: float = 2.0) -> None:
-        super().__init__(protocol, machines, channels, groups, monitors, liveness)
+                 liveness: float = 2.0, capacities: dict[tuple[str, str], int] | None = None) -> None:
+        super().__init__(protocol, machines, channels, groups, monitors, liveness, capacities)
         self.settings = settings
         self.elsewhere = elsewhere
         # The supervisors of the other hosts: policies that reach beyond a group act there too.
@@ -65,7 +65,7 @@ class DdsRunner(ProcessRunner):
                 machines={role: self.machines[role] for role in group.roles},
                 channels=self.channels, dead=dead, monitors=self.monitors,
                 priority=group.priority, cpus=group.cpus, memory=group.memory,
-                sys_path=tuple(p for p in _sys_path() if p),
+                sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
                 extra={"dds": replace(self.settings, host=self.settings.host_of.get(name, self.settings.host))})
             parent_end, child_end = self.context.Pipe()
             process = self.context.Process(target=group_main, args=(spec, child_end, {}),

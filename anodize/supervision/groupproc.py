@@ -93,6 +93,7 @@ class GroupSpec:
     memory: int | None = None
     sys_path: tuple[str, ...] = ()
     extra: dict[str, Any] = field(default_factory=dict)
+    capacities: dict[tuple[str, str], int] = field(default_factory=dict)  # channels that hold at most so many
 
 
 def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
@@ -174,7 +175,7 @@ class _GroupProcess:
 
             network = DdsNetwork(dds, spec.name, spec.incarnation, spec.roles, spec.channels, spec.dead,
                                  lambda pair: make_codec(classes, None, None, ros_types), doorbell_roles,
-                                 report=lambda line: self._send(Notice(text=line)))
+                                 report=lambda line: self._send(Notice(text=line)), capacities=spec.capacities)
             network.wait_for_peers()  # the start barrier: "ready" means every peer has appeared
             return network
 
@@ -192,7 +193,7 @@ class _GroupProcess:
             return make_codec(classes, ring, None, ros_types)
 
         fds = {pair: conn.fileno() for pair, conn in self.pipes.items()}
-        return ProcessNetwork(spec.roles, spec.channels, fds, spec.dead, codec_for, doorbell_roles)
+        return ProcessNetwork(spec.roles, spec.channels, fds, spec.dead, codec_for, doorbell_roles, spec.capacities)
 
     def _gone(self, receiver: str) -> str | None:
         network = self.network
@@ -264,7 +265,10 @@ class _GroupProcess:
                 for peer, n in ep.sent_counts().items()}
         received = {f"{peer}->{role}": n for role, ep in self.endpoints.items()
                     for peer, n in ep.received_counts().items()}
-        self._send(Beat(at=time.monotonic(), memory=used, peak=self.peak, sent=sent, received=received, final=final))
+        waiting = {f"{role}->{peer}": n for role, ep in self.endpoints.items()
+                   for peer, n in ep.high_water_marks().items()}
+        self._send(Beat(at=time.monotonic(), memory=used, peak=self.peak, sent=sent, received=received,
+                        waiting=waiting, final=final))
 
     def _memory_exceeded(self, role: str) -> None:
         self.reserve = None  # room to report in

@@ -70,9 +70,11 @@ class ProcessRunner:
     transport = "process"
 
     def __init__(self, protocol: str, machines: dict[str, StateMachine], channels: Sequence[tuple[str, str]],
-                 groups: dict[str, Group], monitors: bool, liveness: float = 2.0) -> None:
+                 groups: dict[str, Group], monitors: bool, liveness: float = 2.0,
+                 capacities: dict[tuple[str, str], int] | None = None) -> None:
         self.protocol = protocol
         self.liveness = liveness
+        self.capacities = dict(capacities or {})
         self.machines = machines
         self.channels = tuple(channels)
         self.groups = groups
@@ -109,7 +111,7 @@ class ProcessRunner:
                 machines={role: self.machines[role] for role in group.roles},
                 channels=self.channels, dead=dead, monitors=self.monitors,
                 priority=group.priority, cpus=group.cpus, memory=group.memory,
-                sys_path=tuple(p for p in _sys_path() if p))
+                sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities)
             parent_end, child_end = self.context.Pipe()
             process = self.context.Process(target=group_main, args=(spec, child_end, pipes[name]),
                                            name=f"anodize:{name}", daemon=True)
@@ -209,7 +211,8 @@ class ProcessRunner:
                 self._on_ready(inc, message)
             case control.Beat():  # counts from the group; memory is measured here, from the kernel
                 self.pending.append(Counts(group=name, incarnation=number, at=message.at, sent=message.sent,
-                                           received=message.received, memory=inc.resident, peak=inc.peak))
+                                           received=message.received, waiting=message.waiting,
+                                           memory=inc.resident, peak=inc.peak))
             case control.RoleEnded():
                 self.pending.append(RoleEnded(group=name, incarnation=number, report=_role_report(name, message)))
             case control.MemoryExceeded():
@@ -362,8 +365,14 @@ class ProcessRunner:
         self.pending.append(Note(group=group, text=description))
 
     def notes(self) -> list[str]:
-        return [(f"real-time guard: kernel RT throttling {rt_throttling()}; watchdog demotes a SCHED_FIFO "
-                 f"group that keeps a CPU busy for {WATCHDOG_LIMIT:g} s")]
+        notes = [(f"real-time guard: kernel RT throttling {rt_throttling()}; watchdog demotes a SCHED_FIFO "
+                  f"group that keeps a CPU busy for {WATCHDOG_LIMIT:g} s")]
+        if self.transport == "process":
+            piped = sorted(f"{a}->{b}" for a, b in self.capacities if self.group_of.get(a) != self.group_of.get(b))
+            if piped:
+                notes.append(f"capacity not counted in messages on {', '.join(piped)}: between processes a channel "
+                             "is a pipe, and its kernel buffer (64 KiB) is what bounds it")
+        return notes
 
     def close(self) -> None:
         self.watchdog.stop()

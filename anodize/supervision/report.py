@@ -147,6 +147,12 @@ class RunReport:
         messages: per channel ``"A->B"``, the messages A sent to B.
         received: per channel, the messages B took from A (fewer where a run ended
             with messages in flight).
+        high_water: per channel, the most messages that waited in it at once (sent, not yet
+            received), where the transport can tell: channels between threads of one
+            process and DDS channels (to within a credit); not pipes between processes,
+            whose kernel buffer (64 KiB) bounds them.
+        capacities: per channel given a capacity, that capacity (its sender waits while
+            that many messages wait).
         interrupted: the run was ended by Ctrl-C (SIGINT).
         notes: system-wide facts, e.g. the real-time guard in force.
     """
@@ -156,6 +162,8 @@ class RunReport:
     groups: dict[str, GroupReport]
     messages: dict[str, int] = field(default_factory=dict)
     received: dict[str, int] = field(default_factory=dict)
+    high_water: dict[str, int] = field(default_factory=dict)
+    capacities: dict[str, int] = field(default_factory=dict)
     duration: float = 0.0
     transport: str = "inproc"
     interrupted: bool = False
@@ -191,6 +199,10 @@ class RunReport:
             if group.error is not None:
                 lines.append(f"    {type(group.error).__name__}: {group.error}")
         lines.extend(f"  {role.line()}" for role in self.roles.values() if role.status is not RoleStatus.DONE)
+        if self.high_water:
+            lines.append("  most messages waiting: " + ", ".join(
+                f"{channel} {n}" + (f" of {self.capacities[channel]}" if channel in self.capacities else "")
+                for channel, n in self.high_water.items()))
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)
 
@@ -200,7 +212,8 @@ class RunReport:
             "protocol": self.protocol, "ok": self.ok, "outcome": self.outcome,
             "interrupted": self.interrupted, "duration_s": round(self.duration, 4),
             "transport": self.transport, "notes": list(self.notes), "messages": dict(self.messages),
-            "received": dict(self.received),
+            "received": dict(self.received), "high_water": dict(self.high_water),
+            "capacities": dict(self.capacities),
             "groups": {name: {
                 "status": str(g.status), "scheduling": g.scheduling, "peak_memory": g.peak_memory,
                 "memory_bound": g.memory_bound, "memory_note": g.memory_note, "notes": list(g.notes),

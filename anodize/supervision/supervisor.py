@@ -70,6 +70,7 @@ class Counts:
     at: float  # time.monotonic() when the counts were taken
     sent: dict[str, int] | None = None  # None: this event only measures memory
     received: dict[str, int] | None = None
+    waiting: dict[str, int] | None = None  # per channel, the most messages waiting so far
     memory: int | None = None
     peak: int | None = None
 
@@ -241,6 +242,7 @@ class _GroupRecord:
     received: dict[str, int] = field(default_factory=dict)
     sent_before: dict[str, int] = field(default_factory=dict)  # earlier incarnations' totals
     received_before: dict[str, int] = field(default_factory=dict)
+    high_water: dict[str, int] = field(default_factory=dict)  # all incarnations: the most waiting
     # (time, messages sent so far), in stretches during which every role of the group ran
     stretches: list[list[tuple[float, int]]] = field(default_factory=list)
     steady: bool = False  # in such a stretch now
@@ -389,6 +391,8 @@ class Supervisor:
             record.sent[channel] = record.sent_before.get(channel, 0) + n
         for channel, n in counts.received.items():
             record.received[channel] = record.received_before.get(channel, 0) + n
+        for channel, n in (counts.waiting or {}).items():
+            record.high_water[channel] = max(record.high_water.get(channel, 0), n)
         stretch = record.stretches[-1] if record.steady and self.state is RunState.RUNNING else None
         if stretch is not None and counts.at >= record.steady_since:  # not counted before "go"
             stretch.append((counts.at, sum(record.sent.values())))
@@ -589,11 +593,13 @@ class Supervisor:
             roles.setdefault(role, RoleReport(name=role, group=self.group_of[role], status=RoleStatus.STOPPED))
         sent = {f"{a}->{b}": 0 for a, b in self.channels}
         received = dict(sent)
+        high_water: dict[str, int] = {}
         for r in self.records.values():
             sent.update({c: n for c, n in r.sent.items() if c in sent})
             received.update({c: n for c, n in r.received.items() if c in received})
+            high_water.update({c: n for c, n in r.high_water.items() if c in sent})
         return RunReport(protocol=self.protocol, roles={role: roles[role] for role in self.roles},
-                         groups=groups, messages=sent, received=received,
+                         groups=groups, messages=sent, received=received, high_water=high_water,
                          duration=time.monotonic() - self.started, transport=self.runner.transport,
                          interrupted=self.interrupted, notes=tuple(self.notes))
 

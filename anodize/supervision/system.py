@@ -9,7 +9,9 @@ builds the :class:`RunReport`. ``run`` always returns a report.
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import re
 import socket
 from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING
@@ -55,11 +57,15 @@ class System:
         ros_distro: the ROS 2 distribution whose message definitions are used ("" for the
             default, Jazzy).
         ros_domain: the ROS domain when ``ROS_DOMAIN_ID`` is not set.
+        capacities: ``{"Control->Move": 4}``: channels that hold at most so many messages;
+            their senders wait while they are full (between threads of one process, and on
+            DDS; between processes a pipe's buffer bounds a channel instead, as the report says).
     """
 
     def __init__(self, global_type: GlobalType, transport: str = "inproc", monitors: bool = True,
                  domain: int = 0, run_id: str = "", ros_topics: Mapping[str, str] | None = None,
-                 external: Iterable[str] = (), ros_distro: str = "", ros_domain: int | None = None) -> None:
+                 external: Iterable[str] = (), ros_distro: str = "", ros_domain: int | None = None,
+                 capacities: Mapping[str, int] | None = None) -> None:
         if transport not in TRANSPORTS:
             raise ConfigurationError(f"transport {transport!r}: expected one of {', '.join(TRANSPORTS)}")
         if isinstance(domain, bool) or not isinstance(domain, int) or not 0 <= domain <= 232:
@@ -73,6 +79,7 @@ class System:
         self.external = frozenset(external)
         self.ros_distro = ros_distro
         self.ros_domain = ros_domain
+        self.capacities = _capacities(global_type, capacities or {})
         unknown = sorted(self.external - set(global_type.roles))
         if unknown:
             raise ConfigurationError(f"external role {unknown[0]}: global {global_type.name} has no such role; "
@@ -183,10 +190,15 @@ class System:
         if self.transport == "process":
             from .processes import ProcessRunner  # the inproc path never needs it
 
-            runner = ProcessRunner(gt.name, machines, channels, self.groups, self.monitors, liveness)
+            runner = ProcessRunner(gt.name, machines, channels, self.groups, self.monitors, liveness,
+                                   self.capacities)
         else:
-            runner = ThreadRunner(gt, machines, channels, self.groups, self.monitors)
-        return Supervisor(gt.name, gt.roles, self.groups, channels, runner, timeout, grace, on_status).run()
+            runner = ThreadRunner(gt, machines, channels, self.groups, self.monitors, self.capacities)
+        return self._with_capacities(
+            Supervisor(gt.name, gt.roles, self.groups, channels, runner, timeout, grace, on_status).run())
+
+    def _with_capacities(self, report: RunReport) -> RunReport:
+        return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()})
 
     def ros_settings(self, machines: dict[str, StateMachine] | None = None,
                      channels: tuple[tuple[str, str], ...] | None = None) -> RosSettings | None:
@@ -242,7 +254,26 @@ class System:
                        if role not in self.external and self._placed[role] in local]
         local_channels = tuple((a, b) for a, b in channels if a in local_roles and b in local_roles)
         runner = DdsRunner(self.global_type.name, machines, channels, local, self.monitors, settings, elsewhere,
-                           liveness)
+                           liveness, self.capacities)
         everywhere = (Elsewhere(runner.link, dict(self.groups), channels) if runner.link is not None else None)
-        return Supervisor(self.global_type.name, local_roles, local, local_channels, runner, timeout, grace,
-                          on_status, everywhere).run()
+        return self._with_capacities(Supervisor(self.global_type.name, local_roles, local, local_channels, runner,
+                                                timeout, grace, on_status, everywhere).run())
+
+
+def _capacities(global_type: GlobalType, given: Mapping[str, int]) -> dict[tuple[str, str], int]:
+    """``{"A->B": n}`` checked against the protocol's channels.
+
+    Raises:
+        ConfigurationError: not a channel of the protocol, or not a whole number >= 1.
+    """
+    channels = set(communication_graph(global_type).edges)
+    found: dict[tuple[str, str], int] = {}
+    for key, capacity in given.items():
+        match = re.fullmatch(r"\s*(\w+)\s*->\s*(\w+)\s*", key)
+        if match is None or (match.group(1), match.group(2)) not in channels:
+            raise ConfigurationError(f"capacity of {key!r}: global {global_type.name} has no channel {key}; its "
+                                     f"channels are {', '.join(sorted(f'{a}->{b}' for a, b in channels))}")
+        if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 1:
+            raise ConfigurationError(f"capacity of {key}: expected a whole number of messages >= 1, got {capacity!r}")
+        found[(match.group(1), match.group(2))] = capacity
+    return found

@@ -51,8 +51,10 @@ class ThreadRunner:
     transport = "inproc"
 
     def __init__(self, global_type: GlobalType, machines: dict[str, StateMachine],
-                 channels: Sequence[tuple[str, str]], groups: dict[str, Group], monitors: bool) -> None:
+                 channels: Sequence[tuple[str, str]], groups: dict[str, Group], monitors: bool,
+                 capacities: dict[tuple[str, str], int] | None = None) -> None:
         self.global_type = global_type
+        self.capacities = dict(capacities or {})
         self.machines = machines
         self.channels = tuple(channels)
         self.groups = groups
@@ -67,7 +69,7 @@ class ThreadRunner:
         channels = [(a, b) for a, b in self.channels if a in roles or b in roles]
         dead = {role: f"group {self.group_of[role]} did not start again with group(s) {', '.join(sorted(batch))}"
                 for pair in channels for role in pair if role not in roles}
-        network = InprocNetwork(channels, [r for r in roles if self.machines[r].forks], dead)
+        network = InprocNetwork(channels, [r for r in roles if self.machines[r].forks], dead, self.capacities)
         for name in groups:
             group = self.groups[name]
             endpoints = {role: Endpoint(role, self.global_type.name, self.machines[role], network, self.monitors)
@@ -124,8 +126,10 @@ class ThreadRunner:
                     for peer, n in ep.sent_counts().items()}
             received = {f"{peer}->{role}": n for role, ep in inc.endpoints.items()
                         for peer, n in ep.received_counts().items()}
+            waiting = {f"{role}->{peer}": n for role, ep in inc.endpoints.items()
+                       for peer, n in ep.high_water_marks().items()}
             counts.append(Counts(group=name, incarnation=inc.number, at=time.monotonic(), sent=sent,
-                                 received=received))
+                                 received=received, waiting=waiting))
         return counts
 
     def tell_failed(self, group: str, role: str, cause: str) -> None:

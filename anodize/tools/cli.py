@@ -404,7 +404,9 @@ def _run_named(name: str, rest: list[str]) -> int:
 class ProgressLine:
     """``on_status`` for a named system: its one-line account of the run so far.
 
-    On a terminal the line is redrawn in place; in a log, one line every 5 s.
+    On a terminal the line is redrawn in place, no wider than the terminal: the named
+    system is expected to make it fit (``shutil.get_terminal_size``), and a longer line is
+    cut, naming the groups that failed at its end. In a log, one line every 5 s, whole.
     """
 
     LOG_EVERY = 5.0  # seconds
@@ -420,8 +422,9 @@ class ProgressLine:
         elapsed = time.monotonic() - self.started
         line = self.describe(statuses, elapsed)
         if self.tty:
-            width = shutil.get_terminal_size().columns
-            self.stream.write(f"\r\x1b[2K{line[:width - 1]}")
+            failed = [status.name for status in statuses.values() if status.state == "failed"]
+            line = self.fit(line, self.width(), self.stream, failed)
+            self.stream.write(f"\r\x1b[2K{line}")
         elif elapsed - self.logged >= self.LOG_EVERY:
             self.logged = elapsed
             self.stream.write(line + "\n")
@@ -432,12 +435,33 @@ class ProgressLine:
             self.stream.write("\n")
             self.stream.flush()
 
+    @staticmethod
+    def width() -> int:
+        """Columns a live line may take: the terminal's (80 when unknown) but the last, which
+        the cursor takes (a character there makes some terminals wrap)."""
+        return max(1, shutil.get_terminal_size().columns - 1)
+
+    @staticmethod
+    def fit(line: str, width: int, stream: TextIO, failed: Sequence[str] = ()) -> str:
+        """``line`` in at most ``width`` characters: cut, the cut marked by an ellipsis (``...``
+        where ``stream`` cannot write one), and then the groups in ``failed`` named, so that a
+        failure never goes out of sight."""
+        if len(line) <= width:
+            return line
+        encoding = (getattr(stream, "encoding", None) or "utf-8").lower().replace("-", "")
+        ellipsis = "\u2026" if encoding == "utf8" else "..."
+        tail = f" FAILED {','.join(failed)}" if failed else ""
+        keep = max(0, width - len(ellipsis) - len(tail))
+        return (line[:keep] + ellipsis + tail)[:width]
+
 
 class LiveStatus:
     """``on_status`` for ``anodize run``: one line per group.
 
-    On a terminal the lines are redrawn in place; otherwise (a log, a pipe) a
-    group's line is printed only when its state changed, so logs stay short.
+    On a terminal the lines are redrawn in place, each cut to the terminal's width
+    (a line the terminal wrapped would throw the redrawing off; the group's name and
+    state come first, so they stay); otherwise (a log, a pipe) a group's line is
+    printed whole, and only when its state changed, so logs stay short.
     """
 
     def __init__(self, stream: TextIO) -> None:
@@ -449,7 +473,9 @@ class LiveStatus:
     def __call__(self, statuses: dict[str, GroupStatus]) -> None:
         if self.tty:
             up = f"\x1b[{self.drawn}F" if self.drawn else ""
-            lines = "".join(f"\x1b[2K{status.line()}\n" for status in statuses.values())
+            width = ProgressLine.width()
+            lines = "".join(f"\x1b[2K{ProgressLine.fit(status.line(), width, self.stream)}\n"
+                            for status in statuses.values())
             self.stream.write(f"{up}{lines}\x1b[J")  # [J: clear what a longer frame left below
             self.drawn = len(statuses)
         else:

@@ -43,7 +43,8 @@ __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_s
            "add_pythonpath"]
 
 _TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id",
-             "ros")
+             "ros", "channels")
+_CHANNEL_KEYS = ("capacity",)
 _ROS_KEYS = ("topics", "external", "distro", "domain")
 _GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host")
 _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
@@ -128,6 +129,7 @@ class SystemConfig:
         external: ``[ros] external``: roles that ROS 2 nodes play.
         ros_distro: ``[ros] distro``: the ROS 2 distribution of the message definitions.
         ros_domain: ``[ros] domain``: the ROS domain when ``ROS_DOMAIN_ID`` is not set.
+        capacities: ``[channels."A->B"] capacity``: channels that hold at most so many messages.
     """
 
     path: Path
@@ -144,6 +146,7 @@ class SystemConfig:
     external: tuple[str, ...] = ()
     ros_distro: str = ""
     ros_domain: int | None = None
+    capacities: dict[str, int] = field(default_factory=dict)
 
     def group_of(self, role: str) -> str | None:
         """The group that runs ``role``, or None."""
@@ -223,7 +226,24 @@ class _Reader:
             global_name=global_name, transport=transport,
             timeout=None if timeout is None else float(timeout), monitors=monitors,
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
-            groups=self.groups(data.get("groups")), domain=domain, run_id=run_id, **ros)
+            groups=self.groups(data.get("groups")), domain=domain, run_id=run_id,
+            capacities=self.capacities(data.get("channels", {})), **ros)
+
+    def capacities(self, table: Any) -> dict[str, int]:
+        """``[channels."A->B"] capacity = n``: the shape here; the channels when the system is built."""
+        if not isinstance(table, dict):
+            raise self.error("channels", f'expected tables such as [channels."A->B"], got {_show(table)}')
+        found = {}
+        for channel, settings in table.items():
+            key = f"channels.{channel}"
+            if not isinstance(settings, dict):
+                raise self.error(key, f"expected a table such as {{ capacity = 8 }}, got {_show(settings)}")
+            self.known_keys(settings, _CHANNEL_KEYS, key)
+            capacity = settings.get("capacity")
+            if not _is_int(capacity) or capacity < 1:
+                raise self.error(f"{key}.capacity", f"expected a whole number of messages >= 1, got {_show(capacity)}")
+            found[channel] = capacity
+        return found
 
     def ros(self, table: Any) -> dict[str, Any]:
         """The ``[ros]`` table: what is checked here is its shape; the topics against the protocol
@@ -394,10 +414,11 @@ def build_system(config: SystemConfig) -> System:
     try:
         system = System(global_type, transport=config.transport, monitors=config.monitors, domain=config.domain,
                         run_id=config.run_id, ros_topics=config.ros_topics, external=config.external,
-                        ros_distro=config.ros_distro, ros_domain=config.ros_domain)
+                        ros_distro=config.ros_distro, ros_domain=config.ros_domain, capacities=config.capacities)
         system.ros_settings()  # the topics against the protocol, now rather than when the run starts
     except ConfigurationError as error:
-        raise ConfigError(shown, "ros", str(error)) from None
+        key = "channels" if str(error).startswith("capacity of") else "ros"
+        raise ConfigError(shown, key, str(error)) from None
     for group in config.groups.values():
         try:
             declared = system.group(group.name, priority=group.priority, memory=group.memory,

@@ -273,8 +273,14 @@ class DdsSender:
             self._credit_wait.attach(ReadCondition(self.credits, ANY_SAMPLE))
         self.written = 0  # messages written
         self.taken = 0    # of those, how many the receiver says it has taken
+        self.window = min(_WINDOW, network.capacities.get((sender, receiver), _WINDOW))  # a capacity narrows it
         self._in_flight: deque[int] = deque()  # the sizes of the samples written but not taken
         self._in_flight_bytes = 0
+
+    def qsize(self) -> int:
+        """Messages written that the receiver has not handed on yet, as its credits say (to
+        within one credit, 32 messages); into an external role, unknown: 0."""
+        return self.written - self.taken
 
     @property
     def writer(self) -> DataWriter[Any]:
@@ -297,7 +303,7 @@ class DdsSender:
                 raise PayloadError(f"role {self.sender}: cannot send {item[0]} to {self.receiver}: "
                                    f"{error}") from None
             with self._lock:
-                if self.credits is not None and (self.written - self.taken >= _WINDOW
+                if self.credits is not None and (self.written - self.taken >= self.window
                                                  or self._in_flight_bytes >= _WINDOW_BYTES):
                     self._await_credit()
                 self._write(lane or self.frames, sample)  # type: ignore[arg-type]
@@ -362,7 +368,7 @@ class DdsSender:
         """
         while True:
             self._take_credits()
-            if self.written - self.taken < _WINDOW and self._in_flight_bytes < _WINDOW_BYTES:
+            if self.written - self.taken < self.window and self._in_flight_bytes < _WINDOW_BYTES:
                 return
             if self.network.stopping:
                 raise RoleStopped(f"interrupted sending to {self.receiver}")
@@ -498,6 +504,9 @@ class DdsReceiver:
                                             qos=endpoints.credit_qos)
         self.taken = 0     # samples of the accepted writer handed on so far
         self.credited = 0  # the count last told to the sender
+        # Credit at least twice per window: a capacity narrows the sender's window below _CREDIT_EVERY.
+        capacity = network.capacities.get((sender, receiver))
+        self.credit_every = _CREDIT_EVERY if capacity is None else max(1, min(_CREDIT_EVERY, capacity // 2))
         self._uncredited_bytes = 0  # taken since then
         self.frame_size = 0
         self._pushed: deque[object] = deque()
@@ -647,7 +656,7 @@ class DdsReceiver:
             return data
         self.taken += 1
         self._uncredited_bytes += len(data)
-        if self.credit_writer is not None and (self.taken - self.credited >= _CREDIT_EVERY
+        if self.credit_writer is not None and (self.taken - self.credited >= self.credit_every
                                                or self._uncredited_bytes >= _CREDIT_BYTES):
             self.credited = self.taken
             self._uncredited_bytes = 0
@@ -735,7 +744,8 @@ class DdsNetwork(ProcessNetwork):
     def __init__(self, settings: DdsSettings, group: str, incarnation: int, local_roles: Iterable[str],
                  channels: Iterable[tuple[str, str]], dead: dict[str, str],
                  codec_for: Callable[[tuple[str, str]], Codec], doorbell_roles: Iterable[str] = (),
-                 report: Callable[[str], None] = lambda line: None) -> None:
+                 report: Callable[[str], None] = lambda line: None,
+                 capacities: Mapping[tuple[str, str], int] | None = None) -> None:
         self.settings = settings
         self.report = report
         self.incarnation = incarnation
@@ -746,7 +756,7 @@ class DdsNetwork(ProcessNetwork):
                   if (pair[0] in local) != (pair[1] in local) and not ({pair[0], pair[1]} & set(dead))}
         self.senders: list[DdsSender] = []
         self.receivers: list[DdsReceiver] = []
-        super().__init__(local, channels, remote, dead, codec_for, doorbell_roles)
+        super().__init__(local, channels, remote, dead, codec_for, doorbell_roles, capacities)
 
     def _writer(self, link: Any, codec: Codec, sender: str, receiver: str) -> DdsSender:
         channel = DdsSender(link, codec, self, sender, receiver)

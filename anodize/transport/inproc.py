@@ -6,18 +6,93 @@ every message its peer sent before it failed, then the failure: nothing is
 dropped and nobody waits forever. Messages travel as plain ``(label, payload)``
 tuples. Roles with parallel branches also get a *doorbell*: each message into
 them rings it with the sender's name, so one thread can wait on whichever
-channel has a message first.
+channel has a message first. A channel given a *capacity* is a
+:class:`BoundedQueue`: its sender waits while that many messages wait in it.
 """
 
 from __future__ import annotations
 
 import threading
+import time
+from collections import deque
 from collections.abc import Iterable, Mapping
-from queue import SimpleQueue
+from queue import Empty, SimpleQueue
 
+from ..errors import PeerFailedError, RoleStopped
 from ..session.channel import STOP, Channel, Doorbell, PeerFailure
 
-__all__ = ["InprocNetwork"]
+__all__ = ["InprocNetwork", "BoundedQueue"]
+
+_LOOK = 0.05  # seconds between a waiting sender's looks at stops and failures
+
+
+class BoundedQueue:
+    """A channel between threads that holds at most ``capacity`` messages: a sender waits while
+    it is full (back pressure, bounded memory), and stops waiting when the run stops or its
+    receiver fails. Signals (a failure, STOP) never wait and do not count."""
+
+    def __init__(self, capacity: int, network: InprocNetwork, sender: str, receiver: str) -> None:
+        self.capacity = capacity
+        self._network = network
+        self._sender = sender
+        self._receiver = receiver
+        self._items: deque[object] = deque()
+        self._messages = 0
+        self._changed = threading.Condition()
+
+    def put(self, item: object) -> None:
+        """Add ``item``; a message waits for room first.
+
+        Raises:
+            RoleStopped: the sender was told to stop while it waited.
+            PeerFailedError: the receiver failed while the sender waited.
+        """
+        with self._changed:
+            if type(item) is tuple:
+                while self._messages >= self.capacity:
+                    self._check_waiting()
+                    self._changed.wait(_LOOK)
+                self._messages += 1
+            self._items.append(item)
+            self._changed.notify_all()
+
+    def _check_waiting(self) -> None:
+        network = self._network
+        if network.stopping or self._sender in network.stopped:
+            raise RoleStopped(f"interrupted sending to {self._receiver} (its channel is full: "
+                              f"{self.capacity} messages wait)")
+        cause = network.failed.get(self._receiver)
+        if cause is not None:
+            raise PeerFailedError(self._sender, self._receiver, cause)
+
+    def get(self, timeout: float | None = None) -> object:
+        """The oldest item.
+
+        Raises:
+            queue.Empty: nothing came within ``timeout`` seconds.
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self._changed:
+            while not self._items:
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
+                    raise Empty
+                self._changed.wait(left)
+            item = self._items.popleft()
+            if type(item) is tuple:
+                self._messages -= 1
+            self._changed.notify_all()
+            return item
+
+    def get_nowait(self) -> object:
+        return self.get(timeout=0)
+
+    def empty(self) -> bool:
+        return not self._items
+
+    def qsize(self) -> int:
+        """The messages waiting (signals not counted)."""
+        return self._messages
 
 
 class InprocNetwork:
@@ -30,11 +105,16 @@ class InprocNetwork:
         dead: roles that are not there for these channels (their group did not start
             with this batch), with the reason: receiving from them or sending to them
             fails at once.
+        capacities: channels that hold at most so many messages (their senders wait).
     """
 
     def __init__(self, channels: Iterable[tuple[str, str]], doorbell_roles: Iterable[str] = (),
-                 dead: Mapping[str, str] | None = None) -> None:
-        self.queues: dict[tuple[str, str], Channel] = {pair: SimpleQueue() for pair in channels}
+                 dead: Mapping[str, str] | None = None,
+                 capacities: Mapping[tuple[str, str], int] | None = None) -> None:
+        capacities = capacities or {}
+        self.queues: dict[tuple[str, str], Channel] = {
+            pair: BoundedQueue(capacities[pair], self, *pair) if pair in capacities else SimpleQueue()
+            for pair in channels}
         self.doorbells: dict[str, Doorbell] = {role: SimpleQueue() for role in doorbell_roles}
         self.failed: dict[str, str] = {}
         self.stopping = False

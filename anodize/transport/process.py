@@ -275,10 +275,13 @@ class ProcessNetwork(InprocNetwork):
 
     def __init__(self, local_roles: Iterable[str], channels: Iterable[tuple[str, str]],
                  pipes: Mapping[tuple[str, str], Any], dead: dict[str, str],
-                 codec_for: Callable[[tuple[str, str]], Codec], doorbell_roles: Iterable[str] = ()) -> None:
+                 codec_for: Callable[[tuple[str, str]], Codec], doorbell_roles: Iterable[str] = (),
+                 capacities: Mapping[tuple[str, str], int] | None = None) -> None:
         self.local_roles = frozenset(local_roles)
+        self.capacities = dict(capacities or {})
         local_pairs = [(a, b) for a, b in channels if a in self.local_roles and b in self.local_roles]
-        super().__init__(local_pairs, [r for r in doorbell_roles if r in self.local_roles])
+        super().__init__(local_pairs, [r for r in doorbell_roles if r in self.local_roles],
+                         capacities={pair: n for pair, n in self.capacities.items() if pair in local_pairs})
         self.wake_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self._cause_arrived = threading.Condition()
         self._failure_listeners: dict[str, list[int]] = {}

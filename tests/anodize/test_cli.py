@@ -21,7 +21,7 @@ import pytest
 
 from anodize import GroupStatus
 from anodize.supervision.report import GroupState
-from anodize.tools.cli import LiveStatus, main
+from anodize.tools.cli import LiveStatus, ProgressLine, main
 
 REPO = Path(__file__).resolve().parents[2]
 CORPUS = REPO / "tests" / "sessiontypes" / "corpus"
@@ -426,9 +426,11 @@ def test_run_prints_status_and_the_summary_and_writes_json(
     assert [line.split()[:2] for line in lines[:2]] == [["a", "done"], ["b", "done"]]
     assert lines[2].startswith("protocol Stream: ok in ")
     assert lines[3].startswith("  group a: done (") and lines[4].startswith("  group b: done (")
-    assert lines[5:] == [f"wrote {report}"]
+    assert lines[5].startswith("  most messages waiting: P->C ")  # 1 to 4: how far the consumer fell behind
+    assert lines[6:] == [f"wrote {report}"]
     data = json.loads(report.read_text(encoding="utf-8"))
     assert (data["ok"], data["protocol"], data["messages"]) == (True, "Stream", {"P->C": 4})
+    assert 1 <= data["high_water"]["P->C"] <= 4
 
 
 def test_run_quiet_prints_only_the_summary(
@@ -436,7 +438,7 @@ def test_run_quiet_prints_only_the_summary(
     status, out, err = run(capsys, "run", str(system_file("cli_run_roles:producer", "cli_run_roles:consumer")),
                            "--quiet")
     assert (status, err) == (0, "")
-    assert out.startswith("protocol Stream: ok in ") and len(out.splitlines()) == 3
+    assert out.startswith("protocol Stream: ok in ") and len(out.splitlines()) == 4  # groups, most waiting
 
 
 def test_run_of_a_failing_system_exits_1(
@@ -503,6 +505,56 @@ def test_live_status_in_a_log_prints_a_line_when_a_state_changes() -> None:
     live({"a": a9, "b": b})
     live({"a": a12, "b": b})
     assert log.getvalue().splitlines() == [a1.line(), b.line(), a12.line()]
+
+
+LONG_NOTE = "memory limit 64 MiB exceeded; restarted after the group process was killed by the kernel"
+
+
+def test_live_status_lines_fit_the_terminal_and_a_failure_stays_in_sight(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("COLUMNS", "80")
+    screen = _Terminal()
+    live = LiveStatus(screen)
+    failed = GroupStatus(name="perception", state=GroupState.FAILED, pid=4242, memory=70 * 2**20,
+                         messages=123_456, rate_hz=62.0, restarts=3, note=LONG_NOTE)
+    running = GroupStatus(name="control", state=GroupState.RUNNING, messages=9, rate_hz=50.0)
+    assert len(failed.line()) > 80
+    live({"perception": failed, "control": running})
+    lines = re.sub(r"\x1b\[(2K|J)", "", screen.getvalue()).splitlines()
+    assert lines == [failed.line()[:78] + "\u2026", running.line()]
+    assert lines[0].startswith("perception    failed ")
+    log = io.StringIO()  # a log is no terminal: its lines are whole
+    LiveStatus(log)({"perception": failed})
+    assert log.getvalue() == failed.line() + "\n"
+
+
+def test_progress_line_fits_the_terminal_and_names_a_failed_group(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("COLUMNS", "80")
+
+    def describe(statuses: dict[str, GroupStatus], elapsed: float) -> str:
+        return " | ".join(f"{s.name} {s.state} {s.rate_hz or 0:.0f} msg/s" for s in statuses.values())
+
+    names = ["control", "perception", "planning", "simulation"]
+    running = {name: GroupStatus(name=name, state=GroupState.RUNNING, rate_hz=1523.0) for name in names}
+    failing = {**running, "simulation": GroupStatus(name="simulation", state=GroupState.FAILED)}
+    screen = _Terminal()
+    line = ProgressLine(screen, describe)
+    line(running)
+    line(failing)
+    line.close()
+    drawn = [text.removeprefix("\x1b[2K").removesuffix("\n") for text in screen.getvalue().split("\r")[1:]]
+    assert drawn[0] == describe(running, 0)[:78] + "\u2026"
+    assert len(drawn[1]) == 79 and drawn[1].endswith("\u2026 FAILED simulation")  # cut, but the failure named
+    assert drawn[1].startswith("control running 1523 msg/s | perception running")
+    assert screen.getvalue().endswith("\n")
+    screen = _Terminal()
+    ProgressLine(screen, lambda statuses, elapsed: "a FAILED")({"a": GroupStatus(name="a", state=GroupState.FAILED)})
+    assert screen.getvalue() == "\r\x1b[2Ka FAILED"  # a line that fits is left alone
+
+
+def test_progress_line_cuts_with_dots_where_the_stream_cannot_write_an_ellipsis() -> None:
+    stream = io.TextIOWrapper(io.BytesIO(), encoding="ascii")
+    assert ProgressLine.fit("x" * 100, 20, stream, ["b"]) == "xxxxxxxx... FAILED b"
+    assert ProgressLine.fit("x" * 100, 5, stream, ["b"]) == "... F"  # the narrowest terminal: still a cut
 
 
 # ---- the installed command -------------------------------------------------------------

@@ -105,8 +105,14 @@ GROUP = '[groups.g]\nroles = { A = "m:f" }\n'
 BAD = {
     "unknown_top_key": (
         MINIMAL + "protocl = 1\n" + GROUP,
-        ("protocl: unknown key; expected one of domain, global, groups, monitors, protocol, pythonpath, "
+        ("protocl: unknown key; expected one of channels, domain, global, groups, monitors, protocol, pythonpath, "
          "ros, run_id, timeout, transport")),
+    "channel_capacity_zero": (
+        MINIMAL + '[channels."A->B"]\ncapacity = 0\n' + GROUP,
+        "channels.A->B.capacity: expected a whole number of messages >= 1, got 0"),
+    "channel_unknown_key": (
+        MINIMAL + '[channels."A->B"]\nsize = 3\n' + GROUP,
+        "channels.A->B.size: unknown key; expected one of capacity"),
     "unknown_ros_key": (
         MINIMAL + "[ros]\ntopic = {}\n" + GROUP,
         "ros.topic: unknown key; expected one of distro, domain, external, topics"),
