@@ -12,6 +12,7 @@ import dataclasses
 import json
 import os
 import shutil
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -82,7 +83,8 @@ class TinMan:
         if args.teleop:
             _check_terminal()
         out = Path(args.out)
-        self.settings = Settings(out=str(out.resolve()), dataset=str(_dataset(args.dataset, log)),
+        dataset = _dataset(args.dataset, log, quiet=bool(getattr(args, "quiet", False)))
+        self.settings = Settings(out=str(out.resolve()), dataset=str(dataset),
                                  duration=float(args.duration), paper=args.paper, teleop=args.teleop,
                                  inject=inject, groups=groups, planner=args.planner)
         shutil.rmtree(self.settings.records, ignore_errors=True)  # no record of an older run may linger
@@ -91,12 +93,24 @@ class TinMan:
         return Prepared(build_system(config), timeout=float(args.duration), grace=3.0)
 
     def progress(self, statuses: dict[str, GroupStatus], elapsed: float) -> str:
+        """The live line, as much of it as the terminal has room for (80 columns when unknown).
+
+        In full where it fits (``TinMan 12.3/20 s | control running 152 msg/s | perception
+        running 62 msg/s | ...``), else abbreviated: ``TinMan 12.3/20s con 152/s per 62/s pla 1/s
+        sim 100/s``, a group that is not running showing its state instead of its rate (a
+        failed one ``FAILED``). The abbreviated line of TinMan's four groups is under 70 columns.
+        """
         shown = min(elapsed, self.settings.duration)
-        parts = [f"TinMan {shown:4.1f}/{self.settings.duration:g} s"]
+        width = shutil.get_terminal_size().columns - 1  # the last column is the cursor's
+        full = [f"TinMan {shown:4.1f}/{self.settings.duration:g} s"]
         for status in statuses.values():
             rate = f" {status.rate_hz:.0f} msg/s" if status.rate_hz is not None and status.state == "running" else ""
-            parts.append(f"{status.name} {status.state}{rate}")
-        return " | ".join(parts)
+            full.append(f"{status.name} {status.state}{rate}")
+        if len(" | ".join(full)) <= width:
+            return " | ".join(full)
+        short = _abbreviations([status.name for status in statuses.values()])
+        return " ".join([f"TinMan {shown:.1f}/{self.settings.duration:g}s",
+                         *(f"{short[status.name]} {_brief(status)}" for status in statuses.values())])
 
     def finish(self, report: RunReport, args: argparse.Namespace) -> Finished:
         from .picture import draw_run  # matplotlib: only once there is something to draw
@@ -114,6 +128,30 @@ class TinMan:
                       f"({data['ate_percent']:.2f}%)")
         picture = draw_run(out / "trajectory.png", settings, title=title)
         return Finished(ok, [*_lines(data, problems), f"wrote {_shown(report_file)} and {_shown(picture)}"])
+
+
+_BRIEF_STATES = {"starting": "start", "restarting": "restart", "stopped": "stop", "failed": "FAILED"}
+
+
+def _brief(status: GroupStatus) -> str:
+    """A group in the abbreviated live line: its rate while running, else its state."""
+    if status.state == "running":
+        return f"{status.rate_hz:.0f}/s" if status.rate_hz is not None else "run"
+    return _BRIEF_STATES.get(str(status.state), str(status.state))
+
+
+def _abbreviations(names: list[str]) -> dict[str, str]:
+    """Each name's shortest prefix of three or more letters that starts no other name
+    (``control`` -> ``con``, ``planning`` -> ``pla``); a name that starts another stays whole."""
+    short = {}
+    for name in names:
+        prefix = name
+        for length in range(3, len(name)):
+            if not any(other != name and other.startswith(name[:length]) for other in names):
+                prefix = name[:length]
+                break
+        short[name] = prefix
+    return short
 
 
 def _faults(requests: list[str], groups: list[str]) -> dict[str, str]:
@@ -154,13 +192,17 @@ def _check_terminal() -> None:
         raise TinManError(f"--teleop needs a terminal to read keys from ({error.strerror})") from None
 
 
-def _dataset(given: str | None, log: Callable[[str], None]) -> Path:
+def _dataset(given: str | None, log: Callable[[str], None], quiet: bool = False) -> Path:
+    """The sequence for the camera; the default one is generated on first use (``log`` says so
+    first, and where it goes) with a progress bar on stderr, unless ``quiet``."""
     from .dataset import DatasetError, TumSequence
 
     if given is None:
+        from .progress import FrameProgress
         from .sequences import default_sequence
 
-        return default_sequence(log=log).resolve()
+        with FrameProgress("rendering", sys.stderr, enabled=not quiet) as progress:
+            return default_sequence(log=log, progress=progress).resolve()
     try:
         TumSequence.open(given)  # fail now, with the reason, rather than in a group process
     except DatasetError as error:

@@ -1,8 +1,12 @@
 """The ``tinman`` command: evaluate visual odometry, compare trajectories, make sequences.
 
-    tinman vo-eval DATASET [--max-frames N] [--save FILE] [--features N]
+    tinman vo-eval DATASET [--max-frames N] [--save FILE] [--features N] [--quiet]
     tinman ate GROUNDTRUTH ESTIMATE [--offset S] [--max-difference S] [--scale F]
-    tinman generate DIR [--duration S]
+    tinman generate DIR [--duration S] [--quiet]
+
+vo-eval and generate take a minute or more over a whole sequence: they show a
+progress bar on stderr when it is a terminal (a line every 10 s in a log; none
+with --quiet).
 
 The only tinman module that prints or exits. Exit status: 0 success, 1 an error
 (one line on stderr, no traceback), 2 a usage error, 70 a bug (set
@@ -87,6 +91,7 @@ def _parser() -> argparse.ArgumentParser:
                          help="write the estimated trajectory (TUM format: t tx ty tz qx qy qz qw)")
     vo_eval.add_argument("--features", type=_positive_int, default=1000, metavar="N",
                          help="ORB features per frame (default 1000)")
+    vo_eval.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     vo_eval.set_defaults(run=_vo_eval)
 
     ate = commands.add_parser(
@@ -110,6 +115,7 @@ def _parser() -> argparse.ArgumentParser:
     generate.add_argument("directory", metavar="DIR", help="where to write the sequence")
     generate.add_argument("--duration", type=_positive_float, default=30.0, metavar="S",
                           help="seconds of mission (default 30)")
+    generate.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     generate.set_defaults(run=_generate)
     return parser
 
@@ -118,12 +124,14 @@ def _parser() -> argparse.ArgumentParser:
 
 def _vo_eval(args: argparse.Namespace) -> int:
     from .dataset import TumSequence  # here, so 'tinman ate' needs no image reading
+    from .progress import FrameProgress
     from .vo import run_sequence
 
     sequence = TumSequence.open(args.dataset)
     if len(sequence) == 0:
         raise CommandError(f"{args.dataset}: no frames (rgb.txt and depth.txt have no stamps in common)")
-    result = run_sequence(sequence, max_frames=args.max_frames, features=args.features)
+    with FrameProgress("visual odometry", sys.stderr, enabled=not args.quiet) as progress:
+        result = run_sequence(sequence, max_frames=args.max_frames, features=args.features, progress=progress)
     frames = len(result.stats)
     ms = np.array([s.ms for s in result.stats])
     print(f"frames          {frames} ({result.failures} failed, {_count(result.keyframes, 'keyframe')})")
@@ -154,7 +162,10 @@ def _generate(args: argparse.Namespace) -> int:
         from . import sequences
     except ImportError as error:
         raise CommandError(f"synthetic sequences are not available in this build ({error})") from None
-    path = sequences.generate(Path(args.directory), duration=args.duration)
+    from .progress import FrameProgress
+
+    with FrameProgress("rendering", sys.stderr, enabled=not args.quiet) as progress:
+        path = sequences.generate(Path(args.directory), duration=args.duration, progress=progress)
     print(f"wrote {path}")
     return EXIT_OK
 

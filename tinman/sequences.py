@@ -39,11 +39,13 @@ def cache_dir() -> Path:
     return Path(base) / "tinman"
 
 
-def default_sequence(duration: float = DEFAULT_DURATION, log: Callable[[str], None] | None = None) -> Path:
+def default_sequence(duration: float = DEFAULT_DURATION, log: Callable[[str], None] | None = None,
+                     progress: Callable[[int, int], None] | None = None) -> Path:
     """The default sequence's directory, generated on first use.
 
     Args:
         log: told (one line) when a sequence has to be generated, and when it is done.
+        progress: told ``(frames rendered, frames)`` while it is generated (see :func:`generate`).
     """
     directory = cache_dir() / f"tinman-room-{duration:g}s-v{GENERATOR_VERSION}"
     if (directory / "tinman.json").exists():
@@ -51,22 +53,27 @@ def default_sequence(duration: float = DEFAULT_DURATION, log: Callable[[str], No
     if log is not None:
         log(f"generating the synthetic RGB-D sequence ({duration:g} s at {FRAME_RATE:g} fps) "
             f"into {directory}; this happens once")
-    generate(directory, duration)
+    generate(directory, duration, progress=progress)
     if log is not None:
         log("sequence ready")
     return directory
 
 
 def generate(directory: str | Path, duration: float = DEFAULT_DURATION, world: World = DEFAULT_WORLD,
-             intrinsics: Intrinsics = FR1, seed: int = 0, workers: int = 2) -> Path:
-    """Simulate the patrol for ``duration`` seconds and film it into ``directory`` (TUM layout)."""
+             intrinsics: Intrinsics = FR1, seed: int = 0, workers: int = 2,
+             progress: Callable[[int, int], None] | None = None) -> Path:
+    """Simulate the patrol for ``duration`` seconds and film it into ``directory`` (TUM layout).
+
+    ``progress`` is told ``(frames rendered, frames)`` before the first frame and after every
+    one (simulating the patrol, before that, takes a fraction of a second).
+    """
     trace = simulate_mission(world, duration=duration, rate=TRUTH_RATE, seed=seed)
     truth_stamps = FIRST_STAMP + np.asarray(trace.stamps, dtype=float)
     truth_poses = np.array([camera_pose(x, y, theta) for x, y, theta in trace.poses])
     frame_times = np.arange(0.0, duration - 1e-9, 1.0 / FRAME_RATE)
     frame_poses = np.array([camera_pose(*_pose_at(trace.stamps, trace.poses, t)) for t in frame_times])
     return generate_sequence(directory, world, FIRST_STAMP + frame_times, frame_poses, truth_stamps,
-                             truth_poses, intrinsics=intrinsics, seed=seed, workers=workers)
+                             truth_poses, intrinsics=intrinsics, seed=seed, workers=workers, progress=progress)
 
 
 def _pose_at(stamps: np.ndarray, poses: np.ndarray, t: float) -> tuple[float, float, float]:

@@ -13,7 +13,7 @@ import json
 import multiprocessing
 import os
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import cv2
@@ -100,7 +100,8 @@ def _standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.nda
 def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequence[float] | np.ndarray,
                       frame_poses: Sequence[np.ndarray] | np.ndarray, truth_stamps: Sequence[float] | np.ndarray,
                       truth_poses: Sequence[np.ndarray] | np.ndarray, intrinsics: Intrinsics = FR1,
-                      seed: int = 0, workers: int = 2, world_name: str | None = None) -> Path:
+                      seed: int = 0, workers: int = 2, world_name: str | None = None,
+                      progress: Callable[[int, int], None] | None = None) -> Path:
     """Render and write a TUM RGB-D sequence.
 
     Writes ``rgb/<stamp>.png`` (8-bit colour), ``depth/<stamp>.png`` (16-bit,
@@ -122,6 +123,8 @@ def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequenc
         seed: seeds the textures and all noise.
         workers: rendering processes (spawned) for sequences of more than 50 frames.
         world_name: recorded in ``tinman.json``; defaults to ``"DEFAULT_WORLD"`` or ``"custom"``.
+        progress: told ``(frames written, frames)`` before the first frame and after every one
+            (e.g. a :class:`tinman.progress.FrameProgress`).
 
     Returns:
         The sequence directory.
@@ -147,16 +150,19 @@ def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequenc
         (partial / "rgb").mkdir(parents=True)
         (partial / "depth").mkdir()
         jobs = [(i, float(stamps[i]), float(depth_stamps[i]), poses[i]) for i in range(len(stamps))]
+        report = progress if progress is not None else _ignore
+        report(0, len(jobs))
         if workers > 1 and len(jobs) > _POOL_THRESHOLD:
             context = multiprocessing.get_context("spawn")
             with context.Pool(workers, initializer=_start_worker,
                               initargs=(world, intrinsics, seed, str(partial))) as pool:
-                for _ in pool.imap_unordered(_render_job, jobs, chunksize=8):
-                    pass
+                for done, _ in enumerate(pool.imap_unordered(_render_job, jobs, chunksize=8), 1):
+                    report(done, len(jobs))
         else:
             _start_worker(world, intrinsics, seed, str(partial), threads=None)
-            for job in jobs:
+            for done, job in enumerate(jobs, 1):
                 _render_job(job)
+                report(done, len(jobs))
         write_file_list(partial / "rgb.txt", {float(s): f"rgb/{s:.6f}.png" for s in stamps},
                         comment="color images\nfile: tinman synthetic")
         write_file_list(partial / "depth.txt", {float(s): f"depth/{s:.6f}.png" for s in depth_stamps},
@@ -179,6 +185,10 @@ def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequenc
         shutil.rmtree(partial, ignore_errors=True)
         raise
     return target
+
+
+def _ignore(done: int, total: int) -> None:
+    pass
 
 
 def _replace(partial: Path, target: Path) -> None:

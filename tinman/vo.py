@@ -20,6 +20,7 @@ height, and nothing but the initial pose comes from outside the images.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -481,7 +482,8 @@ class VoRun:
         return sum(s.keyframe for s in self.stats)
 
 
-def run_sequence(sequence: FrameSource, max_frames: int | None = None, **options: Any) -> VoRun:
+def run_sequence(sequence: FrameSource, max_frames: int | None = None,
+                 progress: Callable[[int, int], None] | None = None, **options: Any) -> VoRun:
     """Run :class:`VisualOdometry` over a sequence's frames, in order.
 
     The first frame's pose is the ground truth's nearest pose within 20 ms when the
@@ -491,6 +493,8 @@ def run_sequence(sequence: FrameSource, max_frames: int | None = None, **options
     Args:
         sequence: the frames (and intrinsics, stamps, optional ground truth).
         max_frames: stop after this many frames (all by default).
+        progress: told ``(frames tracked, frames)`` before the first frame and after every one
+            (e.g. a :class:`tinman.progress.FrameProgress`).
         options: passed on to :class:`VisualOdometry`.
 
     Returns:
@@ -508,6 +512,8 @@ def run_sequence(sequence: FrameSource, max_frames: int | None = None, **options
     poses = np.empty((count, 4, 4))
     stats: list[TrackStats] = []
     seconds = 0.0
+    if progress is not None:
+        progress(0, count)
     for i in range(count):
         rgb, depth = sequence.rgb(i), sequence.depth(i)
         start = time.perf_counter()
@@ -515,4 +521,6 @@ def run_sequence(sequence: FrameSource, max_frames: int | None = None, **options
         seconds += time.perf_counter() - start
         assert odometry.last is not None
         stats.append(odometry.last)
+        if progress is not None:
+            progress(i + 1, count)
     return VoRun(stamps, poses, tuple(stats), seconds)

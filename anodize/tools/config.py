@@ -233,13 +233,13 @@ class _Reader:
         """``[channels."A->B"] capacity = n``: the shape here; the channels when the system is built."""
         if not isinstance(table, dict):
             raise self.error("channels", f'expected tables such as [channels."A->B"], got {_show(table)}')
-        found = {}
+        found: dict[str, int] = {}
         for channel, settings in table.items():
             key = f"channels.{channel}"
             if not isinstance(settings, dict):
                 raise self.error(key, f"expected a table such as {{ capacity = 8 }}, got {_show(settings)}")
             self.known_keys(settings, _CHANNEL_KEYS, key)
-            capacity = settings.get("capacity")
+            capacity: Any = settings.get("capacity")
             if not _is_int(capacity) or capacity < 1:
                 raise self.error(f"{key}.capacity", f"expected a whole number of messages >= 1, got {_show(capacity)}")
             found[channel] = capacity

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -80,15 +81,18 @@ def trajectory(frames: int, rate: float = 30.0) -> tuple[np.ndarray, list[np.nda
     return stamps, poses
 
 
-def generate(directory: Path, frames: int = 10, workers: int = 1, seed: int = 5) -> Path:
+def generate(directory: Path, frames: int = 10, workers: int = 1, seed: int = 5,
+             progress: Callable[[int, int], None] | None = None) -> Path:
     stamps, poses = trajectory(frames)
     truth_stamps, truth_poses = trajectory(3 * frames, rate=90.0)
     return generate_sequence(directory, ROOM, stamps, poses, truth_stamps, truth_poses,
-                             intrinsics=SMALL, seed=seed, workers=workers)
+                             intrinsics=SMALL, seed=seed, workers=workers, progress=progress)
 
 
 def test_a_generated_sequence_reads_back_as_tum_data(tmp_path: Path) -> None:
-    root = generate(tmp_path / "synthetic")
+    reports: list[tuple[int, int]] = []
+    root = generate(tmp_path / "synthetic", progress=lambda done, total: reports.append((done, total)))
+    assert reports == [(done, 10) for done in range(11)]  # before the first frame, then after each
     assert sorted(p.name for p in tmp_path.iterdir()) == ["synthetic"]  # no partial directory left
     assert sorted(p.name for p in root.iterdir()) == ["depth", "depth.txt", "groundtruth.txt", "rgb", "rgb.txt",
                                                       "tinman.json"]
@@ -151,7 +155,10 @@ def test_a_failed_run_leaves_nothing_behind(tmp_path: Path, monkeypatch: pytest.
 @pytest.mark.slow  # starts two spawned worker processes and renders 112 frames
 def test_worker_processes_write_the_same_sequence(tmp_path: Path) -> None:
     serial = generate(tmp_path / "serial", frames=56, workers=1)
-    parallel = generate(tmp_path / "parallel", frames=56, workers=2)
+    reports: list[tuple[int, int]] = []
+    parallel = generate(tmp_path / "parallel", frames=56, workers=2,
+                        progress=lambda done, total: reports.append((done, total)))
+    assert reports == [(done, 56) for done in range(57)]  # the pool's frames are counted as they come
     for name in ("rgb.txt", "depth.txt", "groundtruth.txt"):
         assert (serial / name).read_text() == (parallel / name).read_text()
     for folder in ("rgb", "depth"):

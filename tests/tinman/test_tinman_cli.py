@@ -6,10 +6,12 @@ test directories are not packages.)
 
 from __future__ import annotations
 
+import io
 import re
 import subprocess
 import sys
 import types
+from collections.abc import Callable, Sized
 from pathlib import Path
 
 import numpy as np
@@ -160,6 +162,58 @@ def test_vo_eval_of_a_missing_or_broken_sequence(capsys: pytest.CaptureFixture[s
     assert len(err.splitlines()) == 1
 
 
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.fixture
+def listed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A sequence of 40 frames in its file lists only, and visual odometry that only counts them."""
+    from tinman.vo import TrackStats, VoRun
+
+    stamps = 1_700_000_000.0 + np.arange(40) / 30.0
+    tum.write_file_list(tmp_path / "rgb.txt", {float(s): f"rgb/{s:.6f}.png" for s in stamps})
+    tum.write_file_list(tmp_path / "depth.txt", {float(s): f"depth/{s:.6f}.png" for s in stamps})
+
+    def run_sequence(sequence: Sized, max_frames: int | None, features: int,
+                     progress: Callable[[int, int], None]) -> VoRun:
+        count = len(sequence) if max_frames is None else min(max_frames, len(sequence))
+        for done in range(count + 1):
+            progress(done, count)
+        stats = tuple(TrackStats(i, features, 300, 200, i == 0, False, 5.0) for i in range(count))
+        return VoRun(stamps[:count], np.tile(np.eye(4), (count, 1, 1)), stats, 0.2)
+
+    monkeypatch.setattr("tinman.vo.run_sequence", run_sequence)
+    monkeypatch.setenv("COLUMNS", "80")
+    monkeypatch.setenv("TERM", "xterm")
+    for name in ("FORCE_COLOR", "TTY_COMPATIBLE", "TTY_INTERACTIVE"):
+        monkeypatch.delenv(name, raising=False)
+    return tmp_path
+
+
+def test_vo_eval_draws_a_progress_bar_on_a_terminal(capsys: pytest.CaptureFixture[str],
+                                                    monkeypatch: pytest.MonkeyPatch, listed: Path) -> None:
+    screen = _Terminal()
+    monkeypatch.setattr("sys.stderr", screen)
+    status, out, _ = run(capsys, "vo-eval", str(listed), "--max-frames", "30")
+    assert status == 0 and out.startswith("frames          30 (0 failed, 1 keyframe)\n")
+    last = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", screen.getvalue()).replace("\r", "\n").split("\n")[-2]
+    assert re.match(r"visual odometry ━+ 30/30 100% .* fps .* ETA 0:00:00", last), last
+    assert len(last) <= 80
+
+
+@pytest.mark.parametrize("terminal", [True, False])
+def test_vo_eval_quiet_or_into_a_log_draws_no_bar(capsys: pytest.CaptureFixture[str],
+                                                  monkeypatch: pytest.MonkeyPatch, listed: Path,
+                                                  terminal: bool) -> None:
+    stream = _Terminal() if terminal else io.StringIO()
+    monkeypatch.setattr("sys.stderr", stream)
+    status, out, _ = run(capsys, "vo-eval", str(listed), *(["--quiet"] if terminal else []))
+    assert status == 0 and out.startswith("frames          40 (")
+    assert stream.getvalue() == ""  # in a log: a line only every 10 s
+
+
 # ---- usage errors -------------------------------------------------------------------------
 
 @pytest.mark.parametrize("argv", [
@@ -197,8 +251,10 @@ def test_generate_calls_the_sequence_writer(capsys: pytest.CaptureFixture[str], 
                                             tmp_path: Path) -> None:
     calls = []
 
-    def generate(directory: Path, duration: float) -> Path:
+    def generate(directory: Path, duration: float, progress: Callable[[int, int], None]) -> Path:
         calls.append((directory, duration))
+        for done in range(76):
+            progress(done, 75)
         return directory
 
     monkeypatch.setitem(sys.modules, "tinman.sequences", types.SimpleNamespace(generate=generate))
@@ -207,6 +263,15 @@ def test_generate_calls_the_sequence_writer(capsys: pytest.CaptureFixture[str], 
     assert (status, err) == (0, "")
     assert calls == [(tmp_path / "seq", 2.5)]
     assert out == f"wrote {tmp_path / 'seq'}\n"
+    screen = _Terminal()
+    monkeypatch.setattr("sys.stderr", screen)
+    assert run(capsys, "generate", str(tmp_path / "seq"), "--quiet")[:2] == (0, f"wrote {tmp_path / 'seq'}\n")
+    assert screen.getvalue() == ""
+    monkeypatch.setenv("TERM", "xterm")
+    for name in ("FORCE_COLOR", "TTY_COMPATIBLE", "TTY_INTERACTIVE"):
+        monkeypatch.delenv(name, raising=False)
+    assert run(capsys, "generate", str(tmp_path / "seq"))[0] == 0
+    assert "75/75 100%" in re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", screen.getvalue())
 
 
 def test_generate_without_the_sequence_writer(capsys: pytest.CaptureFixture[str],

@@ -229,7 +229,9 @@ class _Sequence:
 def test_run_sequence_starts_at_the_ground_truth_and_counts(driving: tuple[np.ndarray, list[Frame]]) -> None:
     truth, frames = driving
     sequence = _Sequence(truth, frames)
-    result = run_sequence(sequence, max_frames=12)
+    reports: list[tuple[int, int]] = []
+    result = run_sequence(sequence, max_frames=12, progress=lambda done, total: reports.append((done, total)))
+    assert reports == [(done, 12) for done in range(13)]
     assert result.poses.shape == (12, 4, 4) and len(result.stats) == 12
     np.testing.assert_array_equal(result.stamps, sequence.stamps[:12])
     np.testing.assert_array_equal(result.poses[0], sequence.groundtruth[1][0])
