@@ -12,7 +12,6 @@ import dataclasses
 import json
 import os
 import shutil
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -57,8 +56,8 @@ class TinMan:
                             help="drive with the keyboard (w/s forward/back, a/d turn, q/e curve) "
                                  "instead of the scripted joystick; needs a terminal")
         parser.add_argument("--dataset", metavar="DIR",
-                            help="a TUM RGB-D sequence for the camera (default: the synthetic one, "
-                                 "generated and cached on first use)")
+                            help="play a recorded TUM RGB-D sequence back as the camera (default: the simulated "
+                                 "camera renders the room live from the simulated robot)")
         parser.add_argument("--planner", choices=("rrt", "astar"), default="rrt",
                             help="RRT-Connect with shortcut smoothing (default) or grid A*")
         parser.add_argument("--transport", choices=("process", "dds"), default=None,
@@ -83,8 +82,8 @@ class TinMan:
         if args.teleop:
             _check_terminal()
         out = Path(args.out)
-        dataset = _dataset(args.dataset, log, quiet=bool(getattr(args, "quiet", False)))
-        self.settings = Settings(out=str(out.resolve()), dataset=str(dataset),
+        dataset = _dataset(args.dataset) if args.dataset is not None else ""
+        self.settings = Settings(out=str(out.resolve()), dataset=dataset,
                                  duration=float(args.duration), paper=args.paper, teleop=args.teleop,
                                  inject=inject, groups=groups, planner=args.planner)
         shutil.rmtree(self.settings.records, ignore_errors=True)  # no record of an older run may linger
@@ -192,22 +191,15 @@ def _check_terminal() -> None:
         raise TinManError(f"--teleop needs a terminal to read keys from ({error.strerror})") from None
 
 
-def _dataset(given: str | None, log: Callable[[str], None], quiet: bool = False) -> Path:
-    """The sequence for the camera; the default one is generated on first use (``log`` says so
-    first, and where it goes) with a progress bar on stderr, unless ``quiet``."""
+def _dataset(given: str) -> str:
+    """A recorded sequence for the camera, checked now rather than in a group process."""
     from .dataset import DatasetError, TumSequence
 
-    if given is None:
-        from .progress import FrameProgress
-        from .sequences import default_sequence
-
-        with FrameProgress("rendering", sys.stderr, enabled=not quiet) as progress:
-            return default_sequence(log=log, progress=progress).resolve()
     try:
-        TumSequence.open(given)  # fail now, with the reason, rather than in a group process
+        TumSequence.open(given)
     except DatasetError as error:
         raise TinManError(str(error)) from None
-    return Path(given).resolve()
+    return str(Path(given).resolve())
 
 
 def _judge(data: dict[str, Any], settings: Settings) -> tuple[bool, list[str]]:

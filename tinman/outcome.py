@@ -14,7 +14,9 @@ from .records import load_records
 from .settings import Settings
 from .tum import read_trajectory
 
-__all__ = ["build_report", "violations_in"]
+__all__ = ["build_report", "violations_in", "truth_path", "CAMERA_TRUTH"]
+
+CAMERA_TRUTH = "camera_truth.txt"  # in the records: the simulated camera's true path, TUM format
 
 
 def violations_in(report: RunReport) -> list[str]:
@@ -48,8 +50,9 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "injected": dict(settings.inject),
         **ate,
         "frames_processed": vo.get("frames_processed"),
-        "frames_dropped": _sum(vo.get("frames_dropped"), camera.get("frames_skipped")),
+        "frames_dropped": _sum(vo.get("frames_dropped"), gazebo.get("camera_frames_skipped")),
         "frames_published": camera.get("frames_published"),
+        "camera": gazebo.get("camera"),
         "vo_track_ms": {key: vo.get("track_ms", {}).get(key) for key in ("p50", "p99")},
         "violations": len(violations),
         "violation_messages": violations,
@@ -76,7 +79,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
 def _ate(settings: Settings) -> dict[str, Any]:
     empty = {"ate_rmse_m": None, "trajectory_length_m": None, "ate_percent": None, "ate_pairs": 0}
     estimate_file = settings.records / "vo_estimate.txt"
-    truth_file = Path(settings.dataset) / "groundtruth.txt"
+    truth_file = truth_path(settings)
     if not estimate_file.exists() or not truth_file.exists():
         return empty
     try:
@@ -87,6 +90,13 @@ def _ate(settings: Settings) -> dict[str, Any]:
         return {**empty, "ate_error": str(error)}
     return {"ate_rmse_m": round(result.rmse, 5), "trajectory_length_m": round(result.length, 4),
             "ate_percent": round(result.percent, 4), "ate_pairs": result.pairs}
+
+
+def truth_path(settings: Settings) -> Path:
+    """The camera's true path: the simulated camera's (live), or the recording's ground truth."""
+    if settings.dataset:
+        return Path(settings.dataset) / "groundtruth.txt"
+    return settings.records / CAMERA_TRUTH
 
 
 def _sum(*values: Any) -> int | None:

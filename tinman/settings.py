@@ -25,7 +25,8 @@ class Settings:
 
     Attributes:
         out: the folder for the report, the picture and each role's records.
-        dataset: the TUM RGB-D sequence the camera replays ("" = the default synthetic one).
+        dataset: a TUM RGB-D sequence the camera plays back ("": the simulated camera renders the
+            room from the simulated robot's true pose, live).
         duration: seconds the run lasts.
         paper: whether the run follows Fig. 16's single loop (``TinMan``).
         teleop: keyboard driving from the terminal instead of the scripted joystick.
@@ -33,6 +34,7 @@ class Settings:
         groups: role -> the group that runs it (so a role knows whether a fault is its own).
         planner: ``"rrt"`` (RRT-Connect with shortcut smoothing) or ``"astar"``.
         control_rate: Hz of the joystick, hence of the whole control loop.
+        camera_rate: Hz of the simulated camera (a recorded sequence plays at its own rate).
         replan_period: seconds between two plans.
         seed: for the planner's random samples.
     """
@@ -46,6 +48,7 @@ class Settings:
     groups: dict[str, str] = field(default_factory=dict)
     planner: str = "rrt"
     control_rate: float = 50.0
+    camera_rate: float = 30.0
     replan_period: float = 0.5
     seed: int = 0
 

@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import io
 import re
-from collections.abc import Callable
-from pathlib import Path
 
 import pytest
 
 from anodize import GroupStatus
 from anodize.supervision.report import GroupState
 from anodize.tools.cli import ProgressLine
-from tinman.app import TinMan, _dataset
+from tinman.app import TinMan
 from tinman.progress import FrameProgress
 from tinman.settings import Settings
 
@@ -125,48 +123,6 @@ def test_in_a_log_long_work_writes_a_line_every_ten_seconds_and_one_at_the_end()
     assert lines[-2].startswith("rendering: 800/900 frames (88%), ")
     assert lines[-1] == "rendering: 900/900 frames in 0:01:30"
     assert "\x1b" not in log.getvalue() and "\r" not in log.getvalue()
-
-
-# ---- the first run's sequence -------------------------------------------------------------
-
-def fake_generation(monkeypatch: pytest.MonkeyPatch, frames: int) -> list[str]:
-    """``default_sequence`` as on a first run: it says what it does and renders ``frames``."""
-    said: list[str] = []
-
-    def default_sequence(log: Callable[[str], None], progress: Callable[[int, int], None]) -> Path:
-        log("generating the synthetic RGB-D sequence (...) into /cache/tinman-room; this happens once")
-        said.append(f"progress shown after {len(said)} line(s)")
-        for done in range(frames + 1):
-            progress(done, frames)
-        log("sequence ready")
-        return Path("/cache/tinman-room")
-
-    monkeypatch.setattr("tinman.sequences.default_sequence", default_sequence)
-    return said
-
-
-def test_the_first_run_says_what_it_generates_then_draws_a_bar(monkeypatch: pytest.MonkeyPatch) -> None:
-    said = fake_generation(monkeypatch, 30)
-    lines: list[str] = []
-    screen = Terminal()
-    monkeypatch.setattr("sys.stderr", screen)
-    assert _dataset(None, lines.append) == Path("/cache/tinman-room")
-    assert lines[0].startswith("generating the synthetic RGB-D sequence") and said == ["progress shown after 0 line(s)"]
-    assert lines[1] == "sequence ready"
-    assert re.match(r"rendering ━+ 30/30 100%", shown(screen.getvalue())[-1])
-
-
-def test_the_first_run_with_quiet_or_into_a_log_draws_no_bar(monkeypatch: pytest.MonkeyPatch) -> None:
-    fake_generation(monkeypatch, 30)
-    screen = Terminal()
-    monkeypatch.setattr("sys.stderr", screen)
-    lines: list[str] = []
-    _dataset(None, lines.append, quiet=True)
-    assert screen.getvalue() == "" and len(lines) == 2  # what and where is still said
-    log = io.StringIO()
-    monkeypatch.setattr("sys.stderr", log)
-    _dataset(None, lines.append)
-    assert log.getvalue() == ""
 
 
 # ---- the live line of 'anodize run tinman' ------------------------------------------------

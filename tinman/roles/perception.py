@@ -13,67 +13,49 @@ from anodize import Endpoint, PeerFailedError, RoleStopped
 
 from ..dataset import TumSequence
 from ..faults import start_faults
-from ..geometry import depth_metres
-from ..messages import Header, Image, PoseStamped, image_array, image_of, pose_from_matrix, seconds, stamp_from_seconds
+from ..geometry import FR1, camera_pose, depth_metres
+from ..messages import Header, Image, PoseStamped, image_array, pose_from_matrix, seconds
 from ..records import percentiles, save_record
 from ..settings import current
 from ..tum import write_trajectory
 from ..vo import VisualOdometry
+from ..world import DEFAULT_WORLD
 
-__all__ = ["camera", "visodom", "STALE_FRAMES", "OPTICAL_FRAME", "Lateness"]
+__all__ = ["camera", "visodom", "STALE_FRAMES", "Lateness"]
 
 STALE_FRAMES = 2.0  # a frame later than this many frame periods is dropped, not tracked
-OPTICAL_FRAME = "camera_optical"  # the images' frame_id: depth is registered to colour, as TUM's is
 
 cv2.setNumThreads(1)  # one core per role: the group's CPU use stays what its threads are
 
 
 def camera(ep: Endpoint) -> None:
-    """Replays the RGB-D sequence at its frame rate, as an RGB-D camera driver publishes it.
+    """The RGB-D camera's driver: publishes every frame the simulator's camera takes.
 
-    Every frame is two ``sensor_msgs/Image`` messages, colour (``rgb8``) then depth
-    (``16UC1``, 5000 units per metre), each stamped with its capture time in the
-    sequence (as a rosbag replay keeps them): the colour and the depth stamp of the
-    associated pair. A frame is read before it is due and sent when it is due.
+    Every frame is two ``sensor_msgs/Image`` messages from Gazebo's camera (rendered
+    live from the robot's true pose, or a recording played back: :mod:`tinman.cameras`),
+    colour (``rgb8``) then depth (``16UC1``, 5000 units per metre), each stamped with its
+    capture time, passed on as a camera driver publishes them.
     """
-    settings = current()
     start_faults("Camera")
-    sequence = TumSequence.open(settings.dataset)
-    first = float(sequence.stamps[0])
-    period = 1.0 / sequence.frame_rate
-    start = time.monotonic()
-    published = skipped = 0
+    published = 0
     try:
-        for index, stamp in enumerate(sequence.stamps):
-            due = start + (float(stamp) - first)
-            if time.monotonic() - due > period:  # reading fell behind: a real camera drops frames
-                skipped += 1
-                continue
-            color = image_of(sequence.rgb(index), "rgb8",
-                             Header(stamp=stamp_from_seconds(float(stamp)), frame_id=OPTICAL_FRAME))
-            depth = image_of(sequence.depth_raw(index), "16UC1",
-                             Header(stamp=stamp_from_seconds(float(sequence.depth_stamps[index])),
-                                    frame_id=OPTICAL_FRAME))
-            ep.sleep(due - time.monotonic())
+        while True:
+            color: Image = ep.recv("Gazebo").payload
+            depth: Image = ep.recv("Gazebo").payload
             ep.send("VisOdom", "color", color)
             ep.send("VisOdom", "depth", depth)
             published += 1
-        ep.sleep(math.inf)  # the sequence is over: the camera stays silent until the run stops
     finally:
-        save_record("Camera", {"frames_published": published, "frames_skipped": skipped,
-                               "frames_in_sequence": len(sequence), "frame_rate": sequence.frame_rate})
+        save_record("Camera", {"frames_published": published})
 
 
 def visodom(ep: Endpoint) -> None:
     """RGB-D visual odometry: a pose for every frame; the latest pose to the planner."""
     settings = current()
     start_faults("VisOdom")
-    sequence = TumSequence.open(settings.dataset)
-    truth = sequence.groundtruth
-    # The robot knows where it starts (its dock): the first ground-truth pose, if any.
-    odometry = VisualOdometry(sequence.intrinsics, truth[1][0] if truth is not None else None)
+    odometry = _odometry(settings.dataset)
     latest = _Latest()
-    period = 1.0 / sequence.frame_rate
+    period = 1.0 / (TumSequence.open(settings.dataset).frame_rate if settings.dataset else settings.camera_rate)
     if not settings.paper:  # the planning loop: the latest pose at the planner's rate
         ep.fork()
         threading.Thread(target=_feed_planner, args=(ep, latest, settings.replan_period),
@@ -112,6 +94,16 @@ def visodom(ep: Endpoint) -> None:
         save_record("VisOdom", {
             "frames_processed": len(stamps), "frames_dropped": dropped, "track_ms": percentiles(track_ms),
             "lost_frames": odometry.failures})
+
+
+def _odometry(dataset: str) -> VisualOdometry:
+    """Odometry for the camera at hand. The robot knows where it starts (its dock): the simulated
+    robot's start, or a recording's first ground-truth pose, if it has one."""
+    if not dataset:
+        return VisualOdometry(FR1, camera_pose(*DEFAULT_WORLD.start))
+    sequence = TumSequence.open(dataset)
+    truth = sequence.groundtruth
+    return VisualOdometry(sequence.intrinsics, truth[1][0] if truth is not None else None)
 
 
 class Lateness:

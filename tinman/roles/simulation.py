@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+import math
+import threading
 import time
 
-from anodize import Endpoint
+import numpy as np
 
+from anodize import Endpoint, PeerFailedError, RoleStopped
+
+from ..cameras import LiveCamera, RecordedCamera
 from ..faults import start_faults
 from ..messages import PoseStamped, Twist, seconds
+from ..outcome import CAMERA_TRUTH
 from ..picture import draw_run
 from ..records import save_record
-from ..settings import current
+from ..settings import Settings, current
 from ..sim import DiffDrive
+from ..tum import write_trajectory
 from ..world import DEFAULT_WORLD
 
 __all__ = ["gazebo", "visualizer", "REDRAW_PERIOD"]
@@ -20,22 +27,124 @@ REDRAW_PERIOD = 5.0  # seconds between two live pictures
 
 
 def gazebo(ep: Endpoint) -> None:
-    """The robot in the room: each command drives it for one control period (lockstep)."""
+    """The robot in the room, and the camera on it.
+
+    Each command drives the robot for one control period (lockstep). The camera takes
+    frames at its own rate: rendered from the robot's true pose (or a recording played
+    back, with ``--dataset``) and handed to the Camera role's driver. In
+    ``TinManParallel`` the two run side by side (the camera in a thread of its own); in
+    Fig. 16's single loop, a frame then a command, in turn.
+    """
     settings = current()
     start_faults("Gazebo")
-    robot = DiffDrive(DEFAULT_WORLD)
+    robot = _Robot(DiffDrive(DEFAULT_WORLD))
+    film = _Film(settings)
+    if not settings.paper:
+        ep.fork()
+        threading.Thread(target=_run_camera, args=(ep, robot, film, settings), name="Gazebo-camera",
+                         daemon=True).start()
     period = 1.0 / settings.control_rate
     start = time.monotonic()
     trace: list[list[float]] = []
     try:
         while True:
+            if settings.paper and not film.shoot(ep, robot.pose()):
+                ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
             twist: Twist = ep.recv("Move").payload
             x, y, theta = robot.step(twist.linear.x, twist.angular.z, period)
             trace.append([round(time.monotonic() - start, 3), round(x, 4), round(y, 4), round(theta, 4),
-                          round(robot.velocity[0], 3), round(robot.velocity[1], 3)])
+                          round(robot.drive.velocity[0], 3), round(robot.drive.velocity[1], 3)])
     finally:
-        save_record("Gazebo", {"trajectory": trace, "odometer_m": robot.odometer, "bumps": robot.bumps,
-                               "columns": ["t", "x", "y", "theta", "v", "w"]})
+        film.save(settings)
+        save_record("Gazebo", {"trajectory": trace, "odometer_m": robot.drive.odometer, "bumps": robot.drive.bumps,
+                               "columns": ["t", "x", "y", "theta", "v", "w"], **film.record()})
+
+
+class _Robot:
+    """The simulated robot, shared by Gazebo's control loop and its camera thread."""
+
+    def __init__(self, drive: DiffDrive) -> None:
+        self.drive = drive
+        self._lock = threading.Lock()
+
+    def step(self, v: float, w: float, dt: float) -> tuple[float, float, float]:
+        with self._lock:
+            return self.drive.step(v, w, dt)
+
+    def pose(self) -> tuple[float, float, float]:
+        with self._lock:
+            return self.drive.pose
+
+
+class _Film:
+    """Gazebo's camera: frames at the camera's rate, and the camera's true path (for ATE)."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.live: LiveCamera | None = None
+        self.recorded: RecordedCamera | None = None
+        if settings.dataset:
+            self.recorded = RecordedCamera(settings.dataset)
+            self.period = 1.0 / self.recorded.frame_rate
+        else:
+            self.live = LiveCamera(DEFAULT_WORLD, seed=settings.seed)
+            self.period = 1.0 / settings.camera_rate
+        self.start = time.monotonic()
+        self.taken = self.skipped = 0
+        self.stamps: list[float] = []
+        self.poses: list[np.ndarray] = []
+
+    def due(self) -> float | None:
+        """When the next frame is due (monotonic), or None once a recording is over."""
+        if self.recorded is None:
+            return self.start + self.taken * self.period
+        index = self.taken + self.skipped
+        return self.start + self.recorded.offset(index) if index < len(self.recorded) else None
+
+    def shoot(self, ep: Endpoint, robot: tuple[float, float, float]) -> bool:
+        """Take the next frame when it is due and hand it to the Camera; False once a recording is over."""
+        due = self.due()
+        if due is None:
+            return False
+        ep.sleep(due - time.monotonic())
+        if self.recorded is not None:
+            color, depth = self.recorded.frame(self.taken + self.skipped)
+        else:
+            assert self.live is not None
+            stamp = time.time()  # a camera stamps its frames with the time they were taken
+            color, depth, t_wc = self.live.capture(robot, stamp)
+            self.stamps.append(stamp)
+            self.poses.append(t_wc)
+        ep.send("Camera", "color", color)
+        ep.send("Camera", "depth", depth)
+        self.taken += 1
+        return True
+
+    def skip_late(self) -> None:
+        """Frames a camera that fell behind drops, as a real one does."""
+        while (due := self.due()) is not None and time.monotonic() - due > self.period:
+            if self.recorded is None:
+                self.start += self.period  # a live camera takes its next frame from now on
+            self.skipped += 1
+
+    def save(self, settings: Settings) -> None:
+        if self.stamps:
+            settings.records.mkdir(parents=True, exist_ok=True)
+            write_trajectory(settings.records / CAMERA_TRUTH, self.stamps, self.poses,
+                             comment="TinMan Gazebo: the simulated camera's true path")
+
+    def record(self) -> dict[str, object]:
+        return {"camera_frames": self.taken, "camera_frames_skipped": self.skipped,
+                "camera": "live" if self.live is not None else "recorded", "camera_rate": 1.0 / self.period}
+
+
+def _run_camera(ep: Endpoint, robot: _Robot, film: _Film, settings: Settings) -> None:
+    try:
+        while True:
+            film.skip_late()
+            if not film.shoot(ep, robot.pose()):
+                ep.sleep(math.inf)  # a recording is over: the camera stays silent until the run stops
+    except (RoleStopped, PeerFailedError):  # the run stops, or perception is gone: the robot drives on
+        pass
 
 
 def visualizer(ep: Endpoint) -> None:

@@ -1,0 +1,84 @@
+"""The simulator's camera: where Gazebo's RGB-D images come from.
+
+On a real TinMan, Gazebo's camera plugin renders what the camera on the simulated
+robot sees. :class:`LiveCamera` does that: it renders the room from the robot's
+true pose (through the camera's mount, :func:`tinman.geometry.camera_pose`) and adds
+the sensor's noise (Kinect-like depth noise and dropouts, image noise). Odometry
+then tracks the robot that is really driving, so its error is the robot's.
+:class:`RecordedCamera` plays a recorded TUM RGB-D sequence back instead
+(``anodize run tinman --dataset DIR``): the images then belong to that recording's
+path, not to the simulated robot.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import FR1, Intrinsics, camera_pose
+from .messages import Header, Image, image_of, stamp_from_seconds
+from .world import World
+
+__all__ = ["LiveCamera", "RecordedCamera", "OPTICAL_FRAME", "frame_images"]
+
+OPTICAL_FRAME = "camera_optical"  # the images' frame_id: depth is registered to colour, as TUM's is
+
+
+def frame_images(rgb: np.ndarray, depth_raw: np.ndarray, color_stamp: float, depth_stamp: float) -> tuple[Image, Image]:
+    """A colour (``rgb8``) and a depth (``16UC1``, 5000 units per metre) ``sensor_msgs/Image``."""
+    color = image_of(rgb, "rgb8", Header(stamp=stamp_from_seconds(color_stamp), frame_id=OPTICAL_FRAME))
+    depth = image_of(depth_raw, "16UC1", Header(stamp=stamp_from_seconds(depth_stamp), frame_id=OPTICAL_FRAME))
+    return color, depth
+
+
+class LiveCamera:
+    """Renders the camera's view of ``world`` from a robot pose, with the sensor's noise.
+
+    Args:
+        world: the room.
+        intrinsics: the camera (freiburg1's by default, as the recorded sequences).
+        seed: the textures' seed and the noise's.
+    """
+
+    def __init__(self, world: World, intrinsics: Intrinsics = FR1, seed: int = 0) -> None:
+        from .render import RoomRenderer  # the textures are painted here: a second or two
+
+        self.intrinsics = intrinsics
+        self.renderer = RoomRenderer(world, intrinsics, seed)
+        self._rng = np.random.default_rng([seed, 2])
+
+    def capture(self, robot: tuple[float, float, float], stamp: float) -> tuple[Image, Image, np.ndarray]:
+        """The images the camera takes at ``stamp`` (seconds) on a robot at ``(x, y, theta)``,
+        and the camera's true pose ``T_wc`` then."""
+        from .synthetic import add_depth_noise, add_image_noise
+
+        t_wc = camera_pose(*robot)
+        rgb, depth = self.renderer.render(t_wc)
+        color, depth_image = frame_images(add_image_noise(rgb, self._rng), add_depth_noise(depth, self._rng),
+                                          stamp, stamp)
+        return color, depth_image, t_wc
+
+
+class RecordedCamera:
+    """Plays a TUM RGB-D sequence back, frame by frame, with the stamps it was recorded with."""
+
+    def __init__(self, directory: str) -> None:
+        from .dataset import TumSequence
+
+        self.sequence = TumSequence.open(directory)
+        self.intrinsics = self.sequence.intrinsics
+        self.frame_rate = self.sequence.frame_rate
+
+    def __len__(self) -> int:
+        return len(self.sequence)
+
+    def offset(self, index: int) -> float:
+        """Seconds from the first frame to frame ``index``."""
+        stamps = self.sequence.stamps
+        return float(stamps[index]) - float(stamps[0])
+
+    def frame(self, index: int) -> tuple[Image, Image]:
+        """Frame ``index``: its colour and depth images."""
+        sequence = self.sequence
+        return frame_images(sequence.rgb(index), sequence.depth_raw(index), float(sequence.stamps[index]),
+                            float(sequence.depth_stamps[index]))
+
