@@ -40,5 +40,7 @@ def test_a_recording_is_played_back_with_its_stamps(tmp_path: Path) -> None:
     assert len(camera) == len(camera.sequence.stamps) > 5 and camera.offset(0) == 0.0
     color, depth = camera.frame(3)
     assert seconds(color.header.stamp) == pytest.approx(float(camera.sequence.stamps[3]))
+    assert seconds(depth.header.stamp) == pytest.approx(float(camera.sequence.depth_stamps[3]))
     assert np.array_equal(image_array(color), camera.sequence.rgb(3))
+    assert np.array_equal(image_array(depth), camera.sequence.depth_raw(3))
     assert camera.offset(3) == pytest.approx(float(camera.sequence.stamps[3] - camera.sequence.stamps[0]))
