@@ -212,8 +212,10 @@ def _judge(data: dict[str, Any], settings: Settings) -> tuple[bool, list[str]]:
             errors = [group["error"]] + [role["error"] for role in data["roles"].values() if role["group"] == name]
             first = next((error for error in errors if error), {"type": "?", "message": "see the report"})
             problems.append(f"group {name} failed: {first['type']}: {first['message']}")
-        if group["status"] != "failed" and name in settings.inject:
+        if group["status"] != "failed" and settings.inject.get(name) == "memory-hog":
             problems.append(f"group {name} was injected with {settings.inject[name]} but did not fail")
+    if data["robot"].get("bumps"):
+        problems.append(f"the robot bumped into the room {data['robot']['bumps']} times")
     if not data["frames_processed"] and "perception" not in settings.inject:
         problems.append("visual odometry tracked no frame")
     if data["control_period_ms"].get("p50") is None and "control" not in settings.inject:
@@ -231,6 +233,17 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
     if period.get("p50") is not None:
         lines.append(f"control loop: period p50 {period['p50']:.1f} ms, p99 {period['p99']:.1f} ms "
                      f"over {data['control']['commands']} commands")
+    robot = data["robot"]
+    if data.get("final_position_error_m") is not None and robot.get("distance_m") is not None:
+        lines.append(f"robot (steered by the odometry): drove {robot['distance_m']:.2f} m, "
+                     f"{robot['waypoints_reached']} waypoints reached, {robot['bumps']} bumps; "
+                     f"odometry's final position error {data['final_position_error_m']:.3f} m "
+                     f"({data['drift_per_m'] * 100:.2f} cm per metre)")
+    control = data["control"]
+    if data.get("vo_lost_frames") or control.get("stops_for_lost_tracking"):
+        lines.append(f"odometry lost track on {data['vo_lost_frames']} frames: the robot stopped "
+                     f"{control['stops_for_lost_tracking']} times, then drove on "
+                     f"({control['path_commands_after_a_stop']} path commands after)")
     lost = data["control"].get("planner_lost")
     if lost:
         lines.append(f"planner lost during the run; teleop commands after that: "

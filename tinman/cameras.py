@@ -46,12 +46,18 @@ class LiveCamera:
         self.renderer = RoomRenderer(world, intrinsics, seed)
         self._rng = np.random.default_rng([seed, 2])
 
-    def capture(self, robot: tuple[float, float, float], stamp: float) -> tuple[Image, Image, np.ndarray]:
+    def capture(self, robot: tuple[float, float, float], stamp: float,
+                blind: bool = False) -> tuple[Image, Image, np.ndarray]:
         """The images the camera takes at ``stamp`` (seconds) on a robot at ``(x, y, theta)``,
-        and the camera's true pose ``T_wc`` then."""
+        and the camera's true pose ``T_wc`` then; ``blind``: a covered lens (black, no depth)."""
         from .synthetic import add_depth_noise, add_image_noise
 
         t_wc = camera_pose(*robot)
+        if blind:
+            k = self.intrinsics
+            color, depth_image = frame_images(np.zeros((k.height, k.width, 3), np.uint8),
+                                              np.zeros((k.height, k.width), np.uint16), stamp, stamp)
+            return color, depth_image, t_wc
         rgb, depth = self.renderer.render(t_wc)
         color, depth_image = frame_images(add_image_noise(rgb, self._rng), add_depth_noise(depth, self._rng),
                                           stamp, stamp)

@@ -99,7 +99,8 @@ def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate:
     period = 1.0 / rate
     planner = Planner(world, method=method, seed=seed)
     patrol = Patrol(world, tolerance=waypoint_tolerance)
-    mixer = Mixer(world, period, pursuit if pursuit is not None else patrol_pursuit())
+    # Offline the drive model is the truth (perfect odometry): its estimate never goes stale.
+    mixer = Mixer(world, period, pursuit if pursuit is not None else patrol_pursuit(), clock=lambda: 0.0)
     robot = mixer.model
     steps = round(duration * rate)
     # Integer step counts, not accumulated float seconds, decide when to replan.

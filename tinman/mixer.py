@@ -1,24 +1,31 @@
 """Move's logic: teleop wins when it commands anything, else pure pursuit on the latest path.
 
-Move has no sensor of its own: it tracks the robot with a model of the drive (the
-simulator's kinematics and limits, stepped with every command it sends), which is
-what wheel odometry would report. Teleop is "active" while Control's twist is not
-zero: Control sends a twist every cycle, so a centred stick means "no command"
-(as with ROS's twist_mux, where a silent teleop topic yields to navigation).
+Move has no sensor of its own: a real robot knows only its estimate. It steers by
+the visual odometry's pose (each fresh estimate resets its model of the drive, which
+carries the pose forward between estimates with every command sent), so the
+odometry's error moves the real robot. When no fresh estimate has come for
+``LOST_AFTER`` seconds (VisOdom lost track, or perception is gone), path following
+stops the robot and counts the stop; it resumes with the next fresh estimate. Teleop
+is "active" while Control's twist is not zero: Control sends a twist every cycle, so
+a centred stick means "no command" (as with ROS's twist_mux, where a silent teleop
+topic yields to navigation); a person driving is not stopped.
 """
 
 from __future__ import annotations
 
 import threading
+import time
+from collections.abc import Callable
 
 from .messages import Path, Twist, path_points, twist_planar
 from .pursuit import PurePursuit
 from .sim import DiffDrive
 from .world import World
 
-__all__ = ["Mixer", "IDLE_EPSILON"]
+__all__ = ["Mixer", "IDLE_EPSILON", "LOST_AFTER"]
 
 IDLE_EPSILON = 1e-3  # m/s or rad/s: a twist this small commands nothing
+LOST_AFTER = 0.5  # seconds without a fresh estimate before path following stops the robot
 
 
 class Mixer:
@@ -27,19 +34,31 @@ class Mixer:
     Args:
         world: the room (for the drive model).
         period: the control period in seconds (each command drives that long).
+        clock: seconds, for how fresh the estimate is (``time.monotonic``).
 
     Attributes:
-        sources: how many commands came from each source (``teleop``, ``path``, ``idle``).
+        sources: how many commands came from each source (``teleop``, ``path``, ``idle``,
+            ``lost``: stopped for want of a fresh estimate).
+        estimates: fresh estimates taken.
+        stops: how often path following stopped because the estimate went stale.
     """
 
-    def __init__(self, world: World, period: float, pursuit: PurePursuit | None = None) -> None:
+    def __init__(self, world: World, period: float, pursuit: PurePursuit | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.model = DiffDrive(world)
         self.period = period
         self.pursuit = pursuit or PurePursuit()
-        self.sources = {"teleop": 0, "path": 0, "idle": 0}
+        self.sources = {"teleop": 0, "path": 0, "idle": 0, "lost": 0}
         self.paths_received = 0
+        self.estimates = 0
+        self.stops = 0
+        self.resumed = 0  # path commands after the first stop: tracking came back
         self._path: list[tuple[float, float]] = []
-        self._lock = threading.Lock()  # the planning branch's thread hands paths over
+        self._stamp: float | None = None
+        self._clock = clock
+        self._fresh_at = clock()  # the robot starts knowing its pose: its dock
+        self._lost = False
+        self._lock = threading.Lock()  # the planning and perception branches' threads hand over
 
     def set_path(self, path: Path) -> None:
         """Follow ``path`` from now on (the latest plan always wins)."""
@@ -47,6 +66,21 @@ class Mixer:
         with self._lock:
             self._path = points
             self.paths_received += 1
+
+    def set_estimate(self, stamp: float, pose: tuple[float, float, float]) -> None:
+        """The odometry's estimate of the robot at ``stamp``; a repeated stamp is no news."""
+        with self._lock:
+            if stamp == self._stamp:
+                return
+            self._stamp = stamp
+            self._fresh_at = self._clock()
+            self.model.pose = pose
+            self.estimates += 1
+
+    def tracking(self) -> bool:
+        """Whether a fresh estimate came within ``LOST_AFTER`` seconds."""
+        with self._lock:
+            return self._clock() - self._fresh_at <= LOST_AFTER
 
     def step(self, teleop: Twist) -> tuple[Twist, str]:
         """The command for this period and where it came from; advances the drive model."""
@@ -56,11 +90,18 @@ class Mixer:
         else:
             with self._lock:
                 path = self._path
-            if len(path) >= 2 and not self.pursuit.at_goal(self.model.pose, path):
-                v, w = self.pursuit.command(self.model.pose, path)
-                source = "path"
-            else:
+                pose = self.model.pose
+            if len(path) < 2 or self.pursuit.at_goal(pose, path):
                 v, w, source = 0.0, 0.0, "idle"
-        self.model.step(v, w, self.period)
+            elif not self.tracking():
+                v, w, source = 0.0, 0.0, "lost"
+                self.stops += not self._lost
+            else:
+                v, w = self.pursuit.command(pose, path)
+                source = "path"
+                self.resumed += self.stops > 0
+            self._lost = source == "lost"
+        with self._lock:
+            self.model.step(v, w, self.period)
         self.sources[source] += 1
         return twist_planar(v, w), source

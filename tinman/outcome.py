@@ -10,9 +10,11 @@ import numpy as np
 from anodize import ProtocolViolationError, RunReport
 
 from .ate import evaluate_ate
+from .mission import WAYPOINT_TOLERANCE
 from .records import load_records
 from .settings import Settings
 from .tum import read_trajectory
+from .world import DEFAULT_WORLD
 
 __all__ = ["build_report", "violations_in", "truth_path", "CAMERA_TRUTH"]
 
@@ -67,8 +69,13 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "control": {"commands": move.get("commands"), "sources": move.get("sources"),
                     "paths_received": move.get("paths_received"),
                     "planner_lost": move.get("planner_lost"),
-                    "teleop_commands_after_planner_lost": move.get("teleop_commands_after_planner_lost")},
-        "robot": {"distance_m": _round(gazebo.get("odometer_m")), "bumps": gazebo.get("bumps")},
+                    "teleop_commands_after_planner_lost": move.get("teleop_commands_after_planner_lost"),
+                    "estimates": move.get("estimates"),
+                    "stops_for_lost_tracking": move.get("stops_for_lost_tracking"),
+                    "path_commands_after_a_stop": move.get("path_commands_after_a_stop")},
+        "vo_lost_frames": vo.get("lost_frames"),
+        "robot": {"distance_m": _round(gazebo.get("odometer_m")), "bumps": gazebo.get("bumps"),
+                  "waypoints_reached": _waypoints_reached(gazebo.get("trajectory") or [])},
         "planner": {"method": planner.get("method"), "plans": planner.get("plans"),
                     "failures": planner.get("failure_count"),
                     "plan_ms_p50": _round(float(np.median(planner["plan_ms"])) if planner.get("plan_ms") else None)},
@@ -77,7 +84,8 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
 
 
 def _ate(settings: Settings) -> dict[str, Any]:
-    empty = {"ate_rmse_m": None, "trajectory_length_m": None, "ate_percent": None, "ate_pairs": 0}
+    empty = {"ate_rmse_m": None, "trajectory_length_m": None, "ate_percent": None, "ate_pairs": 0,
+             "final_position_error_m": None, "drift_per_m": None}
     estimate_file = settings.records / "vo_estimate.txt"
     truth_file = truth_path(settings)
     if not estimate_file.exists() or not truth_file.exists():
@@ -88,8 +96,25 @@ def _ate(settings: Settings) -> dict[str, Any]:
         result = evaluate_ate(truth_stamps, truth_poses[:, :3, 3], stamps, poses[:, :3, 3])
     except (OSError, ValueError) as error:
         return {**empty, "ate_error": str(error)}
+    # Unaligned, in the map frame the odometry starts in (the robot's dock): where the robot
+    # believes it ended, against where it did.
+    nearest = int(np.argmin(np.abs(truth_stamps - stamps[-1])))
+    final = float(np.linalg.norm(poses[-1][:3, 3] - truth_poses[nearest][:3, 3]))
     return {"ate_rmse_m": round(result.rmse, 5), "trajectory_length_m": round(result.length, 4),
-            "ate_percent": round(result.percent, 4), "ate_pairs": result.pairs}
+            "ate_percent": round(result.percent, 4), "ate_pairs": result.pairs,
+            "final_position_error_m": round(final, 4),
+            "drift_per_m": round(final / result.length, 5) if result.length > 0 else None}
+
+
+def _waypoints_reached(trajectory: list[list[float]]) -> int:
+    """How many waypoints of the patrol the robot really passed, in order (rows ``t, x, y, ...``)."""
+    waypoints = DEFAULT_WORLD.waypoints
+    reached = 0
+    for row in trajectory:
+        x, y = waypoints[reached % len(waypoints)]
+        if (row[1] - x) ** 2 + (row[2] - y) ** 2 <= WAYPOINT_TOLERANCE ** 2:
+            reached += 1
+    return reached
 
 
 def truth_path(settings: Settings) -> Path:

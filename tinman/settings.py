@@ -16,7 +16,7 @@ from pathlib import Path
 __all__ = ["Settings", "ENVIRONMENT_VARIABLE", "current", "export", "FAULTS"]
 
 ENVIRONMENT_VARIABLE = "TINMAN_SETTINGS"
-FAULTS = ("memory-hog",)  # what --inject can put into a group
+FAULTS = ("memory-hog", "blind-camera")  # what --inject can put into a group
 
 
 @dataclass(frozen=True)

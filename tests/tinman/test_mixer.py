@@ -16,14 +16,14 @@ def path_of(points: list[tuple[float, float]]) -> Path:
 
 
 def test_without_a_path_or_a_stick_the_robot_stays_put() -> None:
-    mixer = Mixer(DEFAULT_WORLD, PERIOD)
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0)  # the estimate never goes stale here
     command, source = mixer.step(twist_planar(0.0, 0.0))
     assert (command, source) == (twist_planar(0.0, 0.0), "idle")
     assert mixer.model.pose == DEFAULT_WORLD.start
 
 
 def test_the_robot_follows_the_latest_path_to_its_end() -> None:
-    mixer = Mixer(DEFAULT_WORLD, PERIOD)
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0)  # the estimate never goes stale here
     x, y, _ = DEFAULT_WORLD.start
     mixer.set_path(path_of([(x, y), (x + 0.5, y + 2.0)]))  # superseded before it is used
     mixer.set_path(path_of([(x, y), (x + 1.5, y)]))
@@ -35,11 +35,43 @@ def test_the_robot_follows_the_latest_path_to_its_end() -> None:
 
 
 def test_teleop_wins_over_the_path_while_it_commands_anything() -> None:
-    mixer = Mixer(DEFAULT_WORLD, PERIOD)
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0)  # the estimate never goes stale here
     x, y, _ = DEFAULT_WORLD.start
     mixer.set_path(path_of([(x, y), (x + 2.0, y)]))
     command, source = mixer.step(twist_planar(0.0, 0.8))
     assert (command, source) == (twist_planar(0.0, 0.8), "teleop")
     command, source = mixer.step(twist_planar(0.0, 0.0))  # the stick is back in the centre: the path resumes
     assert source == "path" and command.linear.x >= 0.0
-    assert mixer.sources == {"teleop": 1, "path": 1, "idle": 0}
+    assert mixer.sources == {"teleop": 1, "path": 1, "idle": 0, "lost": 0}
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_the_robot_steers_by_the_odometrys_estimate_and_stops_when_it_goes_stale() -> None:
+    clock = Clock()
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=clock)
+    x, y, _ = DEFAULT_WORLD.start
+    mixer.set_path(path_of([(x, y), (x + 3.0, y)]))
+    assert mixer.step(twist_planar(0.0, 0.0))[1] == "path"
+    # A fresh estimate puts the robot where the odometry says, whatever Move's model thought.
+    mixer.set_estimate(1.0, (x + 0.5, y + 0.1, 0.0))
+    assert mixer.model.pose[:2] == (x + 0.5, y + 0.1) and mixer.estimates == 1
+    # The same stamp again (VisOdom lost track and repeats its last estimate) is no news: after
+    # LOST_AFTER seconds without a fresh one, path following stops the robot, once counted.
+    for _ in range(10):
+        clock.now += 0.1
+        mixer.set_estimate(1.0, (x + 0.5, y + 0.1, 0.0))
+        command, source = mixer.step(twist_planar(0.0, 0.0))
+    assert (command, source) == (twist_planar(0.0, 0.0), "lost") and mixer.stops == 1
+    # A person at the stick still drives.
+    assert mixer.step(twist_planar(0.2, 0.0))[1] == "teleop"
+    # Tracking is back: the robot drives on.
+    mixer.set_estimate(2.0, (x + 0.6, y + 0.1, 0.0))
+    command, source = mixer.step(twist_planar(0.0, 0.0))
+    assert source == "path" and command.linear.x > 0 and mixer.resumed == 1 and mixer.stops == 1

@@ -105,3 +105,14 @@ def test_the_camera_sees_the_simulated_robot(monkeypatch: pytest.MonkeyPatch, tm
     # ATE against that true path; the robot drove, so the path has a length.
     assert report["ate_pairs"] >= 0.9 * report["frames_processed"] and report["trajectory_length_m"] > 0.5
     assert report["ate_percent"] < 5.0  # the easy room: VO tracks well (issue 14 measures a harder one)
+
+
+def test_the_robot_stops_when_the_camera_is_blinded_and_drives_on_after(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    report = run_tinman(monkeypatch, tmp_path, None, "--duration", "8", "--inject", "blind-camera=simulation")
+    assert report["ok"], report["problems"]
+    assert report["violations"] == 0 and report["robot"]["bumps"] == 0
+    assert report["vo_lost_frames"] > 10  # two seconds of a covered lens
+    assert report["control"]["stops_for_lost_tracking"] >= 1
+    assert report["control"]["sources"]["lost"] > 10  # stopped for a while, for want of an estimate
+    assert report["control"]["path_commands_after_a_stop"] > 10  # and drove on once it tracked again

@@ -10,9 +10,10 @@ import numpy as np
 from anodize import Endpoint, PeerFailedError, RoleStopped
 
 from ..faults import start_faults
+from ..geometry import robot_pose
 from ..joystick import scripted_joy, twist_from_joy
 from ..keyboard import Keyboard
-from ..messages import Header, Joy, Path, Twist, stamp_now, twist_planar
+from ..messages import Header, Joy, Path, PoseStamped, Twist, pose_matrix, seconds, stamp_now, twist_planar
 from ..messages import joy as joy_message
 from ..mission import patrol_pursuit
 from ..mixer import Mixer
@@ -56,14 +57,18 @@ def control(ep: Endpoint) -> None:
 
 
 def move(ep: Endpoint) -> None:
-    """The mixer: a command to the robot for every command from Control."""
+    """The mixer: a command to the robot for every command from Control, steering by the
+    odometry's estimate (VisOdom's Pose)."""
     settings = current()
     start_faults("Move")
     mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate, patrol_pursuit())  # as the mission drives
     planner_lost: list[str] = []
-    if not settings.paper:  # the planning loop runs beside the control loop: its own thread
+    perception_lost: list[str] = []
+    if not settings.paper:  # the planning and perception loops run beside the control loop: threads
         ep.fork()
         threading.Thread(target=_take_paths, args=(ep, mixer, planner_lost), name="Move-paths",
+                         daemon=True).start()
+        threading.Thread(target=_take_estimates, args=(ep, mixer, perception_lost), name="Move-estimates",
                          daemon=True).start()
     sent: list[float] = []
     teleop_after_loss = 0
@@ -71,6 +76,7 @@ def move(ep: Endpoint) -> None:
         while True:
             teleop: Twist = ep.recv("Control").payload
             if settings.paper:
+                _estimate(mixer, ep.recv("VisOdom").payload)
                 path: Path = ep.recv("Planner").payload
                 mixer.set_path(path)
             command, source = mixer.step(teleop)
@@ -84,7 +90,24 @@ def move(ep: Endpoint) -> None:
             "commands": len(sent), "sources": mixer.sources, "paths_received": mixer.paths_received,
             "period_ms": percentiles(periods), "planner_lost": planner_lost[0] if planner_lost else None,
             "teleop_commands_after_planner_lost": teleop_after_loss,
+            "estimates": mixer.estimates, "stops_for_lost_tracking": mixer.stops,
+            "path_commands_after_a_stop": mixer.resumed,
+            "perception_lost": perception_lost[0] if perception_lost else None,
             "odometry_pose": list(mixer.model.pose)})
+
+
+def _estimate(mixer: Mixer, pose: PoseStamped) -> None:
+    mixer.set_estimate(seconds(pose.header.stamp), robot_pose(pose_matrix(pose.pose)))
+
+
+def _take_estimates(ep: Endpoint, mixer: Mixer, perception_lost: list[str]) -> None:
+    try:
+        while True:
+            _estimate(mixer, ep.recv("VisOdom").payload)
+    except PeerFailedError as error:  # no more estimates: path following stops, teleop goes on
+        perception_lost.append(str(error))
+    except RoleStopped:
+        pass
 
 
 def _take_paths(ep: Endpoint, mixer: Mixer, planner_lost: list[str]) -> None:

@@ -64,6 +64,7 @@ def visodom(ep: Endpoint) -> None:
     poses: list[np.ndarray] = []
     track_ms: list[float] = []
     dropped = 0
+    lost: list[float] = []  # capture stamps of the frames tracking failed on
     lateness = Lateness()
     last: PoseStamped | None = None
     try:
@@ -77,23 +78,30 @@ def visodom(ep: Endpoint) -> None:
                 dropped += 1  # catch up: the Visualizer gets the latest estimate again
             else:
                 began = time.perf_counter()
+                failures = odometry.failures
                 pose = odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")))
                 track_ms.append((time.perf_counter() - began) * 1000.0)
                 stamps.append(captured)
                 poses.append(pose)
-                last = PoseStamped(header=Header(stamp=color.header.stamp, frame_id="map"),
-                                   pose=pose_from_matrix(pose))
-                latest.set(last)
+                if odometry.failures > failures:
+                    lost.append(captured)
+                if last is None or odometry.failures == failures:
+                    last = PoseStamped(header=Header(stamp=color.header.stamp, frame_id="map"),
+                                       pose=pose_from_matrix(pose))
+                    latest.set(last)
+                # Lost: no new estimate. The last one goes again with its own stamp, so Move sees
+                # its estimate go stale and stops (a fresh stamp would claim a fix VO does not have).
             ep.send("Visualizer", "Pose", last)
             if settings.paper:
                 ep.send("Planner", "Pose", last)
+            ep.send("Move", "Pose", last)
     finally:
         out = settings.records
         out.mkdir(parents=True, exist_ok=True)
         write_trajectory(out / "vo_estimate.txt", stamps, poses, comment="TinMan VisOdom estimate")
         save_record("VisOdom", {
             "frames_processed": len(stamps), "frames_dropped": dropped, "track_ms": percentiles(track_ms),
-            "lost_frames": odometry.failures})
+            "lost_frames": odometry.failures, "lost_stamps": lost})
 
 
 def _odometry(dataset: str) -> VisualOdometry:

@@ -11,7 +11,7 @@ import numpy as np
 from anodize import Endpoint, PeerFailedError, RoleStopped
 
 from ..cameras import LiveCamera, RecordedCamera
-from ..faults import start_faults
+from ..faults import blinded, start_faults
 from ..messages import PoseStamped, Twist, seconds
 from ..outcome import CAMERA_TRUTH
 from ..picture import draw_run
@@ -88,7 +88,7 @@ class _Film:
         else:
             self.live = LiveCamera(DEFAULT_WORLD, seed=settings.seed)
             self.period = 1.0 / settings.camera_rate
-        self.start = time.monotonic()
+        self.start = self.begun = time.monotonic()
         self.taken = self.skipped = 0
         self.stamps: list[float] = []
         self.poses: list[np.ndarray] = []
@@ -111,7 +111,7 @@ class _Film:
         else:
             assert self.live is not None
             stamp = time.time()  # a camera stamps its frames with the time they were taken
-            color, depth, t_wc = self.live.capture(robot, stamp)
+            color, depth, t_wc = self.live.capture(robot, stamp, blind=blinded("Gazebo", time.monotonic() - self.begun))
             self.stamps.append(stamp)
             self.poses.append(t_wc)
         ep.send("Camera", "color", color)
