@@ -40,10 +40,12 @@ class LiveCamera:
     """
 
     def __init__(self, world: World, intrinsics: Intrinsics = FR1, seed: int = 0) -> None:
-        from .render import RoomRenderer  # the textures are painted here: a second or two
+        # The per-surface warp renderer: the ray caster's images (exact depth, the same textures),
+        # in two thirds of its time (bench/render.py). The textures are painted here: a second or two.
+        from .render_warp import WarpRenderer
 
         self.intrinsics = intrinsics
-        self.renderer = RoomRenderer(world, intrinsics, seed)
+        self.renderer = WarpRenderer(world, intrinsics, seed)
         self._rng = np.random.default_rng([seed, 2])
 
     def capture(self, robot: tuple[float, float, float], stamp: float,
