@@ -9,7 +9,7 @@
     >>> twist.check(Twist(linear=Vector3("fast", 0.0, 0.0), angular=Vector3(0.0, 0.0, 0.5)))
     "field linear.x: expected float64, got str 'fast'"
 
-Needs rosbags (``pip install 'anodize[ros]'``); :meth:`RosType.idl_class` needs the
+Needs rosbags (a dependency of anodize); :meth:`RosType.idl_class` needs the
 Cyclone DDS binding. Neither is imported before a type is resolved.
 """
 

