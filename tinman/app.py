@@ -22,6 +22,7 @@ from anodize.tools.named import Finished, Prepared
 
 from .outcome import build_report
 from .settings import FAULTS, Settings, export
+from .worlds import DEFAULT_LOOK, WORLDS
 
 __all__ = ["TINMAN", "TinMan", "SYSTEM_FILE", "TinManError"]
 
@@ -58,6 +59,10 @@ class TinMan:
         parser.add_argument("--dataset", metavar="DIR",
                             help="play a recorded TUM RGB-D sequence back as the camera (default: the simulated "
                                  "camera renders the room live from the simulated robot)")
+        parser.add_argument("--world", choices=WORLDS, default=DEFAULT_LOOK,
+                            help="how the room looks to the simulated camera: easy (procedural textures made "
+                                 "for ORB, the default) or realistic (photographs, plain walls, repeated "
+                                 "patterns, flickering lamps, motion blur)")
         parser.add_argument("--planner", choices=("rrt", "astar"), default="rrt",
                             help="RRT-Connect with shortcut smoothing (default) or grid A*")
         parser.add_argument("--transport", choices=("process", "dds"), default=None,
@@ -82,8 +87,12 @@ class TinMan:
         if args.teleop:
             _check_terminal()
         out = Path(args.out)
+        world = getattr(args, "world", DEFAULT_LOOK)
+        if args.dataset is not None and world != DEFAULT_LOOK:
+            raise TinManError(f"--world {world} with --dataset: a recording is played back as it was filmed; "
+                              "--world chooses what the simulated camera renders")
         dataset = _dataset(args.dataset) if args.dataset is not None else ""
-        self.settings = Settings(out=str(out.resolve()), dataset=dataset,
+        self.settings = Settings(out=str(out.resolve()), dataset=dataset, world=world,
                                  duration=float(args.duration), paper=args.paper, teleop=args.teleop,
                                  inject=inject, groups=groups, planner=args.planner)
         shutil.rmtree(self.settings.records, ignore_errors=True)  # no record of an older run may linger

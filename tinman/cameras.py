@@ -4,7 +4,9 @@ On a real TinMan, Gazebo's camera plugin renders what the camera on the simulate
 robot sees. :class:`LiveCamera` does that: it renders the room from the robot's
 true pose (through the camera's mount, :func:`tinman.geometry.camera_pose`) and adds
 the sensor's noise (Kinect-like depth noise and dropouts, image noise). Odometry
-then tracks the robot that is really driving, so its error is the robot's.
+then tracks the robot that is really driving, so its error is the robot's. In the
+realistic world (:mod:`tinman.worlds`) the lamps flicker and the image blurs along
+the camera's motion during the exposure.
 :class:`RecordedCamera` plays a recorded TUM RGB-D sequence back instead
 (``anodize run tinman --dataset DIR``): the images then belong to that recording's
 path, not to the simulated robot.
@@ -16,7 +18,9 @@ import numpy as np
 
 from .geometry import FR1, Intrinsics, camera_pose
 from .messages import Header, Image, image_of, stamp_from_seconds
+from .sim import arc_pose
 from .world import World
+from .worlds import DEFAULT_LOOK, world_look
 
 __all__ = ["LiveCamera", "RecordedCamera", "OPTICAL_FRAME", "frame_images"]
 
@@ -36,33 +40,65 @@ class LiveCamera:
     Args:
         world: the room.
         intrinsics: the camera (freiburg1's by default, as the recorded sequences).
-        seed: the textures' seed and the noise's.
+        seed: the textures' seed and the noise's (and the lamps' flicker's).
+        look: the named world (:data:`tinman.worlds.WORLDS`): its textures, lamps and exposure.
+
+    Raises:
+        tinman.worlds.UnknownWorldError: ``look`` names no world.
+        tinman.photos.PhotoMissingError: the realistic world's photographs are not installed.
     """
 
-    def __init__(self, world: World, intrinsics: Intrinsics = FR1, seed: int = 0) -> None:
-        # The per-surface warp renderer: the ray caster's images (exact depth, the same textures),
-        # in two thirds of its time (bench/render.py). The textures are painted here: a second or two.
+    def __init__(self, world: World, intrinsics: Intrinsics = FR1, seed: int = 0, *,
+                 look: str = DEFAULT_LOOK) -> None:
+        from .lamps import FlickeringLamps
+        from .render import RoomRenderer
         from .render_warp import WarpRenderer
 
         self.intrinsics = intrinsics
-        self.renderer = WarpRenderer(world, intrinsics, seed)
+        self.look = world_look(look)
+        # The textures are painted here: a second or two.
+        self.renderer: RoomRenderer | WarpRenderer
+        if self.look.name == DEFAULT_LOOK:
+            # The per-surface warp renderer: the ray caster's images (exact depth, the same textures),
+            # in two thirds of its time (bench/render.py).
+            self.renderer = WarpRenderer(world, intrinsics, seed)
+        else:
+            # The warp renderer paints only the easy room's textures and cannot relight a frame for
+            # flickering lamps: other worlds are ray-cast.
+            self.renderer = RoomRenderer(world, intrinsics, seed, paint=self.look.paint)
+        lighting = self.renderer._atlas.lighting
+        self.lamps = (FlickeringLamps(len(lighting.lamps), seed)
+                      if self.look.flickering_lamps and lighting is not None else None)
         self._rng = np.random.default_rng([seed, 2])
+        self._first_stamp: float | None = None
 
-    def capture(self, robot: tuple[float, float, float], stamp: float,
-                blind: bool = False) -> tuple[Image, Image, np.ndarray]:
+    def capture(self, robot: tuple[float, float, float], stamp: float, blind: bool = False,
+                velocity: tuple[float, float] = (0.0, 0.0)) -> tuple[Image, Image, np.ndarray]:
         """The images the camera takes at ``stamp`` (seconds) on a robot at ``(x, y, theta)``,
-        and the camera's true pose ``T_wc`` then; ``blind``: a covered lens (black, no depth)."""
-        from .synthetic import add_depth_noise, add_image_noise
+        and the camera's true pose ``T_wc`` then; ``blind``: a covered lens (black, no depth).
+
+        ``velocity`` is the robot's ``(v, w)`` (m/s, rad/s): in a world whose camera has an
+        exposure time, the image is blurred by the motion during it (centred on ``stamp``).
+        The lamps' clock starts at the first frame's stamp.
+        """
+        from .synthetic import simulate_frame
 
         t_wc = camera_pose(*robot)
+        if self._first_stamp is None:
+            self._first_stamp = stamp
         if blind:
             k = self.intrinsics
             color, depth_image = frame_images(np.zeros((k.height, k.width, 3), np.uint8),
                                               np.zeros((k.height, k.width), np.uint16), stamp, stamp)
             return color, depth_image, t_wc
-        rgb, depth = self.renderer.render(t_wc)
-        color, depth_image = frame_images(add_image_noise(rgb, self._rng), add_depth_noise(depth, self._rng),
-                                          stamp, stamp)
+        gains = self.lamps.gains(stamp - self._first_stamp) if self.lamps is not None else None
+        shutter = None
+        exposure = self.look.exposure
+        if exposure > 0 and velocity != (0.0, 0.0):
+            shutter = (camera_pose(*arc_pose(*robot, *velocity, -exposure / 2)),
+                       camera_pose(*arc_pose(*robot, *velocity, exposure / 2)))
+        rgb, depth_raw = simulate_frame(self.renderer, t_wc, self._rng, gains, shutter)
+        color, depth_image = frame_images(rgb, depth_raw, stamp, stamp)
         return color, depth_image, t_wc
 
 

@@ -2,7 +2,7 @@
 
     tinman vo-eval DATASET [--max-frames N] [--save FILE] [--features N] [--quiet]
     tinman ate GROUNDTRUTH ESTIMATE [--offset S] [--max-difference S] [--scale F]
-    tinman generate DIR [--duration S] [--quiet]
+    tinman generate DIR [--duration S] [--world easy|realistic] [--quiet]
 
 vo-eval and generate take a minute or more over a whole sequence: they show a
 progress bar on stderr when it is a terminal (a line every 10 s in a log; none
@@ -115,6 +115,9 @@ def _parser() -> argparse.ArgumentParser:
     generate.add_argument("directory", metavar="DIR", help="where to write the sequence")
     generate.add_argument("--duration", type=_positive_float, default=30.0, metavar="S",
                           help="seconds of mission (default 30)")
+    generate.add_argument("--world", choices=("easy", "realistic"), default=None,
+                          help="the room's look: easy (procedural textures, the default) or realistic "
+                               "(photographs, plain walls, repeated patterns, flickering lamps, motion blur)")
     generate.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     generate.set_defaults(run=_generate)
     return parser
@@ -164,8 +167,9 @@ def _generate(args: argparse.Namespace) -> int:
         raise CommandError(f"synthetic sequences are not available in this build ({error})") from None
     from .progress import FrameProgress
 
+    options = {} if args.world is None else {"look": args.world}
     with FrameProgress("rendering", sys.stderr, enabled=not args.quiet) as progress:
-        path = sequences.generate(Path(args.directory), duration=args.duration, progress=progress)
+        path = sequences.generate(Path(args.directory), duration=args.duration, progress=progress, **options)
     print(f"wrote {path}")
     return EXIT_OK
 

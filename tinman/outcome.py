@@ -49,6 +49,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "duration_s": round(report.duration, 3),
         "requested_duration_s": settings.duration,
         "dataset": settings.dataset,
+        "world": settings.world if not settings.dataset else None,
         "injected": dict(settings.inject),
         **ate,
         "frames_processed": vo.get("frames_processed"),

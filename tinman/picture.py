@@ -106,23 +106,25 @@ class _RenderedFrames(_Frames):
     caption = ("Camera frames: rendered again from the simulated camera's true pose at those moments "
                "(the live camera's images are not saved; these lack its sensor noise).")
 
-    def __init__(self, stamps: np.ndarray, poses: np.ndarray, world: World, seed: int) -> None:
+    def __init__(self, stamps: np.ndarray, poses: np.ndarray, world: World, seed: int, look: str = "easy") -> None:
         super().__init__(stamps)
         self.poses = poses
         self.world = world
         self.seed = seed
+        self.look = look
 
     def image(self, index: int) -> np.ndarray:
-        rgb, _ = _renderer(self.world, self.seed).render(self.poses[index])
+        rgb, _ = _renderer(self.world, self.seed, self.look).render(self.poses[index])
         return np.asarray(rgb)
 
 
 @lru_cache(maxsize=1)
-def _renderer(world: World, seed: int) -> Any:
+def _renderer(world: World, seed: int, look: str = "easy") -> Any:
     """The simulated camera's renderer (painting its textures takes a second or so: kept)."""
     from .render import RoomRenderer
+    from .worlds import world_look
 
-    return RoomRenderer(world, FR1, seed)  # as tinman.cameras.LiveCamera's
+    return RoomRenderer(world, FR1, seed, paint=world_look(look).paint)  # as tinman.cameras.LiveCamera's
 
 
 @dataclass
@@ -195,7 +197,7 @@ def _read_run(settings: Settings, estimate: Sequence[Sequence[float]] | None, wo
         sequence = _open_sequence(settings)
         frames = _RecordedFrames(sequence) if sequence is not None else None
     elif truth_all is not None:  # the simulated camera's true path: one pose per frame it took
-        frames = _RenderedFrames(truth_all[0], truth_all[1], world, settings.seed)
+        frames = _RenderedFrames(truth_all[0], truth_all[1], world, settings.seed, settings.world)
     stamps, positions = _read_estimate(settings, estimate)
     first = (float(frames.stamps[0]) if frames is not None and len(frames.stamps)
              else float(stamps.min()) if len(stamps)

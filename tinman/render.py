@@ -9,7 +9,9 @@ between mip levels chosen from each pixel's footprint on its surface, so far and
 grazing surfaces do not shimmer; pixels where two surfaces meet are supersampled,
 so silhouettes do not crawl either. Lighting is baked into the textures
 (Lambertian: it depends only on the surface point), so a point looks the same
-from every viewpoint, as visual odometry assumes.
+from every viewpoint, as visual odometry assumes; ``render(..., lamp_gains=...)``
+relights a frame for lamps that are dimmer or brighter than the textures were lit
+with (the ratio of the two irradiances at each pixel's surface point).
 
 Speed notes: ray directions are sums of a row and a column vector (no per-pixel
 matrix product), per-surface constants are gathered with ``cv2.LUT`` from the
@@ -20,12 +22,13 @@ atlas has four channels because ``cv2.remap`` is much faster on those.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
 
 from .geometry import FR1, Intrinsics
-from .textures import MAX_SURFACES, MIP_LEVELS, Atlas, build_atlas, room_surfaces
+from .textures import MAX_SURFACES, MIP_LEVELS, Atlas, Surface, build_atlas, room_surfaces
 from .world import World
 
 __all__ = ["RoomRenderer"]
@@ -51,12 +54,16 @@ class RoomRenderer:
         world: the room and its boxes (at most 50 boxes).
         intrinsics: the pinhole camera, image size included.
         seed: the seed of the procedural textures.
+        paint: paints the textures: :func:`tinman.textures.build_atlas` (the easy room's
+            procedural ones, the default) or another function with its signature (e.g.
+            :func:`tinman.realistic.build_realistic_atlas`).
 
     Raises:
         ValueError: the world has more boxes than the renderer supports.
     """
 
-    def __init__(self, world: World, intrinsics: Intrinsics = FR1, seed: int = 0) -> None:
+    def __init__(self, world: World, intrinsics: Intrinsics = FR1, seed: int = 0, *,
+                 paint: Callable[[World, list[Surface], int], Atlas] = build_atlas) -> None:
         self.world = world
         self.intrinsics = intrinsics
         self.seed = seed
@@ -64,7 +71,9 @@ class RoomRenderer:
         if len(self.surfaces) > MAX_SURFACES:
             raise ValueError(f"the renderer supports at most {(MAX_SURFACES - 6) // 5} boxes, "
                              f"got {len(world.boxes)}")
-        self._atlas: Atlas = build_atlas(world, self.surfaces, seed)
+        self._atlas: Atlas = paint(world, self.surfaces, seed)
+        self._normal_sign = np.zeros(MAX_SURFACES, np.float32)
+        self._normal_sign[:len(self.surfaces)] = [surface.normal for surface in self.surfaces]
         k = intrinsics
         self._focal = math.sqrt(k.fx * k.fy)
         # Camera-frame ray (x, y, 1) of each pixel centre: x varies along rows, y down columns.
@@ -75,16 +84,22 @@ class RoomRenderer:
         self._box_hi = np.array([[b.x1, b.y1, b.height] for b in world.boxes]).reshape(-1, 3)
         self._room_hi = np.array([world.width, world.depth, world.wall_height])
 
-    def render(self, t_wc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def render(self, t_wc: np.ndarray, lamp_gains: Sequence[float] | np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
         """The colour and depth images seen by a camera.
 
         Args:
             t_wc: 4x4 camera-to-world pose (optical frame: x right, y down, z forward);
                 the camera must be inside the room and outside every box.
+            lamp_gains: each lamp's brightness now, one per lamp of the textures' lighting
+                (1: as the textures were lit). None (the default) or all ones: the frame as lit.
 
         Returns:
             ``(rgb, depth)``: ``uint8 (H, W, 3)`` in RGB order, and ``float32 (H, W)``
             metres along the optical axis (every pixel sees a surface: no zeros).
+
+        Raises:
+            ValueError: ``lamp_gains`` has not one gain per lamp, or the textures record no lighting.
         """
         pose = np.asarray(t_wc, dtype=np.float64)
         rotation, origin = pose[:3, :3], pose[:3, 3]
@@ -93,7 +108,28 @@ class RoomRenderer:
         depth, ids, axis = self._cast(origin, dirs, pose)
         rgba = self._shade(origin, dirs, depth, ids, axis, self._log2_stretch)
         self._antialias_borders(rgba, origin, rotation, ids)
-        return cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB), depth
+        rgb = cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB)
+        if lamp_gains is not None:
+            rgb = self._relight(rgb, origin, dirs, depth, ids, axis, np.asarray(lamp_gains, dtype=np.float64))
+        return rgb, depth
+
+    def _relight(self, rgb: np.ndarray, origin: np.ndarray, dirs: list[np.ndarray], t: np.ndarray,
+                 ids: np.ndarray, axis: np.ndarray, gains: np.ndarray) -> np.ndarray:
+        """The frame with the lamps at ``gains``: each pixel times the ratio of its surface point's
+        irradiance then to the one baked into the textures."""
+        lighting = self._atlas.lighting
+        if lighting is None:
+            raise ValueError("these textures record no lighting, so lamp_gains cannot relight them")
+        if gains.shape != (len(lighting.lamps),):
+            raise ValueError(f"expected one gain per lamp ({len(lighting.lamps)}), got {gains.tolist()}")
+        if np.all(gains == 1.0):
+            return rgb
+        point = np.stack([_F(origin[a]) + t * dirs[a] for a in range(3)])
+        sign = self._atlas.lookup(ids, self._normal_sign)
+        normal = np.stack([sign * (axis == a) for a in range(3)])
+        ratio = lighting.relit(point, normal, gains)
+        lit: np.ndarray = cv2.multiply(rgb, cv2.merge([ratio, ratio, ratio]), dtype=cv2.CV_8U)
+        return lit
 
     # -- ray casting --------------------------------------------------------------------------
 

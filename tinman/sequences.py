@@ -20,6 +20,7 @@ from .geometry import FR1, Intrinsics, camera_pose
 from .mission import simulate_mission
 from .synthetic import GENERATOR_VERSION, generate_sequence
 from .world import DEFAULT_WORLD, World
+from .worlds import DEFAULT_LOOK, world_look
 
 __all__ = ["DEFAULT_DURATION", "FRAME_RATE", "TRUTH_RATE", "FIRST_STAMP", "cache_dir", "default_sequence",
            "generate"]
@@ -40,20 +41,22 @@ def cache_dir() -> Path:
 
 
 def default_sequence(duration: float = DEFAULT_DURATION, log: Callable[[str], None] | None = None,
-                     progress: Callable[[int, int], None] | None = None) -> Path:
+                     progress: Callable[[int, int], None] | None = None, look: str = DEFAULT_LOOK) -> Path:
     """The default sequence's directory, generated on first use.
 
     Args:
         log: told (one line) when a sequence has to be generated, and when it is done.
         progress: told ``(frames rendered, frames)`` while it is generated (see :func:`generate`).
+        look: the named world filmed (:data:`tinman.worlds.WORLDS`).
     """
-    directory = cache_dir() / f"tinman-room-{duration:g}s-v{GENERATOR_VERSION}"
+    name = "room" if look == DEFAULT_LOOK else f"{look}-room"
+    directory = cache_dir() / f"tinman-{name}-{duration:g}s-v{GENERATOR_VERSION}"
     if (directory / "tinman.json").exists():
         return directory
     if log is not None:
         log(f"generating the synthetic RGB-D sequence ({duration:g} s at {FRAME_RATE:g} fps) "
             f"into {directory}; this happens once")
-    generate(directory, duration, progress=progress)
+    generate(directory, duration, progress=progress, look=look)
     if log is not None:
         log("sequence ready")
     return directory
@@ -61,19 +64,30 @@ def default_sequence(duration: float = DEFAULT_DURATION, log: Callable[[str], No
 
 def generate(directory: str | Path, duration: float = DEFAULT_DURATION, world: World = DEFAULT_WORLD,
              intrinsics: Intrinsics = FR1, seed: int = 0, workers: int = 2,
-             progress: Callable[[int, int], None] | None = None) -> Path:
+             progress: Callable[[int, int], None] | None = None, look: str = DEFAULT_LOOK) -> Path:
     """Simulate the patrol for ``duration`` seconds and film it into ``directory`` (TUM layout).
 
     ``progress`` is told ``(frames rendered, frames)`` before the first frame and after every
-    one (simulating the patrol, before that, takes a fraction of a second).
+    one (simulating the patrol, before that, takes a fraction of a second). ``look`` is the
+    named world filmed (:data:`tinman.worlds.WORLDS`); where its camera has an exposure time,
+    the camera's poses at the start and end of each exposure blur the frame.
+
+    Raises:
+        tinman.worlds.UnknownWorldError: ``look`` names no world.
     """
+    exposure = world_look(look).exposure
     trace = simulate_mission(world, duration=duration, rate=TRUTH_RATE, seed=seed)
     truth_stamps = FIRST_STAMP + np.asarray(trace.stamps, dtype=float)
     truth_poses = np.array([camera_pose(x, y, theta) for x, y, theta in trace.poses])
     frame_times = np.arange(0.0, duration - 1e-9, 1.0 / FRAME_RATE)
     frame_poses = np.array([camera_pose(*_pose_at(trace.stamps, trace.poses, t)) for t in frame_times])
+    shutter_poses = None
+    if exposure > 0:
+        shutter_poses = np.array([[camera_pose(*_pose_at(trace.stamps, trace.poses, t + side * exposure / 2))
+                                   for side in (-1, 1)] for t in frame_times])
     return generate_sequence(directory, world, FIRST_STAMP + frame_times, frame_poses, truth_stamps,
-                             truth_poses, intrinsics=intrinsics, seed=seed, workers=workers, progress=progress)
+                             truth_poses, intrinsics=intrinsics, seed=seed, workers=workers, progress=progress,
+                             look=look, shutter_poses=shutter_poses)
 
 
 def _pose_at(stamps: np.ndarray, poses: np.ndarray, t: float) -> tuple[float, float, float]:

@@ -27,6 +27,9 @@ class Settings:
         out: the folder for the report, the picture and each role's records.
         dataset: a TUM RGB-D sequence the camera plays back ("": the simulated camera renders the
             room from the simulated robot's true pose, live).
+        world: how the room looks to the simulated camera (:data:`tinman.worlds.WORLDS`):
+            ``"easy"`` (procedural textures made for ORB) or ``"realistic"`` (photographs, plain
+            walls, repeated patterns, flickering lamps, motion blur).
         duration: seconds the run lasts.
         paper: whether the run follows Fig. 16's single loop (``TinMan``).
         teleop: keyboard driving from the terminal instead of the scripted joystick.
@@ -41,6 +44,7 @@ class Settings:
 
     out: str = "out/tinman"
     dataset: str = ""
+    world: str = "easy"
     duration: float = 20.0
     paper: bool = False
     teleop: bool = False

@@ -2,29 +2,39 @@
 
 :func:`generate_sequence` renders a camera trajectory through a world with
 :class:`~tinman.render.RoomRenderer`, spoils the images as a Kinect would
-(:func:`add_depth_noise`, :func:`add_image_noise`) and writes exactly the layout
-of the TUM RGB-D benchmark, so the same code reads real and synthetic data.
+(:func:`add_depth_noise`, :func:`add_image_noise`; in the realistic world also
+:func:`add_motion_blur` and flickering lamps, see :func:`simulate_frame`) and
+writes exactly the layout of the TUM RGB-D benchmark, so the same code reads
+real and synthetic data.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import multiprocessing
 import os
 import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, NamedTuple
 
 import cv2
 import numpy as np
 
 from .geometry import DEPTH_SCALE, FR1, Intrinsics
+from .lamps import FlickeringLamps
 from .render import RoomRenderer
 from .tum import write_file_list, write_trajectory
 from .world import DEFAULT_WORLD, World
+from .worlds import DEFAULT_LOOK, world_look
 
-__all__ = ["GENERATOR_VERSION", "METADATA_FILE", "add_depth_noise", "add_image_noise", "generate_sequence"]
+if TYPE_CHECKING:
+    from .render_warp import WarpRenderer
+
+__all__ = ["GENERATOR_VERSION", "METADATA_FILE", "add_depth_noise", "add_image_noise", "add_motion_blur",
+           "image_motion", "simulate_frame", "generate_sequence"]
 
 GENERATOR_VERSION = 1
 METADATA_FILE = "tinman.json"
@@ -87,6 +97,106 @@ def add_image_noise(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return noisy.clip(0, 255).astype(np.uint8)
 
 
+def image_motion(open_pose: np.ndarray, close_pose: np.ndarray, depth_m: np.ndarray,
+                 intrinsics: Intrinsics) -> tuple[float, float]:
+    """How far the image moved while the shutter was open: the mean displacement (pixels,
+    ``(du, dv)``) of the scene points seen on a 5 x 5 grid of pixels, from where the camera
+    saw them at ``open_pose`` to where it sees them at ``close_pose`` (both ``T_wc``).
+
+    Args:
+        open_pose, close_pose: the camera's poses when the shutter opened and closed.
+        depth_m: the depth image (metres, 0 = none) seen from ``close_pose``.
+        intrinsics: the camera.
+
+    Returns:
+        ``(0.0, 0.0)`` when no grid pixel has depth.
+    """
+    k = intrinsics
+    rows, cols = depth_m.shape
+    v, u = np.meshgrid(np.linspace(0.1, 0.9, 5) * (rows - 1), np.linspace(0.1, 0.9, 5) * (cols - 1), indexing="ij")
+    z = depth_m[np.rint(v).astype(int), np.rint(u).astype(int)].astype(np.float64)
+    seen = z > 0
+    if not seen.any():
+        return 0.0, 0.0
+    u, v, z = u[seen], v[seen], z[seen]
+    camera = np.stack([(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z])
+    opened = np.linalg.inv(open_pose) @ close_pose
+    before = opened[:3, :3] @ camera + opened[:3, 3:4]
+    ahead = before[2] > 1e-3
+    if not ahead.any():
+        return 0.0, 0.0
+    du = u[ahead] - (k.fx * before[0, ahead] / before[2, ahead] + k.cx)
+    dv = v[ahead] - (k.fy * before[1, ahead] / before[2, ahead] + k.cy)
+    return float(du.mean()), float(dv.mean())
+
+
+def add_motion_blur(rgb: np.ndarray, motion: tuple[float, float]) -> np.ndarray:
+    """The image smeared evenly along ``motion`` (pixels ``(du, dv)`` the image moved during the
+    exposure), centred: it shows the scene as at mid-exposure.
+
+    One straight line kernel for the whole image (``cv2.filter2D``): exact for a camera that
+    turns about its vertical axis, an approximation where translation makes near things move
+    more than far ones.
+
+    Args:
+        rgb: uint8 ``(H, W, 3)``.
+        motion: the displacement in pixels.
+
+    Returns:
+        The blurred image; ``rgb`` itself (unchanged) when the motion is under half a pixel.
+    """
+    length = math.hypot(*motion)
+    if length < 0.5:
+        return rgb
+    half = math.ceil(length / 2) + 1
+    size = 2 * half + 1
+    kernel = np.zeros((size, size), np.float32)
+    # Splat points along the segment bilinearly, four per pixel of length.
+    steps = np.linspace(-0.5, 0.5, max(2, math.ceil(4 * length) + 1))
+    x = half + steps * motion[0]
+    y = half + steps * motion[1]
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
+    for dy, wy in ((0, 1 - fy), (1, fy)):
+        for dx, wx in ((0, 1 - fx), (1, fx)):
+            np.add.at(kernel, (y0 + dy, x0 + dx), wy * wx)
+    kernel /= kernel.sum()
+    # filter2D correlates; the kernel is point-symmetric, so that is the convolution.
+    blurred: np.ndarray = cv2.filter2D(rgb, -1, kernel, borderType=cv2.BORDER_REFLECT_101)
+    return blurred
+
+
+def simulate_frame(renderer: RoomRenderer | WarpRenderer, t_wc: np.ndarray, rng: np.random.Generator,
+                   lamp_gains: np.ndarray | None = None,
+                   shutter: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """What the simulated Kinect delivers for one frame: the rendered view (relit for the lamps'
+    ``lamp_gains``, blurred by the camera's motion from ``shutter[0]`` to ``shutter[1]``, the
+    poses when the shutter opened and closed), then image and depth noise.
+
+    Args:
+        renderer: renders the room (only the ray caster can relight it for ``lamp_gains``).
+        t_wc: the camera's pose (at mid-exposure).
+        rng: the noise's random generator.
+        lamp_gains: each lamp's brightness (None: as the textures were lit).
+        shutter: the camera's poses at the start and end of the exposure (None: no blur).
+
+    Returns:
+        ``(rgb, depth)``: uint8 ``(H, W, 3)`` and TUM's uint16 depth (5000 per metre, 0 = none).
+
+    Raises:
+        ValueError: ``lamp_gains`` for a renderer that cannot relight.
+    """
+    if lamp_gains is None:
+        rgb, depth = renderer.render(t_wc)
+    elif isinstance(renderer, RoomRenderer):
+        rgb, depth = renderer.render(t_wc, lamp_gains)
+    else:
+        raise ValueError(f"{type(renderer).__name__} cannot relight a frame for lamp gains; use RoomRenderer")
+    if shutter is not None:
+        rgb = add_motion_blur(rgb, image_motion(shutter[0], shutter[1], depth, renderer.intrinsics))
+    return add_image_noise(rgb, rng), add_depth_noise(depth, rng)
+
+
 def _standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
     """Standard normal float32 samples, drawn by OpenCV (three times faster than numpy)
     from a seed taken from ``rng``, so the result still depends only on ``rng``."""
@@ -101,7 +211,8 @@ def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequenc
                       frame_poses: Sequence[np.ndarray] | np.ndarray, truth_stamps: Sequence[float] | np.ndarray,
                       truth_poses: Sequence[np.ndarray] | np.ndarray, intrinsics: Intrinsics = FR1,
                       seed: int = 0, workers: int = 2, world_name: str | None = None,
-                      progress: Callable[[int, int], None] | None = None) -> Path:
+                      progress: Callable[[int, int], None] | None = None, look: str = DEFAULT_LOOK,
+                      shutter_poses: Sequence[np.ndarray] | np.ndarray | None = None) -> Path:
     """Render and write a TUM RGB-D sequence.
 
     Writes ``rgb/<stamp>.png`` (8-bit colour), ``depth/<stamp>.png`` (16-bit,
@@ -125,12 +236,19 @@ def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequenc
         world_name: recorded in ``tinman.json``; defaults to ``"DEFAULT_WORLD"`` or ``"custom"``.
         progress: told ``(frames written, frames)`` before the first frame and after every one
             (e.g. a :class:`tinman.progress.FrameProgress`).
+        look: the named world (:data:`tinman.worlds.WORLDS`): its textures, and whether its lamps
+            flicker (their time is the frame's stamp minus the first frame's). Recorded in
+            ``tinman.json``.
+        shutter_poses: per frame, the camera's poses when the shutter opened and closed
+            (``(N, 2, 4, 4)``), for motion blur; None: a still shutter. Used only when the
+            world's camera has an exposure time.
 
     Returns:
         The sequence directory.
 
     Raises:
         ValueError: stamps and poses differ in number, or stamps are not increasing.
+        tinman.worlds.UnknownWorldError: ``look`` names no world.
     """
     target = Path(directory)
     stamps = np.asarray(frame_stamps, dtype=float)
@@ -140,6 +258,10 @@ def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequenc
                          f"{len(truth_stamps)} truth stamps, {len(truth_poses)} truth poses")
     if len(stamps) > 1 and np.any(np.diff(stamps) <= 0):
         raise ValueError("frame stamps must be strictly increasing")
+    blur = world_look(look).exposure > 0 and shutter_poses is not None
+    shutters = np.asarray(shutter_poses, dtype=float).reshape(-1, 2, 4, 4) if blur else None
+    if shutters is not None and len(shutters) != len(stamps):
+        raise ValueError(f"shutter poses and frames differ in number: {len(shutters)} and {len(stamps)}")
     offsets = np.random.default_rng([seed, 2]).uniform(0.002, 0.012, len(stamps))
     offsets *= np.where(np.random.default_rng([seed, 3]).random(len(stamps)) < 0.5, -1.0, 1.0)
     depth_stamps = stamps + offsets
@@ -149,17 +271,18 @@ def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequenc
     try:
         (partial / "rgb").mkdir(parents=True)
         (partial / "depth").mkdir()
-        jobs = [(i, float(stamps[i]), float(depth_stamps[i]), poses[i]) for i in range(len(stamps))]
+        jobs = [_Job(i, float(stamps[i]), float(depth_stamps[i]), poses[i], float(stamps[i] - stamps[0]),
+                     None if shutters is None else (shutters[i, 0], shutters[i, 1])) for i in range(len(stamps))]
         report = progress if progress is not None else _ignore
         report(0, len(jobs))
         if workers > 1 and len(jobs) > _POOL_THRESHOLD:
             context = multiprocessing.get_context("spawn")
             with context.Pool(workers, initializer=_start_worker,
-                              initargs=(world, intrinsics, seed, str(partial))) as pool:
+                              initargs=(world, intrinsics, seed, str(partial), 1, look)) as pool:
                 for done, _ in enumerate(pool.imap_unordered(_render_job, jobs, chunksize=8), 1):
                     report(done, len(jobs))
         else:
-            _start_worker(world, intrinsics, seed, str(partial), threads=None)
+            _start_worker(world, intrinsics, seed, str(partial), threads=None, look=look)
             for done, job in enumerate(jobs, 1):
                 _render_job(job)
                 report(done, len(jobs))
@@ -178,6 +301,8 @@ def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequenc
             "depth_scale": DEPTH_SCALE,
             "frames": len(stamps),
             "seed": seed,
+            "look": look,
+            "motion_blur": shutters is not None,
         }
         (partial / METADATA_FILE).write_text(json.dumps(metadata, indent=2) + "\n", encoding="utf-8")
         _replace(partial, target)
@@ -202,34 +327,49 @@ def _replace(partial: Path, target: Path) -> None:
         partial.rename(target)
 
 
+class _Job(NamedTuple):
+    """One frame to render and write."""
+
+    frame: int
+    stamp: float
+    depth_stamp: float
+    pose: np.ndarray
+    time: float  # seconds since the first frame (the lamps' clock)
+    shutter: tuple[np.ndarray, np.ndarray] | None
+
+
 # One renderer per worker process (built once: painting the textures takes a second or two).
 _worker: dict[str, object] = {}
 
 
 def _start_worker(world: World, intrinsics: Intrinsics, seed: int, directory: str,
-                  threads: int | None = 1) -> None:
+                  threads: int | None = 1, look: str = DEFAULT_LOOK) -> None:
     if threads is not None:
         cv2.setNumThreads(threads)  # the pool already keeps every core busy
-    key = (world, intrinsics, seed)
+    key = (world, intrinsics, seed, look)
     if _worker.get("key") != key:
-        _worker["renderer"] = RoomRenderer(world, intrinsics, seed)
+        kind = world_look(look)
+        renderer = RoomRenderer(world, intrinsics, seed, paint=kind.paint)
+        _worker["renderer"] = renderer
+        lighting = renderer._atlas.lighting
+        _worker["lamps"] = (FlickeringLamps(len(lighting.lamps), seed)
+                            if kind.flickering_lamps and lighting is not None else None)
         _worker["key"] = key
     _worker["directory"] = Path(directory)
     _worker["seed"] = seed
 
 
-def _render_job(job: tuple[int, float, float, np.ndarray]) -> None:
-    index, stamp, depth_stamp, pose = job
+def _render_job(job: _Job) -> None:
     renderer: RoomRenderer = _worker["renderer"]  # type: ignore[assignment]
+    lamps: FlickeringLamps | None = _worker["lamps"]  # type: ignore[assignment]
     directory: Path = _worker["directory"]  # type: ignore[assignment]
-    rng = np.random.default_rng([int(_worker["seed"]), 1, index])  # type: ignore[call-overload]
-    rgb, depth = renderer.render(pose)
-    colour = add_image_noise(rgb, rng)
-    depth_png = add_depth_noise(depth, rng)
+    rng = np.random.default_rng([int(_worker["seed"]), 1, job.frame])  # type: ignore[call-overload]
+    gains = lamps.gains(job.time) if lamps is not None else None
+    colour, depth_png = simulate_frame(renderer, job.pose, rng, gains, job.shutter)
     # Noisy images hardly compress: Huffman coding alone is as small and much faster.
     png = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
-    _write_png(directory / "rgb" / f"{stamp:.6f}.png", cv2.cvtColor(colour, cv2.COLOR_RGB2BGR), png)
-    _write_png(directory / "depth" / f"{depth_stamp:.6f}.png", depth_png, png)
+    _write_png(directory / "rgb" / f"{job.stamp:.6f}.png", cv2.cvtColor(colour, cv2.COLOR_RGB2BGR), png)
+    _write_png(directory / "depth" / f"{job.depth_stamp:.6f}.png", depth_png, png)
 
 
 def _write_png(path: Path, image: np.ndarray, params: list[int]) -> None:

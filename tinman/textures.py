@@ -24,7 +24,8 @@ import numpy as np
 
 from .world import World
 
-__all__ = ["MAX_SURFACES", "MIP_LEVELS", "Surface", "Atlas", "room_surfaces", "build_atlas"]
+__all__ = ["MAX_SURFACES", "MIP_LEVELS", "TEXEL", "Surface", "Atlas", "Lighting", "room_surfaces", "room_lighting",
+           "build_atlas", "pack_atlas", "picture_shape", "picture_coordinates", "light_picture"]
 
 MIP_LEVELS = 7
 MAX_SURFACES = 256  # surface ids are uint8
@@ -32,7 +33,8 @@ _MARGIN = 2 ** (MIP_LEVELS - 1)  # texels around each picture: one texel at the 
 _ATLAS_WIDTH = 4096
 
 # Texel sizes (metres): fine where the camera can come close, coarse where it never does.
-_TEXEL = {"wall": 0.004, "box": 0.004, "top": 0.004, "floor": 0.006, "ceiling": 0.010}
+TEXEL = {"wall": 0.004, "box": 0.004, "top": 0.004, "floor": 0.006, "ceiling": 0.010}
+_TEXEL = TEXEL
 # Smallest dead-leaves shape (metres) per kind.
 _SMALLEST_SHAPE = {"wall": 0.03, "box": 0.03, "top": 0.04, "floor": 0.05, "ceiling": 0.12}
 _TEXT_CHARS = "ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789#&%?"
@@ -84,12 +86,79 @@ def room_surfaces(world: World) -> list[Surface]:
     return surfaces
 
 
+@dataclass(frozen=True)
+class Lighting:
+    """The lamps the textures are lit by: Lambertian point lamps plus ambient light.
+
+    The irradiance of a surface point is ``ambient + sum_i gain_i * strength * cos_i *
+    min(1, reach / d_i^2)``, ``cos_i`` the cosine of the angle between the surface normal
+    and the direction to lamp ``i`` (0 behind the surface), ``d_i`` the distance to it
+    (metres). The textures are lit with every gain 1; a renderer can relight a frame
+    with other gains (lamps that dim or flicker) by the ratio of the two irradiances.
+
+    Attributes:
+        lamps: lamp positions ``(x, y, z)`` in metres.
+        ambient, strength: the irradiance of ambient light and a lamp's at full reach.
+        reach: square metres: a lamp is at full strength up to ``sqrt(reach)`` metres away.
+    """
+
+    lamps: tuple[tuple[float, float, float], ...]
+    ambient: float = 0.55
+    strength: float = 0.45
+    reach: float = 4.0
+
+    def irradiance(self, point: np.ndarray, normal: np.ndarray, gains: np.ndarray | None = None) -> np.ndarray:
+        """The irradiance at surface points.
+
+        Args:
+            point: ``(3, ...)`` world coordinates of the points.
+            normal: ``(3,)`` the unit normal of them all, or ``(3, ...)`` one per point.
+            gains: each lamp's brightness (1 when omitted).
+
+        Returns:
+            The irradiance, shape ``point.shape[1:]``, in ``point``'s float type.
+        """
+        total = np.full(point.shape[1:], self.ambient, point.dtype)
+        for i, term in enumerate(self.lamp_terms(point, normal)):
+            total += term if gains is None else point.dtype.type(gains[i]) * term
+        return total
+
+    def relit(self, point: np.ndarray, normal: np.ndarray, gains: np.ndarray) -> np.ndarray:
+        """How much brighter (> 1) or darker surface points are with the lamps at ``gains`` than
+        as the textures were lit: the ratio of the two irradiances (arguments as :meth:`irradiance`)."""
+        dtype = point.dtype.type
+        lit = np.full(point.shape[1:], self.ambient, point.dtype)
+        nominal = lit.copy()
+        for i, term in enumerate(self.lamp_terms(point, normal)):
+            nominal += term
+            lit += dtype(gains[i]) * term
+        ratio: np.ndarray = lit / nominal
+        return ratio
+
+    def lamp_terms(self, point: np.ndarray, normal: np.ndarray) -> list[np.ndarray]:
+        """Each lamp's irradiance at full brightness (arguments as :meth:`irradiance`)."""
+        dtype = point.dtype.type
+        shape = (3, *([1] * (point.ndim - 1)))
+        normal = normal.reshape(shape) if normal.ndim == 1 else normal
+        terms = []
+        for lamp in self.lamps:
+            to_lamp = np.asarray(lamp, point.dtype).reshape(shape) - point
+            distance = np.sqrt((to_lamp ** 2).sum(axis=0))
+            # A point right at a lamp (a box top touching it) would divide 0 by 0.
+            distance = np.maximum(distance, dtype(1e-3))
+            cosine = np.clip((normal * to_lamp).sum(axis=0) / distance, dtype(0.0), dtype(1.0))
+            terms.append(dtype(self.strength) * cosine * np.minimum(dtype(1.0), dtype(self.reach) / distance ** 2))
+        return terms
+
+
 @dataclass
 class Atlas:
     """The packed, mip-mapped pictures and, per surface id, the map from in-plane
     coordinates to level-0 atlas texels: ``col = h * scale_h + offset_h``, likewise rows.
 
     The per-surface tables have ``MAX_SURFACES`` entries, for :meth:`lookup`.
+    ``lighting`` is the lighting baked into the pictures (None: unknown, so a renderer
+    cannot relight them).
     """
 
     image: np.ndarray          # uint8 (rows, 1.5 * width, 4), RGBA (A unused)
@@ -99,6 +168,7 @@ class Atlas:
     scale_v: np.ndarray
     offset_v: np.ndarray
     log2_inv_texel: np.ndarray
+    lighting: Lighting | None = None
 
     @staticmethod
     def lookup(ids: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -147,15 +217,66 @@ _LEVEL_SCALE[:MIP_LEVELS] = [2.0 ** -k for k in range(MIP_LEVELS)]
 _LEVEL_ROW = np.array([0.0] + [1.0 - 2.0 ** (1 - k) for k in range(1, MIP_LEVELS)], dtype=np.float32)
 
 
+def room_lighting(world: World, ambient: float = 0.55, strength: float = 0.45) -> Lighting:
+    """Two lamps 20 cm under the ceiling, a third of the room's length from each end."""
+    z = world.wall_height - 0.2
+    return Lighting(((world.width / 3, world.depth / 2, z), (2 * world.width / 3, world.depth / 2, z)),
+                    ambient, strength)
+
+
 def build_atlas(world: World, surfaces: list[Surface], seed: int) -> Atlas:
     """Paint every surface of ``world`` (deterministically from ``seed``) and pack the atlas."""
-    # Two lamps under the ceiling, a third of the room's length from each end.
-    lamps = np.array([[world.width / 3, world.depth / 2, world.wall_height - 0.2],
-                      [2 * world.width / 3, world.depth / 2, world.wall_height - 0.2]])
+    lighting = room_lighting(world)
+    lamps = np.array(lighting.lamps)
     pictures = []
     for index, surface in enumerate(surfaces):
         rng = np.random.default_rng([seed, index])
         pictures.append(_picture(surface, rng, lamps))
+    return pack_atlas(surfaces, pictures, lighting)
+
+
+def picture_shape(surface: Surface) -> tuple[int, int]:
+    """``(rows, cols)`` of a surface's picture in the atlas, its margin included."""
+    texel = TEXEL[surface.kind]
+    extent_h = surface.h_range[1] - surface.h_range[0]
+    extent_v = surface.v_range[1] - surface.v_range[0]
+    return (_round_up(math.ceil(extent_v / texel) + 2 * _MARGIN, _MARGIN),
+            _round_up(math.ceil(extent_h / texel) + 2 * _MARGIN, _MARGIN))
+
+
+def picture_coordinates(surface: Surface) -> tuple[np.ndarray, np.ndarray]:
+    """The in-plane coordinates (metres; see :class:`Surface`) of the texel centres of a surface's
+    picture: ``h`` per column and ``v`` per row, margins included (beyond the surface there).
+
+    Pictures read upright and unmirrored from the visible side, so on a wall ``v`` (height)
+    falls down the rows, and an image pasted over a block of rows and columns in its own
+    order appears upright to a viewer in the room.
+    """
+    rows, cols = picture_shape(surface)
+    texel = TEXEL[surface.kind]
+    sign_h, sign_v = _orientation(surface)
+    ref_h = surface.h_range[0] if sign_h > 0 else surface.h_range[1]
+    ref_v = surface.v_range[0] if sign_v > 0 else surface.v_range[1]
+    return (ref_h + sign_h * (np.arange(cols) + 0.5 - _MARGIN) * texel,
+            ref_v + sign_v * (np.arange(rows) + 0.5 - _MARGIN) * texel)
+
+
+def light_picture(picture: np.ndarray, surface: Surface, lighting: Lighting) -> np.ndarray:
+    """An unlit picture of a surface (albedo, 0-255, float or uint8) lit by ``lighting``: uint8."""
+    return _light(picture, surface, TEXEL[surface.kind], lighting)
+
+
+def pack_atlas(surfaces: list[Surface], pictures: list[np.ndarray], lighting: Lighting | None = None) -> Atlas:
+    """Pack lit pictures (uint8 RGB of :func:`picture_shape` each, in surface id order, upright as
+    seen from the visible side) into a mip-mapped atlas.
+
+    Raises:
+        ValueError: a picture does not have its surface's shape.
+    """
+    for surface, picture in zip(surfaces, pictures, strict=True):
+        if picture.shape != (*picture_shape(surface), 3) or picture.dtype != np.uint8:
+            raise ValueError(f"the picture of {surface.name} is {picture.dtype} {picture.shape}; "
+                             f"expected uint8 {(*picture_shape(surface), 3)}")
     # Shelf packing: tallest first; every cell starts at a multiple of the margin so
     # each halving keeps cells on whole texels.
     order = sorted(range(len(surfaces)), key=lambda i: -pictures[i].shape[0])
@@ -192,7 +313,7 @@ def build_atlas(world: World, surfaces: list[Surface], seed: int) -> Atlas:
         scale_v[i] = sign_v / texel
         offset_v[i] = r + _MARGIN - 0.5 - sign_v * ref_v / texel
         log2_inv[i] = -math.log2(texel)
-    return Atlas(image, (rows0, _ATLAS_WIDTH), scale_h, offset_h, scale_v, offset_v, log2_inv)
+    return Atlas(image, (rows0, _ATLAS_WIDTH), scale_h, offset_h, scale_v, offset_v, log2_inv, lighting)
 
 
 def _round_up(n: int, multiple: int) -> int:
@@ -215,10 +336,7 @@ def _orientation(surface: Surface) -> tuple[int, int]:
 def _picture(surface: Surface, rng: np.random.Generator, lamps: np.ndarray) -> np.ndarray:
     """The painted, lit picture of one surface with its margin: uint8 (rows, cols, 3)."""
     texel = _TEXEL[surface.kind]
-    extent_h = surface.h_range[1] - surface.h_range[0]
-    extent_v = surface.v_range[1] - surface.v_range[0]
-    rows = _round_up(math.ceil(extent_v / texel) + 2 * _MARGIN, _MARGIN)
-    cols = _round_up(math.ceil(extent_h / texel) + 2 * _MARGIN, _MARGIN)
+    rows, cols = picture_shape(surface)
     picture = _paint(rng, rows, cols, texel, surface.kind)
     return _light(picture, surface, texel, lamps)
 
@@ -329,8 +447,13 @@ def _text(rng: np.random.Generator, canvas: np.ndarray, texel: float, density: f
                     max(1, round(scale * 2.5)), cv2.LINE_AA)
 
 
-def _light(picture: np.ndarray, surface: Surface, texel: float, lamps: np.ndarray) -> np.ndarray:
-    """Multiply by the irradiance of two ceiling lamps and ambient light (Lambertian)."""
+def _light(picture: np.ndarray, surface: Surface, texel: float, lamps: np.ndarray | Lighting) -> np.ndarray:
+    """Multiply by the irradiance of the lamps and ambient light (Lambertian); ``lamps`` positions
+    (an ``(N, 3)`` array: the default room's lamp model) or a whole :class:`Lighting`."""
+    if isinstance(lamps, Lighting):
+        lighting = lamps
+    else:
+        lighting = Lighting(tuple((float(x), float(y), float(z)) for x, y, z in lamps))
     rows, cols = picture.shape[:2]
     step = 16  # irradiance is smooth: compute it on a coarse grid and interpolate
     sign_h, sign_v = _orientation(surface)
@@ -348,15 +471,7 @@ def _light(picture: np.ndarray, surface: Surface, texel: float, lamps: np.ndarra
     point[in_plane[1]] = vv
     normal = np.zeros(3)
     normal[surface.axis] = surface.normal
-    irradiance = np.full(hh.shape, 0.55)
-    for lamp in lamps:
-        to_lamp = lamp[:, None, None] - point
-        distance = np.sqrt((to_lamp ** 2).sum(axis=0))
-        # A point right at a lamp (a box top touching it) would divide 0 by 0.
-        distance = np.maximum(distance, 1e-3)
-        cosine = np.clip(np.tensordot(normal, to_lamp, axes=1) / distance, 0.0, 1.0)
-        irradiance += 0.45 * cosine * np.minimum(1.0, 4.0 / distance ** 2)
+    irradiance = lighting.irradiance(point, normal)
     factor = cv2.resize(irradiance.astype(np.float32), (hh.shape[1] * step, hh.shape[0] * step),
                         interpolation=cv2.INTER_LINEAR)[:rows, :cols]
     return np.clip(picture * factor[..., None], 0, 255).astype(np.uint8)
-

@@ -81,6 +81,9 @@ class VisualOdometry:
         max_failures: after this many failed frames in a row, restart from the current
             frame as a keyframe at the last pose (the view has moved on).
         pyramid_levels, scale_factor, fast_threshold: ORB's detector settings.
+        low_contrast_threshold: where ``fast_threshold`` finds fewer than half of ``features``
+            (plain walls, dim light, blur), detect again with this lower FAST threshold, as
+            ORB-SLAM does (its 20 and 7); None: never.
         use_depth: refine with this frame's depth readings too (else reprojection only,
             with ``cv2.solvePnPRefineLM``).
         pixel_sigma: the feature position noise assumed by the refinement, in pixels.
@@ -96,6 +99,7 @@ class VisualOdometry:
                  min_depth: float = 0.3, max_depth: float = 6.0, reprojection_error: float = 2.0,
                  ratio: float = 0.8, search_radius: float = 20.0, max_failures: int = 3,
                  pyramid_levels: int = 2, scale_factor: float = 1.3, fast_threshold: int = 20,
+                 low_contrast_threshold: int | None = 7,
                  use_depth: bool = True, pixel_sigma: float = 2.0) -> None:
         self.intrinsics = intrinsics
         self.camera_matrix = intrinsics.matrix()
@@ -116,6 +120,11 @@ class VisualOdometry:
         self.keyframes = 0
         self._orb = cv2.ORB.create(nfeatures=features, scaleFactor=scale_factor, nlevels=pyramid_levels,
                                    fastThreshold=fast_threshold)
+        self._low_contrast_orb = None
+        if low_contrast_threshold is not None and low_contrast_threshold < fast_threshold:
+            self._low_contrast_orb = cv2.ORB.create(nfeatures=features, scaleFactor=scale_factor,
+                                                    nlevels=pyramid_levels, fastThreshold=low_contrast_threshold)
+        self._enough_features = features // 2
         self._matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
         self._keyframe: _Keyframe | None = None
         self._relative = np.eye(4)  # T_kc of the last frame tracked
@@ -144,6 +153,8 @@ class VisualOdometry:
         # features are only useful if they can match a keyframe's.
         mask = ((depth_m >= self.min_depth) & (depth_m <= self.max_depth)).view(np.uint8)
         keypoints, descriptors = self._orb.detectAndCompute(gray, mask)
+        if len(keypoints) < self._enough_features and self._low_contrast_orb is not None:
+            keypoints, descriptors = self._low_contrast_orb.detectAndCompute(gray, mask)
         pixels = np.asarray(cv2.KeyPoint.convert(keypoints) if keypoints else (), dtype=np.float32).reshape(-1, 2)
         index = self.frames
         self.frames += 1

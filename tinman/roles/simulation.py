@@ -48,7 +48,7 @@ def gazebo(ep: Endpoint) -> None:
     trace: list[list[float]] = []
     try:
         while True:
-            if settings.paper and not film.shoot(ep, robot.pose()):
+            if settings.paper and not film.shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
             twist: Twist = ep.recv("Move").payload
             x, y, theta = robot.step(twist.linear.x, twist.angular.z, period)
@@ -71,9 +71,10 @@ class _Robot:
         with self._lock:
             return self.drive.step(v, w, dt)
 
-    def pose(self) -> tuple[float, float, float]:
+    def state(self) -> tuple[tuple[float, float, float], tuple[float, float]]:
+        """The pose and the velocity ``(v, w)``, read together."""
         with self._lock:
-            return self.drive.pose
+            return self.drive.pose, self.drive.velocity
 
 
 class _Film:
@@ -86,7 +87,7 @@ class _Film:
             self.recorded = RecordedCamera(settings.dataset)
             self.period = 1.0 / self.recorded.frame_rate
         else:
-            self.live = LiveCamera(DEFAULT_WORLD, seed=settings.seed)
+            self.live = LiveCamera(DEFAULT_WORLD, seed=settings.seed, look=settings.world)
             self.period = 1.0 / settings.camera_rate
         self.start = self.begun = time.monotonic()
         self.taken = self.skipped = 0
@@ -100,8 +101,10 @@ class _Film:
         index = self.taken + self.skipped
         return self.start + self.recorded.offset(index) if index < len(self.recorded) else None
 
-    def shoot(self, ep: Endpoint, robot: tuple[float, float, float]) -> bool:
-        """Take the next frame when it is due and hand it to the Camera; False once a recording is over."""
+    def shoot(self, ep: Endpoint, robot: tuple[float, float, float],
+              velocity: tuple[float, float] = (0.0, 0.0)) -> bool:
+        """Take the next frame when it is due and hand it to the Camera (the robot's velocity blurs
+        it in the realistic world); False once a recording is over."""
         due = self.due()
         if due is None:
             return False
@@ -111,7 +114,8 @@ class _Film:
         else:
             assert self.live is not None
             stamp = time.time()  # a camera stamps its frames with the time they were taken
-            color, depth, t_wc = self.live.capture(robot, stamp, blind=blinded("Gazebo", time.monotonic() - self.begun))
+            color, depth, t_wc = self.live.capture(robot, stamp, blind=blinded("Gazebo", time.monotonic() - self.begun),
+                                                   velocity=velocity)
             self.stamps.append(stamp)
             self.poses.append(t_wc)
         ep.send("Camera", "color", color)
@@ -134,14 +138,15 @@ class _Film:
 
     def record(self) -> dict[str, object]:
         return {"camera_frames": self.taken, "camera_frames_skipped": self.skipped,
-                "camera": "live" if self.live is not None else "recorded", "camera_rate": 1.0 / self.period}
+                "camera": "live" if self.live is not None else "recorded", "camera_rate": 1.0 / self.period,
+                "world": self.live.look.name if self.live is not None else None}
 
 
 def _run_camera(ep: Endpoint, robot: _Robot, film: _Film, settings: Settings) -> None:
     try:
         while True:
             film.skip_late()
-            if not film.shoot(ep, robot.pose()):
+            if not film.shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera stays silent until the run stops
     except (RoleStopped, PeerFailedError):  # the run stops, or perception is gone: the robot drives on
         pass
