@@ -149,7 +149,7 @@ class RunReport:
             with messages in flight).
         high_water: per channel, the most messages that waited in it at once (sent, not yet
             received), where the transport can tell: channels between threads of one
-            process and DDS channels (to within a credit); not pipes between processes,
+            process and DDS channels (to within a credit or two); not pipes between processes,
             whose kernel buffer (64 KiB) bounds them.
         capacities: per channel given a capacity, that capacity (its sender waits while
             that many messages wait).
