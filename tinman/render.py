@@ -31,7 +31,7 @@ from .geometry import FR1, Intrinsics
 from .textures import MAX_SURFACES, MIP_LEVELS, Atlas, Surface, build_atlas, room_surfaces
 from .world import World
 
-__all__ = ["RoomRenderer"]
+__all__ = ["RoomRenderer", "painted_surfaces"]
 
 # Sub-pixel offsets for supersampling the pixels on surface borders (a rotated grid).
 _SUBSAMPLES = np.array([[-0.375, -0.125], [0.125, -0.375], [0.375, 0.125], [-0.125, 0.375]],
@@ -41,6 +41,20 @@ _F = np.float32
 # error 4.3 levels against 9.2 at 0 and 15 without mip-mapping, measured over four views
 # of a test room); -1 is as close but starts to alias, and shimmer would hurt tracking.
 _LEVEL_BIAS = -0.75
+
+
+def painted_surfaces(world: World, seed: int, paint: Callable[[World, list[Surface], int], Atlas] = build_atlas,
+                     ) -> tuple[list[Surface], Atlas]:
+    """The room's surfaces and their textures, painted once from ``seed``: what every renderer
+    samples.
+
+    Raises:
+        ValueError: the world has more boxes than the renderers support.
+    """
+    surfaces = room_surfaces(world)
+    if len(surfaces) > MAX_SURFACES:
+        raise ValueError(f"the renderer supports at most {(MAX_SURFACES - 6) // 5} boxes, got {len(world.boxes)}")
+    return surfaces, paint(world, surfaces, seed)
 
 
 class RoomRenderer:
@@ -67,11 +81,7 @@ class RoomRenderer:
         self.world = world
         self.intrinsics = intrinsics
         self.seed = seed
-        self.surfaces = room_surfaces(world)
-        if len(self.surfaces) > MAX_SURFACES:
-            raise ValueError(f"the renderer supports at most {(MAX_SURFACES - 6) // 5} boxes, "
-                             f"got {len(world.boxes)}")
-        self._atlas: Atlas = paint(world, self.surfaces, seed)
+        self.surfaces, self._atlas = painted_surfaces(world, seed, paint)
         self._normal_sign = np.zeros(MAX_SURFACES, np.float32)
         self._normal_sign[:len(self.surfaces)] = [surface.normal for surface in self.surfaces]
         k = intrinsics

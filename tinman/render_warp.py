@@ -40,8 +40,11 @@ import cv2
 import numpy as np
 
 from .geometry import FR1, Intrinsics
-from .render import _LEVEL_BIAS  # the ray caster's mip bias: both renderers must pick the same levels
-from .textures import MAX_SURFACES, MIP_LEVELS, Atlas, Surface, build_atlas, room_surfaces
+from .render import (
+    _LEVEL_BIAS,  # the ray caster's mip bias: both renderers must pick the same levels
+    painted_surfaces,
+)
+from .textures import MAX_SURFACES, MIP_LEVELS, Atlas, Surface
 from .world import World
 
 __all__ = ["NEAR_PLANE", "WarpRenderer", "clip_to_near_plane"]
@@ -89,11 +92,7 @@ class WarpRenderer:
         self.world = world
         self.intrinsics = intrinsics
         self.seed = seed
-        self.surfaces = room_surfaces(world)
-        if len(self.surfaces) > MAX_SURFACES:
-            raise ValueError(f"the renderer supports at most {(MAX_SURFACES - 6) // 5} boxes, "
-                             f"got {len(world.boxes)}")
-        self._atlas: Atlas = build_atlas(world, self.surfaces, seed)
+        self.surfaces, self._atlas = painted_surfaces(world, seed)
         self._faces = [_face(i, s, self._atlas) for i, s in enumerate(self.surfaces)]
         k = intrinsics
         self._k_inverse = np.array([[1 / k.fx, 0.0, -k.cx / k.fx], [0.0, 1 / k.fy, -k.cy / k.fy], [0.0, 0.0, 1.0]])
