@@ -47,7 +47,6 @@ import argparse
 import datetime
 import importlib.metadata
 import itertools
-import json
 import multiprocessing
 import os
 import platform
@@ -69,7 +68,7 @@ os.environ["PYTHONPATH"] = os.pathsep.join(
 
 import dds_roles as roles  # noqa: E402
 import numpy as np  # noqa: E402
-from runs import bench_env  # noqa: E402
+from runs import bench_env, print_table, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import System  # noqa: E402
@@ -236,17 +235,6 @@ def table(results: dict[str, dict[str, Any]]) -> list[list[str]]:
     return rows
 
 
-def print_table(rows: list[list[str]]) -> None:
-    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    for k, row in enumerate(rows):
-        cells = [cell.ljust(w) if i in (0, 5, 6) else cell.rjust(w)
-                 for i, (cell, w) in enumerate(zip(row, widths, strict=True))]
-        print("| " + " | ".join(cells) + " |")
-        if k == 0:
-            print("|" + "|".join(("-" * (w + 1) + ":") if i not in (0, 5, 6) else "-" * (w + 2)
-                                 for i, w in enumerate(widths)) + "|")
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -280,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
           f"median of {args.repeat}; {args.messages:,} messages, {args.rounds:,} round trips "
           f"(after {args.warmup:,}), {args.frames:,} frames per run")
     print()
-    print_table(rows)
+    print_table(rows, (0, 5, 6))
 
     document = {
         "benchmark": "dds",
@@ -294,9 +282,7 @@ def main(argv: list[str] | None = None) -> int:
         "table": rows,
         **results,
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    print(f"\nwrote {args.json} ({time.monotonic() - started:.0f} s)")
+    write_results(args.json, document, started)
     return 0
 
 

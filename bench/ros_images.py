@@ -75,7 +75,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402  # ros_peer reports a missing compiler or Fast DDS as a pytest skip
 import ros_images_roles as roles  # noqa: E402
 from ros_peer import finish_peer, ros_peer_binary, start_peer  # noqa: E402
-from runs import bench_env  # noqa: E402
+from runs import bench_env, print_table, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import System  # noqa: E402
@@ -260,17 +260,6 @@ def table(found: dict[str, Any]) -> list[list[str]]:
     return rows
 
 
-def print_table(rows: list[list[str]]) -> None:
-    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    for k, row in enumerate(rows):
-        cells = [cell.ljust(w) if i in (0, 3, 4) else cell.rjust(w)
-                 for i, (cell, w) in enumerate(zip(row, widths, strict=True))]
-        print("| " + " | ".join(cells) + " |")
-        if k == 0:
-            print("|" + "|".join(("-" * (w + 1) + ":") if i not in (0, 3, 4) else "-" * (w + 2)
-                                 for i, w in enumerate(widths)) + "|")
-
-
 def rmem_default() -> int | None:
     try:
         return int(Path("/proc/sys/net/core/rmem_default").read_text())
@@ -355,7 +344,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{cyclone}, ROS_DOMAIN_ID {DOMAIN}; load average {load_start[0]:.2f} at the start, "
           f"{load_end[0]:.2f} at the end (shared machine)")
     print()
-    print_table(rows)
+    print_table(rows, (0, 3, 4))
     print()
     for line in notes(found, args.images, rmem):
         print(line)
@@ -378,9 +367,7 @@ def main(argv: list[str] | None = None) -> int:
         "notes": notes(found, args.images, rmem),
         "images": found,
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    print(f"\nwrote {args.json} ({time.monotonic() - started:.0f} s)")
+    write_results(args.json, document, started)
     return 0
 
 

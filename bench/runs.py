@@ -7,12 +7,13 @@ import json
 import os
 import shutil
 import tempfile
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-__all__ = ["bench_env"]
+__all__ = ["bench_env", "print_table", "write_results"]
 
 
 @contextmanager
@@ -33,3 +34,23 @@ def bench_env(variable: str, **settings: Any) -> Iterator[tuple[str, Callable[[s
     finally:
         os.environ.pop(variable, None)
         shutil.rmtree(out, ignore_errors=True)
+
+
+def print_table(rows: list[list[str]], text_columns: tuple[int, ...]) -> None:
+    """``rows`` (the first is the header) as a markdown table: ``text_columns`` left-aligned,
+    the others (numbers) right-aligned."""
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    for k, row in enumerate(rows):
+        cells = [cell.ljust(w) if i in text_columns else cell.rjust(w)
+                 for i, (cell, w) in enumerate(zip(row, widths, strict=True))]
+        print("| " + " | ".join(cells) + " |")
+        if k == 0:
+            print("|" + "|".join(("-" * (w + 1) + ":") if i not in text_columns else "-" * (w + 2)
+                                 for i, w in enumerate(widths)) + "|")
+
+
+def write_results(path: Path, document: dict[str, Any], started: float) -> None:
+    """Write a benchmark's JSON and say where, with the seconds since ``started`` (monotonic)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    print(f"\nwrote {path} ({time.monotonic() - started:.0f} s)")
