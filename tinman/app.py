@@ -71,6 +71,10 @@ class TinMan:
         parser.add_argument("--external", action="append", default=[], metavar="ROLE",
                             help="with --transport dds: a ROS 2 node on the network plays ROLE (e.g. Joy: a "
                                  "joy_node on /joy; Gazebo: a simulator on /cmd_vel); TinMan does not run it")
+        parser.add_argument("--record", nargs="?", const="", default=None, metavar="PATH",
+                            help="record every message between groups (camera images, poses, plans, commands) "
+                                 "to PATH: an MCAP file if it ends in .mcap, else a rosbag2 folder "
+                                 "(default: OUT/run.mcap); check it with 'anodize verify PATH'")
 
     def prepare(self, args: argparse.Namespace, log: Callable[[str], None]) -> Prepared:
         if not args.duration > 0:
@@ -98,7 +102,8 @@ class TinMan:
         shutil.rmtree(self.settings.records, ignore_errors=True)  # no record of an older run may linger
         self.settings.records.mkdir(parents=True, exist_ok=True)
         export(self.settings)
-        return Prepared(build_system(config), timeout=float(args.duration), grace=3.0)
+        record = None if args.record is None else Path(args.record or out / "run.mcap")
+        return Prepared(build_system(config), timeout=float(args.duration), grace=3.0, record=record)
 
     def progress(self, statuses: dict[str, GroupStatus], elapsed: float) -> str:
         """The live line, as much of it as the terminal has room for (80 columns when unknown).

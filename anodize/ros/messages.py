@@ -141,6 +141,11 @@ class RosType:
                 raise RosDecodeError(self.name, reason)
         return value
 
+    def message_definition(self) -> str:
+        """The ``.msg`` text with every nested definition after it, as rosbag2 stores a ``ros2msg`` schema."""
+        text: str = self._store.generate_msgdef(self.name, ros_version=2)[0]
+        return text
+
     def idl_class(self) -> type:
         """The Cyclone DDS ``IdlStruct`` of this type (see :func:`anodize.ros.idl.idl_class`)."""
         from .idl import idl_class

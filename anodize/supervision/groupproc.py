@@ -41,6 +41,7 @@ from ..errors import MemoryBoundError, error_to_data
 from ..isolation.memory import data_size, limit_data
 from ..isolation.sched import apply_thread_scheduling
 from ..isolation.tree import become_subreaper, kill_tree
+from ..recording.tap import Recorder
 from ..ros import RosType, ros_type
 from ..session.endpoint import Endpoint
 from ..session.payloads import resolve_class, with_field_classes
@@ -148,6 +149,7 @@ class _GroupProcess:
         functions = {role: resolve_function(ref) for role, ref in spec.roles.items()}
         threading.excepthook = self._thread_failed
         network = self.network = self._network()
+        self.recorder = _recorder(spec, network.queues)  # before the endpoints take their channels
         endpoints = {role: Endpoint(role, spec.protocol, spec.machines[role], network, spec.monitors)
                      for role in spec.roles}
         threads = [threading.Thread(target=self._role_thread, name=f"anodize:{spec.name}/{role}",
@@ -253,6 +255,8 @@ class _GroupProcess:
                                  where=report.where, traceback=report.traceback, detail=report.detail))
             if report.status is RoleStatus.FAILED:
                 self.network.fail(report.name, describe_error(report.error))
+        if self.recorder is not None:  # every role has ended: nothing more will be sent
+            self.recorder.close()
         self._heartbeat(final=True)
         close = getattr(self.network, "close", None)
         if close is not None:  # a DDS network: what was written reaches its readers before we exit
@@ -322,3 +326,13 @@ def _payload_ros_types(machines: Iterable[StateMachine]) -> list[RosType]:
     targets = {t.sort.target for machine in machines for t in machine.all_transitions()
                if t.sort is not None and t.sort.target and t.sort.target.startswith("ros:")}
     return [ros_type(t) for t in sorted(targets)]
+
+
+def _recorder(spec: GroupSpec, queues: dict[tuple[str, str], Any]) -> Recorder | None:
+    """The group's recorder, wrapping the channels it records, if the run is recorded."""
+    plan = spec.extra.get("record")
+    if plan is None:
+        return None
+    recorder = Recorder(plan, spec.name, spec.incarnation, spec.protocol, spec.machines)
+    recorder.attach(queues)
+    return recorder

@@ -14,19 +14,23 @@ import os
 import re
 import socket
 from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from sessiontypes import GlobalType, StateMachine
 from sessiontypes.graph import communication_graph
 
 from ..errors import AnodizeError, ConfigurationError
+from ..recording.plan import RecordPlan, record_plan
+from ..recording.run import Recording
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
 from .report import GroupStatus, RunReport
-from .supervisor import Elsewhere, Runner, Supervisor
+from .supervisor import Elsewhere, Supervisor
 from .threads import ThreadRunner
 
 if TYPE_CHECKING:
     from ..transport.ros_lanes import RosSettings
+    from .processes import ProcessRunner
 
 __all__ = ["System"]
 
@@ -152,7 +156,8 @@ class System:
 
     def run(self, timeout: float | None = None, grace: float = 2.0,
             on_status: Callable[[dict[str, GroupStatus]], None] | None = None,
-            liveness: float = 2.0, host: str | None = None, wait: float = 30.0) -> RunReport:
+            liveness: float = 2.0, host: str | None = None, wait: float = 30.0,
+            record: str | os.PathLike[str] | None = None) -> RunReport:
         """Run every role to the end of its local type (or until ``timeout`` seconds).
 
         Roles still running at the timeout are stopped (``RoleStopped`` is raised in
@@ -173,6 +178,10 @@ class System:
         the domain; a group whose peers do not all appear within ``wait`` seconds
         fails, naming the groups and hosts that never did.
 
+        ``record`` writes every message between groups to a recording (docs/recording.md):
+        an MCAP file if it ends in ``.mcap``, else a rosbag2 folder; the report's notes say
+        what was recorded. With several hosts, each host records what its groups send.
+
         Raises:
             AnodizeError: some role of the global type is in no group.
         """
@@ -184,18 +193,35 @@ class System:
             raise AnodizeError(f"global {gt.name}: roles {', '.join(missing)} are in no group")
         machines = {role: gt.project(role).fsm() for role in gt.roles}
         channels = tuple(communication_graph(gt).edges)
-        runner: Runner
+        recording = Recording(record, self._record_plan(record, machines, channels)) if record is not None else None
+        runner: ProcessRunner | ThreadRunner
         if self.transport == "dds":
-            return self._run_dds(machines, channels, timeout, grace, on_status, liveness, host, wait)
+            report = self._run_dds(machines, channels, timeout, grace, on_status, liveness, host, wait,
+                                   recording)
+            return _with_recording(report, recording, gt, self.transport)
         if self.transport == "process":
-            from .processes import ProcessRunner  # the inproc path never needs it
+            from .processes import ProcessRunner
 
             runner = ProcessRunner(gt.name, machines, channels, self.groups, self.monitors, liveness,
                                    self.capacities)
         else:
             runner = ThreadRunner(gt, machines, channels, self.groups, self.monitors, self.capacities)
-        return self._with_capacities(
+        runner.record = recording.plan if recording is not None else None
+        report = self._with_capacities(
             Supervisor(gt.name, gt.roles, self.groups, channels, runner, timeout, grace, on_status).run())
+        return _with_recording(report, recording, gt, self.transport)
+
+    def _record_plan(self, record: str | os.PathLike[str], machines: dict[str, StateMachine],
+                     channels: tuple[tuple[str, str], ...]) -> RecordPlan:
+        """What a recorded run records, under the system's ROS topic names where it has them."""
+        topics: dict[tuple[str, str, str], str] = {}
+        if self.ros_topics:
+            from ..transport.ros_lanes import ros_settings
+
+            ros = ros_settings(machines, channels, self.ros_topics, self.external, self.ros_distro, self.ros_domain)
+            topics = {key: topic.name for key, topic in ros.topics.items()}
+        parts = Path(record).with_name(f".{Path(record).name}.parts-{os.getpid()}")
+        return record_plan(str(parts), machines, dict(self._placed), topics)
 
     def _with_capacities(self, report: RunReport) -> RunReport:
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()})
@@ -218,7 +244,7 @@ class System:
 
     def _run_dds(self, machines: dict[str, StateMachine], channels: tuple[tuple[str, str], ...],
                  timeout: float | None, grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None,
-                 liveness: float, host: str | None, wait: float) -> RunReport:
+                 liveness: float, host: str | None, wait: float, recording: Recording | None) -> RunReport:
         from ..transport.dds import DOMAIN_ENV, DdsSettings  # only a DDS run loads Cyclone DDS
         from .ddsrunner import DdsRunner
 
@@ -255,9 +281,16 @@ class System:
         local_channels = tuple((a, b) for a, b in channels if a in local_roles and b in local_roles)
         runner = DdsRunner(self.global_type.name, machines, channels, local, self.monitors, settings, elsewhere,
                            liveness, self.capacities)
+        runner.record = recording.plan if recording is not None else None
         everywhere = (Elsewhere(runner.link, dict(self.groups), channels) if runner.link is not None else None)
         return self._with_capacities(Supervisor(self.global_type.name, local_roles, local, local_channels, runner,
                                                 timeout, grace, on_status, everywhere).run())
+
+
+def _with_recording(report: RunReport, recording: Recording | None, gt: GlobalType, transport: str) -> RunReport:
+    if recording is None:
+        return report
+    return dataclasses.replace(report, notes=(*report.notes, *recording.finish(gt, transport)))
 
 
 def _capacities(global_type: GlobalType, given: Mapping[str, int]) -> dict[tuple[str, str], int]:

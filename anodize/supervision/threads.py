@@ -18,6 +18,8 @@ from typing import Any
 
 from sessiontypes import GlobalType, StateMachine
 
+from ..recording.plan import RecordPlan
+from ..recording.tap import Recorder
 from ..session.endpoint import Endpoint
 from ..transport.inproc import InprocNetwork
 from .group import Group, resolve_function
@@ -62,6 +64,8 @@ class ThreadRunner:
         self.group_of = {role: g.name for g in groups.values() for role in g.roles}
         self.current: dict[str, _Incarnation] = {}
         self.inbox: SimpleQueue[Event] = SimpleQueue()
+        self.record: RecordPlan | None = None  # set by System.run for a recorded run
+        self.recorders: list[Recorder] = []
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         batch = set(groups)
@@ -72,6 +76,11 @@ class ThreadRunner:
         network = InprocNetwork(channels, [r for r in roles if self.machines[r].forks], dead, self.capacities)
         for name in groups:
             group = self.groups[name]
+            if self.record is not None:  # before the endpoints take their channels
+                recorder = Recorder(self.record, name, incarnation, self.global_type.name,
+                                    {role: self.machines[role] for role in group.roles})
+                recorder.attach(network.queues)
+                self.recorders.append(recorder)
             endpoints = {role: Endpoint(role, self.global_type.name, self.machines[role], network, self.monitors)
                          for role in group.roles}
             inc = self.current[name] = _Incarnation(group, incarnation, network, endpoints)
@@ -156,3 +165,5 @@ class ThreadRunner:
     def close(self) -> None:
         for name in self.current:
             self.kill(name)
+        for recorder in self.recorders:
+            recorder.close()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import shlex
 import shutil
@@ -134,7 +135,26 @@ def _parser() -> argparse.ArgumentParser:
                             help='transport = "dds": run only the groups placed on host NAME (default: every group)')
     run_system.add_argument("--wait", type=float, metavar="S", default=30.0,
                             help='transport = "dds": how long the groups wait for their peers to appear (default 30)')
+    run_system.add_argument("--record", metavar="PATH",
+                            help="record every message between groups: PATH.mcap is an MCAP file, any other PATH "
+                                 "a rosbag2 folder (see 'anodize verify' and 'anodize replay')")
     run_system.set_defaults(run=_run)
+
+    verify = commands.add_parser(
+        "verify", help="check a recording (MCAP file or rosbag2 folder) against a protocol",
+        description="Replay each channel of a recording through the monitors of both its ends and report the "
+                    "first violation on each, with the role to blame. Exit 0 when it conforms, 1 otherwise.")
+    verify.add_argument("recording", metavar="RECORDING")
+    verify.add_argument("--protocol", metavar="FILE.proto",
+                        help="the protocol (default: the one an anodize recording carries)")
+    verify.add_argument("--global", dest="global_name", metavar="G",
+                        help="the global type (default: the recording's, or the file's only one)")
+    verify.add_argument("--topics", metavar="MAP",
+                        help="a TOML file mapping \"Sender->Receiver:label\" to topics (a system file's "
+                             "[ros.topics], or the same entries at its top level), for recordings made by "
+                             "other tools")
+    verify.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
+    verify.set_defaults(run=_verify)
     return parser
 
 
@@ -347,7 +367,7 @@ def _run(args: argparse.Namespace) -> int:
     system = build_system(config)
     timeout = args.timeout if args.timeout is not None else config.timeout
     report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout),
-                        host=args.host, wait=args.wait)
+                        host=args.host, wait=args.wait, record=args.record)
     print(report.summary())
     if args.json:
         out = Path(args.json)
@@ -355,6 +375,24 @@ def _run(args: argparse.Namespace) -> int:
         out.write_text(report.to_json() + "\n", encoding="utf-8")
         print(f"wrote {out}")
     return _exit_status(report.ok, report.interrupted)
+
+
+def _verify(args: argparse.Namespace) -> int:
+    from ..recording.reader import open_recording
+    from ..recording.verify import verify
+    from .recordings import protocol_of, topic_map
+
+    with open_recording(args.recording) as recording:
+        global_type = protocol_of(recording, args.protocol, args.global_name)
+        topics = topic_map(args.topics, global_type) if args.topics else None
+        report = verify(recording, global_type, topics)
+    print(report.text())
+    if args.json:
+        out = Path(args.json)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {out}")
+    return EXIT_OK if report.conforms else EXIT_ERRORS
 
 
 def _exit_status(ok: bool, interrupted: bool) -> int:
@@ -390,7 +428,8 @@ def _run_named(name: str, rest: list[str]) -> int:
     prepared = named.prepare(args, lambda line: print(line, flush=True))
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
     try:
-        report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress)
+        report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
+                                     record=prepared.record)
     finally:
         if progress is not None:
             progress.close()

@@ -17,6 +17,7 @@ import argparse
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
+from pathlib import Path
 from typing import Protocol
 
 from ..errors import AnodizeError
@@ -30,11 +31,13 @@ ENTRY_POINT_GROUP = "anodize.systems"
 
 @dataclass
 class Prepared:
-    """What a named system hands back to be run: the system and its timeout (seconds)."""
+    """What a named system hands back to be run: the system, its timeout (seconds), and where
+    to record it (None: not recorded)."""
 
     system: System
     timeout: float | None
     grace: float = 3.0
+    record: Path | None = None
 
 
 @dataclass

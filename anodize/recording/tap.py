@@ -1,0 +1,248 @@
+"""Recording inside a group: the channels it records, and the thread that writes its part.
+
+Each recorded channel is wrapped (:class:`RecordingChannel`): a message is encoded
+(:mod:`.encoding`) in the sending thread, as it leaves, so what is recorded is what was
+sent, even if the sender changes the payload afterwards; a thread of the group writes
+it to the group's part file (an MCAP file without chunks, flushed every 0.1 s, so a
+group that is killed loses at most its last tenth of a second). That thread runs at
+ordinary priority, below every real-time role of the group, so recording does not
+delay the control loop; when it falls behind by more than :data:`BACKLOG` bytes the
+senders wait for it (bounded memory; nothing is dropped). The supervisor merges the
+parts when the run ends (:mod:`.merge`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+import time
+from collections import deque
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from sessiontypes import StateMachine
+
+from ..session.channel import Channel
+from .encoding import SortCodec, codec_for_sort
+from .plan import META, PROFILE, ChannelLabel, RecordPlan
+
+__all__ = ["Recorder", "RecordingChannel", "BACKLOG", "channel_metadata", "QOS_PROFILES"]
+
+BACKLOG = 64 * 2**20  # bytes a group's recorder may hold before its senders wait
+_FLUSH_EVERY = 0.1    # seconds
+
+# What anodize's channels offer, as rosbag2 writes it (metadata version 9): reliable, keep all, volatile.
+QOS_PROFILES = """- history: keep_all
+  depth: 0
+  reliability: reliable
+  durability: volatile
+  deadline: {sec: 9223372036, nsec: 854775807}
+  lifespan: {sec: 9223372036, nsec: 854775807}
+  liveliness: automatic
+  liveliness_lease_duration: {sec: 9223372036, nsec: 854775807}
+  avoid_ros_namespace_conventions: false"""
+
+
+def channel_metadata(item: ChannelLabel, codec: SortCodec, protocol: str,
+                     group_of: Mapping[str, str]) -> dict[str, str]:
+    """The metadata of a recorded label's MCAP channel: rosbag2's keys, then anodize's."""
+    sort = item.sort
+    return {
+        "offered_qos_profiles": QOS_PROFILES,
+        "topic_type_hash": codec.ros.type_hash,
+        f"{META}.protocol": protocol,
+        f"{META}.sender": item.sender,
+        f"{META}.receiver": item.receiver,
+        f"{META}.label": item.label,
+        f"{META}.sort": sort.key if sort is not None else "",
+        f"{META}.sort_target": (sort.target or "") if sort is not None else "",
+        f"{META}.encoding": "json" if codec.json else "cdr",
+        f"{META}.sender_group": group_of.get(item.sender, "external"),
+        f"{META}.receiver_group": group_of.get(item.receiver, "external"),
+    }
+
+
+class Recorder:
+    """One group's recorder; :meth:`attach` it to the group's network, :meth:`close` at the end."""
+
+    def __init__(self, plan: RecordPlan, group: str, incarnation: int, protocol: str,
+                 machines: Mapping[str, StateMachine]) -> None:
+        from mcap.writer import CompressionType, Writer
+
+        self.plan = plan
+        self.protocol = protocol
+        self.recorded = plan.recorded_here(machines)
+        self._labels = _local_labels(machines, self.recorded)
+        Path(plan.parts).mkdir(parents=True, exist_ok=True)
+        self.path = Path(plan.parts) / f"{group}-{incarnation}.mcap"
+        self._file = self.path.open("wb")
+        self._writer = Writer(self._file, use_chunking=False, compression=CompressionType.NONE,
+                              enable_crcs=False)
+        self._writer.start(profile=PROFILE, library="anodize")
+        self._channels: dict[tuple[str, str, str], tuple[int, SortCodec]] = {}
+        self._schemas: dict[str, int] = {}
+        self._pending: deque[tuple[int, int, int, bytes]] = deque()
+        self._pending_bytes = 0
+        self._sequence: dict[tuple[str, str], int] = dict.fromkeys(self.recorded, 0)
+        self._lock = threading.Condition()
+        self._closing = False
+        self.written = 0
+        self.unrecorded: dict[str, list[int | str]] = {}  # "A->B:label" -> [count, first reason]
+        self._thread = threading.Thread(target=self._write_loop, name=f"anodize-record:{group}", daemon=True)
+        self._thread.start()
+
+    def attach(self, queues: dict[tuple[str, str], Channel]) -> None:
+        """Wrap the recorded channels among ``queues`` (in place)."""
+        for pair, end in self.recorded.items():
+            if pair in queues:
+                queues[pair] = RecordingChannel(queues[pair], self, pair, record_puts=(end == "send"))
+
+    def encode(self, pair: tuple[str, str], label: str, payload: object) -> tuple[int, int, bytes] | None:
+        """A message of channel ``pair`` as it will be recorded: (MCAP channel, time, bytes).
+
+        A payload that cannot be encoded (possible only without monitors) is counted, with the
+        first reason, in the part's ``anodize.unrecorded`` metadata: the run goes on.
+        """
+        stamp = time.time_ns()
+        try:
+            channel_id, codec = self._channel(pair, label)
+            return channel_id, stamp, codec.encode(payload)
+        except Exception as error:  # the recording's problem, not the role's: say so at the end
+            key = f"{pair[0]}->{pair[1]}:{label}"
+            first = self.unrecorded.setdefault(key, [0, f"{type(error).__name__}: {error}"])
+            first[0] = int(first[0]) + 1
+            return None
+
+    def queue(self, pair: tuple[str, str], encoded: tuple[int, int, bytes]) -> None:
+        """Hand an encoded message to the writer (waiting while the writer is far behind)."""
+        channel_id, stamp, data = encoded
+        with self._lock:
+            while self._pending_bytes > BACKLOG and not self._closing:
+                self._lock.wait(0.1)
+            sequence = self._sequence[pair] = self._sequence[pair] + 1
+            self._pending.append((channel_id, stamp, sequence, data))
+            self._pending_bytes += len(data)
+            self._lock.notify_all()
+
+    def _channel(self, pair: tuple[str, str], label: str) -> tuple[int, SortCodec]:
+        key = (*pair, label)
+        found = self._channels.get(key)
+        if found is None:
+            with self._lock:
+                found = self._channels.get(key) or self._register(key)
+        return found
+
+    def _register(self, key: tuple[str, str, str]) -> tuple[int, SortCodec]:
+        item = self._labels.get(key) or ChannelLabel(*key, None)
+        codec = codec_for_sort(item.sort)
+        schema = self._schemas.get(codec.type_name)
+        if schema is None:
+            schema = self._schemas[codec.type_name] = self._writer.register_schema(
+                codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+        topic = self.plan.topics.get(key) or f"/anodize/{key[0]}/{key[1]}/{key[2]}"
+        metadata = channel_metadata(item, codec, self.protocol, self.plan.group_of)
+        channel_id = self._writer.register_channel(topic, "cdr", schema, metadata)
+        found = self._channels[key] = (channel_id, codec)
+        return found
+
+    def _write_loop(self) -> None:
+        _lower_own_priority()
+        last_flush = time.monotonic()
+        while True:
+            with self._lock:
+                while not self._pending and not self._closing:
+                    self._lock.wait(_FLUSH_EVERY)
+                    if time.monotonic() - last_flush >= _FLUSH_EVERY:
+                        break
+                batch = list(self._pending)
+                self._pending.clear()
+                closing = self._closing
+            for channel_id, stamp, sequence, data in batch:
+                self._writer.add_message(channel_id, stamp, data, stamp, sequence)
+            self.written += len(batch)
+            with self._lock:
+                self._pending_bytes -= sum(len(item[3]) for item in batch)
+                self._lock.notify_all()
+            if time.monotonic() - last_flush >= _FLUSH_EVERY or closing:
+                self._file.flush()
+                last_flush = time.monotonic()
+            if closing and not batch:
+                return
+
+    def close(self) -> None:
+        """Write what is queued, end the part file properly, and stop the writer."""
+        with self._lock:
+            self._closing = True
+            self._lock.notify_all()
+        self._thread.join()
+        with contextlib.suppress(OSError, ValueError):
+            if self.unrecorded:
+                self._writer.add_metadata(f"{META}.unrecorded", {
+                    key: f"{count} messages not recorded; the first: {reason}"
+                    for key, (count, reason) in self.unrecorded.items()})
+            self._writer.finish()  # type: ignore[no-untyped-call]
+            self._file.close()
+
+
+class RecordingChannel:
+    """A channel whose messages are also recorded: as they are put (the sending end),
+    or as they are taken (the receiving end of an external sender)."""
+
+    def __init__(self, inner: Channel, recorder: Recorder, pair: tuple[str, str], record_puts: bool) -> None:
+        self._inner = inner
+        self._recorder = recorder
+        self._pair = pair
+        self._record_puts = record_puts
+
+    def put(self, item: object) -> None:
+        if not (self._record_puts and type(item) is tuple):  # messages are plain tuples, signals are not
+            self._inner.put(item)
+            return
+        # Encoded before it leaves: once put, an array in a shared slot is the receiver's.
+        encoded = self._recorder.encode(self._pair, item[0], item[1])
+        self._inner.put(item)
+        if encoded is not None:
+            self._recorder.queue(self._pair, encoded)
+
+    def get(self, *, timeout: float | None = None) -> object:
+        return self._taken(self._inner.get(timeout=timeout))
+
+    def get_nowait(self) -> object:
+        return self._taken(self._inner.get_nowait())
+
+    def _taken(self, item: object) -> object:
+        if not self._record_puts and type(item) is tuple:
+            encoded = self._recorder.encode(self._pair, item[0], item[1])
+            if encoded is not None:
+                self._recorder.queue(self._pair, encoded)
+        return item
+
+    def empty(self) -> bool:
+        return self._inner.empty()
+
+    def __getattr__(self, name: str) -> Any:  # qsize, buffer, ... of the transport's channel
+        return getattr(self._inner, name)
+
+
+def _local_labels(machines: Mapping[str, StateMachine],
+                  recorded: Mapping[tuple[str, str], str]) -> dict[tuple[str, str, str], ChannelLabel]:
+    """The labels (with sorts) of the recorded channels, from the local roles' machines."""
+    found: dict[tuple[str, str, str], ChannelLabel] = {}
+    for role, machine in machines.items():
+        for t in machine.all_transitions():
+            if t.peer is None:
+                continue
+            pair = (role, t.peer) if t.action == "send" else (t.peer, role)
+            if pair in recorded:
+                found.setdefault((*pair, t.label), ChannelLabel(*pair, t.label, t.sort))
+    return found
+
+
+def _lower_own_priority() -> None:
+    """This thread at ordinary priority (it inherited the group's real-time one), niced."""
+    with contextlib.suppress(OSError, AttributeError):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))  # 0: the calling thread, on Linux
+    with contextlib.suppress(OSError, AttributeError):
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
