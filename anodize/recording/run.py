@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import os
+from collections.abc import Mapping
 from pathlib import Path
 
 from sessiontypes import GlobalType
@@ -20,13 +22,17 @@ class Recording:
         self.target = Path(target)
         self.plan = plan
 
-    def finish(self, global_type: GlobalType, transport: str) -> list[str]:
-        """Merge the groups' parts into the recording; returns notes for the run's report."""
+    def finish(self, global_type: GlobalType, transport: str, functions: Mapping[str, str]) -> list[str]:
+        """Merge the groups' parts into the recording; returns notes for the run's report.
+
+        ``functions`` (role -> ``module:function``) goes into the recording for ``anodize replay``.
+        """
         location = global_type.location
         info = {"protocol_file": location.path, "protocol_source": "\n".join(global_type.source_lines),
                 "global": global_type.name, "transport": transport, "anodize_version": _version(),
                 "recorded_channels": " ".join(sorted(f"{s}->{r}" for s, r in
-                                                     self.plan.at_sender | self.plan.at_receiver))}
+                                                     self.plan.at_sender | self.plan.at_receiver)),
+                "role_functions": json.dumps(dict(functions)), "group_of": json.dumps(dict(self.plan.group_of))}
         result = merge_parts(Path(self.plan.parts), self.target, info)
         size = f"{result.bytes / 2**20:.1f} MiB"
         notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels between groups to "

@@ -114,8 +114,8 @@ class VerifyReport:
         checked = sum(r.messages for r in self.channels.values())
         verdict = "conforms to" if self.conforms else "does NOT conform to"
         read = f"{self.messages} read, {self.bytes / 2**20:.1f} MiB in {self.seconds:.2f} s"
-        lines = [f"{self.recording} {verdict} {self.protocol}: {checked} messages on {len(self.channels)} channels "
-                 + f"checked ({read})"]
+        head = f"{self.recording} {verdict} {self.protocol}"
+        lines = [f"{head}: {checked} messages on {len(self.channels)} channels checked ({read})"]
         lines.extend(f"violation: {r.violation}" for r in self.channels.values() if r.violation is not None)
         lines.extend(f"unknown channel: {text}" for text in self.unknown)
         lines.extend(f"not checked: topic {text} is no channel of the protocol (give it in --topics)"

@@ -9,6 +9,7 @@ builds the :class:`RunReport`. ``run`` always returns a report.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import re
@@ -198,7 +199,7 @@ class System:
         if self.transport == "dds":
             report = self._run_dds(machines, channels, timeout, grace, on_status, liveness, host, wait,
                                    recording)
-            return _with_recording(report, recording, gt, self.transport)
+            return _with_recording(report, recording, gt, self.transport, self.groups)
         if self.transport == "process":
             from .processes import ProcessRunner
 
@@ -209,7 +210,7 @@ class System:
         runner.record = recording.plan if recording is not None else None
         report = self._with_capacities(
             Supervisor(gt.name, gt.roles, self.groups, channels, runner, timeout, grace, on_status).run())
-        return _with_recording(report, recording, gt, self.transport)
+        return _with_recording(report, recording, gt, self.transport, self.groups)
 
     def _record_plan(self, record: str | os.PathLike[str], machines: dict[str, StateMachine],
                      channels: tuple[tuple[str, str], ...]) -> RecordPlan:
@@ -287,10 +288,17 @@ class System:
                                                 timeout, grace, on_status, everywhere).run())
 
 
-def _with_recording(report: RunReport, recording: Recording | None, gt: GlobalType, transport: str) -> RunReport:
+def _with_recording(report: RunReport, recording: Recording | None, gt: GlobalType, transport: str,
+                    groups: Mapping[str, Group]) -> RunReport:
     if recording is None:
         return report
-    return dataclasses.replace(report, notes=(*report.notes, *recording.finish(gt, transport)))
+    functions = {}
+    for group in groups.values():
+        for role, function in group.roles.items():
+            with contextlib.suppress(AnodizeError):  # a lambda (inproc) cannot be named: replay needs it given
+                functions[role] = reference_of(function)
+    notes = recording.finish(gt, transport, functions)
+    return dataclasses.replace(report, notes=(*report.notes, *notes))
 
 
 def _capacities(global_type: GlobalType, given: Mapping[str, int]) -> dict[tuple[str, str], int]:
