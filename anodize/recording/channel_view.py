@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from sessiontypes import StateMachine, Transition
 from sessiontypes.fsm import Action
 
-__all__ = ["ChannelView", "Node"]
+__all__ = ["ChannelView", "Node", "sort_key"]
 
 Node = tuple[int, int]  # (machine, state): a machine is the role's, or one of a parallel branch
 
@@ -50,7 +50,7 @@ class ChannelView:
                     else:
                         silent.append((number, t.target))
                 silent.extend((self._index[id(branch)], branch.initial) for branch in m.forks.get(state, ()))
-        self._steps: dict[tuple[frozenset[Node], str], frozenset[Node]] = {}
+        self._steps: dict[tuple[frozenset[Node], str, frozenset[str | None] | None], frozenset[Node]] = {}
         self.start = self.closure([(0, machine.initial)])
 
     def _collect(self, machine: StateMachine) -> None:
@@ -70,13 +70,19 @@ class ChannelView:
                     stack.append(target)
         return frozenset(seen)
 
-    def step(self, nodes: frozenset[Node], label: str) -> frozenset[Node]:
-        """The states after ``label`` (empty: the label is not allowed here)."""
-        key = (nodes, label)
+    def step(self, nodes: frozenset[Node], label: str,
+             sorts: frozenset[str | None] | None = None) -> frozenset[Node]:
+        """The states after ``label`` (empty: the label is not allowed here).
+
+        ``sorts``: only through transitions carrying one of these sorts (by key; None for
+        no payload), for a label that carries different sorts on different paths.
+        """
+        key = (nodes, label, sorts)
         found = self._steps.get(key)
         if found is None:
             found = self._steps[key] = self.closure(
-                move.target for node in nodes for move in self._moves[node] if move.label == label)
+                move.target for node in nodes for move in self._moves[node]
+                if move.label == label and (sorts is None or sort_key(move.transition) in sorts))
         return found
 
     def allowed(self, nodes: frozenset[Node]) -> list[Transition]:
@@ -97,3 +103,7 @@ class ChannelView:
         texts = [f"{state} ({self.machines[m].describe(state)})" for m, state in acting[:3]]
         more = f" and {len(acting) - 3} more" if len(acting) > 3 else ""
         return " or ".join(texts) + more
+
+
+def sort_key(transition: Transition) -> str | None:
+    return transition.sort.key if transition.sort is not None else None

@@ -25,7 +25,7 @@ from sessiontypes import GlobalType, Sort, StateMachine, Transition
 from ..errors import AnodizeError
 from ..ros import ros_type
 from ..session.payloads import validator_for
-from .channel_view import ChannelView, Node
+from .channel_view import ChannelView, Node, sort_key
 from .encoding import JSON_TYPE, SortCodec, UnknownObject, codec_for_sort
 from .plan import META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
@@ -157,16 +157,20 @@ class _ChannelCheck:
         if problem:
             self._fail(message, index, label, 0, RECORDING_FAULT, problem)
             return
+        # The label's sorts that the payload fits: a label may carry different sorts on different paths.
+        taken = self.views[0].taken(self.states[0], label)
+        if not taken:
+            self._fail(message, index, label, 0, self.sender)
+            return
+        fits, reason = _fitting_sorts(message, taken, codecs)
+        if not fits:
+            self._fail(message, index, label, 0, self.sender, reason)
+            return
         for side, view in enumerate(self.views):
-            after = view.step(self.states[side], label)
+            after = view.step(self.states[side], label, fits)
             if not after:
                 self._fail(message, index, label, side, self.sender)
                 return
-            if side == 0:
-                reason = _payload_problem(message, view.taken(self.states[side], label), codecs)
-                if reason:
-                    self._fail(message, index, label, side, self.sender, reason)
-                    return
             self.states[side] = after
 
     def _numbering(self, sequence: int) -> str:
@@ -218,9 +222,22 @@ class _Codecs:
         return codec.decode(data)
 
 
-def _payload_problem(message: RecordedMessage, taken: list[Transition], codecs: _Codecs) -> str:
-    """Why the message's payload is not of the sort its label carries ("" if it is)."""
-    sort = taken[0].sort if taken else None
+def _fitting_sorts(message: RecordedMessage, taken: list[Transition], codecs: _Codecs
+                   ) -> tuple[frozenset[str | None], str]:
+    """The sorts (keys) among ``taken``'s that the message's payload is of, and if none, why not."""
+    fits: set[str | None] = set()
+    reasons: list[str] = []
+    for sort in {sort_key(t): t.sort for t in taken}.values():
+        reason = _payload_problem(message, sort, codecs)
+        if reason:
+            reasons.append(reason)
+        else:
+            fits.add(sort.key if sort is not None else None)
+    return frozenset(fits), "; ".join(reasons)
+
+
+def _payload_problem(message: RecordedMessage, sort: Sort | None, codecs: _Codecs) -> str:
+    """Why the message's payload is not of ``sort`` ("" if it is)."""
     expected = codec_for_sort(sort)
     recorded = message.topic.type_name
     if recorded != expected.type_name:
