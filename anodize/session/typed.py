@@ -8,10 +8,15 @@ generated module shares one copy.
 
 from __future__ import annotations
 
-from ..errors import LinearityError
+import inspect
+import typing
+from collections.abc import Callable
+from typing import Any
+
+from ..errors import AnodizeError, LinearityError
 from .endpoint import Endpoint, Message
 
-__all__ = ["State"]
+__all__ = ["State", "argument_for"]
 
 
 class State:
@@ -43,3 +48,24 @@ class State:
                 f"{type(self).__name__} expected {' or '.join(labels)} from {peer}, but the "
                 f"endpoint delivered {message.label}: it does not monitor this role's protocol")
         return message
+
+
+def argument_for(function: Callable[..., Any], endpoint: Endpoint) -> Any:
+    """What a role function is called with: the endpoint, or the generated typed initial
+    state when the function's first parameter is annotated with one.
+
+    Raises:
+        AnodizeError: the function takes no argument.
+    """
+    try:
+        parameters = list(inspect.signature(function).parameters.values())
+        hints = typing.get_type_hints(function)
+    except (TypeError, ValueError, NameError):
+        return endpoint
+    if not parameters:
+        raise AnodizeError(f"role function {function.__qualname__} must take one argument "
+                           "(an Endpoint or the typed initial state)")
+    wanted = hints.get(parameters[0].name)
+    if isinstance(wanted, type) and issubclass(wanted, State):  # a generated typed state
+        return wanted(endpoint)
+    return endpoint

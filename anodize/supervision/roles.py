@@ -5,17 +5,15 @@ Shared by every transport: the in-process runner and a group's process.
 
 from __future__ import annotations
 
-import inspect
 import os
 import traceback
-import typing
 from collections.abc import Callable
 from typing import Any
 
-from ..errors import AnodizeError, RoleStopped
+from ..errors import RoleStopped
 from ..isolation.sched import apply_thread_scheduling
 from ..session.endpoint import Endpoint
-from ..session.typed import State
+from ..session.typed import argument_for
 from .report import RoleReport, RoleStatus
 
 __all__ = ["run_role", "argument_for", "describe_error", "where_raised"]
@@ -69,19 +67,3 @@ def run_role(group: str, priority: int | None, cpus: frozenset[int] | None, role
                           scheduling=scheduling, where=where, traceback=frames))
     else:
         report(RoleReport(name=role, group=group, status=RoleStatus.DONE, scheduling=scheduling))
-
-
-def argument_for(function: Callable[..., Any], endpoint: Endpoint) -> Any:
-    """The endpoint, or the typed initial state when the function asks for one."""
-    try:
-        parameters = list(inspect.signature(function).parameters.values())
-        hints = typing.get_type_hints(function)
-    except (TypeError, ValueError, NameError):
-        return endpoint
-    if not parameters:
-        raise AnodizeError(f"role function {function.__qualname__} must take one argument "
-                           "(an Endpoint or the typed initial state)")
-    wanted = hints.get(parameters[0].name)
-    if isinstance(wanted, type) and issubclass(wanted, State):  # a generated typed state
-        return wanted(endpoint)
-    return endpoint
