@@ -214,7 +214,7 @@ class ReplayNetwork:
             check = self.checks[peer]
             channel = f"{self.role}->{peer}"
             if check.sent >= len(items):
-                raise self.end(RECORDING_ENDS, f"the recording ends here: {self.role}{self.state()} sends "
+                raise self.end(RECORDING_ENDS, f"the recording ends here: {self.role} sends "
                                          f"{_message(label, payload)} on {channel}, but the recording has "
                                          f"only the {len(items)} message(s) before it there")
             item = items[check.sent]

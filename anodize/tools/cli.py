@@ -1,4 +1,4 @@
-"""The ``anodize`` command: check, project, fsm, graph, lint, run.
+"""The ``anodize`` command: check, project, fsm, graph, lint, run, verify, replay.
 
 The only module that prints or exits. Exit status: 0 success, 1 the input
 has errors (printed as ``path:line:col: error: ...``), 2 usage errors.
@@ -155,6 +155,30 @@ def _parser() -> argparse.ArgumentParser:
                              "other tools")
     verify.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
     verify.set_defaults(run=_verify)
+
+    replay = commands.add_parser(
+        "replay", help="run one role's code against a recording: its inputs from the recording, its outputs "
+                       "compared with it",
+        description="Run role R's function alone, fed the messages its peers sent in the recorded run; each "
+                    "message it sends is compared with the recorded one, and its monitor checks the protocol. "
+                    "Exit 0 when its outputs match the recording and follow the protocol, 1 otherwise.")
+    replay.add_argument("recording", metavar="RECORDING")
+    replay.add_argument("--role", required=True, metavar="R", help="the role to replay")
+    replay.add_argument("--function", metavar="MODULE:FUNCTION",
+                        help="the role's function (default: the one the recording names)")
+    replay.add_argument("--pythonpath", action="append", default=[], metavar="DIR",
+                        help="import role functions from DIR too (repeatable; the current directory always)")
+    replay.add_argument("--protocol", metavar="FILE.proto",
+                        help="the protocol (default: the one an anodize recording carries)")
+    replay.add_argument("--global", dest="global_name", metavar="G",
+                        help="the global type (default: the recording's, or the file's only one)")
+    replay.add_argument("--topics", metavar="MAP",
+                        help="a TOML file mapping \"Sender->Receiver:label\" to topics, for recordings made by "
+                             "other tools (as for verify)")
+    replay.add_argument("--timeout", type=float, default=60.0, metavar="S",
+                        help="stop the role if it has not ended after S seconds (default 60)")
+    replay.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
+    replay.set_defaults(run=_replay)
     return parser
 
 
@@ -393,6 +417,30 @@ def _verify(args: argparse.Namespace) -> int:
         out.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
         print(f"wrote {out}")
     return EXIT_OK if report.conforms else EXIT_ERRORS
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from ..recording.reader import open_recording
+    from ..recording.replay import replay
+    from .recordings import protocol_of, role_function, topic_map
+
+    if not args.timeout > 0:
+        raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
+    with open_recording(args.recording) as recording:
+        global_type = protocol_of(recording, args.protocol, args.global_name)
+        if args.role not in global_type.roles:
+            raise UsageError(f"no role {args.role} in global {global_type.name}; expected one of "
+                             f"{', '.join(global_type.roles)}")
+        topics = topic_map(args.topics, global_type) if args.topics else None
+        function = role_function(recording, args.role, args.function, [".", *args.pythonpath])
+        report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout)
+    print(report.text())
+    if args.json:
+        out = Path(args.json)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {out}")
+    return EXIT_OK if report.ok else EXIT_ERRORS
 
 
 def _exit_status(ok: bool, interrupted: bool) -> int:

@@ -1,18 +1,24 @@
-"""What ``anodize verify`` and ``anodize replay`` need besides the recording: the protocol, the topic map."""
+"""What ``anodize verify`` and ``anodize replay`` need besides the recording: the protocol, the topic map,
+the role's function."""
 
 from __future__ import annotations
 
+import json
+import sys
 import tomllib
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import sessiontypes
 from sessiontypes import GlobalType
 
 from ..errors import ConfigurationError
 from ..recording.reader import Recording
+from ..supervision.group import resolve_function
 from ..transport.ros_lanes import ros_settings
 
-__all__ = ["protocol_of", "topic_map"]
+__all__ = ["protocol_of", "topic_map", "role_function"]
 
 
 def protocol_of(recording: Recording, path: str | None, name: str | None) -> GlobalType:
@@ -68,3 +74,29 @@ def topic_map(path: str, global_type: GlobalType) -> dict[str, tuple[str, str, s
     except ConfigurationError as error:
         raise ConfigurationError(f"{path}: {error}") from None
     return {topic.name: key for key, topic in settings.topics.items()}
+
+
+def role_function(recording: Recording, role: str, reference: str | None,
+                  pythonpath: Sequence[str] = ()) -> Callable[..., Any]:
+    """The function to replay ``role`` with: ``reference`` (``"module:function"``) if given, else the
+    one the recording names. The folders of ``pythonpath`` go to the front of ``sys.path`` first.
+
+    Raises:
+        ConfigurationError: no reference given and the recording names none for ``role``.
+        AnodizeError: the function cannot be imported.
+    """
+    for folder in reversed(pythonpath):
+        path = str(Path(folder).resolve())
+        if path not in sys.path:
+            sys.path.insert(0, path)
+    if reference is None:
+        try:
+            functions = json.loads(recording.info.get("role_functions") or "{}")
+        except ValueError:
+            functions = {}
+        reference = functions.get(role)
+        if reference is None:
+            named = ", ".join(sorted(functions)) or "none"
+            raise ConfigurationError(f"{recording.path} does not name the function of role {role} (it names "
+                                     f"those of: {named}): give it with --function module:function")
+    return resolve_function(reference)
