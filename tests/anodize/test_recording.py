@@ -330,6 +330,17 @@ def test_tinman_records_and_its_recording_verifies(tmp_path: Path) -> None:
     assert types["/cmd_vel"] == "geometry_msgs/msg/Twist"
     assert types["/gazebo/camera/color/image_raw"] == "sensor_msgs/msg/Image"
 
+    def cut_the_tenth_twist(messages: list[Any]) -> None:
+        twists = [m for m in messages if m[0][0] == "/cmd_vel"]
+        twists[10][3] = twists[10][3][:20]  # a Twist is 52 bytes of CDR
+    _rewrite(out / "run.mcap", tmp_path / "cut.mcap", cut_the_tenth_twist)
+    with open_recording(tmp_path / "cut.mcap") as recording:
+        report = verify(recording, sessiontypes.load(ROOT / "tinman" / "tinman.proto").globals["TinManParallel"])
+    violation = report.channels["Move->Gazebo"].violation
+    assert violation is not None and violation.index == 10 and violation.blamed == "Move", report.text()
+    assert "does not decode" in violation.reason
+    assert [n for n, r in report.channels.items() if r.violation] == ["Move->Gazebo"]
+
 
 def test_a_system_run_records_only_channels_between_groups(tmp_path: Path) -> None:
     global_type = load_global(BUYERS, "Buy")
@@ -361,3 +372,23 @@ def test_a_recorded_channel_the_protocol_does_not_have_fails_verify(tmp_path: Pa
         report = verify(recording, global_type)
     assert not report.conforms
     assert len(report.unknown) == 1 and report.unknown[0].startswith("B->Eve")
+
+
+STREAM = """
+global Stream(Talker, Listener) = mu t. Talker -> Listener : { number(int). t, stop }
+"""
+
+
+def test_a_killed_group_keeps_what_it_recorded_and_the_report_says_its_part_ended_early(tmp_path: Path) -> None:
+    import recording_roles
+
+    system = System(load_global(STREAM, "Stream"), transport="process")
+    system.group("talk").role("Talker", "recording_roles:talker_killed_midway")
+    system.group("listen").role("Listener", "recording_roles:listener")
+    report = system.run(timeout=20, record=tmp_path / "r.mcap")
+    assert report.failed
+    assert any("part talk-0.mcap ends early" in n for n in report.notes), report.notes
+    with open_recording(tmp_path / "r.mcap") as recording:
+        result = verify(recording, load_global(STREAM, "Stream"))
+    assert result.conforms, result.text()
+    assert result.channels["Talker->Listener"].messages == recording_roles.SENT_BEFORE_DYING
