@@ -8,13 +8,14 @@ never claims real-time scheduling that was not applied.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import threading
 
 from ..errors import ConfigurationError
 
-__all__ = ["apply_thread_scheduling", "nice_for"]
+__all__ = ["apply_thread_scheduling", "nice_for", "lower_thread_priority"]
 
 
 def nice_for(priority: int) -> int:
@@ -65,3 +66,12 @@ def _apply_priority(priority: int) -> str:
     except OSError as error:
         return f"unchanged (SCHED_FIFO refused: {refused}; nice {nice} refused: {_reason(error)})"
     return f"nice {nice} (SCHED_FIFO refused: {refused})"
+
+
+def lower_thread_priority(nice: int = 10) -> None:
+    """The calling thread at ordinary priority, niced: for a helper thread (recording, the
+    live view) that inherited its group's real-time priority and must not delay its roles."""
+    with contextlib.suppress(OSError, AttributeError):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))  # 0: the calling thread, on Linux
+    with contextlib.suppress(OSError, AttributeError):
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)

@@ -67,7 +67,8 @@ class DdsRunner(ProcessRunner):
                 priority=group.priority, cpus=group.cpus, memory=group.memory,
                 sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
                 extra={"dds": replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)),
-                       **({} if self.record is None else {"record": self.record})})
+                       **({} if self.record is None else {"record": self.record}),
+                       **({} if self.live is None else {"live": self.live})})
             parent_end, child_end = self.context.Pipe()
             process = self.context.Process(target=group_main, args=(spec, child_end, {}),
                                            name=f"anodize:{name}", daemon=True)

@@ -41,6 +41,7 @@ from ..errors import MemoryBoundError, error_to_data
 from ..isolation.memory import data_size, limit_data
 from ..isolation.sched import apply_thread_scheduling
 from ..isolation.tree import become_subreaper, kill_tree
+from ..live.tap import LiveTap
 from ..recording.tap import Recorder
 from ..ros import RosType, ros_type
 from ..session.endpoint import Endpoint
@@ -150,6 +151,7 @@ class _GroupProcess:
         threading.excepthook = self._thread_failed
         network = self.network = self._network()
         self.recorder = _recorder(spec, network.queues)  # before the endpoints take their channels
+        self.live = _live_tap(spec, network.queues)
         endpoints = {role: Endpoint(role, spec.protocol, spec.machines[role], network, spec.monitors)
                      for role in spec.roles}
         threads = [threading.Thread(target=self._role_thread, name=f"anodize:{spec.name}/{role}",
@@ -257,6 +259,8 @@ class _GroupProcess:
                 self.network.fail(report.name, describe_error(report.error))
         if self.recorder is not None:  # every role has ended: nothing more will be sent
             self.recorder.close()
+        if self.live is not None:
+            self.live.close()
         self._heartbeat(final=True)
         close = getattr(self.network, "close", None)
         if close is not None:  # a DDS network: what was written reaches its readers before we exit
@@ -336,3 +340,13 @@ def _recorder(spec: GroupSpec, queues: dict[tuple[str, str], Any]) -> Recorder |
     recorder = Recorder(plan, spec.name, spec.incarnation, spec.protocol, spec.machines)
     recorder.attach(queues)
     return recorder
+
+
+def _live_tap(spec: GroupSpec, queues: dict[tuple[str, str], Any]) -> LiveTap | None:
+    """The group's live-view tap, wrapping the channels it shows, if the run is shown live."""
+    plan = spec.extra.get("live")
+    if plan is None:
+        return None
+    tap = LiveTap(plan, spec.name, spec.roles)
+    tap.attach(queues)
+    return tap

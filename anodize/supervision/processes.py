@@ -26,6 +26,7 @@ from ..errors import MemoryBoundError, RoleError, error_from_data
 from ..isolation.memory import CGROUP_SLACK, Cgroup, make_cgroup, peak_rss, remove_stale_cgroups, rss
 from ..isolation.tree import descendants, kill_tree
 from ..isolation.watchdog import Watchdog, rt_throttling
+from ..live.plan import LivePlan
 from ..recording.plan import RecordPlan
 from ..transport.codec import DecodeError
 from ..transport.shm import remove_run_segments, remove_stale_segments
@@ -77,6 +78,7 @@ class ProcessRunner:
         self.liveness = liveness
         self.capacities = dict(capacities or {})
         self.record: RecordPlan | None = None  # set by System.run for a recorded run
+        self.live: LivePlan | None = None      # set by System.run for a run shown live
         self.machines = machines
         self.channels = tuple(channels)
         self.groups = groups
@@ -114,7 +116,8 @@ class ProcessRunner:
                 channels=self.channels, dead=dead, monitors=self.monitors,
                 priority=group.priority, cpus=group.cpus, memory=group.memory,
                 sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
-                extra={} if self.record is None else {"record": self.record})
+                extra={**({} if self.record is None else {"record": self.record}),
+                       **({} if self.live is None else {"live": self.live})})
             parent_end, child_end = self.context.Pipe()
             process = self.context.Process(target=group_main, args=(spec, child_end, pipes[name]),
                                            name=f"anodize:{name}", daemon=True)

@@ -22,6 +22,7 @@ from sessiontypes import GlobalType, StateMachine
 from sessiontypes.graph import communication_graph
 
 from ..errors import AnodizeError, ConfigurationError
+from ..live.plan import LivePlan, live_plan
 from ..recording.plan import RecordPlan, record_plan
 from ..recording.run import Recording
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
@@ -30,6 +31,7 @@ from .supervisor import Elsewhere, Supervisor
 from .threads import ThreadRunner
 
 if TYPE_CHECKING:
+    from ..live.server import LiveView
     from ..transport.ros_lanes import RosSettings
     from .processes import ProcessRunner
 
@@ -158,7 +160,7 @@ class System:
     def run(self, timeout: float | None = None, grace: float = 2.0,
             on_status: Callable[[dict[str, GroupStatus]], None] | None = None,
             liveness: float = 2.0, host: str | None = None, wait: float = 30.0,
-            record: str | os.PathLike[str] | None = None) -> RunReport:
+            record: str | os.PathLike[str] | None = None, live: LiveView | None = None) -> RunReport:
         """Run every role to the end of its local type (or until ``timeout`` seconds).
 
         Roles still running at the timeout are stopped (``RoleStopped`` is raised in
@@ -183,6 +185,10 @@ class System:
         an MCAP file if it ends in ``.mcap``, else a rosbag2 folder; the report's notes say
         what was recorded. With several hosts, each host records what its groups send.
 
+        ``live`` (:func:`anodize.live.open_live_view`) serves every channel, and each group's
+        status, to the Foxglove app as the run goes (docs/recording.md, "Live view in
+        Foxglove"); the report's notes say what it showed and what clients published.
+
         Raises:
             AnodizeError: some role of the global type is in no group.
         """
@@ -195,11 +201,16 @@ class System:
         machines = {role: gt.project(role).fsm() for role in gt.roles}
         channels = tuple(communication_graph(gt).edges)
         recording = Recording(record, self._record_plan(record, machines, channels)) if record is not None else None
+        shown = None
+        if live is not None:
+            shown = live_plan(live.socket_path, machines, dict(self._placed), self._topic_names(machines, channels))
+            live.begin(shown)
+            on_status = _with_live_status(on_status, live)
         runner: ProcessRunner | ThreadRunner
         if self.transport == "dds":
             report = self._run_dds(machines, channels, timeout, grace, on_status, liveness, host, wait,
-                                   recording)
-            return _with_recording(report, recording, gt, self.transport, self.groups)
+                                   recording, shown)
+            return _with_live(_with_recording(report, recording, gt, self.transport, self.groups), live)
         if self.transport == "process":
             from .processes import ProcessRunner
 
@@ -208,21 +219,26 @@ class System:
         else:
             runner = ThreadRunner(gt, machines, channels, self.groups, self.monitors, self.capacities)
         runner.record = recording.plan if recording is not None else None
+        runner.live = shown
         report = self._with_capacities(
             Supervisor(gt.name, gt.roles, self.groups, channels, runner, timeout, grace, on_status).run())
-        return _with_recording(report, recording, gt, self.transport, self.groups)
+        return _with_live(_with_recording(report, recording, gt, self.transport, self.groups), live)
 
     def _record_plan(self, record: str | os.PathLike[str], machines: dict[str, StateMachine],
                      channels: tuple[tuple[str, str], ...]) -> RecordPlan:
         """What a recorded run records, under the system's ROS topic names where it has them."""
-        topics: dict[tuple[str, str, str], str] = {}
-        if self.ros_topics:
-            from ..transport.ros_lanes import ros_settings
-
-            ros = ros_settings(machines, channels, self.ros_topics, self.external, self.ros_distro, self.ros_domain)
-            topics = {key: topic.name for key, topic in ros.topics.items()}
         parts = Path(record).with_name(f".{Path(record).name}.parts-{os.getpid()}")
-        return record_plan(str(parts), machines, dict(self._placed), topics)
+        return record_plan(str(parts), machines, dict(self._placed), self._topic_names(machines, channels))
+
+    def _topic_names(self, machines: dict[str, StateMachine],
+                     channels: tuple[tuple[str, str], ...]) -> dict[tuple[str, str, str], str]:
+        """``(sender, receiver, label) -> ROS topic`` of the labels the system maps to ROS topics."""
+        if not self.ros_topics:
+            return {}
+        from ..transport.ros_lanes import ros_settings
+
+        ros = ros_settings(machines, channels, self.ros_topics, self.external, self.ros_distro, self.ros_domain)
+        return {key: topic.name for key, topic in ros.topics.items()}
 
     def _with_capacities(self, report: RunReport) -> RunReport:
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()})
@@ -245,7 +261,8 @@ class System:
 
     def _run_dds(self, machines: dict[str, StateMachine], channels: tuple[tuple[str, str], ...],
                  timeout: float | None, grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None,
-                 liveness: float, host: str | None, wait: float, recording: Recording | None) -> RunReport:
+                 liveness: float, host: str | None, wait: float, recording: Recording | None,
+                 shown: LivePlan | None = None) -> RunReport:
         from ..transport.dds import DOMAIN_ENV, DdsSettings  # only a DDS run loads Cyclone DDS
         from .ddsrunner import DdsRunner
 
@@ -283,9 +300,26 @@ class System:
         runner = DdsRunner(self.global_type.name, machines, channels, local, self.monitors, settings, elsewhere,
                            liveness, self.capacities)
         runner.record = recording.plan if recording is not None else None
+        runner.live = shown
         everywhere = (Elsewhere(runner.link, dict(self.groups), channels) if runner.link is not None else None)
         return self._with_capacities(Supervisor(self.global_type.name, local_roles, local, local_channels, runner,
                                                 timeout, grace, on_status, everywhere).run())
+
+
+def _with_live_status(on_status: Callable[[dict[str, GroupStatus]], None] | None,
+                      live: LiveView) -> Callable[[dict[str, GroupStatus]], None]:
+    """``on_status`` that also publishes the statuses on the live view."""
+    def both(statuses: dict[str, GroupStatus]) -> None:
+        live.status(statuses)
+        if on_status is not None:
+            on_status(statuses)
+    return both
+
+
+def _with_live(report: RunReport, live: LiveView | None) -> RunReport:
+    if live is None:
+        return report
+    return dataclasses.replace(report, notes=(*report.notes, *live.end()))
 
 
 def _with_recording(report: RunReport, recording: Recording | None, gt: GlobalType, transport: str,

@@ -18,6 +18,8 @@ from typing import Any
 
 from sessiontypes import GlobalType, StateMachine
 
+from ..live.plan import LivePlan
+from ..live.tap import LiveTap
 from ..recording.plan import RecordPlan
 from ..recording.tap import Recorder
 from ..session.endpoint import Endpoint
@@ -66,6 +68,8 @@ class ThreadRunner:
         self.inbox: SimpleQueue[Event] = SimpleQueue()
         self.record: RecordPlan | None = None  # set by System.run for a recorded run
         self.recorders: list[Recorder] = []
+        self.live: LivePlan | None = None  # set by System.run for a run shown live
+        self.taps: list[LiveTap] = []
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         batch = set(groups)
@@ -81,6 +85,10 @@ class ThreadRunner:
                                     {role: self.machines[role] for role in group.roles})
                 recorder.attach(network.queues)
                 self.recorders.append(recorder)
+            if self.live is not None:
+                tap = LiveTap(self.live, name, group.roles)
+                tap.attach(network.queues)
+                self.taps.append(tap)
             endpoints = {role: Endpoint(role, self.global_type.name, self.machines[role], network, self.monitors)
                          for role in group.roles}
             inc = self.current[name] = _Incarnation(group, incarnation, network, endpoints)
@@ -167,3 +175,5 @@ class ThreadRunner:
             self.kill(name)
         for recorder in self.recorders:
             recorder.close()
+        for tap in self.taps:
+            tap.close()

@@ -7,6 +7,7 @@ has errors (printed as ``path:line:col: error: ...``), 2 usage errors.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -15,7 +16,7 @@ import shutil
 import signal
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TextIO
 
@@ -27,6 +28,7 @@ from sessiontypes.printer import PrintTooLongError, print_local
 from ..errors import AnodizeError
 
 if TYPE_CHECKING:
+    from ..live.server import LiveView
     from ..supervision.report import GroupStatus
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -138,6 +140,7 @@ def _parser() -> argparse.ArgumentParser:
     run_system.add_argument("--record", metavar="PATH",
                             help="record every message between groups: PATH.mcap is an MCAP file, any other PATH "
                                  "a rosbag2 folder (see 'anodize verify' and 'anodize replay')")
+    _add_foxglove_argument(run_system)
     run_system.set_defaults(run=_run)
 
     verify = commands.add_parser(
@@ -390,8 +393,9 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f"--host needs transport = \"dds\"; {config.path} uses {config.transport!r}")
     system = build_system(config)
     timeout = args.timeout if args.timeout is not None else config.timeout
-    report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout),
-                        host=args.host, wait=args.wait, record=args.record)
+    with _live_view(args.foxglove) as live:
+        report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout),
+                            host=args.host, wait=args.wait, record=args.record, live=live)
     print(report.summary())
     if args.json:
         out = Path(args.json)
@@ -417,6 +421,32 @@ def _verify(args: argparse.Namespace) -> int:
         out.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
         print(f"wrote {out}")
     return EXIT_OK if report.conforms else EXIT_ERRORS
+
+
+def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--foxglove", nargs="?", type=int, const=8765, default=None, metavar="PORT",
+                        help="serve every channel and each group's status live to the Foxglove app on "
+                             "ws://127.0.0.1:PORT (default 8765; 0: any free port); a client publishing on a "
+                             "channel's topic (e.g. /joy) reaches the role that sends it")
+
+
+@contextlib.contextmanager
+def _live_view(port: int | None) -> Iterator[LiveView | None]:
+    """The run's live view in Foxglove (``--foxglove``), announced before the run starts."""
+    if port is None:
+        yield None
+        return
+    if not 0 <= port <= 65535:
+        raise UsageError(f"--foxglove {port}: expected a port number 0..65535")
+    from ..live import open_live_view
+
+    live = open_live_view(port)
+    print(f"foxglove: serving the run live at {live.url} (Foxglove app: Open connection > Foxglove WebSocket)",
+          flush=True)
+    try:
+        yield live
+    finally:
+        live.close()
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -468,6 +498,7 @@ def _run_named(name: str, rest: list[str]) -> int:
     assert named is not None  # _is_named_run saw it registered
     parser = argparse.ArgumentParser(prog=f"anodize run {name}", description=named.summary)
     parser.add_argument("--quiet", action="store_true", help="no live progress line")
+    _add_foxglove_argument(parser)
     named.add_arguments(parser)
     try:
         args = parser.parse_args(rest)
@@ -476,8 +507,9 @@ def _run_named(name: str, rest: list[str]) -> int:
     prepared = named.prepare(args, lambda line: print(line, flush=True))
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
     try:
-        report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
-                                     record=prepared.record)
+        with _live_view(args.foxglove) as live:
+            report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
+                                         record=prepared.record, live=live)
     finally:
         if progress is not None:
             progress.close()
