@@ -249,10 +249,11 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
                      f"over {data['control']['commands']} commands")
     robot = data["robot"]
     if data.get("final_position_error_m") is not None and robot.get("distance_m") is not None:
+        drift = data.get("drift_per_m")  # None when the robot did not travel (e.g. turned on the spot)
         lines.append(f"robot (steered by the odometry): drove {robot['distance_m']:.2f} m, "
                      f"{robot['waypoints_reached']} waypoints reached, {robot['bumps']} bumps; "
-                     f"odometry's final position error {data['final_position_error_m']:.3f} m "
-                     f"({data['drift_per_m'] * 100:.2f} cm per metre)")
+                     f"odometry's final position error {data['final_position_error_m']:.3f} m"
+                     + (f" ({drift * 100:.2f} cm per metre)" if drift is not None else ""))
     control = data["control"]
     if data.get("vo_lost_frames") or control.get("stops_for_lost_tracking"):
         lines.append(f"odometry lost track on {data['vo_lost_frames']} frames: the robot stopped "

@@ -144,8 +144,10 @@ class LiveView:
                     metadata=_metadata(x, codec, plan))
             self._channels.append(channel)
             self._codecs.append(codec)
-        self._status = foxglove.Channel(STATUS_TOPIC, schema=_STATUS_SCHEMA, message_encoding="json",
-                                        context=self.context)
+        self._status = foxglove.Channel(
+            STATUS_TOPIC, message_encoding="json", context=self.context,
+            schema=foxglove.Schema(name="anodize.GroupStatuses", encoding="jsonschema",
+                                   data=json.dumps(_STATUS_SCHEMA).encode()))
         self.plan = plan
         threading.Thread(target=self._accept_loop, name="anodize-live-accept", daemon=True).start()
 

@@ -102,3 +102,18 @@ def test_a_joy_messages_numpy_arrays_map_to_python_floats() -> None:
     v, w, active = twist_from_joy(message.axes, message.buttons)
     assert type(v) is float and type(w) is float and active
     assert math.isclose(v, 0.3, rel_tol=1e-6) and math.isclose(w, 0.45, rel_tol=1e-6)
+
+
+def test_a_foxglove_clients_joy_is_fitted_to_the_gamepad() -> None:
+    """A client's Joy (``--foxglove``) may have any length and any floats: Joy sends six
+    axes within [-1, 1] (not-a-number centred) and eight buttons 0 or 1."""
+    import numpy as np
+
+    from tinman.roles.control import _fitted
+
+    client = joy(Header(stamp=Time(sec=0, nanosec=0), frame_id="foxglove"),
+                 np.array([0.5, math.nan, 7.0, -math.inf], np.float32), np.array([0, 3, -1], np.int32))
+    assert _fitted(client) == ((0.5, 0.0, 1.0, -1.0, 0.0, 0.0), (0, 1, 1, 0, 0, 0, 0, 0))
+    many = joy(Header(stamp=Time(sec=0, nanosec=0), frame_id="foxglove"), np.full(9, 0.25, np.float32),
+               np.ones(12, np.int32))
+    assert _fitted(many) == ((0.25,) * 6, (1,) * 8)

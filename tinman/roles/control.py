@@ -8,10 +8,11 @@ import time
 import numpy as np
 
 from anodize import Endpoint, PeerFailedError, RoleStopped
+from anodize.live import client_input
 
 from ..faults import start_faults
 from ..geometry import robot_pose
-from ..joystick import scripted_joy, twist_from_joy
+from ..joystick import AXES, BUTTONS, scripted_joy, twist_from_joy
 from ..keyboard import Keyboard
 from ..messages import Header, Joy, Path, PoseStamped, Twist, pose_matrix, seconds, stamp_now, twist_planar
 from ..messages import joy as joy_message
@@ -23,19 +24,30 @@ from ..world import DEFAULT_WORLD
 
 __all__ = ["joy", "control", "move"]
 
+CLIENT_HOLD = 0.5  # seconds a Foxglove client's joystick state counts after it arrived
+
 
 def joy(ep: Endpoint) -> None:
-    """The joystick: its state every control period, on an absolute schedule."""
+    """The joystick: its state every control period, on an absolute schedule.
+
+    With ``--foxglove``, a joystick in the Foxglove app (a client publishing
+    ``sensor_msgs/Joy`` on ``/joy``) takes over while it publishes: its latest state,
+    fitted to this gamepad's layout, is what Joy sends.
+    """
     settings = current()
     start_faults("Joy")
     period = 1.0 / settings.control_rate
     keyboard = Keyboard.open() if settings.teleop else None
     read = keyboard.read if keyboard is not None else scripted_joy
+    client = client_input(ep, "Control", "Joy")  # None without --foxglove
     start = time.monotonic()
     tick = 0
     try:
         while True:
             axes, buttons = read(time.monotonic() - start)
+            held = client.latest(max_age=CLIENT_HOLD) if client is not None else None
+            if isinstance(held, Joy):
+                axes, buttons = _fitted(held)
             ep.send("Control", "Joy", joy_message(Header(stamp=stamp_now(), frame_id="joy"), axes, buttons))
             tick += 1
             late = time.monotonic() - (start + tick * period)
@@ -45,6 +57,15 @@ def joy(ep: Endpoint) -> None:
     finally:
         if keyboard is not None:
             keyboard.close()
+
+
+def _fitted(state: Joy) -> tuple[tuple[float, ...], tuple[int, ...]]:
+    """A client's Joy as this gamepad's: its axes within [-1, 1] (not a number: centred) and its
+    buttons 0 or 1, as many of each as the gamepad has (missing ones centred or released)."""
+    axes = np.nan_to_num(np.clip(np.asarray(state.axes, np.float64)[:AXES], -1.0, 1.0), nan=0.0)
+    buttons = (np.asarray(state.buttons)[:BUTTONS] != 0).astype(int)
+    return (tuple(float(a) for a in axes) + (0.0,) * (AXES - len(axes)),
+            tuple(int(b) for b in buttons) + (0,) * (BUTTONS - len(buttons)))
 
 
 def control(ep: Endpoint) -> None:
@@ -91,7 +112,7 @@ def move(ep: Endpoint) -> None:
             "period_ms": percentiles(periods), "planner_lost": planner_lost[0] if planner_lost else None,
             "teleop_commands_after_planner_lost": teleop_after_loss,
             "estimates": mixer.estimates, "stops_for_lost_tracking": mixer.stops,
-            "path_commands_after_a_stop": mixer.resumed,
+            "path_commands_after_a_stop": mixer.resumed, "bridged": mixer.bridged,
             "perception_lost": perception_lost[0] if perception_lost else None,
             "odometry_pose": list(mixer.model.pose)})
 
