@@ -6,15 +6,15 @@ sent, even if the sender changes the payload afterwards; a thread of the group w
 it to the group's part file (an MCAP file without chunks, flushed every 0.1 s, so a
 group that is killed loses at most its last tenth of a second). That thread runs at
 ordinary priority, below every real-time role of the group, so recording does not
-delay the control loop; when it falls behind by more than :data:`BACKLOG` bytes the
-senders wait for it (bounded memory; nothing is dropped). The supervisor merges the
+delay the control loop; when it falls behind by more than :data:`BACKLOG` bytes (an
+eighth of the group's memory bound, if that is less) the senders wait for it (bounded
+memory; nothing is dropped). The supervisor merges the
 parts when the run ends (:mod:`.merge`).
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
 import threading
 import time
 from collections import deque
@@ -24,6 +24,7 @@ from typing import Any
 
 from sessiontypes import StateMachine
 
+from ..isolation.sched import lower_thread_priority
 from ..session.channel import Channel
 from .encoding import SortCodec, codec_for_sort
 from .plan import META, PROFILE, ChannelLabel, RecordPlan
@@ -68,7 +69,7 @@ class Recorder:
     """One group's recorder; :meth:`attach` it to the group's network, :meth:`close` at the end."""
 
     def __init__(self, plan: RecordPlan, group: str, incarnation: int, protocol: str,
-                 machines: Mapping[str, StateMachine]) -> None:
+                 machines: Mapping[str, StateMachine], memory: int | None = None) -> None:
         from mcap.writer import CompressionType, Writer
 
         self.plan = plan
@@ -85,6 +86,8 @@ class Recorder:
         self._schemas: dict[str, int] = {}
         self._pending: deque[tuple[int, int, int, bytes]] = deque()
         self._pending_bytes = 0
+        # A group with a memory bound spends at most an eighth of it on a backlog.
+        self.backlog = BACKLOG if memory is None else max(2**20, min(BACKLOG, memory // 8))
         self._sequence: dict[tuple[str, str], int] = dict.fromkeys(self.recorded, 0)
         self._lock = threading.Condition()
         self._closing = False
@@ -119,7 +122,7 @@ class Recorder:
         """Hand an encoded message to the writer (waiting while the writer is far behind)."""
         channel_id, stamp, data = encoded
         with self._lock:
-            while self._pending_bytes > BACKLOG and not self._closing:
+            while self._pending_bytes > self.backlog and not self._closing:
                 self._lock.wait(0.1)
             sequence = self._sequence[pair] = self._sequence[pair] + 1
             self._pending.append((channel_id, stamp, sequence, data))
@@ -148,7 +151,7 @@ class Recorder:
         return found
 
     def _write_loop(self) -> None:
-        _lower_own_priority()
+        lower_thread_priority()  # it inherited the group's real-time priority
         last_flush = time.monotonic()
         while True:
             with self._lock:
@@ -240,9 +243,3 @@ def _local_labels(machines: Mapping[str, StateMachine],
     return found
 
 
-def _lower_own_priority() -> None:
-    """This thread at ordinary priority (it inherited the group's real-time one), niced."""
-    with contextlib.suppress(OSError, AttributeError):
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))  # 0: the calling thread, on Linux
-    with contextlib.suppress(OSError, AttributeError):
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)

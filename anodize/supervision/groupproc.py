@@ -337,7 +337,7 @@ def _recorder(spec: GroupSpec, queues: dict[tuple[str, str], Any]) -> Recorder |
     plan = spec.extra.get("record")
     if plan is None:
         return None
-    recorder = Recorder(plan, spec.name, spec.incarnation, spec.protocol, spec.machines)
+    recorder = Recorder(plan, spec.name, spec.incarnation, spec.protocol, spec.machines, spec.memory)
     recorder.attach(queues)
     return recorder
 

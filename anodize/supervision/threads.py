@@ -82,7 +82,7 @@ class ThreadRunner:
             group = self.groups[name]
             if self.record is not None:  # before the endpoints take their channels
                 recorder = Recorder(self.record, name, incarnation, self.global_type.name,
-                                    {role: self.machines[role] for role in group.roles})
+                                    {role: self.machines[role] for role in group.roles}, group.memory)
                 recorder.attach(network.queues)
                 self.recorders.append(recorder)
             if self.live is not None:
