@@ -35,6 +35,7 @@ import pickle
 import pickletools
 import struct
 import sys
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from enum import IntEnum
 from typing import TYPE_CHECKING, Any
@@ -132,6 +133,8 @@ class Codec:
         self.write_array: ArrayWriter | None = ring.write if ring is not None else None
         self.read_array = read_array
         self._labels: dict[str, bytes] = {}
+        self._empty_frames: dict[str, bytes] = {}  # label -> its whole frame without payload
+        self._int_prefixes: dict[str, bytes] = {}  # label -> its frame up to an int payload's 8 bytes
         self._label_names: dict[bytes, str] = {}
         self._numpy: Any = sys.modules.get("numpy")  # imported lazily: only arrays need it
 
@@ -142,24 +145,39 @@ class Codec:
         Raises:
             EncodeError: the payload holds something this codec refuses.
         """
+        # Fast paths for the commonest payloads, whose frames differ only in the payload's
+        # bytes: no payload (the whole frame, built once), a small int (a prefix built once).
+        if payload is None:
+            frame = self._empty_frames.get(label)
+            if frame is None:
+                frame = self._empty_frames[label] = self._framed(self._head(label) + _TAG_BYTE[Tag.NONE])
+            return frame
+        if type(payload) is int and _I64_MIN <= payload <= _I64_MAX:
+            prefix = self._int_prefixes.get(label)
+            if prefix is None:
+                head = self._head(label)
+                prefix = self._int_prefixes[label] = HEADER.pack(len(head) + 9) + head + _TAG_BYTE[Tag.INT]
+            return prefix + _I64.pack(payload)
+        out = io.BytesIO()
+        out.write(self._head(label))
+        self._encode(payload, out, 0)
+        body = out.getvalue()
+        if len(body) > MAX_FRAME:
+            raise EncodeError(f"the payload encodes to {len(body) / 2**20:.1f} MiB, over the "
+                              f"{MAX_FRAME // 2**20} MiB a message may take (numpy arrays of any "
+                              "size travel through shared memory instead)")
+        return self._framed(body)
+
+    def _head(self, label: str) -> bytes:
+        """The frame kind and the label, as every message frame of ``label`` begins."""
         head = self._labels.get(label)
         if head is None:
             encoded = label.encode()
             head = self._labels[label] = bytes((FrameKind.MESSAGE,)) + _U32.pack(len(encoded)) + encoded
-        # Fast paths for the commonest payloads: no payload, a small int.
-        if payload is None:
-            body = head + _TAG_BYTE[Tag.NONE]
-        elif type(payload) is int and _I64_MIN <= payload <= _I64_MAX:
-            body = head + _TAG_BYTE[Tag.INT] + _I64.pack(payload)
-        else:
-            out = io.BytesIO()
-            out.write(head)
-            self._encode(payload, out, 0)
-            body = out.getvalue()
-            if len(body) > MAX_FRAME:
-                raise EncodeError(f"the payload encodes to {len(body) / 2**20:.1f} MiB, over the "
-                                  f"{MAX_FRAME // 2**20} MiB a message may take (numpy arrays of any "
-                                  "size travel through shared memory instead)")
+        return head
+
+    @staticmethod
+    def _framed(body: bytes) -> bytes:
         return HEADER.pack(len(body)) + body
 
     @staticmethod
@@ -201,6 +219,40 @@ class Codec:
             raise
         except Exception as error:  # whatever the bytes provoke, it is the sender's fault
             raise DecodeError(f"malformed frame: {type(error).__name__}: {error}") from None
+
+    def decode_run(self, buffer: bytearray, at: int, into: deque[tuple[object, int]]) -> int:
+        """Decode the complete message frames from ``at`` on that carry no payload or a small
+        int (the frames :meth:`message_frame` builds from a cached prefix) into ``into``, as
+        ``((label, payload), frame size)``; stop at the first other or incomplete frame.
+
+        One loop for a run of small messages costs far less per message than a call per
+        frame. Anything else (another payload, a failure frame, a malformed or unknown
+        label) is left for :meth:`decode_body`, so every error is still reported there.
+
+        Returns:
+            The offset after the last frame decoded.
+        """
+        names = self._label_names
+        size = len(buffer)
+        unpack_length, unpack_int = HEADER.unpack_from, _I64.unpack_from
+        while size - at >= 4:
+            (length,) = unpack_length(buffer, at)
+            end = at + 4 + length
+            if end > size or length < 6 or buffer[at + 4] != FrameKind.MESSAGE:  # 6: kind, label size, tag
+                break
+            (label_length,) = _U32.unpack_from(buffer, at + 5)
+            start = at + 9 + label_length
+            label = names.get(bytes(buffer[at + 9:start]))
+            if label is None:
+                break
+            if end == start + 1 and buffer[start] == Tag.NONE:
+                into.append(((label, None), 4 + length))
+            elif end == start + 9 and buffer[start] == Tag.INT:
+                into.append(((label, unpack_int(buffer, start + 1)[0]), 4 + length))
+            else:
+                break
+            at = end
+        return at
 
     # ---- encoding ----------------------------------------------------------------------
     def _encode(self, value: Any, out: io.BytesIO, depth: int) -> None:

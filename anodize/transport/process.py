@@ -149,6 +149,7 @@ class PipeReceiver:
         self._at = 0
         self.frame_size = 0  # bytes of the last frame taken (a bridge's queue is bounded by these)
         self._pushed: deque[object] = deque()  # sentinels put back so later receives see them too
+        self._ready: deque[tuple[object, int]] = deque()  # small messages decoded in a run, with frame sizes
         self._eof = False
         self._poll = select.poll()
         # Rung by the supervisor's word that the sender failed: a forked child of the sender's
@@ -200,6 +201,8 @@ class PipeReceiver:
         return not (self._fill(0) and (self._complete() or self._eof))
 
     def _complete(self) -> bool:
+        if self._ready:
+            return True
         buffer, at = self._buffer, self._at
         if len(buffer) - at < 4:
             return False
@@ -207,6 +210,12 @@ class PipeReceiver:
         return len(buffer) - at - 4 >= length
 
     def _next_frame(self) -> object | None:
+        ready = self._ready
+        if not ready:
+            self._at = self.codec.decode_run(self._buffer, self._at, ready)
+        if ready:
+            item, self.frame_size = ready.popleft()
+            return item
         buffer, at = self._buffer, self._at
         if len(buffer) - at < 4:
             return None
@@ -221,9 +230,6 @@ class PipeReceiver:
         body = buffer[at + 4:end]
         self._at = end
         self.frame_size = 4 + length
-        if end > 4 * _READ_SIZE:  # drop what was consumed now and then, not on every frame
-            del buffer[:end]
-            self._at = 0
         try:
             kind, value = self.codec.decode_body(body)
         except DecodeError as error:  # the stream is still in step: later frames may be fine
@@ -252,8 +258,11 @@ class PipeReceiver:
             data = b""
         if not data:
             self._eof = True
-        else:
-            self._buffer += data
+            return True
+        if self._at > 4 * _READ_SIZE:  # drop what was consumed now and then, not on every frame
+            del self._buffer[:self._at]
+            self._at = 0
+        self._buffer += data
         return True
 
 

@@ -485,3 +485,56 @@ def test_a_mutated_pickle_is_refused_or_is_still_one_plain(position: int, value:
     except DecodeError:
         return
     assert type(got) is Plain
+
+
+def _decode_one_by_one(codec: Codec, stream: bytes) -> list[object]:
+    found: list[object] = []
+    at = 0
+    while len(stream) - at >= 4:
+        (length,) = HEADER.unpack_from(stream, at)
+        if len(stream) - at - 4 < length:
+            break
+        try:
+            found.append(codec.decode_body(stream[at + 4:at + 4 + length]))
+        except DecodeError as error:
+            found.append(("error", str(error)))
+        at += 4 + length
+    return found
+
+
+def _decode_with_runs(codec: Codec, stream: bytes) -> list[object]:
+    """As PipeReceiver does: runs of small messages at once, anything else one by one."""
+    from collections import deque
+
+    buffer, at, found = bytearray(stream), 0, []
+    ready: deque[tuple[object, int]] = deque()
+    while True:
+        at = codec.decode_run(buffer, at, ready)
+        found.extend((FrameKind.MESSAGE, item) for item, _ in ready)
+        ready.clear()
+        if len(buffer) - at < 4 or len(buffer) - at - 4 < HEADER.unpack_from(buffer, at)[0]:
+            return found
+        (length,) = HEADER.unpack_from(buffer, at)
+        try:
+            found.append(codec.decode_body(bytes(buffer[at + 4:at + 4 + length])))
+        except DecodeError as error:
+            found.append(("error", str(error)))
+        at += 4 + length
+
+
+frames = st.one_of(
+    st.tuples(st.sampled_from(["num", "stop", "é"]), st.none() | st.integers(-2**63, 2**63 - 1)).map(
+        lambda lp: Codec().message_frame(*lp)),
+    st.tuples(st.sampled_from(["num", "other"]), values).map(lambda lp: Codec().message_frame(*lp)),
+    st.text(max_size=10).map(Codec.failure_frame),
+    st.binary(max_size=12).map(lambda b: HEADER.pack(len(b)) + b),  # garbage, in a frame
+)
+
+
+@settings(max_examples=examples(200))
+@given(stream=st.lists(frames, max_size=30).map(b"".join), cut=st.integers(0, 30))
+def test_decoding_runs_of_small_messages_gives_what_decoding_each_frame_gives(stream: bytes, cut: int) -> None:
+    stream = stream[:len(stream) - cut] if cut < len(stream) else stream  # a last frame may be incomplete
+    runs, each = Codec(), Codec()
+    _decode_one_by_one(runs, stream)  # labels are learnt by decoding them once, as in a receiver
+    assert _decode_with_runs(runs, stream) == _decode_one_by_one(each, stream)
