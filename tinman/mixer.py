@@ -5,7 +5,17 @@ the visual odometry's pose (each fresh estimate resets its model of the drive, w
 carries the pose forward between estimates with every command sent), so the
 odometry's error moves the real robot. When no fresh estimate has come for
 ``LOST_AFTER`` seconds (VisOdom lost track, or perception is gone), path following
-stops the robot and counts the stop; it resumes with the next fresh estimate. Teleop
+stops the robot and counts the stop; it resumes with the next fresh estimate.
+
+The drive model also bridges what the odometry cannot see, as a real robot's wheel
+odometry does. After a gap of more than ``BRIDGE_GAP`` seconds between two estimates
+(frames dropped, or tracking lost and restarted from a guess), or when an estimate
+jumps away from where the commands since the last one took the robot (more than
+``BRIDGE_JUMP`` metres or ``BRIDGE_TURN`` radians: a false fix), Move keeps the drive
+model's pose and from then on reads the odometry's poses relative to it (an offset
+between the odometry's frame and Move's, ``offset``). Over such short spans the
+commanded motion is what the base did (the simulated base does not slip: a real one
+slips a little, which these thresholds are far above). Teleop
 is "active" while Control's twist is not zero: Control sends a twist every cycle, so
 a centred stick means "no command" (as with ROS's twist_mux, where a silent teleop
 topic yields to navigation); a person driving is not stopped.
@@ -13,6 +23,7 @@ topic yields to navigation); a person driving is not stopped.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -22,10 +33,27 @@ from .pursuit import PurePursuit
 from .sim import DiffDrive
 from .world import World
 
-__all__ = ["Mixer", "IDLE_EPSILON", "LOST_AFTER"]
+__all__ = ["Mixer", "IDLE_EPSILON", "LOST_AFTER", "BRIDGE_GAP", "BRIDGE_JUMP", "BRIDGE_TURN"]
 
 IDLE_EPSILON = 1e-3  # m/s or rad/s: a twist this small commands nothing
 LOST_AFTER = 0.5  # seconds without a fresh estimate before path following stops the robot
+BRIDGE_GAP = 0.1  # seconds between two estimates' stamps (three camera frames) the odometry may have lost
+BRIDGE_JUMP = 0.1  # metres an estimate may differ from the drive model's pose before it is a false fix ...
+BRIDGE_TURN = math.radians(5.0)  # ... or radians
+
+Pose = tuple[float, float, float]
+
+
+def _compose(a: Pose, b: Pose) -> Pose:
+    """The planar pose ``b`` seen from ``a`` (``a`` then ``b``)."""
+    cos_a, sin_a = math.cos(a[2]), math.sin(a[2])
+    return (a[0] + cos_a * b[0] - sin_a * b[1], a[1] + sin_a * b[0] + cos_a * b[1],
+            math.remainder(a[2] + b[2], math.tau))
+
+
+def _inverse(a: Pose) -> Pose:
+    cos_a, sin_a = math.cos(a[2]), math.sin(a[2])
+    return (-cos_a * a[0] - sin_a * a[1], sin_a * a[0] - cos_a * a[1], -a[2])
 
 
 class Mixer:
@@ -41,6 +69,8 @@ class Mixer:
             ``lost``: stopped for want of a fresh estimate).
         estimates: fresh estimates taken.
         stops: how often path following stopped because the estimate went stale.
+        bridged: how often the drive model's pose was kept over the odometry's (a gap, or a jump).
+        offset: the odometry's frame in Move's, ``(x, y, theta)`` (zero until the first bridge).
     """
 
     def __init__(self, world: World, period: float, pursuit: PurePursuit | None = None,
@@ -53,6 +83,8 @@ class Mixer:
         self.estimates = 0
         self.stops = 0
         self.resumed = 0  # path commands after the first stop: tracking came back
+        self.bridged = 0
+        self.offset: Pose = (0.0, 0.0, 0.0)
         self._path: list[tuple[float, float]] = []
         self._stamp: float | None = None
         self._clock = clock
@@ -68,14 +100,32 @@ class Mixer:
             self.paths_received += 1
 
     def set_estimate(self, stamp: float, pose: tuple[float, float, float]) -> None:
-        """The odometry's estimate of the robot at ``stamp``; a repeated stamp is no news."""
+        """The odometry's estimate of the robot at ``stamp``; a repeated stamp is no news.
+
+        The robot is then where the odometry says (through ``offset``), unless the estimate
+        follows a gap or jumps (see the module): then the drive model's pose is kept and
+        ``offset`` changes so that this estimate reads as that pose."""
         with self._lock:
             if stamp == self._stamp:
                 return
+            estimate = _compose(self.offset, pose)
+            if self._stamp is not None and not self._believable(stamp, estimate):
+                self.offset = _compose(self.model.pose, _inverse(pose))
+                estimate = self.model.pose
+                self.bridged += 1
             self._stamp = stamp
             self._fresh_at = self._clock()
-            self.model.pose = pose
+            self.model.pose = estimate
             self.estimates += 1
+
+    def _believable(self, stamp: float, estimate: Pose) -> bool:
+        """Whether an estimate follows the last one closely enough, and lands near enough where the
+        commands since took the drive model, to be taken as it is."""
+        assert self._stamp is not None
+        x, y, theta = self.model.pose
+        return (stamp - self._stamp <= BRIDGE_GAP
+                and math.hypot(estimate[0] - x, estimate[1] - y) <= BRIDGE_JUMP
+                and abs(math.remainder(estimate[2] - theta, math.tau)) <= BRIDGE_TURN)
 
     def tracking(self) -> bool:
         """Whether a fresh estimate came within ``LOST_AFTER`` seconds."""

@@ -51,7 +51,7 @@ from .outcome import truth_path
 from .records import load_records
 from .settings import Settings
 from .tum import associate, read_trajectory
-from .world import DEFAULT_WORLD, ROBOT_RADIUS, World
+from .world import CLEARANCE, DEFAULT_WORLD, World
 
 __all__ = ["draw_run", "run_figure", "FIGURE_SIZE", "DPI", "THUMBNAILS", "COLOURS"]
 
@@ -307,7 +307,7 @@ def _draw_room(axes: Axes, run: _Run, world: World, moments: list[tuple[float, i
     """The room from above; returns the legend's handles: the lines and areas, then the markers."""
     handles: list[Any] = []  # lines and areas
     marks: list[Any] = []
-    grown = ROBOT_RADIUS + 0.07  # as World.occupancy's default: what the planner keeps clear of
+    grown = CLEARANCE  # as World.occupancy's default: what the planner keeps clear of
     for box in world.boxes:
         axes.add_patch(Rectangle((box.x0 - grown, box.y0 - grown), box.x1 - box.x0 + 2 * grown,
                                  box.y1 - box.y0 + 2 * grown, facecolor=_GROWN, edgecolor="none", zorder=0.5))

@@ -24,7 +24,7 @@ import cv2
 import networkx as nx
 import numpy as np
 
-from .world import ROBOT_RADIUS, OccupancyGrid, World
+from .world import CLEARANCE, OccupancyGrid, World
 
 __all__ = ["NoPathError", "Point", "plan_rrt_connect", "shortcut", "simplify", "free_cell_graph",
            "plan_astar", "Planner", "Patrol"]
@@ -310,7 +310,7 @@ class Planner:
     """
 
     def __init__(self, world: World, method: str = "rrt", seed: int = 0, resolution: float = 0.05,
-                 inflate: float = ROBOT_RADIUS + 0.07) -> None:
+                 inflate: float = CLEARANCE) -> None:
         """A planner for ``world``.
 
         Args:

@@ -36,7 +36,7 @@ if TYPE_CHECKING:
 __all__ = ["GENERATOR_VERSION", "METADATA_FILE", "add_depth_noise", "add_image_noise", "add_motion_blur",
            "image_motion", "simulate_frame", "generate_sequence"]
 
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2  # changes the cached sequences: 2, the planner keeps the robot further from boxes
 METADATA_FILE = "tinman.json"
 
 MIN_RANGE = 0.4   # metres: the Kinect sees nothing closer

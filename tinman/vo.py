@@ -79,11 +79,19 @@ class VisualOdometry:
         ratio: a match's descriptor distance must be below this fraction of the runner-up's.
         search_radius: how far (pixels) from its predicted position a keyframe point is looked for.
         max_failures: after this many failed frames in a row, restart from the current
-            frame as a keyframe at the last pose (the view has moved on).
+            frame as a keyframe (the view has moved on), at the pose the camera coasted to.
+        max_coast: through up to this many failed frames in a row the camera is taken to go on
+            moving as it did between the last two frames tracked (then to stand still); the
+            pose returned for a failed frame stays the last one tracked.
+        max_turn_per_frame, max_step_per_frame: the most a camera's pose departs from the motion
+            model's prediction (radians, metres) per frame period; a pose further off is a false
+            PnP solution (repeated patterns, a few matches on a plain surface) and the frame
+            fails. The bound grows with the frames since the last one tracked.
         pyramid_levels, scale_factor, fast_threshold: ORB's detector settings.
         low_contrast_threshold: where ``fast_threshold`` finds fewer than half of ``features``
             (plain walls, dim light, blur), detect again with this lower FAST threshold, as
-            ORB-SLAM does (its 20 and 7); None: never.
+            ORB-SLAM does (its 20 and 7; 4 here: in front of a plain painted box, 7 leaves
+            too few corners to track a turn); None: never.
         use_depth: refine with this frame's depth readings too (else reprojection only,
             with ``cv2.solvePnPRefineLM``).
         pixel_sigma: the feature position noise assumed by the refinement, in pixels.
@@ -95,11 +103,12 @@ class VisualOdometry:
     """
 
     def __init__(self, intrinsics: Intrinsics, initial_pose: np.ndarray | None = None, features: int = 1000, *,
-                 min_inliers: int = 20, keyframe_fraction: float = 0.5, keyframe_inliers: int = 120,
+                 min_inliers: int = 20, keyframe_fraction: float = 0.5, keyframe_inliers: int = 80,
                  min_depth: float = 0.3, max_depth: float = 6.0, reprojection_error: float = 2.0,
                  ratio: float = 0.8, search_radius: float = 20.0, max_failures: int = 3,
+                 max_coast: int = 6, max_turn_per_frame: float = 0.05, max_step_per_frame: float = 0.05,
                  pyramid_levels: int = 2, scale_factor: float = 1.3, fast_threshold: int = 20,
-                 low_contrast_threshold: int | None = 7,
+                 low_contrast_threshold: int | None = 4,
                  use_depth: bool = True, pixel_sigma: float = 2.0) -> None:
         self.intrinsics = intrinsics
         self.camera_matrix = intrinsics.matrix()
@@ -114,6 +123,8 @@ class VisualOdometry:
         self.use_depth = use_depth
         self.pixel_sigma = pixel_sigma
         self.max_failures = max_failures
+        self.max_coast = max_coast
+        self.max_turn_per_frame, self.max_step_per_frame = max_turn_per_frame, max_step_per_frame
         self.last: TrackStats | None = None
         self.frames = 0
         self.failures = 0
@@ -129,14 +140,21 @@ class VisualOdometry:
         self._keyframe: _Keyframe | None = None
         self._relative = np.eye(4)  # T_kc of the last frame tracked
         self._motion = np.eye(4)    # the last frame-to-frame motion, to predict the next
+        self._motion_seconds: float | None = None  # how long that motion took (None: no stamps)
+        self._stamp: float | None = None           # the last frame's, tracked or coasted through
+        self._step = np.eye(4)                     # the motion predicted from the last frame to this one
+        self._seconds_ago: float | None = None     # from the last frame to this one
         self._failed_in_a_row = 0
 
-    def track(self, rgb: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
+    def track(self, rgb: np.ndarray, depth_m: np.ndarray, stamp: float | None = None) -> np.ndarray:
         """Estimate the pose of the next frame.
 
         Args:
             rgb: the colour image, uint8 H x W x 3 in RGB order (or H x W grey).
             depth_m: the registered depth image in metres, 0 where there is no reading.
+            stamp: the frame's capture time in seconds, if known: the motion model then predicts
+                over the time since the last frame (frames dropped in between are allowed for),
+                else over one frame.
 
         Returns:
             ``T_wc`` (4x4) of this frame; the previous frame's when tracking failed.
@@ -158,6 +176,9 @@ class VisualOdometry:
         pixels = np.asarray(cv2.KeyPoint.convert(keypoints) if keypoints else (), dtype=np.float32).reshape(-1, 2)
         index = self.frames
         self.frames += 1
+        steps = self._steps_since_last(stamp)
+        self._step = _scaled(self._motion, steps)
+        self._stamp = stamp
         if self._keyframe is None:
             made = self._make_keyframe(pixels, descriptors, depth_m, self.pose)
             self.failures += not made
@@ -165,20 +186,28 @@ class VisualOdometry:
             return self.pose.copy()
 
         matches, inliers, relative = self._relative_pose(pixels, descriptors, depth_m)
+        if relative is not None and not self._plausible(relative, steps):
+            relative, inliers = None, 0
         if relative is None:
             self.failures += 1
             self._failed_in_a_row += 1
+            self._coast()
             restart = False
-            if self._failed_in_a_row >= self.max_failures:  # keep the last pose, measure from what is in view now
-                restart = self._make_keyframe(pixels, descriptors, depth_m, self.pose)
-            self._motion = np.eye(4)
+            if self._failed_in_a_row >= self.max_failures:  # measure from what is in view now, where it coasted to
+                assert self._keyframe is not None
+                coasted = self._keyframe.pose @ self._relative
+                restart = self._make_keyframe(pixels, descriptors, depth_m, coasted)
+                if restart:
+                    self.pose = coasted
             self._finish(start, index, len(keypoints), matches, 0, restart, failed=True)
             return self.pose.copy()
 
-        self._failed_in_a_row = 0
         keyframe = self._keyframe
         pose: np.ndarray = keyframe.pose @ relative
-        self._motion = np.linalg.inv(self._relative) @ relative
+        if self._failed_in_a_row == 0:  # from a coasted guess the motion would be the guess's error
+            self._motion = np.linalg.inv(self._relative) @ relative
+            self._motion_seconds = self._seconds_ago
+        self._failed_in_a_row = 0
         self._relative = relative
         self.pose = pose
         if keyframe.reference_inliers == 0:
@@ -204,7 +233,7 @@ class VisualOdometry:
         assert keyframe is not None
         if descriptors is None or len(keyframe.descriptors) < 2 or len(descriptors) < 2:
             return 0, 0, None
-        camera_from_keyframe = np.linalg.inv(self._relative @ self._motion)  # predicted
+        camera_from_keyframe = np.linalg.inv(self._relative @ self._step)  # predicted
         rvec, _ = cv2.Rodrigues(camera_from_keyframe[:3, :3])
         tvec = camera_from_keyframe[:3, 3].reshape(3, 1).copy()
         projected = self._project(keyframe.points, camera_from_keyframe)
@@ -223,6 +252,32 @@ class VisualOdometry:
             query, train = query[near], train[near]
         found = self._solve(keyframe.points[query], pixels[train], depth_m, rvec, tvec)
         return found if found[1] > best[1] else best
+
+    def _coast(self) -> None:
+        """Carry the camera on through a failed frame with its last frame-to-frame motion (the
+        constant-velocity model that predicts every frame), for at most ``max_coast`` frames;
+        after that it is held still. A robot turning on the spot in front of a plain wall loses
+        track for a few frames and turns on meanwhile: restarting where it was would lose the turn."""
+        if self._failed_in_a_row > self.max_coast:
+            self._motion, self._step = np.eye(4), np.eye(4)
+        self._relative = self._relative @ self._step
+
+    def _steps_since_last(self, stamp: float | None) -> float:
+        """How many of the last motion's durations have passed since the last frame (1 without stamps)."""
+        self._seconds_ago = None if stamp is None or self._stamp is None else stamp - self._stamp
+        if self._seconds_ago is None or not self._motion_seconds or self._seconds_ago <= 0:
+            return 1.0
+        return self._seconds_ago / self._motion_seconds
+
+    def _plausible(self, relative: np.ndarray, steps: float) -> bool:
+        """Whether ``relative`` (``T_kc``) lies near enough the motion model's prediction for the
+        ``steps`` frame periods since the last frame (tracked or coasted through): a physical
+        camera does not jump, nor change its velocity much from one frame to the next."""
+        surprise = np.linalg.inv(self._relative @ self._step) @ relative
+        frames = self._failed_in_a_row + max(1.0, steps)
+        cosine = np.clip((np.trace(surprise[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
+        return bool(np.arccos(cosine) <= self.max_turn_per_frame * frames
+                    and np.linalg.norm(surprise[:3, 3]) <= self.max_step_per_frame * frames)
 
     def _project(self, points: np.ndarray, camera_from_points: np.ndarray) -> np.ndarray:
         """Pixel positions of 3D points (N x 2); far outside the image for points behind the camera."""
@@ -292,6 +347,18 @@ class VisualOdometry:
                 failed: bool) -> None:
         self.last = TrackStats(index, features, matches, inliers, keyframe, failed,
                                (time.perf_counter() - start) * 1000.0)
+
+
+def _scaled(motion: np.ndarray, factor: float) -> np.ndarray:
+    """The motion ``factor`` times as long at the same velocities (rotation vector and translation
+    scaled: exact for a straight move or a turn on the spot, close for a frame's arc)."""
+    if factor == 1.0:
+        return motion
+    scaled = np.eye(4)
+    rotation_vector, _ = cv2.Rodrigues(motion[:3, :3])
+    scaled[:3, :3] = cv2.Rodrigues(rotation_vector * factor)[0]
+    scaled[:3, 3] = motion[:3, 3] * factor
+    return scaled
 
 
 _MAX_HAMMING = 64  # of 256 bits: above this two ORB descriptors are not the same corner
@@ -528,7 +595,7 @@ def run_sequence(sequence: FrameSource, max_frames: int | None = None,
     for i in range(count):
         rgb, depth = sequence.rgb(i), sequence.depth(i)
         start = time.perf_counter()
-        poses[i] = odometry.track(rgb, depth)
+        poses[i] = odometry.track(rgb, depth, float(stamps[i]))
         seconds += time.perf_counter() - start
         assert odometry.last is not None
         stats.append(odometry.last)

@@ -10,9 +10,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Box", "World", "OccupancyGrid", "DEFAULT_WORLD", "ROBOT_RADIUS"]
+__all__ = ["Box", "World", "OccupancyGrid", "DEFAULT_WORLD", "ROBOT_RADIUS", "CLEARANCE"]
 
 ROBOT_RADIUS = 0.18  # metres: a TurtleBot-sized disc
+# How far the planner keeps the robot's centre from walls and boxes (metres): its radius, plus
+# room for the odometry's error (a few centimetres) and pure pursuit cutting corners.
+CLEARANCE = ROBOT_RADIUS + 0.2
 
 
 @dataclass(frozen=True)
@@ -100,7 +103,7 @@ class World:
                 return True
         return False
 
-    def occupancy(self, resolution: float = 0.05, inflate: float = ROBOT_RADIUS + 0.07) -> OccupancyGrid:
+    def occupancy(self, resolution: float = 0.05, inflate: float = CLEARANCE) -> OccupancyGrid:
         """The occupancy grid, obstacles and walls grown by ``inflate`` metres."""
         cols = round(self.width / resolution)
         rows = round(self.depth / resolution)

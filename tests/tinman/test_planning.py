@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from tinman.planning import NoPathError, Patrol, Planner, plan_astar, plan_rrt_connect, shortcut, simplify
-from tinman.world import DEFAULT_WORLD, ROBOT_RADIUS, Box, World
+from tinman.world import CLEARANCE, DEFAULT_WORLD, ROBOT_RADIUS, Box, World
 
 PLANNERS = {method: Planner(DEFAULT_WORLD, method, seed=1) for method in ("rrt", "astar")}
 GRID = PLANNERS["rrt"].grid
@@ -111,7 +111,7 @@ def test_a_start_against_the_wall_goes_to_the_nearest_free_cell_first(method):
     assert not GRID.free(*start) and not DEFAULT_WORLD.collides(*start)
     path = PLANNERS[method].plan(start, (7.0, 3.0))
     assert path[0] == start
-    assert math.dist(path[0], path[1]) < 0.1
+    assert math.dist(path[0], path[1]) < CLEARANCE - ROBOT_RADIUS + 0.05  # out of the margin, to a cell centre
     assert_path_is_safe(DEFAULT_WORLD, GRID, path[1:], path[1], (7.0, 3.0))
 
 
@@ -131,9 +131,9 @@ def test_astar_goes_round_a_box_nearly_as_short_as_possible():
     world = World(width=6.0, depth=6.0, boxes=(Box(2.6, 2.2, 3.4, 3.8, 1.0),))
     planner = Planner(world, "astar")
     path = planner.plan((1.0, 3.0), (5.0, 3.0))
-    # The grid grows the box by a square margin: round its corners (2.35, 1.95) and (3.65, 1.95),
+    # The grid grows the box by a square margin: round its corners (2.22, 1.82) and (3.78, 1.82),
     # or the mirror image above.
-    margin = ROBOT_RADIUS + 0.07
+    margin = CLEARANCE
     corner = 3.0 - (2.2 - margin)
     optimal = 2 * math.hypot(1.0 + 0.6 - margin, corner) + (0.8 + 2 * margin)
     assert optimal - 0.05 <= length(path) <= optimal * 1.03

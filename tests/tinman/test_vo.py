@@ -157,14 +157,17 @@ def test_tracking_survives_several_blind_frames_and_half_missing_depth(
 def test_after_failing_in_a_new_place_it_restarts_there(driving: tuple[np.ndarray, list[Frame]],
                                                          flying: tuple[np.ndarray, list[Frame]]) -> None:
     # Carried off (the frames jump to another part of the room): nothing matches the keyframe,
-    # so after max_failures frames the odometry starts again from what it sees, at its last pose.
+    # so after max_failures frames the odometry starts again from what it sees, where its motion
+    # model carried it: the last pose moved on twice by the last frame-to-frame motion.
     driving_truth, driving_frames = driving
     flying_truth, flying_frames = flying
     odometry = VisualOdometry(FR1, driving_truth[0], max_failures=2)
-    last = _run(odometry, driving_frames[:10])[-1]
+    before_last, last = _run(odometry, driving_frames[:10])[-2:]
     lost = _run(odometry, flying_frames[:2])
     assert odometry.failures == 2 and odometry.last is not None and odometry.last.keyframe
-    np.testing.assert_array_equal(lost[-1], last)
+    np.testing.assert_array_equal(lost[0], last)  # a failed frame reports the last pose tracked
+    motion = np.linalg.inv(before_last) @ last
+    np.testing.assert_allclose(lost[-1], last @ motion @ motion, atol=1e-9)
     resumed = _run(odometry, flying_frames[2:20])
     assert odometry.failures == 2
     # From the restart on, the motion is right, relative to where it restarted.

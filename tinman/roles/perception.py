@@ -79,7 +79,7 @@ def visodom(ep: Endpoint) -> None:
             else:
                 began = time.perf_counter()
                 failures = odometry.failures
-                pose = odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")))
+                pose = odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")), captured)
                 track_ms.append((time.perf_counter() - began) * 1000.0)
                 stamps.append(captured)
                 poses.append(pose)

@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from anodize import Endpoint, PeerFailedError, RoleStopped
+from anodize.isolation.sched import lower_thread_priority
 
 from ..cameras import LiveCamera, RecordedCamera
 from ..faults import blinded, start_faults
@@ -153,13 +154,12 @@ def _run_camera(ep: Endpoint, robot: _Robot, film: _Film, settings: Settings) ->
 
 
 def visualizer(ep: Endpoint) -> None:
-    """Keeps the estimated trajectory and redraws the live picture every few seconds."""
+    """Keeps the estimated trajectory; a painter thread redraws the live picture every few seconds."""
     settings = current()
     start_faults("Visualizer")
     estimate: list[tuple[float, float, float, float]] = []
     last_stamp: float | None = None
-    next_draw = time.monotonic() + REDRAW_PERIOD
-    live = settings.records / "live.png"
+    painter = _Painter(settings)
     try:
         while True:
             pose: PoseStamped = ep.recv("VisOdom").payload
@@ -168,8 +168,36 @@ def visualizer(ep: Endpoint) -> None:
                 last_stamp = stamp
                 p = pose.pose.position
                 estimate.append((stamp, p.x, p.y, p.z))
-            if time.monotonic() >= next_draw:
-                draw_run(live, settings, estimate=estimate)
-                next_draw = time.monotonic() + REDRAW_PERIOD
+                painter.offer(estimate)
     finally:
         save_record("Visualizer", {"poses_received": len(estimate)})
+
+
+class _Painter:
+    """Draws the live picture in a thread of its own at ordinary, niced priority.
+
+    Drawing takes a few hundred milliseconds. Done in the Visualizer's thread at the
+    group's real-time priority, it stalled Gazebo's camera thread in the same process,
+    and the camera skipped frames every redraw: the odometry lost track when that fell
+    on a turn. The painter only gets the CPU the simulated robot leaves.
+    """
+
+    def __init__(self, settings: Settings) -> None:
+        self._settings = settings
+        self._estimate: list[tuple[float, float, float, float]] = []
+        self._lock = threading.Lock()
+        threading.Thread(target=self._paint, name="Visualizer-painter", daemon=True).start()
+
+    def offer(self, estimate: list[tuple[float, float, float, float]]) -> None:
+        """The estimate so far (the painter copies what it draws)."""
+        with self._lock:
+            self._estimate = estimate
+
+    def _paint(self) -> None:
+        lower_thread_priority()
+        live = self._settings.records / "live.png"
+        while True:
+            time.sleep(REDRAW_PERIOD)  # a plain thread, not a role: it takes no step of the protocol
+            with self._lock:
+                estimate = list(self._estimate)
+            draw_run(live, self._settings, estimate=estimate)
