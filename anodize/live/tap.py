@@ -21,10 +21,10 @@ import time
 from collections import deque
 from collections.abc import Iterable
 from queue import Empty, SimpleQueue
-from typing import Any
 
 from ..isolation.sched import lower_thread_priority
 from ..recording.encoding import SortCodec, codec_for_sort
+from ..recording.tap import TappedChannel
 from ..session.channel import Channel
 from .inputs import ClientInput, register_input, unregister_input
 from .plan import LivePlan
@@ -168,37 +168,16 @@ class LiveTap:
         self._sock.close()
 
 
-class LiveChannel:
-    """A channel whose messages are also shown live: as they are put (the sending end), or
-    as they are taken (the receiving end of an external sender)."""
+class LiveChannel(TappedChannel):
+    """A channel whose messages are also shown live."""
 
     def __init__(self, inner: Channel, tap: LiveTap, pair: tuple[str, str], tap_puts: bool) -> None:
-        self._inner = inner
+        super().__init__(inner, pair, tap_puts)
         self._tap = tap
-        self._pair = pair
-        self._tap_puts = tap_puts
 
-    def put(self, item: object) -> None:
-        if self._tap_puts and type(item) is tuple:  # messages are plain tuples, signals are not
-            self._tap.offer(self._pair, item[0], item[1])
-        self._inner.put(item)
-
-    def get(self, *, timeout: float | None = None) -> object:
-        return self._taken(self._inner.get(timeout=timeout))
-
-    def get_nowait(self) -> object:
-        return self._taken(self._inner.get_nowait())
-
-    def _taken(self, item: object) -> object:
-        if not self._tap_puts and type(item) is tuple:
-            self._tap.offer(self._pair, item[0], item[1])
-        return item
-
-    def empty(self) -> bool:
-        return self._inner.empty()
-
-    def __getattr__(self, name: str) -> Any:  # qsize, buffer, ... of the transport's channel
-        return getattr(self._inner, name)
+    def leaving(self, label: str, payload: object) -> object:
+        self._tap.offer(self._pair, label, payload)
+        return None
 
 
 class _TappedQueue(SimpleQueue):  # type: ignore[type-arg]

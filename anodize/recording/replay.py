@@ -23,10 +23,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from sessiontypes import GlobalType, StateMachine
+from sessiontypes import GlobalType
 
 from ..errors import ConfigurationError, ProtocolViolationError, RoleStopped
-from ..session.endpoint import Endpoint
+from ..session.endpoint import Endpoint, peers_of
 from ..session.typed import argument_for
 from .compare import TopicCodecs, payload_difference
 from .plan import META
@@ -145,7 +145,7 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
     name = f"{getattr(function, '__module__', '?')}:{getattr(function, '__qualname__', repr(function))}"
     report = ReplayReport(str(recording.path), global_type.name, role, name)
     machine = global_type.project(role).fsm()
-    sends_to, receives_from = _peers(machine)
+    sends_to, receives_from = peers_of(machine)
     streams = _streams(recording, role, topics or {}, report.notes)
     recorded = _recorded_pairs(recording, streams)
     why = _why_unrecorded(recording.info)
@@ -231,15 +231,6 @@ def _account(network: ReplayNetwork, report: ReplayReport) -> None:
                                            f"nothing more ({report.detail})",
                                            f"the recording has {len(unsent)} more message(s) there", first.log_time)
             return
-
-
-def _peers(machine: StateMachine) -> tuple[set[str], set[str]]:
-    sends: set[str] = set()
-    receives: set[str] = set()
-    for t in machine.all_transitions():
-        if t.peer is not None:
-            (sends if t.action == "send" else receives).add(t.peer)
-    return sends, receives
 
 
 def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, str, str]],

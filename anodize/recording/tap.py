@@ -29,7 +29,7 @@ from ..session.channel import Channel
 from .encoding import SortCodec, codec_for_sort
 from .plan import META, PROFILE, ChannelLabel, RecordPlan
 
-__all__ = ["Recorder", "RecordingChannel", "BACKLOG", "channel_metadata", "QOS_PROFILES"]
+__all__ = ["Recorder", "RecordingChannel", "TappedChannel", "BACKLOG", "channel_metadata", "QOS_PROFILES"]
 
 BACKLOG = 64 * 2**20  # bytes a group's recorder may hold before its senders wait
 _FLUSH_EVERY = 0.1    # seconds
@@ -100,7 +100,7 @@ class Recorder:
         """Wrap the recorded channels among ``queues`` (in place)."""
         for pair, end in self.recorded.items():
             if pair in queues:
-                queues[pair] = RecordingChannel(queues[pair], self, pair, record_puts=(end == "send"))
+                queues[pair] = RecordingChannel(queues[pair], self, pair, at_sender=(end == "send"))
 
     def encode(self, pair: tuple[str, str], label: str, payload: object) -> tuple[int, int, bytes] | None:
         """A message of channel ``pair`` as it will be recorded: (MCAP channel, time, bytes).
@@ -189,25 +189,31 @@ class Recorder:
             self._file.close()
 
 
-class RecordingChannel:
-    """A channel whose messages are also recorded: as they are put (the sending end),
-    or as they are taken (the receiving end of an external sender)."""
+class TappedChannel:
+    """A channel whose messages something else also sees (a recording, the live view):
+    as they are put, at the sending end, or as they are taken, at the receiving end (the
+    channels of an external sender). Subclasses say what to do with a message before it
+    leaves (:meth:`leaving`, whose result :meth:`left` gets once it has gone)."""
 
-    def __init__(self, inner: Channel, recorder: Recorder, pair: tuple[str, str], record_puts: bool) -> None:
+    def __init__(self, inner: Channel, pair: tuple[str, str], at_sender: bool) -> None:
         self._inner = inner
-        self._recorder = recorder
         self._pair = pair
-        self._record_puts = record_puts
+        self._at_sender = at_sender
+
+    def leaving(self, label: str, payload: object) -> object:
+        """A message is about to go (or has just arrived); returns what :meth:`left` gets."""
+        raise NotImplementedError
+
+    def left(self, token: object) -> None:
+        """The message :meth:`leaving` saw has gone."""
 
     def put(self, item: object) -> None:
-        if not (self._record_puts and type(item) is tuple):  # messages are plain tuples, signals are not
+        if not (self._at_sender and type(item) is tuple):  # messages are plain tuples, signals are not
             self._inner.put(item)
             return
-        # Encoded before it leaves: once put, an array in a shared slot is the receiver's.
-        encoded = self._recorder.encode(self._pair, item[0], item[1])
+        token = self.leaving(item[0], item[1])
         self._inner.put(item)
-        if encoded is not None:
-            self._recorder.queue(self._pair, encoded)
+        self.left(token)
 
     def get(self, *, timeout: float | None = None) -> object:
         return self._taken(self._inner.get(timeout=timeout))
@@ -216,10 +222,8 @@ class RecordingChannel:
         return self._taken(self._inner.get_nowait())
 
     def _taken(self, item: object) -> object:
-        if not self._record_puts and type(item) is tuple:
-            encoded = self._recorder.encode(self._pair, item[0], item[1])
-            if encoded is not None:
-                self._recorder.queue(self._pair, encoded)
+        if not self._at_sender and type(item) is tuple:
+            self.left(self.leaving(item[0], item[1]))
         return item
 
     def empty(self) -> bool:
@@ -227,6 +231,22 @@ class RecordingChannel:
 
     def __getattr__(self, name: str) -> Any:  # qsize, buffer, ... of the transport's channel
         return getattr(self._inner, name)
+
+
+class RecordingChannel(TappedChannel):
+    """A channel whose messages are also recorded. A message is encoded before it leaves:
+    once put, an array in a shared slot is the receiver's."""
+
+    def __init__(self, inner: Channel, recorder: Recorder, pair: tuple[str, str], at_sender: bool) -> None:
+        super().__init__(inner, pair, at_sender)
+        self._recorder = recorder
+
+    def leaving(self, label: str, payload: object) -> object:
+        return self._recorder.encode(self._pair, label, payload)
+
+    def left(self, token: object) -> None:
+        if token is not None:
+            self._recorder.queue(self._pair, token)  # type: ignore[arg-type]
 
 
 def _local_labels(machines: Mapping[str, StateMachine],

@@ -23,7 +23,7 @@ from ..errors import Action, AnodizeError, PeerFailedError, RoleStopped
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
 from .monitor import Monitor
 
-__all__ = ["Message", "Endpoint", "RoleStopped"]
+__all__ = ["Message", "Endpoint", "RoleStopped", "peers_of"]
 
 
 _new_tuple = tuple.__new__  # builds a Message without NamedTuple's Python-level __new__
@@ -47,7 +47,7 @@ class Endpoint:
         self._machine = machine
         self._network = network
         self._monitor: Monitor | None = Monitor(machine, protocol, role) if monitored else None
-        sends_to, receives_from = peers if peers is not None else _peers(machine)
+        sends_to, receives_from = peers if peers is not None else peers_of(machine)
         queues = network.queues
         # Per peer: the channel and the receiver's doorbell (None for most roles).
         self._out = {p: (queues[(role, p)], network.doorbells.get(p))
@@ -355,7 +355,7 @@ class Endpoint:
                 return
             branches = []
             for machine in self._machine.forks[fork_state]:
-                sends_to, receives_from = _peers(machine)
+                sends_to, receives_from = peers_of(machine)
                 branch = Endpoint(self.role, self.protocol, machine, self._network,
                                   self._monitor is not None, (sends_to, receives_from))
                 branch._doorbell = self._doorbell
@@ -397,7 +397,7 @@ class Endpoint:
         return found
 
 
-def _peers(machine: StateMachine) -> tuple[set[str], set[str]]:
+def peers_of(machine: StateMachine) -> tuple[set[str], set[str]]:
     """The roles a machine (with its forks) sends to and receives from."""
     sends: set[str] = set()
     recvs: set[str] = set()

@@ -416,10 +416,7 @@ def _verify(args: argparse.Namespace) -> int:
         report = verify(recording, global_type, topics)
     print(report.text())
     if args.json:
-        out = Path(args.json)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {out}")
+        _write_json(Path(args.json), report.to_dict())
     return EXIT_OK if report.conforms else EXIT_ERRORS
 
 
@@ -466,11 +463,14 @@ def _replay(args: argparse.Namespace) -> int:
         report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout)
     print(report.text())
     if args.json:
-        out = Path(args.json)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {out}")
+        _write_json(Path(args.json), report.to_dict())
     return EXIT_OK if report.ok else EXIT_ERRORS
+
+
+def _write_json(out: Path, data: object) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    print(f"wrote {out}")
 
 
 def _exit_status(ok: bool, interrupted: bool) -> int:
