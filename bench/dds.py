@@ -92,11 +92,11 @@ _runs = itertools.count()
 
 # ---- running one measurement ----------------------------------------------------------------
 def run_anodize(transport: str, global_name: str, groups: dict[str, tuple[str, Callable[..., None]]],
-                timeout: float) -> None:
+                timeout: float, monitors: bool = True) -> None:
     """Run a two-group system; raise if it did not end well."""
     run_id = f"bench{os.getpid()}_{next(_runs)}"
-    system = (System(GLOBALS[global_name], transport="dds", domain=DOMAIN, run_id=run_id) if transport == "dds"
-              else System(GLOBALS[global_name], transport=transport))
+    system = (System(GLOBALS[global_name], transport="dds", monitors=monitors, domain=DOMAIN, run_id=run_id)
+              if transport == "dds" else System(GLOBALS[global_name], transport=transport, monitors=monitors))
     for name, (role, function) in groups.items():
         system.group(name).role(role, function)
     report = system.run(timeout=timeout, wait=20) if transport == "dds" else system.run(timeout=timeout)
@@ -119,7 +119,7 @@ def run_raw(targets: list[tuple[Callable[..., None], tuple[Any, ...]]], timeout:
             process.kill()
             process.join(5)
     if failed:
-        raise RuntimeError(f"raw DDS process(es) failed or timed out: exit codes {failed}")
+        raise RuntimeError(f"raw process(es) failed or timed out: exit codes {failed}")
 
 
 def _prefix(kind: str) -> str:
@@ -134,7 +134,7 @@ def _one_way(found: Callable[[str], dict[str, Any]], n: int) -> dict[str, Any]:
     return {"count": n, "seconds": seconds, "per_second": n / seconds}
 
 
-def messages(way: str, n: int, timeout: float) -> dict[str, Any]:
+def messages(way: str, n: int, timeout: float, monitors: bool = True) -> dict[str, Any]:
     with bench_env(roles.ENV, messages=n) as (out, found):
         if way in ("raw", "raw_unbounded"):
             barrier = multiprocessing.get_context("spawn").Barrier(2)
@@ -142,7 +142,7 @@ def messages(way: str, n: int, timeout: float) -> dict[str, Any]:
             run_raw([(roles.raw_int_producer, args), (roles.raw_int_consumer, args)], timeout + 30)
         else:
             run_anodize(way, "Stream", {"producing": ("P", roles.int_producer),
-                                        "consuming": ("C", roles.int_consumer)}, timeout)
+                                        "consuming": ("C", roles.int_consumer)}, timeout, monitors)
         return _one_way(found, n)
 
 

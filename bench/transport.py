@@ -130,8 +130,8 @@ def bench_env(**settings: Any) -> Iterator[Callable[[str], dict[str, Any]]]:
 
 
 def run_system(global_name: str, groups: dict[str, tuple[int | None, dict[str, Callable[..., None]]]],
-               timeout: float) -> RunReport:
-    system = System(GLOBALS[global_name], transport="process")
+               timeout: float, monitors: bool = True) -> RunReport:
+    system = System(GLOBALS[global_name], transport="process", monitors=monitors)
     for name, (priority, placed) in groups.items():
         group = system.group(name, priority=priority)
         for role, function in placed.items():
@@ -159,10 +159,10 @@ def run_processes(targets: list[tuple[Callable[..., None], tuple[Any, ...]]], ti
         raise RuntimeError(f"baseline process(es) failed or timed out: {[p.exitcode for p in failed]}")
 
 
-def frames_anodize(n: int, timeout: float, produce: bool = False) -> dict[str, Any]:
+def frames_anodize(n: int, timeout: float, produce: bool = False, monitors: bool = True) -> dict[str, Any]:
     with bench_env(frames=n, produce=produce) as result:
         run_system("Frames", {"camera": (None, {"A": roles.frame_source}),
-                              "viewer": (None, {"B": roles.frame_sink})}, timeout)
+                              "viewer": (None, {"B": roles.frame_sink})}, timeout, monitors)
         return _frames_checked(result("frames"), n)
 
 
