@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from tinman.messages import Header, Path, Time, path_through, twist_planar
-from tinman.mixer import Mixer
+from tinman.mixer import BRIDGE_GAP, BRIDGE_JUMP, BRIDGE_TURN, Mixer
 from tinman.world import DEFAULT_WORLD
 
 PERIOD = 0.02
@@ -75,3 +75,36 @@ def test_the_robot_steers_by_the_odometrys_estimate_and_stops_when_it_goes_stale
     mixer.set_estimate(2.0, (x + 0.6, y + 0.1, 0.0))
     command, source = mixer.step(twist_planar(0.0, 0.0))
     assert source == "path" and command.linear.x > 0 and mixer.resumed == 1 and mixer.stops == 1
+
+
+def test_after_a_gap_in_the_odometry_the_drive_model_bridges_it_and_the_odometry_is_read_relative() -> None:
+    clock = Clock()
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=clock)
+    x, y, _ = DEFAULT_WORLD.start
+    mixer.set_estimate(1.0, (x, y, 0.0))
+    for _ in range(10):  # the robot turns on the spot for 0.2 s: 0.1 rad by its commands
+        mixer.step(twist_planar(0.0, 0.5))
+    turned = mixer.model.pose
+    # The odometry lost track meanwhile and restarted from its last pose: its next estimate, after
+    # a gap, says the robot never turned. Move keeps what its commands did ...
+    mixer.set_estimate(1.0 + 5 * BRIDGE_GAP, (x, y, 0.0))
+    assert mixer.model.pose == turned and mixer.bridged == 1
+    # ... and reads the odometry's later estimates in its own frame: 0.1 m ahead in the odometry's
+    # frame is 0.1 m along the turned heading.
+    mixer.set_estimate(1.0 + 5 * BRIDGE_GAP + 0.033, (x + 0.1, y, 0.0))
+    bx, by, btheta = mixer.model.pose
+    assert math.isclose(bx, turned[0] + 0.1 * math.cos(turned[2]), abs_tol=1e-9)
+    assert math.isclose(by, turned[1] + 0.1 * math.sin(turned[2]), abs_tol=1e-9)
+    assert math.isclose(btheta, turned[2], abs_tol=1e-9) and mixer.bridged == 1
+
+
+def test_an_estimate_that_jumps_from_where_the_commands_took_the_robot_is_a_false_fix() -> None:
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0)
+    x, y, _ = DEFAULT_WORLD.start
+    mixer.set_estimate(1.0, (x, y, 0.0))
+    mixer.set_estimate(1.033, (x + 0.01, y, 0.01))  # close to where the robot is: taken as it is
+    assert mixer.model.pose == (x + 0.01, y, 0.01) and mixer.bridged == 0
+    mixer.set_estimate(1.066, (x + 0.01 + 2 * BRIDGE_JUMP, y, 0.01))  # a step no robot makes in 33 ms
+    assert mixer.model.pose == (x + 0.01, y, 0.01) and mixer.bridged == 1
+    mixer.set_estimate(1.1, (x + 0.01, y, 0.01 + 2 * BRIDGE_TURN))  # nor such a turn
+    assert mixer.bridged == 2
