@@ -60,6 +60,10 @@ class _Builder(Transformer[Token, Any]):
     def __init__(self) -> None:
         super().__init__()
         self.path = "<string>"
+        self.lines: tuple[str, ...] = ()
+
+    def line(self, number: int) -> str:
+        return self.lines[number - 1] if 0 < number <= len(self.lines) else ""
 
     def _name(self, token: Token) -> s.Name:
         return s.Name(str(token), _location(self.path, token))
@@ -90,14 +94,49 @@ class _Builder(Transformer[Token, Any]):
     # ---- global ----
     def ginteraction(self, children: list[Any]) -> s.GInteraction:
         # NAME ARROW NAME COLON msg [DOT gtype]: the hottest rule, indexed directly
+        if children[3].type != "COLON":  # a multicast: NAME ARROW NAME (COMMA NAME)+ COLON ...
+            colon = next(i for i, c in enumerate(children) if isinstance(c, Token) and c.type == "COLON")
+            receivers = self._receivers(children[2:colon])
+            rest = children[colon + 3] if len(children) > colon + 3 else None
+            return self._multicast(self._name(children[0]), receivers,
+                                   (s.GBranchSyntax(children[colon + 1], rest),), braced=False)
         sender, receiver = self._name(children[0]), self._name(children[2])
         branch = s.GBranchSyntax(children[4], children[6] if len(children) > 6 else None)
         return s.GInteraction(sender, receiver, (branch,), False, sender.location)
 
     def gchoice(self, children: list[Any]) -> s.GInteraction:
-        sender, receiver = _tokens(children, "NAME")
-        return s.GInteraction(self._name(sender), self._name(receiver),
-                              tuple(_nodes(children)), True, _location(self.path, sender))
+        colon = next(i for i, c in enumerate(children) if isinstance(c, Token) and c.type == "COLON")
+        return self._multicast(self._name(children[0]), self._receivers(children[2:colon]),
+                               tuple(_nodes(children)), braced=True)
+
+    def _receivers(self, tokens: list[Any]) -> list[s.Name]:
+        """The receivers of ``A -> B, C``, each once (a repeated one is an error)."""
+        receivers: list[s.Name] = []
+        for token in _tokens(tokens, "NAME"):
+            name = self._name(token)
+            if any(r.text == name.text for r in receivers):
+                raise ProtocolSyntaxError(name.location, f"'{name.text}' again", ["a receiver not listed yet"],
+                                          self.line(name.location.line),
+                                          "a multicast sends to each receiver once")
+            receivers.append(name)
+        return receivers
+
+    def _multicast(self, sender: s.Name, receivers: list[s.Name], branches: tuple[s.GBranchSyntax, ...],
+                   braced: bool) -> s.GInteraction:
+        """``p -> q1, ..., qn : {l_i. G_i}`` as ``p -> q1 : {l_i. p -> q2 : l_i. ... p -> qn : l_i. G_i}``.
+
+        The message of each branch goes to the receivers in written order; every
+        interaction of the expansion is located at the multicast's sender.
+        """
+        first, *others = receivers
+        expanded: list[s.GBranchSyntax] = []
+        for branch in branches:
+            rest = branch.continuation
+            for receiver in reversed(others):
+                rest = s.GInteraction(sender, receiver, (s.GBranchSyntax(branch.message, rest),), False,
+                                      sender.location)
+            expanded.append(s.GBranchSyntax(branch.message, rest))
+        return s.GInteraction(sender, first, tuple(expanded), braced, sender.location)
 
     def gbranch_msg(self, children: list[Any]) -> s.GBranchSyntax:
         nodes = _nodes(children)
@@ -282,7 +321,7 @@ def parse_file(text: str, path: str = "<string>") -> s.SourceFile:
 def _parse(text: str, path: str) -> s.SourceFile:
     lines = _lines(text)
     with _lock:
-        _builder.path = path
+        _builder.path, _builder.lines = path, lines
         try:
             # The builder's start() turns the tree into the declarations.
             declarations = cast("tuple[s.Declaration, ...]", _parser.parse(text))

@@ -55,7 +55,11 @@ class GBranchSyntax:
 
 @dataclass(frozen=True, slots=True)
 class GInteraction:
-    """``p -> q : msg [. G]`` (``braced`` false) or ``p -> q : {...}``."""
+    """``p -> q : msg [. G]`` (``braced`` false) or ``p -> q : {...}``.
+
+    A multicast ``p -> q, r : ...`` is no node of its own: the parser writes it as
+    these nodes, one per receiver (docs/language-additions.md).
+    """
 
     sender: Name
     receiver: Name

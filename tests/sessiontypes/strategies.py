@@ -150,9 +150,16 @@ class _Generator:
                 return self.draw(st.sampled_from([g.End()] + [g.Var(v) for v in scope.usable()]))
         if kind == "message":
             p, q = self.draw(st.sampled_from(sorted(scope.channels)))
-            label = self.labels(1)[0]
+            message = self.message(self.labels(1)[0])
+            # Sometimes the same message to more receivers: the writer may spell it a multicast.
+            also = [r for r in sorted(scope.roles - {p, q}) if (p, r) in scope.channels]
+            receivers = [q]
+            if also and self.draw(st.integers(0, 3)) == 0:
+                receivers += self.draw(st.lists(st.sampled_from(also), min_size=1, unique=True))
             rest = self.term(scope.after_interaction(), depth - 1)
-            return g.Choice(p, q, (g.Branch(self.message(label), rest),))
+            for receiver in reversed(receivers):
+                rest = g.Choice(p, receiver, (g.Branch(message, rest),))
+            return rest
         if kind == "choice":
             return self.choice(scope, depth)
         if kind == "mu":
@@ -195,15 +202,24 @@ class _Generator:
                          for _ in range(self.draw(st.sampled_from([0, 0, 0, 1, 2])))]
                   for role in informed}
         notices = {role: self.labels(count) for role in informed}
+        # Sometimes one role informed by p hears p's own choice first: the writer may spell
+        # the choice a multicast, p -> q, r : {...}.
+        told = [r for r, notifier in informed.items() if notifier == p]
+        echo = self.draw(st.sampled_from(told)) if told and self.draw(st.integers(0, 2)) == 0 else None
+        if echo is not None:
+            common[echo] = []
         branches = []
         for index, label in enumerate(labels):
+            message = self.message(label)
             order = self.draw(st.permutations(sorted(informed)))
             prefix = []
+            if echo is not None:
+                order = [echo, *(r for r in order if r != echo)]
             for r in order:
                 for common_label, key in common[r]:
                     spelling = self.draw(st.sampled_from(_SPELLINGS_BY_KEY[key]))
                     prefix.append((informed[r], r, Message(common_label, builtin_sort(spelling))))
-                prefix.append((informed[r], r, self.message(notices[r][index])))
+                prefix.append((informed[r], r, message if r == echo else self.message(notices[r][index])))
             if loop is not None:
                 spellings = respellings(loop)
                 if _sends(loop, looping):
@@ -225,7 +241,7 @@ class _Generator:
                 rest = self.term(inner, depth - 1)
             for sender, receiver, note in reversed(prefix):
                 rest = g.Choice(sender, receiver, (g.Branch(note, rest),))
-            branches.append(g.Branch(self.message(label), rest))
+            branches.append(g.Branch(message, rest))
         return g.Choice(p, q, tuple(branches))
 
     def mu(self, scope: _Scope, depth: int) -> g.GlobalTerm:
@@ -430,7 +446,11 @@ class _Writer:
                 return f"({gap()}{inner}{gap()})"
             case g.Choice(sender=p, receiver=q, branches=branches):
                 arrow = self.pick("->", ["->", "→"])
-                head = f"{p}{gap()}{arrow}{gap()}{q}{gap()}:{gap()}"
+                receivers = [q]
+                if self.chance(2):
+                    receivers, branches = _multicast(term)
+                written = f"{gap()},{gap()}".join(receivers)
+                head = f"{p}{gap()}{arrow}{gap()}{written}{gap()}:{gap()}"
                 if len(branches) == 1 and not self.chance(4):
                     return head + self.sequel(branches[0])
                 inner = f"{gap()},{gap()}".join(self.branch(b) for b in branches)
@@ -450,6 +470,27 @@ class _Writer:
             # label-only branch, Fig. 2 style
             return f"{branch.message.label}{self.gap()}:{self.gap()}{self.term(branch.continuation)}"
         return self.sequel(branch)
+
+
+def _multicast(choice: g.Choice) -> tuple[list[str], tuple[g.Branch, ...]]:
+    """The receivers and branches of ``choice`` written as a multicast ``p -> q, r : {...}``:
+    as long as every branch goes on with the sender sending its own message to one more
+    receiver, that receiver joins the list and the branches go on after it."""
+    receivers = [choice.receiver]
+    branches = choice.branches
+    while True:
+        nexts = [b.continuation for b in branches]
+        if not all(isinstance(n, g.Choice) and len(n.branches) == 1 and n.sender == choice.sender
+                   and n.branches[0].message == b.message
+                   and str(n.branches[0].message.sort) == str(b.message.sort)  # spelled alike
+                   for n, b in zip(nexts, branches, strict=True)):
+            return receivers, branches
+        heads = {n.receiver for n in nexts if isinstance(n, g.Choice)}
+        if len(heads) != 1 or heads & {choice.sender, *receivers}:
+            return receivers, branches
+        receivers.append(heads.pop())
+        branches = tuple(g.Branch(b.message, n.branches[0].continuation)
+                         for b, n in zip(branches, nexts, strict=True) if isinstance(n, g.Choice))
 
 
 @st.composite
@@ -501,6 +542,7 @@ _SEEDS = [
     ("global ATM = C -> A : Int. A -> C : {ok: ATM', err: end}\n"
      "global ATM' = C -> A : {deposit: C -> A : Int. ATM, quit: end}\n"),
     "local L at A = mu t. !B(l0(int)). &B{l1. t, l2}\n",
+    "global M = A -> B, C : m(int). B -> A, C : {ok. end, no: end}\n",
 ]
 
 

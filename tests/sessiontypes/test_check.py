@@ -149,13 +149,13 @@ def test_syntax_error_fields() -> None:
     error = caught.value
     assert error.location == Location("p.proto", 2, 10)
     assert error.got == "'ping'"
-    assert error.expected == ("':'",)
+    assert error.expected == ("','", "':'")
     assert error.source_line == "  A -> B ping(int)"
     assert error.hint == "write 'Sender -> Receiver : label'"
-    assert error.message == "syntax error; expected ':', got 'ping' (write 'Sender -> Receiver : label')"
+    assert error.message == "syntax error; expected one of ',', ':', got 'ping' (write 'Sender -> Receiver : label')"
     assert error.diagnostics == (Diagnostic("error", error.location, error.message, error.source_line),)
     assert str(error) == (
-        "p.proto:2:10: error: syntax error; expected ':', got 'ping' (write 'Sender -> Receiver : label')\n"
+        "p.proto:2:10: error: syntax error; expected one of ',', ':', got 'ping' (write 'Sender -> Receiver : label')\n"
         "      A -> B ping(int)\n"
         "             ^"
     )
