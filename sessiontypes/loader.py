@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from pathlib import Path
+from pathlib import Path, PurePath
 
 from .check import ProtocolModule, check_file
 from .errors import ProtocolCheckError, ProtocolEncodingError
+from .foreign import FOREIGN_SUFFIXES, parse_foreign
 from .location import Location
 from .parse import parse_file
 
@@ -15,14 +16,19 @@ __all__ = ["load", "loads", "read_source"]
 def loads(text: str, path: str = "<string>") -> ProtocolModule:
     """Parse and check protocol ``text``.
 
+    A ``path`` ending in ``.scr`` (Scribble) or ``.nuscr`` (nuScr) is read as that
+    language's global protocols (see :mod:`sessiontypes.foreign`); any other as ``.proto``.
+
     Returns:
         The checked module; warnings are in ``module.warnings``.
 
     Raises:
         ProtocolSyntaxError: the text does not parse.
         ProtocolCheckError: it parses but is not well formed (all errors at once).
+        UnsupportedConstructError: a Scribble or nuScr construct outside the subset read.
     """
-    source = parse_file(text, path)
+    language = FOREIGN_SUFFIXES.get(PurePath(path).suffix.lower())
+    source = parse_foreign(text, path, language) if language else parse_file(text, path)
     module, diagnostics = check_file(source)
     if any(d.severity == "error" for d in diagnostics):
         raise ProtocolCheckError(diagnostics)
