@@ -60,9 +60,9 @@ class TinMan:
                             help="play a recorded TUM RGB-D sequence back as the camera (default: the simulated "
                                  "camera renders the room live from the simulated robot)")
         parser.add_argument("--world", choices=WORLDS, default=DEFAULT_LOOK,
-                            help="how the room looks to the simulated camera: easy (procedural textures made "
-                                 "for ORB, the default) or realistic (photographs, plain walls, repeated "
-                                 "patterns, flickering lamps, motion blur)")
+                            help="how the room looks to the simulated camera: realistic (photographs, plain "
+                                 "walls, repeated patterns, flickering lamps, motion blur; the default) or easy "
+                                 "(procedural textures made for ORB)")
         parser.add_argument("--planner", choices=("rrt", "astar"), default="rrt",
                             help="RRT-Connect with shortcut smoothing (default) or grid A*")
         parser.add_argument("--transport", choices=("process", "dds"), default=None,

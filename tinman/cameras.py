@@ -20,7 +20,7 @@ from .geometry import FR1, Intrinsics, camera_pose
 from .messages import Header, Image, image_of, stamp_from_seconds
 from .sim import arc_pose
 from .world import World
-from .worlds import DEFAULT_LOOK, world_look
+from .worlds import world_look
 
 __all__ = ["LiveCamera", "RecordedCamera", "OPTICAL_FRAME", "frame_images"]
 
@@ -49,7 +49,7 @@ class LiveCamera:
     """
 
     def __init__(self, world: World, intrinsics: Intrinsics = FR1, seed: int = 0, *,
-                 look: str = DEFAULT_LOOK) -> None:
+                 look: str = "easy") -> None:
         from .lamps import FlickeringLamps
         from .render import RoomRenderer
         from .render_warp import WarpRenderer
@@ -58,7 +58,7 @@ class LiveCamera:
         self.look = world_look(look)
         # The textures are painted here: a second or two.
         self.renderer: RoomRenderer | WarpRenderer
-        if self.look.name == DEFAULT_LOOK:
+        if self.look.name == "easy":
             # The per-surface warp renderer: the ray caster's images (exact depth, the same textures),
             # in two thirds of its time (bench/render.py).
             self.renderer = WarpRenderer(world, intrinsics, seed)

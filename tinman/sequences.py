@@ -20,7 +20,7 @@ from .geometry import FR1, Intrinsics, camera_pose
 from .mission import simulate_mission
 from .synthetic import GENERATOR_VERSION, generate_sequence
 from .world import DEFAULT_WORLD, World
-from .worlds import DEFAULT_LOOK, world_look
+from .worlds import world_look
 
 __all__ = ["DEFAULT_DURATION", "FRAME_RATE", "TRUTH_RATE", "FIRST_STAMP", "cache_dir", "default_sequence",
            "generate"]
@@ -41,7 +41,7 @@ def cache_dir() -> Path:
 
 
 def default_sequence(duration: float = DEFAULT_DURATION, log: Callable[[str], None] | None = None,
-                     progress: Callable[[int, int], None] | None = None, look: str = DEFAULT_LOOK) -> Path:
+                     progress: Callable[[int, int], None] | None = None, look: str = "easy") -> Path:
     """The default sequence's directory, generated on first use.
 
     Args:
@@ -49,7 +49,7 @@ def default_sequence(duration: float = DEFAULT_DURATION, log: Callable[[str], No
         progress: told ``(frames rendered, frames)`` while it is generated (see :func:`generate`).
         look: the named world filmed (:data:`tinman.worlds.WORLDS`).
     """
-    name = "room" if look == DEFAULT_LOOK else f"{look}-room"
+    name = "room" if look == "easy" else f"{look}-room"
     directory = cache_dir() / f"tinman-{name}-{duration:g}s-v{GENERATOR_VERSION}"
     if (directory / "tinman.json").exists():
         return directory
@@ -64,7 +64,7 @@ def default_sequence(duration: float = DEFAULT_DURATION, log: Callable[[str], No
 
 def generate(directory: str | Path, duration: float = DEFAULT_DURATION, world: World = DEFAULT_WORLD,
              intrinsics: Intrinsics = FR1, seed: int = 0, workers: int = 2,
-             progress: Callable[[int, int], None] | None = None, look: str = DEFAULT_LOOK) -> Path:
+             progress: Callable[[int, int], None] | None = None, look: str = "easy") -> Path:
     """Simulate the patrol for ``duration`` seconds and film it into ``directory`` (TUM layout).
 
     ``progress`` is told ``(frames rendered, frames)`` before the first frame and after every

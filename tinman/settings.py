@@ -28,8 +28,8 @@ class Settings:
         dataset: a TUM RGB-D sequence the camera plays back ("": the simulated camera renders the
             room from the simulated robot's true pose, live).
         world: how the room looks to the simulated camera (:data:`tinman.worlds.WORLDS`):
-            ``"easy"`` (procedural textures made for ORB) or ``"realistic"`` (photographs, plain
-            walls, repeated patterns, flickering lamps, motion blur).
+            ``"realistic"`` (photographs, plain walls, repeated patterns, flickering lamps, motion
+            blur; :data:`tinman.worlds.DEFAULT_LOOK`) or ``"easy"`` (procedural textures made for ORB).
         duration: seconds the run lasts.
         paper: whether the run follows Fig. 16's single loop (``TinMan``).
         teleop: keyboard driving from the terminal instead of the scripted joystick.
@@ -44,7 +44,7 @@ class Settings:
 
     out: str = "out/tinman"
     dataset: str = ""
-    world: str = "easy"
+    world: str = "realistic"
     duration: float = 20.0
     paper: bool = False
     teleop: bool = False

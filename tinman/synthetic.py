@@ -28,7 +28,7 @@ from .lamps import FlickeringLamps
 from .render import RoomRenderer
 from .tum import write_file_list, write_trajectory
 from .world import DEFAULT_WORLD, World
-from .worlds import DEFAULT_LOOK, world_look
+from .worlds import world_look
 
 if TYPE_CHECKING:
     from .render_warp import WarpRenderer
@@ -211,7 +211,7 @@ def generate_sequence(directory: str | Path, world: World, frame_stamps: Sequenc
                       frame_poses: Sequence[np.ndarray] | np.ndarray, truth_stamps: Sequence[float] | np.ndarray,
                       truth_poses: Sequence[np.ndarray] | np.ndarray, intrinsics: Intrinsics = FR1,
                       seed: int = 0, workers: int = 2, world_name: str | None = None,
-                      progress: Callable[[int, int], None] | None = None, look: str = DEFAULT_LOOK,
+                      progress: Callable[[int, int], None] | None = None, look: str = "easy",
                       shutter_poses: Sequence[np.ndarray] | np.ndarray | None = None) -> Path:
     """Render and write a TUM RGB-D sequence.
 
@@ -343,7 +343,7 @@ _worker: dict[str, object] = {}
 
 
 def _start_worker(world: World, intrinsics: Intrinsics, seed: int, directory: str,
-                  threads: int | None = 1, look: str = DEFAULT_LOOK) -> None:
+                  threads: int | None = 1, look: str = "easy") -> None:
     if threads is not None:
         cv2.setNumThreads(threads)  # the pool already keeps every core busy
     key = (world, intrinsics, seed, look)

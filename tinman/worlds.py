@@ -4,9 +4,10 @@ Both share the default room's geometry (walls, boxes, dock, patrol), so the
 planner, the simulator and the mission are the same and only what the camera
 sees differs:
 
-- ``easy`` (the default): procedural textures made for ORB (:func:`tinman.textures.build_atlas`),
-  steady lamps, a still shutter;
-- ``realistic``: photographs, plain paint and repeated patterns
+- ``easy``: procedural textures made for ORB (:func:`tinman.textures.build_atlas`),
+  steady lamps, a still shutter; what the library's renderers, cameras and sequence
+  generator paint unless told otherwise;
+- ``realistic`` (``anodize run tinman``'s default): photographs, plain paint and repeated patterns
   (:func:`tinman.realistic.build_realistic_atlas`), lamps that drift and a failing
   one that flickers (:class:`tinman.lamps.FlickeringLamps`), and a 20 ms exposure
   that blurs the image when the robot moves or turns fast
@@ -49,7 +50,7 @@ _LOOKS = {
     "realistic": WorldLook("realistic", build_realistic_atlas, flickering_lamps=True, exposure=0.02),
 }
 WORLDS = tuple(_LOOKS)
-DEFAULT_LOOK = "easy"
+DEFAULT_LOOK = "realistic"  # what `anodize run tinman` films unless --world says otherwise
 
 
 class UnknownWorldError(ValueError):

@@ -309,8 +309,8 @@ def test_the_world_option_reaches_the_camera(monkeypatch: pytest.MonkeyPatch, tm
     app = TinMan()
     parser = argparse.ArgumentParser()
     app.add_arguments(parser)
-    assert parser.parse_args([]).world == "easy"
-    app.prepare(parser.parse_args(["--world", "realistic", "--out", str(tmp_path)]), lambda line: None)
+    assert parser.parse_args([]).world == "realistic"  # the default
+    app.prepare(parser.parse_args(["--out", str(tmp_path)]), lambda line: None)
     settings = current()
     assert settings.world == "realistic"
     film = _Film(settings)
@@ -318,8 +318,11 @@ def test_the_world_option_reaches_the_camera(monkeypatch: pytest.MonkeyPatch, tm
     assert film.record()["world"] == "realistic"
     atlas_lighting = film.live.renderer._atlas.lighting
     assert atlas_lighting is not None and atlas_lighting.ambient == 0.4
-    with pytest.raises(TinManError, match=r"^--world realistic with --dataset: a recording is played back"):
-        app.prepare(parser.parse_args(["--world", "realistic", "--dataset", str(tmp_path)]), lambda line: None)
+    app.prepare(parser.parse_args(["--world", "easy", "--out", str(tmp_path)]), lambda line: None)
+    easy = _Film(current())
+    assert easy.live is not None and easy.live.look.name == "easy" and easy.live.lamps is None
+    with pytest.raises(TinManError, match=r"^--world easy with --dataset: a recording is played back"):
+        app.prepare(parser.parse_args(["--world", "easy", "--dataset", str(tmp_path)]), lambda line: None)
     current.cache_clear()
 
 

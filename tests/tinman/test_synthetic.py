@@ -12,7 +12,7 @@ import pytest
 from tinman.dataset import TumSequence
 from tinman.geometry import FR1, Intrinsics, camera_pose
 from tinman.render import RoomRenderer
-from tinman.synthetic import add_depth_noise, add_image_noise, generate_sequence
+from tinman.synthetic import GENERATOR_VERSION, add_depth_noise, add_image_noise, generate_sequence
 from tinman.world import Box, World
 
 SMALL = Intrinsics(fx=FR1.fx / 8, fy=FR1.fy / 8, cx=(FR1.cx + 0.5) / 8 - 0.5, cy=(FR1.cy + 0.5) / 8 - 0.5,
@@ -105,7 +105,7 @@ def test_a_generated_sequence_reads_back_as_tum_data(tmp_path: Path) -> None:
     assert sequence.intrinsics == SMALL and sequence.frame_rate == pytest.approx(30.0, rel=1e-3)
     metadata = json.loads((root / "tinman.json").read_text())
     assert {k: metadata[k] for k in ("generator", "version", "world", "frames", "seed", "depth_scale")} == {
-        "generator": "tinman.synthetic", "version": 1, "world": "custom", "frames": 10, "seed": 5,
+        "generator": "tinman.synthetic", "version": GENERATOR_VERSION, "world": "custom", "frames": 10, "seed": 5,
         "depth_scale": 5000.0}
     assert metadata["world_description"]["boxes"][0]["x0"] == 2.0
     truth_stamps, truth_poses = sequence.groundtruth
