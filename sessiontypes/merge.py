@@ -1,11 +1,15 @@
 """Full merge of local types (LANGUAGE.md section 5).
 
-Merge accepts identical types, joins external choices from the same peer
-branch-wise, and unfolds ``mu`` when the two sides differ, remembering the
-pairs it is already merging so that two spellings of one recursive behaviour
-merge instead of looping. "Identical" is taken up to the spelling of
-recursion (see :func:`sessiontypes.recursion.equivalent`): ``mu t.!B(x).t``
-and ``mu u.!B(x).!B(x).u`` are the same behaviour.
+Merge accepts identical types; joins external choices (receives) from the
+same peer branch-wise: a label in both merges its continuations, a label in
+one is kept; merges internal choices (sends) to the same peer with exactly
+the same labels label by label, merging the continuations; and unfolds ``mu``
+when the two sides differ, remembering the pairs it is already merging so
+that two spellings of one recursive behaviour merge instead of looping.
+"Identical" is taken up to the spelling of recursion (see
+:func:`sessiontypes.recursion.equivalent`): ``mu t.!B(x).t`` and
+``mu u.!B(x).!B(x).u`` are the same behaviour. A label carries the same sort
+on both sides or the two do not merge.
 """
 
 from __future__ import annotations
@@ -42,12 +46,31 @@ class _Merger:
     in_progress: dict[tuple[lt.LocalTerm, lt.LocalTerm], list[object]] = field(default_factory=dict)
 
     def merge(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
+        # The messages both sides start with are walked in a loop, not compared as
+        # whole terms at every step: sequences nest deeply, and comparing what is
+        # left at each message would make merging them quadratic.
+        start = left
+        prefix: list[lt.Send | lt.Recv] = []
+        while (left is not right and isinstance(left, (lt.Send, lt.Recv)) and type(left) is type(right)
+               and left.peer == right.peer and left.message == right.message):
+            prefix.append(left)
+            left, right = left.continuation, right.continuation
+        merged = self._merge_node(left, right)
+        if merged is left:  # nothing new: keep the original term (and its sharing)
+            return start
+        for step in reversed(prefix):
+            merged = type(step)(step.peer, step.message, merged, step.location)
+        return merged
+
+    def _merge_node(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
         if left is right or left == right:
             return left
         if isinstance(left, lt.Rec) or isinstance(right, lt.Rec):
             return self._merge_recursive(left, right)
         if isinstance(left, (lt.Recv, lt.Offer)) and isinstance(right, (lt.Recv, lt.Offer)):
             return self._merge_offers(left, right)
+        if isinstance(left, (lt.Send, lt.Select)) and isinstance(right, (lt.Send, lt.Select)):
+            return self._merge_selections(left, right)
         if equivalent(left, right):
             return left
         raise MergeError(_difference(left, right))
@@ -62,14 +85,29 @@ class _Merger:
             if twin is None:
                 merged.append(branch)
                 continue
-            if branch.message != twin.message:
-                raise MergeError(f"label '{branch.message.label}' carries "
-                                 f"{_sort_name(branch.message)} in one and "
-                                 f"{_sort_name(twin.message)} in the other")
+            _same_sort(branch.message, twin.message)
             merged.append(lt.Branch(branch.message, self.merge(branch.continuation, twin.continuation),
                                     branch.location))
         merged.extend(right_branches.values())
         return lt.offer(left.peer, tuple(merged), left.location)
+
+    def _merge_selections(self, left: lt.Send | lt.Select, right: lt.Send | lt.Select) -> lt.LocalTerm:
+        """Choices the role makes: the same peer and labels; continuations merged label by label."""
+        if left.peer != right.peer:
+            raise MergeError(f"one sends to {left.peer}, the other to {right.peer}")
+        left_branches, right_branches = _branches(left), _branches(right)
+        theirs = {b.message.label: b for b in right_branches}
+        if ({b.message.label for b in left_branches} != theirs.keys()
+                or len(left_branches) != len(right_branches)):
+            raise MergeError(f"it sends {_labels(left_branches)} in one and "
+                             f"{_labels(right_branches)} in the other")
+        merged: list[lt.Branch] = []
+        for branch in left_branches:  # in the first one's order
+            twin = theirs[branch.message.label]
+            _same_sort(branch.message, twin.message)
+            merged.append(lt.Branch(branch.message, self.merge(branch.continuation, twin.continuation),
+                                    branch.location))
+        return lt.select(left.peer, tuple(merged), left.location)
 
     def _merge_recursive(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
         if equivalent(left, right):  # keeps the first spelling rather than an unfolding
@@ -100,6 +138,23 @@ def _offer_branches(term: lt.Recv | lt.Offer) -> tuple[lt.Branch, ...]:
     return term.branches
 
 
+def _branches(term: lt.Send | lt.Select) -> tuple[lt.Branch, ...]:
+    if isinstance(term, lt.Send):
+        return (lt.Branch(term.message, term.continuation, term.location),)
+    return term.branches
+
+
+def _same_sort(ours: Message, theirs: Message) -> None:
+    if ours != theirs:
+        raise MergeError(f"label '{ours.label}' carries {_sort_name(ours)} in one and "
+                         f"{_sort_name(theirs)} in the other")
+
+
+def _labels(branches: tuple[lt.Branch, ...]) -> str:
+    names = ", ".join(f"'{b.message.label}'" for b in branches)
+    return names if len(branches) == 1 else f"one of {names}"
+
+
 def _sort_name(message: Message) -> str:
     return str(message.sort) if message.sort else "nothing"
 
@@ -108,7 +163,9 @@ def _difference(left: lt.LocalTerm, right: lt.LocalTerm) -> str:
     kinds = {lt.Send: "a send", lt.Select: "a choice it makes", lt.Recv: "a receive",
              lt.Offer: "a choice it receives", lt.End: "end", lt.Var: "a loop back",
              lt.Parallel: "a parallel composition"}
+    if isinstance(left, lt.Var) and isinstance(right, lt.Var):
+        return f"one loops back to {left.name}, the other to {right.name}"
     a, b = kinds.get(type(left), "?"), kinds.get(type(right), "?")
-    if a == b:
-        return "only identical behaviours merge unless both receive"
+    if a == b:  # parallel compositions: only identical ones merge
+        return f"{a} merges only with an identical one"
     return f"{a} cannot merge with {b}"

@@ -81,6 +81,11 @@ class _Equivalence:
         self.assumed: set[tuple[lt.LocalTerm, lt.LocalTerm]] = set()
 
     def check(self, left: lt.LocalTerm, right: lt.LocalTerm) -> bool:
+        # Messages both start with are walked in a loop: comparing what is left as
+        # whole terms at every message would make long sequences quadratic.
+        while (left is not right and isinstance(left, (lt.Send, lt.Recv)) and type(left) is type(right)
+               and left.peer == right.peer and left.message == right.message):
+            left, right = left.continuation, right.continuation
         if left is right or left == right:
             return True
         if isinstance(left, lt.Rec) or isinstance(right, lt.Rec):

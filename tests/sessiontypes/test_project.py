@@ -60,6 +60,24 @@ def test_merge_of_identical_continuations_is_that_continuation() -> None:
      "one receives from B, the other from A"),
     ("global G = A -> B : {l1. B -> C : x, l2. B -> C : y, l3. end}", ("l1", "l3"),
      "a receive cannot merge with end"),
+    # Sends merge only with the same peer, labels and sorts (LANGUAGE.md 5).
+    ("global G = A -> B : {l1. C -> B : x. B -> C : l1, l2. C -> B : y. B -> C : l2}", ("l1", "l2"),
+     "it sends 'x' in one and 'y' in the other"),
+    ("global G = A -> B : {l1. C -> B : x, l2. C -> A : x}", ("l1", "l2"),
+     "one sends to B, the other to A"),
+    ("global G = A -> B : {l1. C -> B : x(int). B -> C : l1, l2. C -> B : x(str). B -> C : l2}",
+     ("l1", "l2"), "label 'x' carries int in one and str in the other"),
+    (("global G = A -> B : {l1. C -> B : {a. B -> C : l1, b. B -> C : l1},"
+      " l2. C -> B : {a. B -> C : l2, c. B -> C : l2}}"), ("l1", "l2"),
+     "it sends one of 'a', 'b' in one and one of 'a', 'c' in the other"),
+    ("global G = A -> B : {l1. C -> B : x. B -> C : l1, l2. C -> B : {x. B -> C : l2, y. B -> C : l2}}",
+     ("l1", "l2"), "it sends 'x' in one and one of 'x', 'y' in the other"),
+    ("global G = A -> B : {l1. C -> B : x. B -> C : y, l2. C -> B : x}", ("l1", "l2"),
+     "a receive cannot merge with end"),
+    ("global G = A -> B : {l1. C -> B : x, l2. B -> C : x}", ("l1", "l2"),
+     "a send cannot merge with a receive"),
+    ("global G = A -> B : {l1. C -> B : x. B -> C : l1, l2. C -> B : x. B -> C : l2, l3. end}",
+     ("l1", "l3"), "a send cannot merge with end"),
 ])
 def test_unmergeable_branches_name_role_and_branches(text: str, labels: tuple[str, str], reason: str) -> None:
     with pytest.raises(ProtocolCheckError) as caught:
@@ -101,8 +119,115 @@ def test_two_spellings_of_one_loop_merge_instead_of_looping() -> None:
 def test_merge_rejects_different_sends() -> None:
     send = lt.Send("A", Message("x"), lt.End())
     other = lt.Send("A", Message("y"), lt.End())
-    with pytest.raises(MergeError, match=r"^only identical behaviours merge unless both receive$"):
+    with pytest.raises(MergeError, match=r"^it sends 'x' in one and 'y' in the other$"):
         merge(send, other)
+
+
+def test_merge_rejects_loops_back_to_different_places() -> None:
+    with pytest.raises(MergeError, match=r"^one loops back to t, the other to s$"):
+        merge(lt.Var("t"), lt.Var("s"))
+
+
+# ---- full merge of sends (LANGUAGE.md 5, issue 17) ----------------------------------------
+
+def test_sends_to_one_peer_with_one_label_merge_their_continuations() -> None:
+    # The example of issue 17: C sends x either way, then learns the choice from B.
+    result = projections("global G(A, B, C) = A -> B : { l1. C -> B : x. B -> C : l1,"
+                         " l2. C -> B : x. B -> C : l2 }")
+    assert result == {"A": "+B{l1, l2}", "B": "&A{l1.?C(x).!C(l1), l2.?C(x).!C(l2)}",
+                      "C": "!B(x).&B{l1, l2}"}
+
+
+def test_sends_merge_whatever_spelling_of_the_sort() -> None:
+    result = projections("global G = A -> B : {l1. C -> B : x(int). B -> C : l1,"
+                         " l2. C -> B : x(Int). B -> C : l2}")
+    assert result["C"] == "!B(x(int)).&B{l1, l2}"
+
+
+def test_selections_with_the_same_labels_merge_label_by_label_in_first_order() -> None:
+    result = projections("global G = A -> B : {l1. C -> B : {a. B -> C : l1, b(int). B -> C : l1},"
+                         " l2. C -> B : {b(int). B -> C : l2. C -> B : z, a. B -> C : l2}}")
+    assert result["C"] == "+B{a.&B{l1, l2}, b(int).&B{l1, l2.!B(z)}}"
+
+
+def test_send_merges_nest_inside_offers_and_across_three_branches() -> None:
+    result = projections("global G = A -> B : {l1. B -> C : go. C -> B : x. B -> C : l1,"
+                         " l2. B -> C : go. C -> B : x. B -> C : l2, l3. B -> C : stop. C -> B : bye}")
+    assert result["C"] == "&B{go.!B(x).&B{l1, l2}, stop.!B(bye)}"
+
+
+def test_long_common_sends_merge_without_recursion_errors() -> None:
+    sends = ". ".join(f"C -> B : m{i}" for i in range(20_000))
+    result = projections(f"global G = A -> B : {{l1. {sends}. B -> C : l1, l2. {sends}. B -> C : l2}}")
+    assert result["C"].startswith("!B(m0).!B(m1).")
+    assert result["C"].endswith("!B(m19999).&B{l1, l2}")
+
+
+@pytest.mark.parametrize("loop", [False, True])
+def test_merging_long_common_sends_compares_each_message_a_few_times(
+        loop: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Comparing the whole rest of both sides at every message (merge's identity test,
+    # or the equivalence of two loops) would be quadratic: n * n / 2 comparisons.
+    n = 2_000
+    sends = ". ".join(f"C -> B : m{i}" for i in range(n))
+    if loop:
+        text = (f"global G = A -> B : {{l1. mu t. {sends}. B -> C : {{a. t, done. end}},"
+                f" l2. mu s. {sends}. B -> C : {{a. s, quit. end}}}}")
+    else:
+        text = f"global G = A -> B : {{l1. {sends}. B -> C : l1, l2. {sends}. B -> C : l2}}"
+    global_type = sessiontypes.loads(text).globals["G"]
+    global_type.cached_projections.clear()
+    calls = 0
+    original = lt.Send.__eq__
+
+    def counting(self: lt.Send, other: object) -> bool:
+        nonlocal calls
+        calls += 1
+        return original(self, other)
+
+    monkeypatch.setattr(lt.Send, "__eq__", counting)
+    projected = str(global_type.project("C"))
+    monkeypatch.undo()
+    assert projected.endswith("&B{a.t, done, quit}" if loop else "!B(m1999).&B{l1, l2}")
+    assert calls < 10 * n
+
+
+def test_send_merge_inside_a_loop() -> None:
+    result = projections("global G = mu t. A -> B : {l1. C -> B : x. B -> C : l1. t,"
+                         " l2. C -> B : x. B -> C : l2}")
+    assert result["C"] == "mu t.!B(x).&B{l1.t, l2}"
+
+
+def test_two_sending_loops_merge_by_unfolding() -> None:
+    # C sends x and is then told whether to go on; the two branches' loops differ in
+    # how C learns they are over, so neither is the other: merge unfolds both.
+    result = projections("global G = A -> B : {l1. mu t. C -> B : x. B -> C : {a. t, done. end},"
+                         " l2. mu s. C -> B : x. B -> C : {a. s, quit. end}}")
+    assert result["C"] == "mu t.!B(x).&B{a.t, done, quit}"
+
+
+def test_send_merge_after_unfolding_one_side() -> None:
+    result = projections("global G = A -> B : {l1. mu t. C -> B : x. B -> C : {a. t, done. end},"
+                         " l2. C -> B : x. B -> C : {a. mu t. C -> B : x. B -> C : {a. t, done. end},"
+                         " quit. end}}")
+    # After 'a' both branches are in the same loop, which 'quit' does not leave.
+    assert result["C"] == "!B(x).&B{a.mu t.!B(x).&B{a.t, done}, done, quit}"
+
+
+def test_send_merge_failure_deep_inside_names_the_outer_branches() -> None:
+    text = ("global G(A, B, C) =\n"
+            "  A -> B : {\n"
+            "    l1. C -> B : x. B -> C : y. C -> B : ok,\n"
+            "    l2. C -> B : x. B -> C : y. C -> B : ko\n"
+            "  }\n")
+    with pytest.raises(ProtocolCheckError) as caught:
+        sessiontypes.loads(text, "deep.proto")
+    (diagnostic,) = caught.value.errors
+    assert (diagnostic.location.line, diagnostic.location.column) == (2, 3)
+    assert diagnostic.message == (
+        "global G is not projectable onto role C: branches 'l1' and 'l2' give C different "
+        "behaviours that do not merge (it sends 'ok' in one and 'ko' in the other): "
+        "!B(x).?B(y).!B(ok) versus !B(x).?B(y).!B(ko)")
 
 
 def test_merge_of_offers_is_their_union_in_order() -> None:
