@@ -88,6 +88,12 @@ class _Builder(Transformer[Token, Any]):
         sort = self._name(names[1]) if len(names) > 1 else None
         return s.MessageSyntax(self._name(names[0]), sort, parens=True)
 
+    def msg_fields(self, children: list[Any]) -> s.MessageSyntax:
+        return s.MessageSyntax(self._name(children[0]), None, parens=True, fields=tuple(_nodes(children)))
+
+    def field(self, children: list[Any]) -> s.FieldSyntax:
+        return s.FieldSyntax(self._name(children[0]), self._name(children[2]))
+
     def msg_bare(self, children: list[Any]) -> s.MessageSyntax:
         return s.MessageSyntax(self._name(children[0]), None, parens=False)
 
@@ -406,6 +412,8 @@ def _hint(token: Token, expected: set[str]) -> str:
         return "interactions are sequenced with '.', and ';' ends a declaration"
     if token.type == "NAME" and "DOT" in expected:
         return "interactions are sequenced with '.'"
+    if token.type == "NAME" and "COLON" in expected and "RPAR" in expected:
+        return "a named payload is written 'name: Sort'"
     if token.type == "NAME" and "COLON" in expected:
         return "write 'Sender -> Receiver : label'"
     if token.type == "ARROW" and "EQ" in expected:

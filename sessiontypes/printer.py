@@ -3,7 +3,8 @@
 ``!Peer(msg)`` / ``?Peer(msg)``, ``+Peer{msg.T, msg.T}`` / ``&Peer{...}``,
 ``mu t.T``, ``(T1 || T2)``, ``.`` without spaces and no trailing ``.end``.
 A message prints as ``Sort`` when its label is the sort's spelling,
-``label(Sort)`` when they differ, and ``label`` when it carries nothing.
+``label(Sort)`` when they differ, ``label(f: Sort, g: Sort)`` for named
+payloads, and ``label`` when it carries nothing.
 Global types print in the same style (``A->B:msg.G``) so that printing then
 parsing gives the same type back.
 """
@@ -56,13 +57,13 @@ class _Printer:
 
 
 def print_message(message: Message) -> str:
-    """``Sort``, ``label(Sort)`` or ``label``."""
+    """``Sort``, ``label(Sort)``, ``label(f: Sort, ...)`` or ``label``."""
     if message.sort is None:
         # 'int' alone would read back as label int carrying an int.
         if message.empty_parens or message.label in BUILTIN_SORTS:
             return f"{message.label}()"
         return message.label
-    if message.label == message.sort.spelling:
+    if message.label == message.sort.spelling:  # never for a record: its spelling has ':'
         return message.label
     return f"{message.label}({message.sort.spelling})"
 

@@ -25,7 +25,7 @@ from . import syntax as s
 from .errors import Diagnostic
 from .expand import Binder, Scope, Walk
 from .location import Location
-from .sorts import BUILTIN_SORTS, Message, Sort, builtin_sort
+from .sorts import BUILTIN_SORTS, Field, Message, Sort, builtin_sort, record_sort
 
 __all__ = ["Reporter", "SortTable", "global_walk", "local_walk", "resolve_global", "resolve_local"]
 
@@ -81,6 +81,8 @@ class SortTable:
 
     def message(self, syntax: s.MessageSyntax) -> Message:
         """Apply the abbreviation rule: a bare sort name labels a value of that sort."""
+        if syntax.fields is not None:
+            return Message(syntax.label.text, self.record(syntax.label, syntax.fields))
         if syntax.parens:
             if syntax.sort is None:
                 return Message(syntax.label.text, None, self.is_sort(syntax.label.text))
@@ -88,6 +90,22 @@ class SortTable:
         if self.is_sort(syntax.label.text):
             return Message(syntax.label.text, self.sort(syntax.label))
         return Message(syntax.label.text)
+
+    def record(self, label: s.Name, fields: tuple[s.FieldSyntax, ...]) -> Sort | None:
+        """The record sort of named payloads; reports repeated field names and unknown sorts."""
+        resolved: list[Field] = []
+        seen: set[str] = set()
+        for f in fields:
+            if f.name.text in seen:
+                self.reporter.error(f.name.location, f"duplicate field '{f.name.text}' in message "
+                                    f"'{label.text}'")
+            seen.add(f.name.text)
+            sort = self.sort(f.sort)
+            if sort is not None:
+                resolved.append(Field(f.name.text, sort))
+        if len(resolved) < len(fields) or len(seen) < len(fields):
+            return None  # already reported
+        return record_sort(tuple(resolved))
 
     def defined(self) -> dict[str, Sort]:
         return {name: Sort(name, name, d.target) for name, d in self.declared.items()}

@@ -1,10 +1,16 @@
-"""Payload sorts and messages (a label with an optional payload sort)."""
+"""Payload sorts and messages (a label with an optional payload sort).
+
+A sort is a builtin, a declared ``type``, or a *record* of named fields
+(``quote(price: int, date: str)``; docs/language-additions.md): a value of a
+record sort is a ``dict`` with exactly those keys, each holding a value of its
+field's sort.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["BUILTIN_SORTS", "Sort", "Message", "builtin_sort"]
+__all__ = ["BUILTIN_SORTS", "Sort", "Field", "Message", "builtin_sort", "record_sort"]
 
 # Every spelling of a builtin sort, mapped to its canonical name.
 BUILTIN_SORTS: dict[str, str] = {
@@ -26,24 +32,54 @@ class Sort:
             or the name of the ``type`` declaration (``Twist``).
         spelling: how it was written where it occurs; used only for printing.
         target: for declared sorts, the bound class (``module:QualifiedName``)
-            or ROS 2 type (``ros:pkg/msg/Name``); ``None`` for builtins.
+            or ROS 2 type (``ros:pkg/msg/Name``); ``None`` for builtins and records.
+        fields: for a record, its fields in written order; ``None`` otherwise.
+            ``key`` and ``spelling`` are then ``price: int, date: str`` (the key
+            with the fields' keys, the spelling with their spellings), so two
+            records are the same sort when their field names, order and sorts are.
     """
 
     key: str
     spelling: str = field(compare=False)
     target: str | None = field(default=None, compare=False)
+    fields: tuple[Field, ...] | None = field(default=None, compare=False)
 
     @property
     def is_builtin(self) -> bool:
-        return self.target is None
+        return self.target is None and self.fields is None
+
+    @property
+    def is_record(self) -> bool:
+        return self.fields is not None
+
+    def components(self) -> tuple[Sort, ...]:
+        """The sorts a value of this sort is made of: a record's field sorts, else the sort itself."""
+        if self.fields is None:
+            return (self,)
+        return tuple([f.sort for f in self.fields])
 
     def __str__(self) -> str:
         return self.spelling
 
 
+@dataclass(frozen=True, slots=True)
+class Field:
+    """One named field of a record sort: ``price: int``."""
+
+    name: str
+    sort: Sort
+
+
 def builtin_sort(spelling: str) -> Sort:
     """Return the builtin sort spelled ``spelling`` (``KeyError`` if none)."""
     return Sort(BUILTIN_SORTS[spelling], spelling)
+
+
+def record_sort(fields: tuple[Field, ...]) -> Sort:
+    """The record sort of ``fields`` (distinct names, in written order; not records themselves)."""
+    key = ", ".join([f"{f.name}: {f.sort.key}" for f in fields])
+    spelling = ", ".join([f"{f.name}: {f.sort.spelling}" for f in fields])
+    return Sort(key, spelling, None, fields)
 
 
 @dataclass(frozen=True, slots=True)

@@ -14,7 +14,7 @@ from typing import Literal
 from .location import NOWHERE, Location
 
 __all__ = [
-    "Name", "MessageSyntax", "GBranchSyntax", "GInteraction", "GRec", "GRef", "GEnd",
+    "Name", "FieldSyntax", "MessageSyntax", "GBranchSyntax", "GInteraction", "GRec", "GRef", "GEnd",
     "GParallel", "GSyntax", "LBranchSyntax", "LAction", "LChoice", "LRec", "LRef",
     "LEnd", "LParallel", "LSyntax", "TypeDecl", "GlobalDecl", "LocalDecl",
     "Declaration", "SourceFile",
@@ -30,17 +30,27 @@ class Name:
 
 
 @dataclass(frozen=True, slots=True)
+class FieldSyntax:
+    """``name: Sort``, one field of a message with named payloads."""
+
+    name: Name
+    sort: Name
+
+
+@dataclass(frozen=True, slots=True)
 class MessageSyntax:
-    """``label(Sort)``, ``label()`` or a bare ``NAME`` (abbreviation rule).
+    """``label(Sort)``, ``label()``, ``label(f: S, ...)`` or a bare ``NAME`` (abbreviation rule).
 
     ``parens`` tells the written form apart: with parentheses ``sort`` is the
     payload (``None`` for ``label()``); without, the meaning of the bare name
-    depends on whether it names a sort.
+    depends on whether it names a sort. ``fields`` holds named payloads
+    (``sort`` is then None).
     """
 
     label: Name
     sort: Name | None
     parens: bool
+    fields: tuple[FieldSyntax, ...] | None = None
 
 
 # ---- global ---------------------------------------------------------------

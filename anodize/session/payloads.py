@@ -117,6 +117,8 @@ def validator_for(sort: Sort | None) -> Validator:
 
     For a class sort: an instance of the class, and if it is a dataclass, fields that fit
     their annotations (:func:`check_fields`). For a ROS 2 sort: :meth:`anodize.ros.RosType.check`.
+    For named payloads (a record sort): a ``dict`` with exactly the record's field names,
+    each value checked against its field's sort; the reason names the field.
 
     Raises:
         AnodizeError: the sort's class cannot be imported, or its ROS 2 type cannot be
@@ -124,6 +126,8 @@ def validator_for(sort: Sort | None) -> Validator:
     """
     if sort is None:
         return _no_payload
+    if sort.fields is not None:
+        return _record(sort)
     if sort.target is None:
         return _BUILTIN[sort.key]
     if sort.target.startswith("ros:"):
@@ -147,6 +151,29 @@ def validator_for(sort: Sort | None) -> Validator:
                                               catch="(AttributeError, RecursionError)"))
 
 
+def _record(sort: Sort) -> Validator:
+    """Named payloads: a ``dict`` with exactly the record's field names, each value of its field's sort."""
+    assert sort.fields is not None
+    fields = tuple([(f.name, validator_for(f.sort)) for f in sort.fields])
+    names = frozenset([name for name, _ in fields])
+    wanted = f"a dict with the fields {sort.spelling}"
+
+    def check(payload: object) -> str | None:
+        if type(payload) is not dict:  # exactly a dict: what the transports carry as a dict
+            return f"expected {wanted}, got {type(payload).__name__}"
+        for name, field_check in fields:
+            if name not in payload:
+                return f"field {name} is missing (expected {wanted})"
+            reason = field_check(payload[name])
+            if reason is not None:
+                return f"field {name}: {reason}"
+        if len(payload) != len(fields):
+            extra = sorted(repr(key) for key in payload if key not in names)
+            return f"unexpected field{'s' if len(extra) > 1 else ''} {', '.join(extra)} (expected {wanted})"
+        return None
+    return check
+
+
 _EXACT: dict[str, frozenset[type]] = {
     "int": frozenset({int}), "bool": frozenset({bool}), "str": frozenset({str}),
     "float": frozenset({float, int}), "bytes": frozenset({bytes}),
@@ -157,11 +184,15 @@ def exact_types_for(sort: Sort | None) -> frozenset[type]:
     """Types whose instances fit ``sort`` without calling its validator (a fast path).
 
     Empty when every payload needs the full check: ``nat`` (which must be >= 0), a
-    dataclass with annotated fields and a ROS 2 message (their fields are checked on
-    every message).
+    dataclass with annotated fields, a ROS 2 message and named payloads (their fields
+    are checked on every message).
     """
     if sort is None:
         return frozenset({type(None)})
+    if sort.fields is not None:  # every field is checked on every message
+        for part in sort.fields:
+            exact_types_for(part.sort)  # resolved now, as for a sort of its own
+        return frozenset()
     if sort.target is None:
         return _EXACT.get(sort.key, frozenset())
     if sort.target.startswith("ros:"):

@@ -35,7 +35,7 @@ from multiprocessing.connection import Connection
 from queue import Empty, SimpleQueue
 from typing import Any
 
-from sessiontypes import StateMachine
+from sessiontypes import Sort, StateMachine
 
 from ..errors import MemoryBoundError, error_to_data
 from ..isolation.memory import data_size, limit_data
@@ -320,16 +320,21 @@ class _GroupProcess:
 
 def _payload_classes(machines: Iterable[StateMachine]) -> list[type]:
     """The classes named as sorts by the local types (the only ones that may be decoded)."""
-    targets = {t.sort.target for machine in machines for t in machine.all_transitions()
-               if t.sort is not None and t.sort.target and not t.sort.target.startswith("ros:")}
+    targets = {sort.target for sort in _payload_sorts(machines)
+               if sort.target and not sort.target.startswith("ros:")}
     return with_field_classes(resolve_class(t) for t in sorted(targets))
 
 
 def _payload_ros_types(machines: Iterable[StateMachine]) -> list[RosType]:
     """The ROS 2 message types named as sorts by the local types (they travel as CDR)."""
-    targets = {t.sort.target for machine in machines for t in machine.all_transitions()
-               if t.sort is not None and t.sort.target and t.sort.target.startswith("ros:")}
+    targets = {sort.target for sort in _payload_sorts(machines) if sort.target and sort.target.startswith("ros:")}
     return [ros_type(t) for t in sorted(targets)]
+
+
+def _payload_sorts(machines: Iterable[StateMachine]) -> list[Sort]:
+    """The sorts payloads are made of: each label's sort, or the sorts of its named payloads."""
+    return [sort for machine in machines for t in machine.all_transitions() if t.sort is not None
+            for sort in t.sort.components()]
 
 
 def _recorder(spec: GroupSpec, queues: dict[tuple[str, str], Any]) -> Recorder | None:

@@ -93,9 +93,11 @@ def has_fork(machine: StateMachine) -> bool:
 # ---- payloads ------------------------------------------------------------------------------
 
 def payload_for(sort: Sort | None, rng: random.Random) -> object:
-    """A value of ``sort`` (builtin sorts only), None when the label carries nothing."""
+    """A value of ``sort`` (builtin sorts and records of them), None when the label carries nothing."""
     if sort is None:
         return None
+    if sort.fields is not None:
+        return {f.name: payload_for(f.sort, rng) for f in sort.fields}
     match sort.key:
         case "int":
             return rng.randint(-1000, 1000)
