@@ -66,9 +66,9 @@ ROLES_IN_SECOND_BRANCH_FIRST = GeneratedGlobal(
 
 
 # A role that sends in a loop it reaches in both branches, the loop's variable
-# named differently in each: rejected ("only identical behaviours merge unless
+# named differently in each: was rejected ("only identical behaviours merge unless
 # both receive": mu t.!B(l1).t versus mu u.!B(l1).u). The same with one name
-# for both loops, or with A receiving, is accepted. Projectability must not
+# for both loops, or with A receiving, was accepted. Projectability must not
 # depend on bound variable names: alpha-equivalent types are identical.
 RENAMED_SENDING_LOOP = GeneratedGlobal(
     "global G = B -> C : {l0. mu t. A -> B : l1. t, l1. mu u. A -> B : l1. u}",
@@ -138,7 +138,7 @@ def test_local_canonical_print_round_trip(generated: GeneratedGlobal) -> None:
 @SETTINGS
 @example(LOOP_WITHOUT_C)
 @example(RENAMED_SENDING_LOOP)
-@given(global_protocols(rename_sending_loops=True))
+@given(global_protocols())
 def test_projection_never_fails(generated: GeneratedGlobal) -> None:
     """Generated protocols are projectable by construction (strategies._Generator):
     loads accepts them and every role gets a local type and a state machine."""
