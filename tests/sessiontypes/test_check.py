@@ -95,6 +95,12 @@ def test_merge_accepts_two_spellings_of_one_loop() -> None:
     assert projections["C"] in {"mu t.?A(x).?A(x).t", "mu t.?A(x).t", "mu s.?A(x).s"}
 
 
+def test_merge_of_sends_goes_label_by_label() -> None:
+    assert _projections("merge_sends", "SendThenLearn")["C"] == "!B(x).&B{l1, l2}"
+    # the first branch's order; slow's sort spelled Int in the other branch is the same sort
+    assert _projections("merge_sends", "ChooseThenLearn")["C"] == "+B{fast.&B{l1, l2}, slow(int).&B{l1, l2}}"
+
+
 def test_equation_style_recursion_prints_the_declaration_name() -> None:
     assert _projections("equation_recursion", "Ping") == {
         "A": "mu Ping.!B(ping(int)).&B{pong(int).Ping, done}",
