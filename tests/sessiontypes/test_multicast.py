@@ -1,4 +1,4 @@
-"""Multicast ``A -> B, C : m`` (docs/language-additions.md): shorthand the parser expands."""
+"""Multicast ``A -> B, C : m`` (docs/language.md, 4.5): shorthand the parser expands."""
 
 from __future__ import annotations
 

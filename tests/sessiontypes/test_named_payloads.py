@@ -1,4 +1,4 @@
-"""Messages with named payloads, ``quote(price: int, date: str)`` (docs/language-additions.md)."""
+"""Messages with named payloads, ``quote(price: int, date: str)`` (docs/language.md, 4.6)."""
 
 from __future__ import annotations
 
