@@ -15,7 +15,14 @@ jumps away from where the commands since the last one took the robot (more than
 model's pose and from then on reads the odometry's poses relative to it (an offset
 between the odometry's frame and Move's, ``offset``). Over such short spans the
 commanded motion is what the base did (the simulated base does not slip: a real one
-slips a little, which these thresholds are far above). Teleop
+slips a little, which these thresholds are far above).
+
+Path following looks ahead before it drives: if the arc commanded would, in
+``CLEAR_AHEAD`` seconds, bring the robot (by Move's pose, in the room's known map)
+within ``CLEAR_MARGIN`` of a wall or box, it drives no further (turning on the spot
+still goes) and counts it (``held_back``). The planner plans from VisOdom's own pose;
+when that has drifted far from Move's, the way onto its path is not one the planner
+checked. Teleop
 is "active" while Control's twist is not zero: Control sends a twist every cycle, so
 a centred stick means "no command" (as with ROS's twist_mux, where a silent teleop
 topic yields to navigation); a person driving is not stopped.
@@ -30,16 +37,20 @@ from collections.abc import Callable
 
 from .messages import Path, Twist, path_points, twist_planar
 from .pursuit import PurePursuit
-from .sim import DiffDrive
-from .world import World
+from .sim import DiffDrive, arc_pose
+from .world import ROBOT_RADIUS, World
 
-__all__ = ["Mixer", "IDLE_EPSILON", "LOST_AFTER", "BRIDGE_GAP", "BRIDGE_JUMP", "BRIDGE_TURN"]
+__all__ = ["Mixer", "IDLE_EPSILON", "LOST_AFTER", "BRIDGE_GAP", "BRIDGE_JUMP", "BRIDGE_TURN", "CLEAR_AHEAD",
+           "CLEAR_MARGIN"]
 
 IDLE_EPSILON = 1e-3  # m/s or rad/s: a twist this small commands nothing
 LOST_AFTER = 0.5  # seconds without a fresh estimate before path following stops the robot
 BRIDGE_GAP = 0.1  # seconds between two estimates' stamps (three camera frames) the odometry may have lost
 BRIDGE_JUMP = 0.1  # metres an estimate may differ from the drive model's pose before it is a false fix ...
 BRIDGE_TURN = math.radians(5.0)  # ... or radians
+
+CLEAR_AHEAD = 0.5  # seconds of the commanded arc checked against the map
+CLEAR_MARGIN = 0.05  # metres beyond the robot's radius
 
 Pose = tuple[float, float, float]
 
@@ -70,6 +81,7 @@ class Mixer:
         estimates: fresh estimates taken.
         stops: how often path following stopped because the estimate went stale.
         bridged: how often the drive model's pose was kept over the odometry's (a gap, or a jump).
+        held_back: path commands whose forward motion was dropped: it led too near a wall or box.
         offset: the odometry's frame in Move's, ``(x, y, theta)`` (zero until the first bridge).
     """
 
@@ -84,6 +96,7 @@ class Mixer:
         self.stops = 0
         self.resumed = 0  # path commands after the first stop: tracking came back
         self.bridged = 0
+        self.held_back = 0  # path commands that would have driven too near a wall or box
         self.offset: Pose = (0.0, 0.0, 0.0)
         self._path: list[tuple[float, float]] = []
         self._stamp: float | None = None
@@ -132,6 +145,13 @@ class Mixer:
         with self._lock:
             return self._clock() - self._fresh_at <= LOST_AFTER
 
+    def _clear_ahead(self, pose: Pose, v: float, w: float) -> bool:
+        """Whether the arc ``(v, w)`` keeps the robot clear of the room's walls and boxes for
+        ``CLEAR_AHEAD`` seconds (checked at its middle and its end)."""
+        world = self.model.world
+        return not any(world.collides(*arc_pose(*pose, v, w, t)[:2], ROBOT_RADIUS + CLEAR_MARGIN)
+                       for t in (CLEAR_AHEAD / 2, CLEAR_AHEAD))
+
     def step(self, teleop: Twist) -> tuple[Twist, str]:
         """The command for this period and where it came from; advances the drive model."""
         v, w = teleop.linear.x, teleop.angular.z
@@ -148,6 +168,9 @@ class Mixer:
                 self.stops += not self._lost
             else:
                 v, w = self.pursuit.command(pose, path)
+                if v > 0 and not self._clear_ahead(pose, v, w):
+                    v = 0.0
+                    self.held_back += 1
                 source = "path"
                 self.resumed += self.stops > 0
             self._lost = source == "lost"

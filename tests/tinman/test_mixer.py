@@ -108,3 +108,19 @@ def test_an_estimate_that_jumps_from_where_the_commands_took_the_robot_is_a_fals
     assert mixer.model.pose == (x + 0.01, y, 0.01) and mixer.bridged == 1
     mixer.set_estimate(1.1, (x + 0.01, y, 0.01 + 2 * BRIDGE_TURN))  # nor such a turn
     assert mixer.bridged == 2
+
+
+def test_path_following_drives_no_further_toward_a_box_it_believes_it_is_about_to_hit() -> None:
+    # A path from a drifted odometry pose can lead the robot (by Move's own pose) straight at a
+    # box: the cabinet's west face is at x = 2.6; the robot stands 0.3 m from it, facing it.
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0)
+    mixer.set_estimate(1.0, (2.6 - 0.3, 3.0, 0.0))
+    mixer.set_path(path_of([(2.3, 3.0), (3.0, 3.0)]))
+    command, source = mixer.step(twist_planar(0.0, 0.0))
+    assert source == "path" and command.linear.x == 0.0 and mixer.held_back == 1
+    # Far from anything, the same path ahead is driven.
+    free = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0)
+    free.set_estimate(1.0, (1.0, 1.0, 0.0))
+    free.set_path(path_of([(1.0, 1.0), (2.0, 1.0)]))
+    command, _ = free.step(twist_planar(0.0, 0.0))
+    assert command.linear.x > 0.0 and free.held_back == 0

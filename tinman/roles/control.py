@@ -112,7 +112,7 @@ def move(ep: Endpoint) -> None:
             "period_ms": percentiles(periods), "planner_lost": planner_lost[0] if planner_lost else None,
             "teleop_commands_after_planner_lost": teleop_after_loss,
             "estimates": mixer.estimates, "stops_for_lost_tracking": mixer.stops,
-            "path_commands_after_a_stop": mixer.resumed, "bridged": mixer.bridged,
+            "path_commands_after_a_stop": mixer.resumed, "bridged": mixer.bridged, "held_back": mixer.held_back,
             "perception_lost": perception_lost[0] if perception_lost else None,
             "odometry_pose": list(mixer.model.pose)})
 
