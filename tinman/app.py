@@ -59,7 +59,7 @@ class TinMan:
         parser.add_argument("--dataset", metavar="DIR",
                             help="play a recorded TUM RGB-D sequence back as the camera (default: the simulated "
                                  "camera renders the room live from the simulated robot)")
-        parser.add_argument("--world", choices=WORLDS, default=DEFAULT_LOOK,
+        parser.add_argument("--world", choices=WORLDS, default=None,
                             help="how the room looks to the simulated camera: realistic (photographs, plain "
                                  "walls, repeated patterns, flickering lamps, motion blur; the default) or easy "
                                  "(procedural textures made for ORB)")
@@ -91,8 +91,9 @@ class TinMan:
         if args.teleop:
             _check_terminal()
         out = Path(args.out)
-        world = getattr(args, "world", DEFAULT_LOOK)
-        if args.dataset is not None and world != DEFAULT_LOOK:
+        chosen = getattr(args, "world", None)  # None: not given (so it cannot clash with --dataset)
+        world = chosen or DEFAULT_LOOK
+        if args.dataset is not None and chosen is not None:
             raise TinManError(f"--world {world} with --dataset: a recording is played back as it was filmed; "
                               "--world chooses what the simulated camera renders")
         dataset = _dataset(args.dataset) if args.dataset is not None else ""
