@@ -168,6 +168,13 @@ def _collect_roles(node: g.GlobalTerm, found: dict[str, Location], shared: Shari
                         _collect_roles(branch.continuation, found, shared, False)
                     return
                 node = branches[0].continuation
+            case g.Routed(sender=sender, branches=routes):
+                found.setdefault(sender, node.location)
+                for route in routes:
+                    found.setdefault(route.receiver, route.receiver_location)
+                for route in routes:
+                    _collect_roles(route.continuation, found, shared, False)
+                return
             case g.Rec(body=body):
                 node = body
             case g.Parallel(branches=parts):
@@ -186,6 +193,9 @@ def _channels(term: g.GlobalTerm, shared: Sharing) -> frozenset[tuple[str, str]]
         case g.Choice(sender=sender, receiver=receiver, branches=branches):
             found = frozenset({(sender, receiver)}).union(
                 *([_channels(b.continuation, shared) for b in branches]))
+        case g.Routed(sender=sender, branches=routes):
+            found = frozenset({(sender, r.receiver) for r in routes}).union(
+                *([_channels(r.continuation, shared) for r in routes]))
         case g.Rec(body=body):
             found = _channels(body, shared)
         case g.Parallel(branches=parts):
@@ -210,6 +220,9 @@ def _check_parallel_in(term: g.GlobalTerm, reporter: Reporter, shared: Sharing) 
         case g.Choice(branches=branches):
             for b in branches:
                 _check_parallel_global(b.continuation, reporter, shared)
+        case g.Routed(branches=routes):
+            for r in routes:
+                _check_parallel_global(r.continuation, reporter, shared)
         case g.Rec(body=body):
             _check_parallel_global(body, reporter, shared)
         case g.Parallel(branches=parts, location=location):
@@ -255,6 +268,8 @@ def _local_channels(term: lt.LocalTerm, shared: Sharing) -> frozenset[tuple[str,
             arrow = "!" if isinstance(term, lt.Select) else "?"
             found = frozenset({(arrow, peer or "")}).union(
                 *([_local_channels(b.continuation, shared) for b in branches]))
+        case lt.SelectAmong(branches=actions) | lt.OfferAmong(branches=actions):
+            found = frozenset().union(*([_local_channels(a, shared) for a in actions]))
         case lt.Rec(body=body):
             found = _local_channels(body, shared)
         case lt.Parallel(branches=parts):
@@ -280,6 +295,9 @@ def _check_parallel_local_in(term: lt.LocalTerm, reporter: Reporter, shared: Sha
         case lt.Select(branches=branches) | lt.Offer(branches=branches):
             for b in branches:
                 _check_parallel_local(b.continuation, reporter, shared)
+        case lt.SelectAmong(branches=actions) | lt.OfferAmong(branches=actions):
+            for a in actions:
+                _check_parallel_local(a.continuation, reporter, shared)
         case lt.Rec(body=body):
             _check_parallel_local(body, reporter, shared)
         case lt.Parallel(branches=parts, location=location):

@@ -20,6 +20,7 @@ __all__ = [
     "ProtocolEncodingError",
     "ProtocolCheckError",
     "ProjectionError",
+    "ChoiceRaceError",
     "UnknownRoleError",
 ]
 
@@ -209,6 +210,45 @@ class ProjectionError(ProtocolError):
 
     def __str__(self) -> str:
         return str(self.diagnostics[0])
+
+
+class ChoiceRaceError(ProjectionError):
+    """Raised when a role that learns a choice from the first of several peers' messages could be misled.
+
+    The role's local type receives from several peers at one state and takes the
+    branch of whichever message arrives first; in the branch of ``left`` (the
+    receive that decides it), the peer of ``right`` can send ``right`` without
+    waiting for ``left`` to be received, so the two may arrive in either order.
+
+    Attributes (besides :class:`ProjectionError`'s):
+        location: the interaction that sends ``right``.
+        left: the deciding receive (``?A(m1)``); ``decided_at`` where it is written.
+        right: the message that may overtake it (``?C(y)``).
+        reason: the peers the role waits on (``A or C``).
+    """
+
+    def __init__(self, protocol: str, role: str, location: Location, left: str, right: str,
+                 peers: str, decided_at: Location, source_line: str = "") -> None:
+        self.decided_at = decided_at
+        super().__init__(protocol, role, location, (left, right), left, right, peers, source_line)
+
+    @property
+    def message(self) -> str:
+        sender, sent = _action_parts(self.right)
+        _, deciding = _action_parts(self.left)
+        where = self.decided_at
+        return (
+            f"global {self.protocol} is not projectable onto role {self.role}: {self.role} learns a "
+            f"choice from whichever message arrives first from {self.reason}, but in the branch that "
+            f"{self.left} (at {where.line}:{where.column}) decides, {sender} may send {sent} here "
+            f"before {deciding} has reached {self.role}, so {self.role} could take {sent} first"
+        )
+
+
+def _action_parts(action: str) -> tuple[str, str]:
+    """``?C(y(str))`` -> ``("C", "y(str)")``."""
+    peer, _, rest = action[1:].partition("(")
+    return peer, rest[:-1]
 
 
 def _one_of(items: tuple[str, ...]) -> str:

@@ -320,8 +320,12 @@ def _children(node: s.GSyntax | s.LSyntax | None) -> list[s.GSyntax | s.LSyntax 
     match node:
         case s.GInteraction(branches=gbranches):
             return [b.continuation for b in gbranches]
+        case s.GRouted(branches=routes):
+            return list(routes)
         case s.LChoice(branches=lbranches):
             return [b.continuation for b in lbranches]
+        case s.LChoiceAmong(branches=actions):
+            return list(actions)
         case s.LAction(continuation=rest):
             return [rest]
         case s.GRec(body=inner) | s.LRec(body=inner):

@@ -84,6 +84,24 @@ class StateMachine:
         """No action is left in ``state`` (a fork is final when its branches are)."""
         return not self.table[state] and state not in self.forks
 
+    def peers_at(self, state: int, action: Action) -> list[str | None]:
+        """The peers ``state`` may send to (``action`` "send") or receive from ("recv"), in order."""
+        return list(dict.fromkeys(t.peer for t in self.table[state].values() if t.action == action))
+
+    def waits_on_several(self) -> bool:
+        """Whether some state (of this machine or a parallel branch's) may receive from two peers.
+
+        Such a role takes whichever message comes first (``Endpoint.recv_any``);
+        a transport gives it a doorbell, as it does a role with parallel branches.
+        """
+        stack = [self]
+        while stack:
+            machine = stack.pop()
+            if any(len({p for (a, p, _) in keys if a == "recv"}) > 1 for keys in machine.table):
+                return True
+            stack.extend(b for branches in machine.forks.values() for b in branches)
+        return False
+
     def step(self, state: int, action: Action, peer: str | None, label: str) -> Transition | None:
         """The transition for that action from ``state``, or None if not allowed."""
         return self.table[state].get((action, peer, label))
@@ -235,6 +253,11 @@ class _Builder:
                 for b in branches:
                     self.add(state, action, peer, b.message.label, b.message.sort,
                              self.state_of(b.continuation, env), b.location)
+            case lt.SelectAmong(branches=actions) | lt.OfferAmong(branches=actions):
+                kind: Action = "send" if isinstance(term, lt.SelectAmong) else "recv"
+                for a in actions:
+                    self.add(state, kind, a.peer, a.message.label, a.message.sort,
+                             self.state_of(a.continuation, env), a.location)
             case lt.Parallel(branches=parts):
                 self.forks[state] = tuple([_Builder(self.role, self.protocol).build(p) for p in parts])
             case _:

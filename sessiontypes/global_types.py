@@ -1,7 +1,8 @@
 """Global types: the core calculus a protocol's ``global`` declarations denote.
 
 A global type term is one of :class:`Choice` (``p -> q : {l_i(S_i). G_i}``;
-a single message is a choice with one branch), :class:`Rec`, :class:`Var`,
+a single message is a choice with one branch), :class:`Routed` (``p -> {q_i :
+l_i(S_i). G_i}``: a choice whose branches go to different receivers), :class:`Rec`, :class:`Var`,
 :class:`End` and :class:`Parallel`. Terms are frozen, slotted dataclasses
 whose :class:`~sessiontypes.location.Location` is left out of equality.
 :class:`GlobalType` is a named, checked global declaration: the object users
@@ -22,7 +23,7 @@ if TYPE_CHECKING:
     from .local_types import LocalType
 
 __all__ = [
-    "Branch", "Choice", "Rec", "Var", "End", "Parallel", "GlobalTerm", "GlobalType",
+    "Branch", "Choice", "RoutedBranch", "Routed", "Rec", "Var", "End", "Parallel", "GlobalTerm", "GlobalType",
 ]
 
 
@@ -44,6 +45,30 @@ class Choice:
     branches: tuple[Branch, ...]
     location: Location = field(default=NOWHERE, compare=False, repr=False)
     receiver_location: Location = field(default=NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True, slots=True)
+class RoutedBranch:
+    """One alternative of a :class:`Routed` choice: its receiver, its message, what follows."""
+
+    receiver: str
+    message: Message
+    continuation: GlobalTerm
+    location: Location = field(default=NOWHERE, compare=False, repr=False)
+    receiver_location: Location = field(default=NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True, slots=True)
+class Routed:
+    """``sender -> {q_1 : l_1. G_1, ...}``: the sender picks one branch, each to its receiver.
+
+    At least two receivers differ (else it is a :class:`Choice`); the pairs
+    ``(receiver, label)`` are distinct.
+    """
+
+    sender: str
+    branches: tuple[RoutedBranch, ...]
+    location: Location = field(default=NOWHERE, compare=False, repr=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,7 +103,7 @@ class Parallel:
     location: Location = field(default=NOWHERE, compare=False, repr=False)
 
 
-GlobalTerm = Choice | Rec | Var | End | Parallel
+GlobalTerm = Choice | Routed | Rec | Var | End | Parallel
 
 
 @dataclass(frozen=True, slots=True, eq=False)

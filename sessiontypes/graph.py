@@ -34,6 +34,14 @@ def communication_graph(global_type: g.GlobalType) -> nx.DiGraph[str]:
                     if text not in messages:
                         messages.append(text)
                 stack.extend(b.continuation for b in reversed(branches))
+            case g.Routed(sender=sender, branches=routes):
+                for route in routes:
+                    if not graph.has_edge(sender, route.receiver):
+                        graph.add_edge(sender, route.receiver, messages=[])
+                    carried: list[str] = graph.edges[sender, route.receiver]["messages"]
+                    if (text := print_message(route.message)) not in carried:
+                        carried.append(text)
+                stack.extend(r.continuation for r in reversed(routes))
             case g.Rec(body=body):
                 stack.append(body)
             case g.Parallel(branches=parts):

@@ -1,10 +1,14 @@
 """Local types: one role's view of a protocol.
 
 Terms: :class:`Send` / :class:`Recv` (one message), :class:`Select` (this
-role chooses, ``+``) / :class:`Offer` (the peer chooses, ``&``), :class:`Rec`,
+role chooses, ``+``) / :class:`Offer` (the peer chooses, ``&``),
+:class:`SelectAmong` / :class:`OfferAmong` (the same over branches with
+different peers: ``+{!B(m).T, !C(n).U}``, ``&{?A(m).T, ?C(n).U}``), :class:`Rec`,
 :class:`Var`, :class:`End`, :class:`Parallel`. A choice with one branch is
 always built as a :class:`Send` or :class:`Recv` (see :func:`select` and
-:func:`offer`), so each behaviour has exactly one representation. ``peer`` is
+:func:`offer`), and a choice among peers whose branches all have one peer as
+a :class:`Select` or :class:`Offer` (see :func:`select_among` and
+:func:`offer_among`), so each behaviour has exactly one representation. ``peer`` is
 ``None`` in the binary form of Fig. 1 (one implicit peer).
 
 ``str()`` of any term is its canonical print (LANGUAGE.md section 5).
@@ -22,8 +26,8 @@ if TYPE_CHECKING:
     from .fsm import StateMachine
 
 __all__ = [
-    "Branch", "Send", "Recv", "Select", "Offer", "Rec", "Var", "End", "Parallel",
-    "LocalTerm", "LocalType", "select", "offer",
+    "Branch", "Send", "Recv", "Select", "Offer", "SelectAmong", "OfferAmong", "Rec", "Var", "End",
+    "Parallel", "LocalTerm", "LocalType", "select", "offer", "select_among", "offer_among", "sends_of", "receives_of",
 ]
 
 
@@ -103,6 +107,34 @@ class Offer(_Printable):
 
 
 @dataclass(frozen=True, slots=True, repr=False)
+class SelectAmong(_Printable):
+    """``+{!B(m).T, !C(n).U}``: this role sends one of the branches, to peers that differ.
+
+    At least two peers differ; the pairs ``(peer, label)`` are distinct.
+    """
+
+    branches: tuple[Send, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"SelectAmong({str(self)!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class OfferAmong(_Printable):
+    """``&{?A(m).T, ?C(n).U}``: the first of the branches to arrive, from peers that differ.
+
+    At least two peers differ; the pairs ``(peer, label)`` are distinct.
+    """
+
+    branches: tuple[Recv, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+    def __repr__(self) -> str:
+        return f"OfferAmong({str(self)!r})"
+
+
+@dataclass(frozen=True, slots=True, repr=False)
 class Rec(_Printable):
     """``mu var. body``."""
 
@@ -146,7 +178,7 @@ class Parallel(_Printable):
         return f"Parallel({str(self)!r})"
 
 
-LocalTerm = Send | Recv | Select | Offer | Rec | Var | End | Parallel
+LocalTerm = Send | Recv | Select | Offer | SelectAmong | OfferAmong | Rec | Var | End | Parallel
 
 
 def select(peer: str | None, branches: tuple[Branch, ...], location: Location = NOWHERE) -> LocalTerm:
@@ -163,6 +195,46 @@ def offer(peer: str | None, branches: tuple[Branch, ...], location: Location = N
         only = branches[0]
         return Recv(peer, only.message, only.continuation, only.location)
     return Offer(peer, branches, location)
+
+
+def select_among(branches: tuple[Send, ...], location: Location = NOWHERE) -> LocalTerm:
+    """Build an internal choice over (peer, label); one peer gives :func:`select`."""
+    if len({b.peer for b in branches}) == 1:
+        return select(branches[0].peer, tuple([Branch(b.message, b.continuation, b.location)
+                                              for b in branches]), location)
+    return SelectAmong(branches, location)
+
+
+def offer_among(branches: tuple[Recv, ...], location: Location = NOWHERE) -> LocalTerm:
+    """Build an external choice over (peer, label); one peer gives :func:`offer`."""
+    if len({b.peer for b in branches}) == 1:
+        return offer(branches[0].peer, tuple([Branch(b.message, b.continuation, b.location)
+                                             for b in branches]), location)
+    return OfferAmong(branches, location)
+
+
+def sends_of(term: Send | Select | SelectAmong) -> tuple[Send, ...]:
+    """The branches of an internal choice (or the one send) as sends that name their peer."""
+    match term:
+        case Send():
+            return (term,)
+        case SelectAmong(branches=sends):
+            return sends
+        case Select(peer=peer, branches=branches):
+            return tuple([Send(peer, b.message, b.continuation, b.location) for b in branches])
+    raise AssertionError(term)
+
+
+def receives_of(term: Recv | Offer | OfferAmong) -> tuple[Recv, ...]:
+    """The branches of an external choice (or the one receive) as receives that name their peer."""
+    match term:
+        case Recv():
+            return (term,)
+        case OfferAmong(branches=recvs):
+            return recvs
+        case Offer(peer=peer, branches=branches):
+            return tuple([Recv(peer, b.message, b.continuation, b.location) for b in branches])
+    raise AssertionError(term)
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -1,9 +1,12 @@
 """Full merge of local types (LANGUAGE.md section 5).
 
-Merge accepts identical types; joins external choices (receives) from the
-same peer branch-wise: a label in both merges its continuations, a label in
-one is kept; merges internal choices (sends) to the same peer with exactly
-the same labels label by label, merging the continuations; and unfolds ``mu``
+Merge accepts identical types; joins external choices (receives) branch-wise
+by (peer, label): a pair in both merges its continuations, a pair in one is
+kept, so receives from different peers join into ``&{?A(m).T, ?C(n).U}``
+(the role learns the branch from whichever message comes; whether that is
+safe is checked by :mod:`sessiontypes.races`); merges internal choices
+(sends) with exactly the same (peer, label) pairs pair by pair, merging the
+continuations; and unfolds ``mu``
 when the two sides differ, remembering the pairs it is already merging so
 that two spellings of one recursive behaviour merge instead of looping.
 "Identical" is taken up to the spelling of recursion (see
@@ -67,47 +70,48 @@ class _Merger:
             return left
         if isinstance(left, lt.Rec) or isinstance(right, lt.Rec):
             return self._merge_recursive(left, right)
-        if isinstance(left, (lt.Recv, lt.Offer)) and isinstance(right, (lt.Recv, lt.Offer)):
+        if isinstance(left, _OFFERS) and isinstance(right, _OFFERS):
             return self._merge_offers(left, right)
-        if isinstance(left, (lt.Send, lt.Select)) and isinstance(right, (lt.Send, lt.Select)):
+        if isinstance(left, _SELECTIONS) and isinstance(right, _SELECTIONS):
             return self._merge_selections(left, right)
         if equivalent(left, right):
             return left
         raise MergeError(_difference(left, right))
 
-    def _merge_offers(self, left: lt.Recv | lt.Offer, right: lt.Recv | lt.Offer) -> lt.LocalTerm:
-        if left.peer != right.peer:
-            raise MergeError(f"one receives from {left.peer}, the other from {right.peer}")
-        merged: list[lt.Branch] = []
-        right_branches = {b.message.label: b for b in _offer_branches(right)}
-        for branch in _offer_branches(left):
-            twin = right_branches.pop(branch.message.label, None)
+    def _merge_offers(self, left: _Offers, right: _Offers) -> lt.LocalTerm:
+        """Choices a peer makes: joined branch-wise by (peer, label), peers may differ."""
+        merged: list[lt.Recv] = []
+        right_branches = {(b.peer, b.message.label): b for b in lt.receives_of(right)}
+        for branch in lt.receives_of(left):
+            twin = right_branches.pop((branch.peer, branch.message.label), None)
             if twin is None:
                 merged.append(branch)
                 continue
             _same_sort(branch.message, twin.message)
-            merged.append(lt.Branch(branch.message, self.merge(branch.continuation, twin.continuation),
-                                    branch.location))
+            merged.append(lt.Recv(branch.peer, branch.message,
+                                  self.merge(branch.continuation, twin.continuation), branch.location))
         merged.extend(right_branches.values())
-        return lt.offer(left.peer, tuple(merged), left.location)
+        return lt.offer_among(tuple(merged), left.location)
 
-    def _merge_selections(self, left: lt.Send | lt.Select, right: lt.Send | lt.Select) -> lt.LocalTerm:
-        """Choices the role makes: the same peer and labels; continuations merged label by label."""
-        if left.peer != right.peer:
-            raise MergeError(f"one sends to {left.peer}, the other to {right.peer}")
-        left_branches, right_branches = _branches(left), _branches(right)
-        theirs = {b.message.label: b for b in right_branches}
-        if ({b.message.label for b in left_branches} != theirs.keys()
+    def _merge_selections(self, left: _Selections, right: _Selections) -> lt.LocalTerm:
+        """Choices the role makes: the same (peer, label) pairs; continuations merged pair by pair."""
+        left_branches, right_branches = lt.sends_of(left), lt.sends_of(right)
+        left_peers = list(dict.fromkeys(b.peer for b in left_branches))
+        right_peers = list(dict.fromkeys(b.peer for b in right_branches))
+        if set(left_peers) != set(right_peers):
+            raise MergeError(f"one sends to {_peers(left_peers)}, the other to {_peers(right_peers)}")
+        theirs = {(b.peer, b.message.label): b for b in right_branches}
+        if ({(b.peer, b.message.label) for b in left_branches} != theirs.keys()
                 or len(left_branches) != len(right_branches)):
             raise MergeError(f"it sends {_labels(left_branches)} in one and "
                              f"{_labels(right_branches)} in the other")
-        merged: list[lt.Branch] = []
+        merged: list[lt.Send] = []
         for branch in left_branches:  # in the first one's order
-            twin = theirs[branch.message.label]
+            twin = theirs[branch.peer, branch.message.label]
             _same_sort(branch.message, twin.message)
-            merged.append(lt.Branch(branch.message, self.merge(branch.continuation, twin.continuation),
-                                    branch.location))
-        return lt.select(left.peer, tuple(merged), left.location)
+            merged.append(lt.Send(branch.peer, branch.message,
+                                  self.merge(branch.continuation, twin.continuation), branch.location))
+        return lt.select_among(tuple(merged), left.location)
 
     def _merge_recursive(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
         if equivalent(left, right):  # keeps the first spelling rather than an unfolding
@@ -132,16 +136,14 @@ class _Merger:
         return lt.Rec(name, result, binder.location) if entry[1] else result
 
 
-def _offer_branches(term: lt.Recv | lt.Offer) -> tuple[lt.Branch, ...]:
-    if isinstance(term, lt.Recv):
-        return (lt.Branch(term.message, term.continuation, term.location),)
-    return term.branches
+_Offers = lt.Recv | lt.Offer | lt.OfferAmong
+_Selections = lt.Send | lt.Select | lt.SelectAmong
+_OFFERS = (lt.Recv, lt.Offer, lt.OfferAmong)
+_SELECTIONS = (lt.Send, lt.Select, lt.SelectAmong)
 
 
-def _branches(term: lt.Send | lt.Select) -> tuple[lt.Branch, ...]:
-    if isinstance(term, lt.Send):
-        return (lt.Branch(term.message, term.continuation, term.location),)
-    return term.branches
+def _peers(peers: list[str | None]) -> str:
+    return " and ".join(str(p) for p in peers)
 
 
 def _same_sort(ours: Message, theirs: Message) -> None:
@@ -150,8 +152,10 @@ def _same_sort(ours: Message, theirs: Message) -> None:
                          f"{_sort_name(theirs)} in the other")
 
 
-def _labels(branches: tuple[lt.Branch, ...]) -> str:
-    names = ", ".join(f"'{b.message.label}'" for b in branches)
+def _labels(branches: tuple[lt.Send | lt.Recv, ...]) -> str:
+    several = len({b.peer for b in branches}) > 1
+    names = ", ".join(f"'{b.message.label}' to {b.peer}" if several else f"'{b.message.label}'"
+                      for b in branches)
     return names if len(branches) == 1 else f"one of {names}"
 
 
@@ -160,8 +164,9 @@ def _sort_name(message: Message) -> str:
 
 
 def _difference(left: lt.LocalTerm, right: lt.LocalTerm) -> str:
-    kinds = {lt.Send: "a send", lt.Select: "a choice it makes", lt.Recv: "a receive",
-             lt.Offer: "a choice it receives", lt.End: "end", lt.Var: "a loop back",
+    kinds = {lt.Send: "a send", lt.Select: "a choice it makes", lt.SelectAmong: "a choice it makes",
+             lt.Recv: "a receive", lt.Offer: "a choice it receives",
+             lt.OfferAmong: "a choice it receives", lt.End: "end", lt.Var: "a loop back",
              lt.Parallel: "a parallel composition"}
     if isinstance(left, lt.Var) and isinstance(right, lt.Var):
         return f"one loops back to {left.name}, the other to {right.name}"

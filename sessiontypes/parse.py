@@ -144,6 +144,16 @@ class _Builder(Transformer[Token, Any]):
             expanded.append(s.GBranchSyntax(branch.message, rest))
         return s.GInteraction(sender, first, tuple(expanded), braced, sender.location)
 
+    def grouted(self, children: list[Any]) -> s.GRouted:
+        sender = self._name(children[0])
+        branches = tuple([s.GInteraction(sender, receiver, (branch,), False, receiver.location)
+                          for receiver, branch in _nodes(children)])
+        return s.GRouted(sender, branches, sender.location)
+
+    def groute(self, children: list[Any]) -> tuple[s.Name, s.GBranchSyntax]:
+        nodes = _nodes(children)
+        return self._name(children[0]), s.GBranchSyntax(nodes[0], nodes[1] if len(nodes) > 1 else None)
+
     def gbranch_msg(self, children: list[Any]) -> s.GBranchSyntax:
         nodes = _nodes(children)
         return s.GBranchSyntax(nodes[0], nodes[1] if len(nodes) > 1 else None)
@@ -204,6 +214,15 @@ class _Builder(Transformer[Token, Any]):
 
     def loffer(self, children: list[Any]) -> s.LChoice:
         return self._choice(children, "&")
+
+    def lselect_among(self, children: list[Any]) -> s.LChoiceAmong:
+        return s.LChoiceAmong("+", tuple(_nodes(children)), _location(self.path, children[0]))
+
+    def loffer_among(self, children: list[Any]) -> s.LChoiceAmong:
+        return s.LChoiceAmong("&", tuple(_nodes(children)), _location(self.path, children[0]))
+
+    lsend_branch = lsend
+    lrecv_branch = lrecv
 
     def lbranch_msg(self, children: list[Any]) -> s.LBranchSyntax:
         nodes = _nodes(children)

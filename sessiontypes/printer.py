@@ -1,11 +1,12 @@
 """The canonical print of local and global types (LANGUAGE.md section 5).
 
 ``!Peer(msg)`` / ``?Peer(msg)``, ``+Peer{msg.T, msg.T}`` / ``&Peer{...}``,
-``mu t.T``, ``(T1 || T2)``, ``.`` without spaces and no trailing ``.end``.
+``+{!B(msg).T, !C(msg).T}`` / ``&{?A(msg).T, ?C(msg).T}`` (branches with
+different peers), ``mu t.T``, ``(T1 || T2)``, ``.`` without spaces and no trailing ``.end``.
 A message prints as ``Sort`` when its label is the sort's spelling,
 ``label(Sort)`` when they differ, ``label(f: Sort, g: Sort)`` for named
 payloads, and ``label`` when it carries nothing.
-Global types print in the same style (``A->B:msg.G``) so that printing then
+Global types print in the same style (``A->B:msg.G``, ``A->{B:msg.G, C:msg.G}``) so that printing then
 parsing gives the same type back.
 """
 
@@ -119,6 +120,10 @@ def _local_head(term: lt.LocalTerm) -> str:
         case lt.Select(peer=peer, branches=branches) | lt.Offer(peer=peer, branches=branches):
             symbol = "+" if isinstance(term, lt.Select) else "&"
             head = f"{symbol}{peer or ''}{{{', '.join(print_message(b.message) + '...' for b in branches)}}}"
+        case lt.SelectAmong(branches=actions) | lt.OfferAmong(branches=actions):
+            symbol = "+" if isinstance(term, lt.SelectAmong) else "&"
+            arrow = "!" if isinstance(term, lt.SelectAmong) else "?"
+            head = f"{symbol}{{{', '.join(f'{arrow}{a.peer}({print_message(a.message)})...' for a in actions)}}}"
         case lt.Parallel(branches=branches):
             head = "(" + " || ".join(["..."] * len(branches)) + ")"
         case _:
@@ -158,6 +163,9 @@ def _local(term: lt.LocalTerm, printer: _Printer) -> str:
             symbol = "+" if isinstance(term, lt.Select) else "&"
             inner = ", ".join([_local_branch(b, printer) for b in branches])
             tail = f"{symbol}{peer or ''}{{{inner}}}"
+        case lt.SelectAmong(branches=actions) | lt.OfferAmong(branches=actions):
+            symbol = "+" if isinstance(term, lt.SelectAmong) else "&"
+            tail = f"{symbol}{{{', '.join([_local(a, printer) for a in actions])}}}"
         case lt.Parallel(branches=branches):
             tail = "(" + " || ".join([_local(b, printer) for b in branches]) + ")"
         case _:
@@ -195,6 +203,10 @@ def _global(term: g.GlobalTerm, printer: _Printer) -> str:
         case g.Choice(sender=sender, receiver=receiver, branches=branches):
             inner = ", ".join([_global_branch(b, printer) for b in branches])
             tail = f"{sender}->{receiver}:{{{inner}}}"
+        case g.Routed(sender=sender, branches=routes):
+            inner = ", ".join([f"{r.receiver}:{_global_branch(g.Branch(r.message, r.continuation), printer)}"
+                               for r in routes])
+            tail = f"{sender}->{{{inner}}}"
         case g.Parallel(branches=branches):
             tail = "(" + " || ".join([_global(b, printer) for b in branches]) + ")"
         case _:

@@ -2,12 +2,17 @@
 
 ``p -> q : {l_i(S_i). G_i}`` projects to ``+q{...}`` on p, ``&p{...}`` on q and,
 on any other role, to the merge of the branches' projections
-(:mod:`sessiontypes.merge`).
+(:mod:`sessiontypes.merge`). ``p -> {q_i : l_i(S_i). G_i}`` (branches to
+different receivers) projects to ``+{!q_i(l_i(S_i)). G_i↾p}`` on p and, on any
+other role r, to the merge of ``?p(l_i(S_i)). G_i↾r`` (the branches to r) and
+``G_i↾r`` (the others): r learns the branch from the first message it gets,
+whichever peer sends it (``&{?p(l_1). ..., ?s(m). ...}``); see also
+:mod:`sessiontypes.races`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from . import global_types as g
 from . import local_types as lt
@@ -15,6 +20,7 @@ from .deep import run_deep
 from .errors import ProjectionError, UnknownRoleError
 from .location import Location
 from .merge import MergeError, merge
+from .races import check_races, has_offer_among
 from .recursion import free_vars, substitute, unfold  # re-exported
 from .sharing import Sharing, find_shared
 
@@ -26,7 +32,9 @@ def project_global(global_type: g.GlobalType, role: str) -> lt.LocalType:
 
     Raises:
         UnknownRoleError: ``role`` is not one of ``global_type.roles``.
-        ProjectionError: some choice's branches do not merge for ``role``.
+        ProjectionError: some choice's branches do not merge for ``role``, or (a
+            :class:`~sessiontypes.errors.ChoiceRaceError`) a message may overtake the
+            one from which ``role`` learns a choice.
     """
     cached = global_type.cached_projections.get(role)
     if cached is not None:
@@ -35,6 +43,8 @@ def project_global(global_type: g.GlobalType, role: str) -> lt.LocalType:
         raise UnknownRoleError(global_type.name, role, global_type.roles)
     projector = _Projector(global_type.name, role, global_type.source_lines, global_type.shared)
     body = run_deep(projector.project, global_type.body)
+    if has_offer_among(body):
+        check_races(global_type.name, role, global_type.body, body, projector.project, global_type.source_lines)
     local = lt.LocalType(role, role, body, global_type.name, global_type.location)
     global_type.cached_projections[role] = local
     return local
@@ -51,6 +61,8 @@ def _children(term: g.GlobalTerm) -> list[g.GlobalTerm]:
     match term:
         case g.Choice(branches=branches):
             return [b.continuation for b in branches]
+        case g.Routed(branches=routes):
+            return [r.continuation for r in routes]
         case g.Rec(body=body):
             return [body]
         case g.Parallel(branches=parts):
@@ -123,6 +135,11 @@ class _Projector:
                 if len(branches) == 1:
                     return self.project(branches[0].continuation)
                 return self._merge_branches(branches, location)
+            case g.Routed(sender=sender, branches=routes, location=location):
+                if self.role == sender:
+                    return lt.select_among(tuple([lt.Send(r.receiver, r.message, self.project(r.continuation),
+                                                          r.location) for r in routes]), location)
+                return self._merge_routes(term)
         raise AssertionError(f"unexpected global term {term!r}")
 
     def _branches(self, branches: tuple[g.Branch, ...], location: Location) -> tuple[lt.Branch, ...]:
@@ -136,6 +153,25 @@ class _Projector:
                 merged = merge(merged, projections[index])
             except MergeError:
                 raise self._blame(branches, projections, index, location) from None
+        return merged
+
+    def _merge_routes(self, term: g.Routed) -> lt.LocalTerm:
+        """Onto a role other than the sender: its view of each branch, merged."""
+        projections: list[lt.LocalTerm] = []
+        for route in term.branches:
+            rest = self.project(route.continuation)
+            if route.receiver == self.role:
+                rest = lt.Recv(term.sender, route.message, rest, route.location)
+            projections.append(rest)
+        merged = projections[0]
+        # the branches as the error names them: 'B:m1' and 'C:m2'
+        branches = tuple([g.Branch(replace(r.message, label=f"{r.receiver}:{r.message.label}"), r.continuation)
+                          for r in term.branches])
+        for index in range(1, len(projections)):
+            try:
+                merged = merge(merged, projections[index])
+            except MergeError:
+                raise self._blame(branches, projections, index, term.location) from None
         return merged
 
     def _blame(self, branches: tuple[g.Branch, ...], projections: list[lt.LocalTerm],
@@ -166,7 +202,7 @@ class _Projector:
         to two different places the role cannot tell which, and the type is not
         projectable.
         """
-        exits: dict[str, g.Choice | None] = {}
+        exits: dict[str, g.Choice | g.Routed | None] = {}
         self._collect_exits(loop.body, {loop.var: 1}, None, exits, summarising=False)
         if len(exits) > 1:
             raise self._blame_exits(loop, exits)
@@ -175,8 +211,8 @@ class _Projector:
         (name,) = exits
         return lt.Var(name, loop.location)
 
-    def _collect_exits(self, term: g.GlobalTerm, bound: dict[str, int], choice: g.Choice | None,
-                       exits: dict[str, g.Choice | None], summarising: bool) -> None:
+    def _collect_exits(self, term: g.GlobalTerm, bound: dict[str, int], choice: g.Choice | g.Routed | None,
+                       exits: dict[str, g.Choice | g.Routed | None], summarising: bool) -> None:
         """Record where ``term`` can leave to; ``bound`` counts the loops entered per name.
 
         ``bound`` is one mutable counter, entered and left as the walk goes, so deep
@@ -187,7 +223,7 @@ class _Projector:
         try:
             while True:
                 if id(term) in self.shared.nodes and not summarising:
-                    summary: dict[str, g.Choice | None] | None = self.shared.get("exits", term)
+                    summary: dict[str, g.Choice | g.Routed | None] | None = self.shared.get("exits", term)
                     if summary is None:
                         summary = {}
                         self._collect_exits(term, {}, None, summary, summarising=True)
@@ -215,13 +251,17 @@ class _Projector:
                                 self._collect_exits(branch.continuation, bound, term, exits, False)
                             return
                         term = branches[0].continuation
+                    case g.Routed(branches=routes):
+                        for route in routes:
+                            self._collect_exits(route.continuation, bound, term, exits, False)
+                        return
                     case _:
                         raise AssertionError(f"unexpected global term {term!r}")
         finally:
             for var in entered:
                 bound[var] -= 1
 
-    def _blame_exits(self, loop: g.Rec, exits: dict[str, g.Choice | None]) -> ProjectionError:
+    def _blame_exits(self, loop: g.Rec, exits: dict[str, g.Choice | g.Routed | None]) -> ProjectionError:
         (first, _), (second, choice) = list(exits.items())[:2]
         location = choice.location if choice else loop.location
         labels = ("?", "?")
@@ -234,7 +274,7 @@ class _Projector:
                                f"{self.role} takes no part in the loop and cannot tell how it ends", line)
 
     def _leads_to(self, term: g.GlobalTerm, exit_name: str) -> bool:
-        found: dict[str, g.Choice | None] = {}
+        found: dict[str, g.Choice | g.Routed | None] = {}
         self._collect_exits(term, {}, None, found, summarising=False)
         return exit_name in found
 
@@ -251,6 +291,9 @@ class _Projector:
                     # costs time proportional to the depth in CPython 3.11.
                     cached = self.role in (sender, receiver) or any(
                         map(self.occurs, [b.continuation for b in branches]))
+                case g.Routed(sender=sender, branches=routes):
+                    cached = self.role == sender or any(r.receiver == self.role for r in routes) or any(
+                        map(self.occurs, [r.continuation for r in routes]))
                 case g.Rec(body=body):
                     cached = self.occurs(body)
                 case g.Parallel(branches=parts):

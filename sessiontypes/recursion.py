@@ -29,6 +29,12 @@ def substitute(term: lt.LocalTerm, name: str, replacement: lt.LocalTerm) -> lt.L
             return lt.Select(peer, _substitute_branches(branches, name, replacement), location)
         case lt.Offer(peer=peer, branches=branches, location=location):
             return lt.Offer(peer, _substitute_branches(branches, name, replacement), location)
+        case lt.SelectAmong(branches=sends, location=location):
+            return lt.SelectAmong(tuple([lt.Send(b.peer, b.message, substitute(b.continuation, name, replacement),
+                                                 b.location) for b in sends]), location)
+        case lt.OfferAmong(branches=recvs, location=location):
+            return lt.OfferAmong(tuple([lt.Recv(b.peer, b.message, substitute(b.continuation, name, replacement),
+                                                b.location) for b in recvs]), location)
         case lt.Parallel(branches=parts, location=location):
             return lt.Parallel(tuple([substitute(p, name, replacement) for p in parts]), location)
         case lt.Rec(var=var, body=body, location=location):
@@ -59,6 +65,8 @@ def free_vars(term: lt.LocalTerm) -> frozenset[str]:
             return free_vars(cont)
         case lt.Select(branches=branches) | lt.Offer(branches=branches):
             return frozenset().union(*([free_vars(b.continuation) for b in branches]))
+        case lt.SelectAmong(branches=actions) | lt.OfferAmong(branches=actions):
+            return frozenset().union(*([free_vars(b.continuation) for b in actions]))
         case lt.Parallel(branches=parts):
             return frozenset().union(*([free_vars(p) for p in parts]))
         case lt.Rec(var=var, body=body):
@@ -111,6 +119,17 @@ class _Equivalence:
                 twin = theirs.get(ours.message.label)
                 if (twin is None or ours.message != twin.message
                         or not self.check(ours.continuation, twin.continuation)):
+                    return False
+            return True
+        if ((isinstance(left, lt.SelectAmong) and isinstance(right, lt.SelectAmong))
+                or (isinstance(left, lt.OfferAmong) and isinstance(right, lt.OfferAmong))):
+            pairs = {(b.peer, b.message.label): b for b in right.branches}
+            if len(left.branches) != len(pairs):
+                return False
+            for action in left.branches:
+                other = pairs.get((action.peer, action.message.label))
+                if (other is None or action.message != other.message
+                        or not self.check(action.continuation, other.continuation)):
                     return False
             return True
         if isinstance(left, lt.Parallel) and isinstance(right, lt.Parallel):

@@ -119,6 +119,15 @@ def _check_labels(reporter: Reporter, labels: Iterable[s.Name]) -> None:
         seen.add(label.text)
 
 
+def _check_pairs(reporter: Reporter, pairs: Iterable[tuple[s.Name, s.Name]]) -> None:
+    """A choice among peers: each (peer, label) pair once."""
+    seen: set[tuple[str, str]] = set()
+    for peer, label in pairs:
+        if (peer.text, label.text) in seen:
+            reporter.error(label.location, f"duplicate label '{label.text}' for {peer.text} in one choice")
+        seen.add((peer.text, label.text))
+
+
 # ---- global ------------------------------------------------------------------------
 
 GlobalWalk = Walk[s.GlobalDecl, g.GlobalTerm]
@@ -159,6 +168,20 @@ def _resolve_g(walk: GlobalWalk, node: s.GSyntax | None,
                          _resolve_g(walk, b.continuation, scope, depth + 1, parallel_depth),
                          b.message.label.location)
                 for b in branches]), location, receiver.location)
+        case s.GRouted(sender=sender, branches=routes, location=location):
+            _check_pairs(walk.reporter, [(r.receiver, r.branches[0].message.label) for r in routes])
+            resolved: list[g.RoutedBranch] = []
+            for route in routes:
+                one = _resolve_g(walk, route, scope, depth, parallel_depth)
+                assert isinstance(one, g.Choice)
+                resolved.append(g.RoutedBranch(one.receiver, one.branches[0].message,
+                                               one.branches[0].continuation, one.branches[0].location,
+                                               one.receiver_location))
+            if len({r.receiver for r in resolved}) == 1:  # one receiver: an ordinary choice
+                return g.Choice(sender.text, resolved[0].receiver, tuple([
+                    g.Branch(r.message, r.continuation, r.location) for r in resolved]),
+                    location, resolved[0].receiver_location)
+            return g.Routed(sender.text, tuple(resolved), location)
         case s.GRec(var=var, body=body, location=location):
             return walk.with_mu(var.text, body, scope, depth, parallel_depth,
                                 lambda name: g.Rec(name, _resolve_g(walk, body, scope, depth,
@@ -228,6 +251,13 @@ def _resolve_l(walk: LocalWalk, node: s.LSyntax | None,
                 for b in branches])
             make_choice = lt.select if kind == "+" else lt.offer
             return make_choice(peer.text if peer else None, resolved_branches, location)
+        case s.LChoiceAmong(kind=kind, branches=actions, location=location):
+            _check_pairs(walk.reporter, [(a.peer, a.message.label) for a in actions if a.peer is not None])
+            if kind == "+":
+                sends = [_resolve_l(walk, a, scope, depth, parallel_depth) for a in actions]
+                return lt.select_among(tuple([a for a in sends if isinstance(a, lt.Send)]), location)
+            recvs = [_resolve_l(walk, a, scope, depth, parallel_depth) for a in actions]
+            return lt.offer_among(tuple([a for a in recvs if isinstance(a, lt.Recv)]), location)
         case s.LRec(var=var, body=body, location=location):
             return walk.with_mu(var.text, body, scope, depth, parallel_depth,
                                 lambda name: lt.Rec(name, _resolve_l(walk, body, scope, depth,

@@ -14,8 +14,8 @@ from typing import Literal
 from .location import NOWHERE, Location
 
 __all__ = [
-    "Name", "FieldSyntax", "MessageSyntax", "GBranchSyntax", "GInteraction", "GRec", "GRef", "GEnd",
-    "GParallel", "GSyntax", "LBranchSyntax", "LAction", "LChoice", "LRec", "LRef",
+    "Name", "FieldSyntax", "MessageSyntax", "GBranchSyntax", "GInteraction", "GRouted", "GRec", "GRef",
+    "GEnd", "GParallel", "GSyntax", "LBranchSyntax", "LAction", "LChoice", "LChoiceAmong", "LRec", "LRef",
     "LEnd", "LParallel", "LSyntax", "TypeDecl", "GlobalDecl", "LocalDecl",
     "Declaration", "SourceFile",
 ]
@@ -79,6 +79,18 @@ class GInteraction:
 
 
 @dataclass(frozen=True, slots=True)
+class GRouted:
+    """``p -> {q1 : msg [. G], q2 : msg [. G], ...}``: a choice whose branches go to different receivers.
+
+    Each branch is written as the interaction ``p -> qi : msg [. G]`` it stands for.
+    """
+
+    sender: Name
+    branches: tuple[GInteraction, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
 class GRec:
     var: Name
     body: GSyntax
@@ -103,7 +115,7 @@ class GParallel:
     location: Location = field(default=NOWHERE, compare=False)
 
 
-GSyntax = GInteraction | GRec | GRef | GEnd | GParallel
+GSyntax = GInteraction | GRouted | GRec | GRef | GEnd | GParallel
 
 
 # ---- local ----------------------------------------------------------------
@@ -136,6 +148,15 @@ class LChoice:
 
 
 @dataclass(frozen=True, slots=True)
+class LChoiceAmong:
+    """``+{!B(msg)[.T], !C(msg)[.T], ...}`` or ``&{?A(msg)[.T], ?C(msg)[.T], ...}``: branches name their peers."""
+
+    kind: Literal["+", "&"]
+    branches: tuple[LAction, ...]
+    location: Location = field(default=NOWHERE, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
 class LRec:
     var: Name
     body: LSyntax
@@ -158,7 +179,7 @@ class LParallel:
     location: Location = field(default=NOWHERE, compare=False)
 
 
-LSyntax = LAction | LChoice | LRec | LRef | LEnd | LParallel
+LSyntax = LAction | LChoice | LChoiceAmong | LRec | LRef | LEnd | LParallel
 
 
 # ---- declarations -----------------------------------------------------------

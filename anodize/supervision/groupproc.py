@@ -172,7 +172,7 @@ class _GroupProcess:
         classes = _payload_classes(spec.machines.values())
         ros_types = _payload_ros_types(spec.machines.values())
         local = set(spec.roles)
-        doorbell_roles = [r for r, m in spec.machines.items() if m.forks]
+        doorbell_roles = [r for r, m in spec.machines.items() if m.forks or m.waits_on_several()]
         dds = spec.extra.get("dds")
         if dds is not None:  # every channel between groups is a DDS topic; arrays travel in the frames
             from ..transport.dds import DdsNetwork

@@ -77,7 +77,9 @@ class ThreadRunner:
         channels = [(a, b) for a, b in self.channels if a in roles or b in roles]
         dead = {role: f"group {self.group_of[role]} did not start again with group(s) {', '.join(sorted(batch))}"
                 for pair in channels for role in pair if role not in roles}
-        network = InprocNetwork(channels, [r for r in roles if self.machines[r].forks], dead, self.capacities)
+        # A doorbell for each role that may wait on several peers at once (recv_any).
+        doorbells = [r for r in roles if self.machines[r].forks or self.machines[r].waits_on_several()]
+        network = InprocNetwork(channels, doorbells, dead, self.capacities)
         for name in groups:
             group = self.groups[name]
             if self.record is not None:  # before the endpoints take their channels

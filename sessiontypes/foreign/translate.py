@@ -4,8 +4,9 @@ A block of interactions in sequence becomes one global type: each interaction
 takes what follows it as its continuation (``rec X { ... }`` falls through to
 what follows the block; each branch of a choice goes on with it). A choice
 becomes one ``p -> q : {...}`` when every branch begins with a message from
-the chooser to the same receiver; a branch that begins with ``rec`` is
-unfolded once to find that message. ``do`` inlines the protocol it names with
+the chooser to the same receiver, and ``p -> {q1 : ..., q2 : ...}`` when the
+branches begin with messages to different receivers; a branch that begins
+with ``rec`` is unfolded once to find that message. ``do`` inlines the protocol it names with
 its roles renamed; a ``do`` that reaches itself again is refused. Names keep
 their locations in the foreign file, so the checker's errors point into it.
 """
@@ -216,21 +217,21 @@ class _Translator:
 
     def _choice(self, choice: t.Choice, then: s.GSyntax, scope: _Scope) -> s.GSyntax:
         chooser = self._role(choice.role, scope)
-        heads: list[s.GInteraction] = []
+        heads: list[s.GInteraction] = []  # a head that is itself a choice to several roles: one per branch
         for block in choice.blocks:
             if not block:
                 self._error(choice.location, f"a branch of 'choice at {choice.role.text}' is empty")
-            heads.append(self._head(self.sequence(block, then, scope), choice, chooser))
-        receiver = heads[0].receiver
-        for head in heads[1:]:
-            if head.receiver.text != receiver.text:
-                self._refuse(head.location, "a choice whose branches begin with messages to "
-                             f"different roles ({receiver.text} and {head.receiver.text})",
-                             "the chooser's first message in every branch goes to one role")
-        branches = tuple(branch for head in heads for branch in head.branches)
-        return s.GInteraction(heads[0].sender, receiver, branches, True, choice.location)
+            head = self._head(self.sequence(block, then, scope), choice, chooser)
+            heads.extend(head.branches if isinstance(head, s.GRouted) else (head,))
+        routes = [(head.receiver, branch) for head in heads for branch in head.branches]
+        receivers = {receiver.text for receiver, _ in routes}
+        if len(receivers) == 1:
+            return s.GInteraction(chooser, routes[0][0], tuple(b for _, b in routes), True, choice.location)
+        # Branches to different roles: "A -> {B : m1. G1, C : m2. G2}".
+        return s.GRouted(chooser, tuple(s.GInteraction(chooser, receiver, (branch,), False, receiver.location)
+                                        for receiver, branch in routes), choice.location)
 
-    def _head(self, branch: s.GSyntax, choice: t.Choice, chooser: s.Name) -> s.GInteraction:
+    def _head(self, branch: s.GSyntax, choice: t.Choice, chooser: s.Name) -> s.GInteraction | s.GRouted:
         """The message that begins ``branch`` (``rec`` unfolded), checked to be the chooser's."""
         unfolded: set[int] = set()
         while isinstance(branch, s.GRec):
@@ -241,6 +242,11 @@ class _Translator:
             branch = _substitute(branch.body, branch.var.text, branch)
         match branch:
             case s.GInteraction():
+                if branch.sender.text != chooser.text:
+                    self._error(branch.location, f"a branch of 'choice at {chooser.text}' begins "
+                                                 f"with a message from {branch.sender.text}")
+                return branch
+            case s.GRouted():  # a nested choice of the chooser's, to several roles
                 if branch.sender.text != chooser.text:
                     self._error(branch.location, f"a branch of 'choice at {chooser.text}' begins "
                                                  f"with a message from {branch.sender.text}")
@@ -298,6 +304,8 @@ def _reaches(body: s.GSyntax, target: s.GSyntax) -> bool:
         match node:
             case s.GInteraction():
                 stack.extend(b.continuation for b in node.branches if b.continuation is not None)
+            case s.GRouted():
+                stack.extend(node.branches)
             case s.GRec():
                 stack.append(node.body)
             case s.GParallel():
@@ -328,6 +336,12 @@ def _substitute(body: s.GSyntax, var: str, replacement: s.GSyntax) -> s.GSyntax:
             branches = tuple(s.GBranchSyntax(b.message, c)
                              for b, c in zip(body.branches, continuations, strict=True))
             return s.GInteraction(body.sender, body.receiver, branches, body.braced, body.location)
+        case s.GRouted():
+            routes = [_substitute(r, var, replacement) for r in body.branches]
+            if all(n is r for n, r in zip(routes, body.branches, strict=True)):
+                return body
+            return s.GRouted(body.sender, tuple(r for r in routes if isinstance(r, s.GInteraction)),
+                             body.location)
         case s.GParallel():
             parts = tuple(_substitute(b, var, replacement) for b in body.branches)
             if all(p is b for p, b in zip(parts, body.branches, strict=True)):

@@ -56,8 +56,6 @@ def test_merge_of_identical_continuations_is_that_continuation() -> None:
     ("global G = A -> B : {l1. C -> A : x, l2. end}", ("l1", "l2"), "a send cannot merge with end"),
     ("global G = A -> B : {l1. B -> C : x(int), l2. B -> C : x(str)}", ("l1", "l2"),
      "label 'x' carries int in one and str in the other"),
-    ("global G = A -> B : {l1. B -> C : x, l2. A -> C : y}", ("l1", "l2"),
-     "one receives from B, the other from A"),
     ("global G = A -> B : {l1. B -> C : x, l2. B -> C : y, l3. end}", ("l1", "l3"),
      "a receive cannot merge with end"),
     # Sends merge only with the same peer, labels and sorts (LANGUAGE.md 5).

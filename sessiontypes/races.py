@@ -1,0 +1,184 @@
+"""Races at a choice learnt from several peers (LANGUAGE.md section 5, branches to different receivers).
+
+A role whose local type receives from several peers at one state (an
+``&{?A(m).T, ?C(n).U}``, made by merging the branches of a choice) takes the
+branch of whichever message arrives first. That is safe only if, in the
+branch a message decides, no other of those peers can send the role anything
+before the deciding message has been received: messages travel
+asynchronously, so a message sent without waiting for it may arrive first
+and be taken for the other branch (or be refused, though the protocol was
+followed).
+
+:func:`check_races` walks the global type alongside the role's state machine.
+At each receive the role makes in a state that waits on several peers, it
+watches the other peers: a peer is *informed* once it has received a message
+sent, causally, after the deciding receive (the role itself is informed at
+once, and so is everyone it or an informed role sends to afterwards). A
+watched peer that sends the role a message while not informed is a race, and
+the global type is not projectable onto the role (:class:`ChoiceRaceError`).
+Each (place in the global type, state, watches) is walked once, so loops end.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+from . import global_types as g
+from . import local_types as lt
+from .errors import ChoiceRaceError
+from .fsm import StateMachine, build_term_machine
+from .location import Location
+from .printer import print_message
+from .sorts import Message
+
+__all__ = ["check_races", "has_offer_among"]
+
+
+class _Watch(NamedTuple):
+    peers: frozenset[str]       # the peers that must not send the role anything uninformed
+    informed: frozenset[str]    # roles whose later actions come after the deciding receive
+    decided_by: tuple[str, str, Location]   # the deciding receive: its print, peer, location
+
+
+_Env = dict[str, tuple[g.Rec, "_Env"]]
+_Config = tuple[g.GlobalTerm, _Env, StateMachine | None, int, frozenset[_Watch]]
+
+
+def has_offer_among(term: lt.LocalTerm) -> bool:
+    """Whether a receive from several peers at once occurs in ``term``."""
+    seen: set[int] = set()
+    stack = [term]
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        match node:
+            case lt.OfferAmong():
+                return True
+            case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
+                stack.append(cont)
+            case lt.Select(branches=branches) | lt.Offer(branches=branches):
+                stack.extend(b.continuation for b in branches)
+            case lt.SelectAmong(branches=sends):
+                stack.extend(b.continuation for b in sends)
+            case lt.Rec(body=body):
+                stack.append(body)
+            case lt.Parallel(branches=parts):
+                stack.extend(parts)
+    return False
+
+
+def check_races(protocol: str, role: str, body: g.GlobalTerm, local: lt.LocalTerm,
+                project_part: Callable[[g.GlobalTerm], lt.LocalTerm],
+                source_lines: tuple[str, ...] = ()) -> None:
+    """Raise :class:`ChoiceRaceError` if a message can overtake the one that decides a choice for ``role``.
+
+    Args:
+        protocol: the global type's name (for the error).
+        role: the role; ``local`` is its projection of ``body``.
+        project_part: projects a sub-term (a parallel branch) onto ``role``.
+        source_lines: the file's lines, for the error.
+    """
+    _Walk(protocol, role, project_part, source_lines).run(body, build_term_machine(local, role, protocol))
+
+
+class _Walk:
+    def __init__(self, protocol: str, role: str, project_part: Callable[[g.GlobalTerm], lt.LocalTerm],
+                 source_lines: tuple[str, ...]) -> None:
+        self.protocol = protocol
+        self.role = role
+        self.project_part = project_part
+        self.source_lines = source_lines
+        self.envs: dict[tuple[int, int], _Env] = {}   # one env per (loop, outer env): keys stay few
+        self.keep: list[object] = []                    # what the ids of the keys stand for
+
+    def run(self, body: g.GlobalTerm, machine: StateMachine) -> None:
+        seen: set[tuple[int, int, int, int, frozenset[_Watch]]] = set()
+        root: _Env = {}
+        self.keep.append(root)
+        stack: list[_Config] = [(body, root, machine, machine.initial, frozenset())]
+        while stack:
+            node, env, machine_, state, watches = stack.pop()
+            key = (id(node), id(env), id(machine_), state, watches)
+            if key in seen:
+                continue
+            seen.add(key)
+            match node:
+                case g.Rec():
+                    stack.append((node.body, self.enter(node, env), machine_, state, watches))
+                case g.Var(name=name):
+                    if name in env:
+                        loop, inner = env[name]
+                        stack.append((loop.body, inner, machine_, state, watches))
+                case g.Choice(sender=sender, receiver=receiver, branches=branches):
+                    for b in branches:
+                        after = self.step(machine_, state, watches, sender, receiver, b.message,
+                                          b.location if len(branches) > 1 else node.location)
+                        if after is not None:
+                            stack.append((b.continuation, env, machine_, after[0], after[1]))
+                case g.Routed(sender=sender, branches=routes):
+                    for r in routes:
+                        after = self.step(machine_, state, watches, sender, r.receiver, r.message, r.location)
+                        if after is not None:
+                            stack.append((r.continuation, env, machine_, after[0], after[1]))
+                case g.Parallel(branches=parts):
+                    stack.extend(self.parts(parts, env, machine_, state, watches))
+
+    def enter(self, loop: g.Rec, env: _Env) -> _Env:
+        key = (id(loop), id(env))
+        found = self.envs.get(key)
+        if found is None:
+            found = dict(env)
+            found[loop.var] = (loop, found)
+            self.envs[key] = found
+            self.keep.append(found)
+        return found
+
+    def parts(self, parts: tuple[g.GlobalTerm, ...], env: _Env, machine: StateMachine | None, state: int,
+              watches: frozenset[_Watch]) -> list[_Config]:
+        """Each parallel branch with the role's machine for it (None where the role takes no part)."""
+        kept = [not isinstance(self.project_part(p), lt.End) for p in parts] if machine else [False] * len(parts)
+        if machine is not None and state in machine.forks:
+            branch_machines = iter(machine.forks[state])
+            return [(p, env, next(branch_machines), 0, watches) if k else (p, env, None, 0, watches)
+                    for p, k in zip(parts, kept, strict=True)]
+        # one branch (or none) left for the role: its projection is that branch's, inline
+        return [(p, env, machine if k else None, state, watches) for p, k in zip(parts, kept, strict=True)]
+
+    def step(self, machine: StateMachine | None, state: int, watches: frozenset[_Watch], sender: str,
+             receiver: str, message: Message, location: Location) -> tuple[int, frozenset[_Watch]] | None:
+        """One interaction: check and update the watches, step the role's machine."""
+        role = self.role
+        updated: set[_Watch] = set()
+        for watch in watches:
+            if receiver == role and sender in watch.peers and sender not in watch.informed:
+                raise self.race(watch, sender, message, location)
+            informed = watch.informed | {receiver} if sender in watch.informed else watch.informed
+            if not watch.peers <= informed:
+                updated.add(watch._replace(informed=informed))
+        if machine is not None and machine.forks.get(state) is None:
+            if receiver == role:
+                peers = machine.peers_at(state, "recv")
+                if len(peers) > 1:
+                    deciding = f"?{sender}({print_message(message)})"
+                    updated.add(_Watch(frozenset(p for p in peers if p is not None and p != sender),
+                                       frozenset({role}), (deciding, sender, location)))
+                moved = machine.step(state, "recv", sender, message.label)
+                if moved is None:  # the projection does not follow this path: nothing to check on it
+                    return None
+                state = moved.target
+            elif sender == role:
+                moved = machine.step(state, "send", receiver, message.label)
+                if moved is None:
+                    return None
+                state = moved.target
+        return state, frozenset(updated)
+
+    def race(self, watch: _Watch, sender: str, message: Message, location: Location) -> ChoiceRaceError:
+        deciding, decider, decided_at = watch.decided_by
+        peers = sorted(watch.peers | {decider})
+        line = self.source_lines[location.line - 1] if 0 < location.line <= len(self.source_lines) else ""
+        return ChoiceRaceError(self.protocol, self.role, location, deciding,
+                               f"?{sender}({print_message(message)})", " or ".join(peers), decided_at, line)
