@@ -19,6 +19,10 @@ Names in a generated module (all deterministic):
 - ``offer()`` returns one frozen result class per label, ``<State><Label>``
   (``State2Deposit``), with fields ``payload`` (when the label carries one) and
   ``next_state``, so ``match`` works positionally: ``case State2Deposit(amount, s):``;
+- at a choice among peers (``+{!B(m1), !C(m2)}``, ``&{?A(m1), ?C(x)}``) the names say
+  the peer: ``select_<peer>_<label>`` (``select_b_m1``), and ``offer()`` (which takes
+  the first message to come from any of them) returns ``<State>From<Peer><Label>``
+  (``State0FromAM1``);
 - named payloads (``quote(price: int, date: str)``) are a ``TypedDict`` per label,
   ``<Label>Fields`` (``QuoteFields``): the send method takes the fields as parameters
   (``send_quote(price, date)``, a field name that is not a Python name is spelled as
@@ -209,8 +213,9 @@ class _Machine:
     where: str                      # "" or ", parallel branch 1.2"
     classes: dict[int, str] = field(default_factory=dict)
     branches: dict[int, list[_Machine]] = field(default_factory=dict)
-    results: dict[tuple[int, str], str] = field(default_factory=dict)   # (state, label) -> class
-    methods: dict[tuple[int, str], str] = field(default_factory=dict)   # (state, label) -> method
+    # (state, peer, label) -> the offer result's class / the method
+    results: dict[tuple[int, str | None, str], str] = field(default_factory=dict)
+    methods: dict[tuple[int, str | None, str], str] = field(default_factory=dict)
 
 
 def _name_machine(machine: StateMachine, prefix: str, where: str, names: _Names) -> _Machine:
@@ -231,16 +236,19 @@ def _name_members(named: _Machine, names: _Names) -> None:
     for state in named.machine.states:
         transitions = list(named.machine.table[state].values())
         methods = _Names()
+        several = len({t.peer for t in transitions}) > 1  # a choice among peers: names say the peer
         for t in transitions:
             if len(transitions) == 1:
                 verb = "send" if t.action == "send" else "recv"
             else:
                 verb = "select" if t.action == "send" else "offer"
                 if verb == "offer":
-                    named.results[state, t.label] = names.claim(
-                        named.classes[state] + _camel_case(t.label))
+                    origin = f"From{_camel_case(t.peer or '')}" if several else ""
+                    named.results[state, t.peer, t.label] = names.claim(
+                        named.classes[state] + origin + _camel_case(t.label))
                     continue
-            named.methods[state, t.label] = methods.claim(f"{verb}_{snake_case(t.label)}")
+            to = f"{snake_case(t.peer or '')}_" if several else ""
+            named.methods[state, t.peer, t.label] = methods.claim(f"{verb}_{to}{snake_case(t.label)}")
     for parts in named.branches.values():
         for part in parts:
             _name_members(part, names)
@@ -301,8 +309,8 @@ class _Writer:
         return "\n".join(self.head(machine, exported) + self.record_lines + body + self.tail(top, finals)) + "\n"
 
     def result_names(self, named: _Machine, state: int) -> list[str]:
-        return [named.results[state, t.label] for t in named.machine.table[state].values()
-                if (state, t.label) in named.results]
+        return [named.results[state, t.peer, t.label] for t in named.machine.table[state].values()
+                if (state, t.peer, t.label) in named.results]
 
     def head(self, machine: StateMachine, exported: list[str]) -> list[str]:
         g, role = self.global_type.name, self.role
@@ -432,7 +440,7 @@ class _Writer:
             lines[-1] += '"""'
         lines += ["", "    __slots__ = ()"]
         results: list[str] = []
-        assert len({(t.action, t.peer) for t in transitions}) <= 1, "one peer, one direction"
+        assert len({t.action for t in transitions}) <= 1, "one direction"
         if state in machine.forks:
             lines += self.fork_method(named, state)
         elif len(transitions) == 1:
@@ -447,7 +455,7 @@ class _Writer:
         return lines + results
 
     def single_method(self, named: _Machine, state: int, t: Transition) -> list[str]:
-        method = named.methods[state, t.label]
+        method = named.methods[state, t.peer, t.label]
         next_class = named.classes[t.target]
         doc = f'        """``{_escape(str(t))}`` ({_escape(str(t.location))})."""'
         if t.action == "send":
@@ -471,26 +479,35 @@ class _Writer:
                 f"        return message.payload, {next_class}(self._endpoint)"]
 
     def offer_method(self, named: _Machine, state: int, transitions: list[Transition]) -> list[str]:
-        peer = transitions[0].peer
-        labels = ", ".join(_quote(t.label) for t in transitions)
-        results = [named.results[state, t.label] for t in transitions]
+        peers = list(dict.fromkeys(t.peer for t in transitions))
+        results = [named.results[state, t.peer, t.label] for t in transitions]
         where = _escape(", ".join(dict.fromkeys(str(t.location) for t in transitions)))
         choices = _escape(" | ".join(str(t) for t in transitions))
+        doc = (f'``{_escape(peers[0] or "")}`` chooses: ``{choices}``' if len(peers) == 1
+               else f"The first to arrive of ``{choices}``")
         lines = ["", f"    def offer(self, *, timeout: float | None = None) -> {' | '.join(results)}:",
-                 f'        """``{_escape(peer or "")}`` chooses: ``{choices}`` ({where})."""',
-                 f"        message = self._recv({_quote(peer)}, ({labels}), timeout)"]
+                 f'        """{doc} ({where})."""']
+        if len(peers) == 1:
+            labels = ", ".join(_quote(t.label) for t in transitions)
+            lines.append(f"        message = self._recv({_quote(peers[0])}, ({labels}), timeout)")
+        else:  # the first message to come, from whichever of the peers
+            pairs = ", ".join(f"({_quote(t.peer)}, {_quote(t.label)})" for t in transitions)
+            lines.append(f"        peer, message = self._recv_any(({pairs}), timeout)")
         for index, (t, result) in enumerate(zip(transitions, results, strict=True)):
             payload = "message.payload, " if t.sort else ""
             value = f"{result}({payload}{named.classes[t.target]}(self._endpoint))"
+            test = f"message.label == {_quote(t.label)}"
+            if len(peers) > 1:
+                test = f"peer == {_quote(t.peer)} and {test}"
             if index < len(transitions) - 1:
-                lines += [f"        if message.label == {_quote(t.label)}:",
+                lines += [f"        if {test}:",
                           f"            return {value}"]
             else:
                 lines.append(f"        return {value}")
         return lines
 
     def result_class(self, named: _Machine, state: int, t: Transition) -> list[str]:
-        name = named.results[state, t.label]
+        name = named.results[state, t.peer, t.label]
         lines = ["", "", "@final", "@dataclass(frozen=True, slots=True)", f"class {name}:",
                  (f'    """What ``{named.classes[state]}.offer()`` returns when ``{_escape(str(t))}`` '
                   'arrived."""'), ""]

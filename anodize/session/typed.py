@@ -50,6 +50,22 @@ class State:
         return message
 
 
+    def _recv_any(self, choices: tuple[tuple[str, str], ...], timeout: float | None) -> tuple[str, Message]:
+        """Receive the first of ``choices`` (peer, label) to come; a timeout leaves the state unused."""
+        endpoint = self._use()
+        try:
+            peer, message = endpoint.recv_any(timeout)
+        except TimeoutError:
+            self._used = False
+            raise
+        if (peer, message.label) not in choices:
+            wanted = " or ".join(f"{label} from {p}" for p, label in choices)
+            raise AssertionError(
+                f"{type(self).__name__} expected {wanted}, but the endpoint delivered {message.label} "
+                f"from {peer}: it does not monitor this role's protocol")
+        return peer, message
+
+
 def argument_for(function: Callable[..., Any], endpoint: Endpoint) -> Any:
     """What a role function is called with: the endpoint, or the generated typed initial
     state when the function's first parameter is annotated with one.
