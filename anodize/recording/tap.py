@@ -215,6 +215,18 @@ class TappedChannel:
         self._inner.put(item)
         self.left(token)
 
+    def put_many(self, items: list[tuple[str, object]]) -> None:
+        """Several messages (``Endpoint.send_many``): each seen, the batch handed on at once."""
+        tokens = [self.leaving(label, payload) for label, payload in items] if self._at_sender else []
+        put_many = getattr(self._inner, "put_many", None)
+        if put_many is not None:
+            put_many(items)
+        else:
+            for item in items:
+                self._inner.put(item)
+        for token in tokens:
+            self.left(token)
+
     def get(self, *, timeout: float | None = None) -> object:
         return self._taken(self._inner.get(timeout=timeout))
 

@@ -84,11 +84,41 @@ class PipeSender:
             frame = Codec.failure_frame(item.cause)
         else:
             return  # STOP is local to each process
+        self._write(frame)
+
+    def put_many(self, items: list[tuple[str, object]]) -> None:
+        """Send several ``(label, payload)`` with one write (in pieces of at most 1 MiB).
+
+        Raises:
+            PayloadError, PeerFailedError: as :meth:`put`; the messages before the one whose
+                payload cannot travel are sent.
+        """
+        frames: list[bytes] = []
+        size = 0
+        for label, payload in items:
+            try:
+                frame = self.codec.message_frame(label, payload)
+            except EncodeError as error:
+                self._write(b"".join(frames))
+                raise PayloadError(f"role {self.sender}: cannot send {label} to {self.receiver}: "
+                                   f"{error}") from None
+            except BrokenPipeError:
+                raise self._peer_gone() from None
+            frames.append(frame)
+            size += len(frame)
+            if size >= _PIPE_SIZE:  # a batch no bigger than the pipe: the receiver starts on it sooner
+                self._write(b"".join(frames))
+                frames, size = [], 0
+        self._write(b"".join(frames))
+
+    def _write(self, data: bytes) -> None:
+        if not data:
+            return
         with self._lock:
             try:
-                written = os.write(self.fd, frame)  # one call for all but huge frames
-                if written != len(frame):
-                    _write_all(self.fd, frame[written:])
+                written = os.write(self.fd, data)  # one call for all but huge frames
+                if written != len(data):
+                    _write_all(self.fd, data[written:])
             except OSError:
                 raise self._peer_gone() from None
 
