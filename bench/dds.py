@@ -134,14 +134,15 @@ def _one_way(found: Callable[[str], dict[str, Any]], n: int) -> dict[str, Any]:
     return {"count": n, "seconds": seconds, "per_second": n / seconds}
 
 
-def messages(way: str, n: int, timeout: float, monitors: bool = True) -> dict[str, Any]:
+def messages(way: str, n: int, timeout: float, monitors: bool = True, batched: bool = False) -> dict[str, Any]:
     with bench_env(roles.ENV, messages=n) as (out, found):
         if way in ("raw", "raw_unbounded"):
             barrier = multiprocessing.get_context("spawn").Barrier(2)
             args = (DOMAIN, _prefix("messages"), barrier, n, out, timeout, way == "raw")
             run_raw([(roles.raw_int_producer, args), (roles.raw_int_consumer, args)], timeout + 30)
         else:
-            run_anodize(way, "Stream", {"producing": ("P", roles.int_producer),
+            producer = roles.int_batch_producer if batched else roles.int_producer
+            run_anodize(way, "Stream", {"producing": ("P", producer),
                                         "consuming": ("C", roles.int_consumer)}, timeout, monitors)
         return _one_way(found, n)
 

@@ -102,6 +102,15 @@ def int_producer(ep: Endpoint) -> None:
     ep.send("C", "stop")
 
 
+def int_batch_producer(ep: Endpoint) -> None:
+    """As int_producer, in batches of 1,000 (``Endpoint.send_many``)."""
+    n = config()["messages"]
+    report("start", {"start": time.monotonic()})
+    for first in range(0, n, 1000):
+        ep.send_many("C", "data", range(first, min(n, first + 1000)))
+    ep.send("C", "stop")
+
+
 def int_consumer(ep: Endpoint) -> None:
     count = bad = 0
     while (message := ep.recv("P")).label == "data":

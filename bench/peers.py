@@ -79,10 +79,11 @@ from runs import LoadWatch, bench_env, print_table, source_state, write_results 
 
 DEFAULT_JSON = BENCH / "results" / "peers.json"
 THREAD_WAYS = ("monitored", "unmonitored", "zmq_inproc", "simplequeue")
-PROCESS_WAYS = ("monitored", "unmonitored", "zmq_ipc", "mp_pipe", "mp_queue", "cyclonedds")
+PROCESS_WAYS = ("monitored", "unmonitored", "batched", "zmq_ipc", "mp_pipe", "mp_queue", "cyclonedds")
 FRAME_WAYS = ("copy", "buffer", "zmq_ipc", "mp_pipe", "memcpy")
 ROUND_WAYS = ("anodize", "mp_pipe", "os_pipe")
 NAMES = {"monitored": "anodize monitored", "unmonitored": "anodize unmonitored", "anodize": "anodize monitored",
+         "batched": "anodize monitored, send_many x1000",
          "copy": "anodize, copy from a pool", "buffer": "anodize, ep.buffer() in place",
          "zmq_inproc": "pyzmq inproc PAIR", "simplequeue": "queue.SimpleQueue", "zmq_ipc": "pyzmq ipc PAIR",
          "mp_pipe": "mp.Pipe", "mp_queue": "mp.Queue", "cyclonedds": "Cyclone DDS", "memcpy": "memcpy limit",
@@ -116,8 +117,8 @@ def stream_threads(way: str, n: int) -> dict[str, Any]:
 
 
 def stream_processes(way: str, n: int, timeout: float) -> dict[str, Any]:
-    if way in ("monitored", "unmonitored"):
-        return dds.messages("process", n, timeout, monitors=way == "monitored")
+    if way in ("monitored", "unmonitored", "batched"):
+        return dds.messages("process", n, timeout, monitors=way != "unmonitored", batched=way == "batched")
     if way == "cyclonedds":
         return dds.messages("raw", n, timeout)
     with bench_env(transport_roles.ENV) as (out, found):
@@ -229,7 +230,8 @@ def summarise(results: dict[str, dict[str, Any]]) -> tuple[list[list[str]], list
         "threads": [_target("monitored/pyzmq", med["th"]["monitored"], med["th"]["zmq_inproc"], ">=", 1.2),
                     _target("monitored/unmonitored", med["th"]["monitored"], med["th"]["unmonitored"], ">=", 0.9)],
         "processes": [_target("monitored/pyzmq", med["pr"]["monitored"], med["pr"]["zmq_ipc"], ">=", 1.2),
-                      _target("monitored/unmonitored", med["pr"]["monitored"], med["pr"]["unmonitored"], ">=", 0.9)],
+                      _target("monitored/unmonitored", med["pr"]["monitored"], med["pr"]["unmonitored"], ">=", 0.9),
+                      _target("send_many/pyzmq", med["pr"]["batched"], med["pr"]["zmq_ipc"], ">=", 1.2)],
         "frames": [_target("copy/memcpy", med["fr"]["copy"], med["fr"]["memcpy"], ">=", 0.7),
                    _target("buffer/memcpy", med["fr"]["buffer"], med["fr"]["memcpy"], ">=", 0.7),
                    _target("buffer/copy", med["fr"]["buffer"], med["fr"]["copy"], ">", 1.0)],
