@@ -142,8 +142,9 @@ def messages(way: str, n: int, timeout: float, monitors: bool = True, batched: b
             run_raw([(roles.raw_int_producer, args), (roles.raw_int_consumer, args)], timeout + 30)
         else:
             producer = roles.int_batch_producer if batched else roles.int_producer
+            consumer = roles.int_batch_consumer if batched else roles.int_consumer
             run_anodize(way, "Stream", {"producing": ("P", producer),
-                                        "consuming": ("C", roles.int_consumer)}, timeout, monitors)
+                                        "consuming": ("C", consumer)}, timeout, monitors)
         return _one_way(found, n)
 
 

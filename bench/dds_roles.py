@@ -120,6 +120,19 @@ def int_consumer(ep: Endpoint) -> None:
     report("end", {"end": time.monotonic(), "count": count, "bad": bad})
 
 
+def int_batch_consumer(ep: Endpoint) -> None:
+    """As int_consumer, taking what has arrived in batches (``Endpoint.recv_many``)."""
+    count = bad = 0
+    while True:
+        for message in ep.recv_many("P", 1024):
+            if message.label != "data":
+                report("end", {"end": time.monotonic(), "count": count, "bad": bad})
+                return
+            if message.payload != count:
+                bad += 1
+            count += 1
+
+
 def frame_producer(ep: Endpoint) -> None:
     n = config()["frames"]
     pool = frame_pool()

@@ -227,6 +227,15 @@ class TappedChannel:
         for token in tokens:
             self.left(token)
 
+    def take_ready(self, limit: int) -> list[tuple[str, object]]:
+        """Messages already arrived (``Endpoint.recv_many``): at the receiving end each is
+        seen as it is taken, so none is taken in a batch here."""
+        take = getattr(self._inner, "take_ready", None)
+        return take(limit) if take is not None and self._at_sender else []
+
+    def give_back(self, items: list[tuple[str, object]]) -> None:
+        self._inner.give_back(items)  # type: ignore[attr-defined]
+
     def get(self, *, timeout: float | None = None) -> object:
         return self._taken(self._inner.get(timeout=timeout))
 

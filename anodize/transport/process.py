@@ -224,6 +224,24 @@ class PipeReceiver:
     def get_nowait(self) -> object:
         return self.get(timeout=0)
 
+    def take_ready(self, limit: int) -> list[tuple[str, object]]:
+        """Up to ``limit`` small messages already read and decoded, without waiting (none while a
+        sentinel waits: it comes first)."""
+        if self._pushed:
+            return []
+        ready = self._ready
+        if not ready:
+            self._at = self.codec.decode_run(self._buffer, self._at, ready)
+        taken: list[tuple[str, object]] = []
+        while ready and len(taken) < limit:
+            item, self.frame_size = ready.popleft()
+            taken.append(item)  # type: ignore[arg-type]
+        return taken
+
+    def give_back(self, items: list[tuple[str, object]]) -> None:
+        """Put messages taken with :meth:`take_ready` back, first in line, in order."""
+        self._ready.extendleft((item, 0) for item in reversed(items))
+
     def empty(self) -> bool:
         """True when no complete frame (nor end-of-file, nor a stop) is waiting."""
         if self._pushed or self._complete() or self._eof or self.network.stopping:

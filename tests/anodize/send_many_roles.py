@@ -22,3 +22,23 @@ def counting_receiver(ep: Endpoint) -> None:
         got.append(message.payload)
     with open(os.environ["SEND_MANY_OUT"], "w", encoding="utf-8") as out:
         json.dump(got, out)
+
+
+def mixed_sender(ep: Endpoint) -> None:
+    """Floats and ints to a float label: an int needs the full check at the receiver."""
+    ep.send_many("B", "num", [float(i) if i % 3 else i for i in range(COUNT)])
+    ep.send("B", "fin")
+
+
+def batch_receiver(ep: Endpoint) -> None:
+    got: list[object] = []
+    batches = 0
+    while True:
+        messages = ep.recv_many("A", limit=256)
+        batches += 1
+        for message in messages:
+            if message.label == "fin":
+                with open(os.environ["SEND_MANY_OUT"], "w", encoding="utf-8") as out:
+                    json.dump({"got": got, "batches": batches}, out)
+                return
+            got.append(message.payload)

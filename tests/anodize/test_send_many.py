@@ -69,3 +69,37 @@ def test_a_payload_of_the_wrong_sort_in_a_batch_stops_it_there() -> None:
     assert got == [1]
     error = report.roles["A"].error
     assert isinstance(error, ProtocolViolationError) and error.blame == "A" and "int" in str(error)
+
+
+FLOATS = sessiontypes.loads("global F(A, B) = mu t. A -> B : { num(float). t, fin }", "f.proto").globals["F"]
+
+
+@pytest.mark.parametrize(("global_type", "sender"), [(STREAM, "batch_sender"), (FLOATS, "mixed_sender")])
+def test_recv_many_takes_what_has_arrived_in_order_and_leaves_what_needs_a_full_check(
+        global_type: sessiontypes.GlobalType, sender: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SEND_MANY_OUT", str(tmp_path / "got.json"))
+    system = System(global_type, transport="process")
+    system.group("a").role("A", f"send_many_roles:{sender}")
+    system.group("b").role("B", "send_many_roles:batch_receiver")
+    report = system.run(timeout=60)
+    assert report.ok, report.summary()
+    result = json.loads((tmp_path / "got.json").read_text())
+    expected = [float(i) if i % 3 and sender == "mixed_sender" else i for i in range(send_many_roles.COUNT)]
+    assert result["got"] == expected
+    assert [type(v).__name__ for v in result["got"][:3]] == [type(v).__name__ for v in expected[:3]]
+    assert result["batches"] < send_many_roles.COUNT  # some batches held several messages
+    assert report.received["A->B"] == send_many_roles.COUNT + 1
+
+
+def test_recv_many_refuses_a_limit_below_one() -> None:
+    def sender(ep: Any) -> None:
+        ep.send("B", "num", 1)
+
+    def receiver(ep: Any) -> None:
+        ep.recv_many("A", limit=0)
+
+    system = System(TWO)
+    system.group("a").role("A", sender)
+    system.group("b").role("B", receiver)
+    report = system.run(timeout=5)
+    assert isinstance(report.roles["B"].error, ValueError)
