@@ -64,6 +64,8 @@ def _terminating(generated: GeneratedGlobal) -> GlobalType:
     assume(all(can_always_end(m) for m in machines.values()))
     event(f"roles: {len(global_type.roles)}")
     event("a role forks" if any(m.forks for m in machines.values()) else "no fork")
+    event("a role waits on several peers (recv_any)" if any(m.waits_on_several() for m in machines.values())
+          else "every receive names its peer")
     return global_type
 
 

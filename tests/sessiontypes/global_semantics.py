@@ -48,6 +48,9 @@ def alpha_rename(term: g.GlobalTerm) -> g.GlobalTerm:
             case g.Choice(sender=p, receiver=q, branches=branches):
                 return g.Choice(p, q, tuple(g.Branch(b.message, walk(b.continuation, env))
                                             for b in branches))
+            case g.Routed(sender=p, branches=routes):
+                return g.Routed(p, tuple(g.RoutedBranch(r.receiver, r.message, walk(r.continuation, env))
+                                         for r in routes))
             case g.Parallel(branches=parts):
                 return g.Parallel(tuple(walk(part, env) for part in parts))
         raise AssertionError(node)
@@ -68,6 +71,10 @@ def substitute(term: g.GlobalTerm, name: str, replacement: g.GlobalTerm) -> g.Gl
             return g.Choice(p, q, tuple(
                 g.Branch(b.message, substitute(b.continuation, name, replacement))
                 for b in branches))
+        case g.Routed(sender=p, branches=routes):
+            return g.Routed(p, tuple(
+                g.RoutedBranch(r.receiver, r.message, substitute(r.continuation, name, replacement))
+                for r in routes))
         case g.Parallel(branches=parts):
             return g.Parallel(tuple(substitute(part, name, replacement) for part in parts))
     raise AssertionError(term)
@@ -127,6 +134,9 @@ class GlobalSemantics:
                 for b in branches:
                     event = (p, q, b.message.label, b.message.sort)
                     out.append((event, self.normalise(b.continuation)))
+            case g.Routed(sender=p, branches=routes):
+                out.extend(((p, r.receiver, r.message.label, r.message.sort), self.normalise(r.continuation))
+                           for r in routes)
             case g.Parallel(branches=parts):
                 for index, part in enumerate(parts):
                     for event, after in self.steps(part):

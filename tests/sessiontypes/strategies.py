@@ -140,7 +140,7 @@ class _Generator:
         if act and depth > 0:
             kinds = []
         if depth > 0 and (self.nodes_left > 0 or act):
-            kinds += ["message", "message", "choice", "choice"]
+            kinds += ["message", "message", "choice", "choice", "routed"]
             if scope.exit is None or scope.exit == "end":
                 kinds += ["mu"]
                 if len(scope.channels) >= 2:
@@ -169,6 +169,8 @@ class _Generator:
             return rest
         if kind == "choice":
             return self.choice(scope, depth)
+        if kind == "routed":
+            return self.routed(scope, depth)
         if kind == "mu":
             return self.mu(scope, depth)
         return self.parallel(scope, depth)
@@ -240,6 +242,78 @@ class _Generator:
             branches.append(g.Branch(message, rest))
         return g.Choice(p, q, tuple(branches))
 
+    def routed(self, scope: _Scope, depth: int) -> g.GlobalTerm:
+        """``p -> {q1 : l1. G1, q2 : l2. G2, ...}``: branches to different receivers.
+
+        Every other role is *told by p* (in each branch where it is not the
+        receiver, p sends it a notice; its receives all come from p), *relayed*
+        (in each such branch it gets a notice from that branch's receiver, or
+        from p, and then takes no further part: the branches end, so no later
+        message can overtake the notice), or *left out* (not a receiver, in no
+        branch). All (peer, label) pairs a role may receive are distinct.
+        """
+        targets = {p: sorted(q for a, q in scope.channels if a == p) for p in sorted(scope.roles)}
+        senders = [p for p, qs in targets.items() if len(qs) >= 2]
+        if not senders:
+            return self.choice(scope, depth)
+        p = self.draw(st.sampled_from(senders))
+        count = self.draw(st.integers(2, 3))
+        receivers = self.draw(st.lists(st.sampled_from(targets[p]), min_size=count, max_size=count))
+        if len(set(receivers)) == 1:
+            receivers[1] = next(q for q in targets[p] if q != receivers[0])
+        labels = self.labels(count)
+        relay_ok = scope.exit in (None, "end")
+        told: dict[str, list[tuple[str, Message]]] = {}   # role -> per branch (notifier, notice)
+        away: set[str] = set()                            # relayed or left out: not in the branches' rest
+        for role in sorted(scope.roles - {p}):
+            mine = {labels[i] for i in range(count) if receivers[i] == role}
+            needed = [i for i in range(count) if receivers[i] != role]
+            ways = []
+            if all((p, role) in scope.channels for _ in needed):
+                ways += ["p", "p"]
+            if relay_ok and all((receivers[i], role) in scope.channels or (p, role) in scope.channels
+                                for i in needed):
+                ways += ["relay", "relay"]
+            if not mine:
+                ways += ["out"]
+            way = self.draw(st.sampled_from(ways))
+            if way == "out":
+                away.add(role)
+                continue
+            free = [label for label in LABELS if label not in mine]
+            notes = self.draw(st.lists(st.sampled_from(free), min_size=len(needed), max_size=len(needed),
+                                       unique=True))
+            per_branch: list[tuple[str, Message]] = []
+            for i, note in zip(needed, notes, strict=True):
+                notifier = p
+                if way == "relay":
+                    away.add(role)
+                    choices = [n for n in (receivers[i], p) if (n, role) in scope.channels]
+                    notifier = self.draw(st.sampled_from(choices))
+                per_branch.append((notifier, self.message(note)))
+            told[role] = per_branch
+        inner = scope.after_interaction()
+        if away:
+            channels = frozenset(c for c in scope.channels if not (set(c) & away))
+            exit_ = scope.exit
+            if exit_ is None:
+                relayed = any(r in told for r in away)
+                exit_ = "end" if relayed else self.draw(st.sampled_from(["end", *inner.usable()]))
+            inner = _Scope(channels, inner.env, exit_, True)
+        branches = []
+        for index, (receiver, label) in enumerate(zip(receivers, labels, strict=True)):
+            order = self.draw(st.permutations(sorted(r for r in told if r != receiver)))
+            if inner.channels:
+                rest = self.term(inner, depth - 1)
+            else:  # everyone but p has gone: the branch ends as every branch must
+                rest = g.End() if inner.exit in (None, "end") else g.Var(inner.exit)
+            for role in reversed(order):
+                position = [i for i in range(count) if receivers[i] != role].index(index)
+                notifier, note = told[role][position]
+                rest = g.Choice(notifier, role, (g.Branch(note, rest),))
+            branches.append(g.RoutedBranch(receiver, self.message(label), rest))
+        return g.Routed(p, tuple(branches))
+
     def common_step(self, notifier: str, role: str,
                     channels: frozenset[Channel]) -> tuple[str, str, list[str], str]:
         """A step an informed role takes in every branch: sender, receiver, labels
@@ -292,6 +366,10 @@ def substitute(term: g.GlobalTerm, name: str, replacement: g.GlobalTerm) -> g.Gl
         case g.Choice(sender=p, receiver=q, branches=branches):
             return g.Choice(p, q, tuple(g.Branch(b.message, substitute(b.continuation, name, replacement))
                                         for b in branches))
+        case g.Routed(sender=p, branches=routes):
+            return g.Routed(p, tuple(g.RoutedBranch(r.receiver, r.message,
+                                                    substitute(r.continuation, name, replacement))
+                                     for r in routes))
         case g.Parallel(branches=parts):
             return g.Parallel(tuple(substitute(part, name, replacement) for part in parts))
     return term
@@ -305,6 +383,8 @@ def _names(term: g.GlobalTerm) -> set[str]:
             return {var} | _names(body)
         case g.Choice(branches=branches):
             return set().union(*(_names(b.continuation) for b in branches))
+        case g.Routed(branches=routes):
+            return set().union(*(_names(r.continuation) for r in routes))
         case g.Parallel(branches=parts):
             return set().union(*(_names(part) for part in parts))
     return set()
@@ -330,6 +410,12 @@ def _roles_in_text_order(term: g.GlobalTerm) -> tuple[str, ...]:
                 found.setdefault(q)
                 for b in branches:
                     visit(b.continuation)
+            case g.Routed(sender=p, branches=routes):
+                found.setdefault(p)
+                for r in routes:
+                    found.setdefault(r.receiver)
+                for r in routes:
+                    visit(r.continuation)
             case g.Rec(body=body):
                 visit(body)
             case g.Parallel(branches=parts):
@@ -419,6 +505,13 @@ class _Writer:
                 inner = f"{gap()},{gap()}".join(self.branch(b) for b in branches)
                 comma = self.pick("", ["", ","])
                 return f"{head}{{{gap()}{inner}{comma}{gap()}}}"
+            case g.Routed(sender=p, branches=routes):
+                arrow = self.pick("->", ["->", "→"])
+                inner = f"{gap()},{gap()}".join(
+                    f"{r.receiver}{gap()}:{gap()}{self.sequel(g.Branch(r.message, r.continuation))}"
+                    for r in routes)
+                comma = self.pick("", ["", ","])
+                return f"{p}{gap()}{arrow}{gap()}{{{gap()}{inner}{comma}{gap()}}}"
         raise AssertionError(term)
 
     def sequel(self, branch: g.Branch) -> str:
