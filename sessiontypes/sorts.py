@@ -1,7 +1,7 @@
 """Payload sorts and messages (a label with an optional payload sort).
 
 A sort is a builtin, a declared ``type``, or a *record* of named fields
-(``quote(price: int, date: str)``; docs/language-additions.md): a value of a
+(``quote(price: int, date: str)``; docs/language.md): a value of a
 record sort is a ``dict`` with exactly those keys, each holding a value of its
 field's sort.
 """

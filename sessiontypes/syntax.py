@@ -68,7 +68,7 @@ class GInteraction:
     """``p -> q : msg [. G]`` (``braced`` false) or ``p -> q : {...}``.
 
     A multicast ``p -> q, r : ...`` is no node of its own: the parser writes it as
-    these nodes, one per receiver (docs/language-additions.md).
+    these nodes, one per receiver (docs/language.md).
     """
 
     sender: Name
