@@ -217,8 +217,10 @@ class _Reader:
                 self._refuse(child, "delegation ('Protocol@Role' payload)")
             elif child.data == "refinement":
                 self._refuse(child, "a refinement type ('x: T{...}')")
-            else:  # payload: [NAME ':'] qname; the variable name carries no meaning here
-                payloads.append(t.Payload(self._qname(child.children[-1])))
+            else:  # payload: [NAME ':'] qname; a name becomes a field's name if there are several
+                named = [c for c in child.children[:-1] if isinstance(c, lark.Token) and c.type == "NAME"]
+                payloads.append(t.Payload(self._qname(child.children[-1]),
+                                          self._name(named[0]) if named else None))
         return label, tuple(payloads), True
 
     def _i_choice(self, node: lark.Tree[Any]) -> t.Interaction:

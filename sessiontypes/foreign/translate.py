@@ -203,12 +203,15 @@ class _Translator:
         return result
 
     def _message(self, transfer: t.Transfer) -> s.MessageSyntax:
-        sorts = [self._sort(p.sort) for p in transfer.payloads]
-        payloads = [sort for sort in sorts if sort is not None]
-        if len(payloads) > 1:
-            self._refuse(transfer.payloads[1].sort.location, "a message with several payloads",
-                         "a message of the language carries one value")
-        sort = payloads[0] if payloads else None
+        sorts = [(p, self._sort(p.sort)) for p in transfer.payloads]
+        payloads = [(p, sort) for p, sort in sorts if sort is not None]
+        if len(payloads) > 1:  # several payloads: a message with named payloads (fields p1, p2, ... unnamed)
+            if transfer.label is None:
+                self._refuse(transfer.location, "several payloads without a label")
+            fields = tuple(s.FieldSyntax(p.name or s.Name(f"p{number}", p.sort.location), sort)
+                           for number, (p, sort) in enumerate(payloads, start=1))
+            return s.MessageSyntax(self._label(transfer.label), None, parens=True, fields=fields)
+        sort = payloads[0][1] if payloads else None
         if transfer.label is None:  # Scribble's "(Int) from A to B": the sort names the label
             if sort is None:
                 self._refuse(transfer.location, "a message with neither label nor payload")

@@ -22,9 +22,10 @@ __all__ = [
 
 @dataclass(frozen=True, slots=True)
 class Payload:
-    """One payload element: a type name (nuScr's ``x: T`` keeps only ``T``)."""
+    """One payload element: a type name, and nuScr's variable name (``x: T``) if written."""
 
     sort: Name
+    name: Name | None = None
 
 
 @dataclass(frozen=True, slots=True)
