@@ -323,8 +323,8 @@ def test_a_peer_example_gets_its_verdict_or_a_documented_difference(name: str) -
 @pytest.mark.parametrize(("text", "path", "projection"), [
     ("global protocol P(role A, role B) { quote(price: int, date: string) from A to B; }", "p.nuscr",
      "!B(quote(price: int, date: str))"),
-    ("module M; type <java> \"java.lang.Integer\" from \"rt.jar\" as Int;\n"
-     "global protocol P(role A, role B) { m(Int, Int) from A to B; }", "p.scr", "!B(m(p1: Int, p2: Int))"),
+    (("module M; type <java> \"java.lang.Integer\" from \"rt.jar\" as Int;\n"
+     "global protocol P(role A, role B) { m(Int, Int) from A to B; }"), "p.scr", "!B(m(p1: Int, p2: Int))"),
     ("global protocol P(role A, role B) { m(x: int) from A to B; }", "p.nuscr", "!B(m(int))"),
 ])
 def test_several_payloads_are_named_payloads(text: str, path: str, projection: str) -> None:
