@@ -91,11 +91,7 @@ class Endpoint:
             else:
                 monitor.send(to, label, payload)
         if self._network.alarm:
-            failed = self._network.failed.get(to)
-            if failed is not None:
-                raise PeerFailedError(self.role, to, failed)
-            if self._stop_event.is_set():
-                raise RoleStopped(f"interrupted sending {label} to {to}, in state {self._state_number()}")
+            self._refuse_if_down(to, label)
         out = self._out.get(to)
         if out is None:  # only reachable without a monitor
             raise AnodizeError(f"role {self.role} has no channel to {to}")
@@ -148,11 +144,7 @@ class Endpoint:
     def _put_all(self, to: str, label: str, items: list[tuple[str, object]]) -> None:
         """Hand checked messages to the channel: at once where it can take a batch."""
         if self._network.alarm:
-            failed = self._network.failed.get(to)
-            if failed is not None:
-                raise PeerFailedError(self.role, to, failed)
-            if self._stop_event.is_set():
-                raise RoleStopped(f"interrupted sending {label} to {to}, in state {self._state_number()}")
+            self._refuse_if_down(to, label)
         out = self._out.get(to)
         if out is None:  # only reachable without a monitor
             raise AnodizeError(f"role {self.role} has no channel to {to}")
@@ -170,6 +162,14 @@ class Endpoint:
         if doorbell is not None:
             for _ in items:  # one ring per message, as send() rings
                 doorbell.put(self.role)
+
+    def _refuse_if_down(self, to: str, label: str) -> None:
+        """Raise if ``to`` has failed or this role must stop (checked only once an alarm is up)."""
+        failed = self._network.failed.get(to)
+        if failed is not None:
+            raise PeerFailedError(self.role, to, failed)
+        if self._stop_event.is_set():
+            raise RoleStopped(f"interrupted sending {label} to {to}, in state {self._state_number()}")
 
     def buffer(self, to: str, shape: tuple[int, ...], dtype: object = "uint8") -> Any:
         """A numpy array to fill and then send to ``to``, with no copy on the way.

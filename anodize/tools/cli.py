@@ -147,16 +147,7 @@ def _parser() -> argparse.ArgumentParser:
         "verify", help="check a recording (MCAP file or rosbag2 folder) against a protocol",
         description="Replay each channel of a recording through the monitors of both its ends and report the "
                     "first violation on each, with the role to blame. Exit 0 when it conforms, 1 otherwise.")
-    verify.add_argument("recording", metavar="RECORDING")
-    verify.add_argument("--protocol", metavar="FILE.proto",
-                        help="the protocol (default: the one an anodize recording carries)")
-    verify.add_argument("--global", dest="global_name", metavar="G",
-                        help="the global type (default: the recording's, or the file's only one)")
-    verify.add_argument("--topics", metavar="MAP",
-                        help="a TOML file mapping \"Sender->Receiver:label\" to topics (a system file's "
-                             "[ros.topics], or the same entries at its top level), for recordings made by "
-                             "other tools")
-    verify.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
+    _add_recording_arguments(verify)
     verify.set_defaults(run=_verify)
 
     replay = commands.add_parser(
@@ -165,22 +156,14 @@ def _parser() -> argparse.ArgumentParser:
         description="Run role R's function alone, fed the messages its peers sent in the recorded run; each "
                     "message it sends is compared with the recorded one, and its monitor checks the protocol. "
                     "Exit 0 when its outputs match the recording and follow the protocol, 1 otherwise.")
-    replay.add_argument("recording", metavar="RECORDING")
+    _add_recording_arguments(replay)
     replay.add_argument("--role", required=True, metavar="R", help="the role to replay")
     replay.add_argument("--function", metavar="MODULE:FUNCTION",
                         help="the role's function (default: the one the recording names)")
     replay.add_argument("--pythonpath", action="append", default=[], metavar="DIR",
                         help="import role functions from DIR too (repeatable; the current directory always)")
-    replay.add_argument("--protocol", metavar="FILE.proto",
-                        help="the protocol (default: the one an anodize recording carries)")
-    replay.add_argument("--global", dest="global_name", metavar="G",
-                        help="the global type (default: the recording's, or the file's only one)")
-    replay.add_argument("--topics", metavar="MAP",
-                        help="a TOML file mapping \"Sender->Receiver:label\" to topics, for recordings made by "
-                             "other tools (as for verify)")
     replay.add_argument("--timeout", type=float, default=60.0, metavar="S",
                         help="stop the role if it has not ended after S seconds (default 60)")
-    replay.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
     replay.set_defaults(run=_replay)
     return parser
 
@@ -418,6 +401,20 @@ def _verify(args: argparse.Namespace) -> int:
     if args.json:
         _write_json(Path(args.json), report.to_dict())
     return EXIT_OK if report.conforms else EXIT_ERRORS
+
+
+def _add_recording_arguments(parser: argparse.ArgumentParser) -> None:
+    """What verify and replay share: the recording, its protocol and topic map, JSON out."""
+    parser.add_argument("recording", metavar="RECORDING")
+    parser.add_argument("--protocol", metavar="FILE.proto",
+                        help="the protocol (default: the one an anodize recording carries)")
+    parser.add_argument("--global", dest="global_name", metavar="G",
+                        help="the global type (default: the recording's, or the file's only one)")
+    parser.add_argument("--topics", metavar="MAP",
+                        help="a TOML file mapping \"Sender->Receiver:label\" to topics (a system file's "
+                             "[ros.topics], or the same entries at its top level), for recordings made by "
+                             "other tools")
+    parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
 
 
 def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
