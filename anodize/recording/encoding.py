@@ -16,15 +16,14 @@ import base64
 import dataclasses
 import json
 import math
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from sessiontypes import Sort
 
-from ..errors import AnodizeError
 from ..ros import RosType, ros_type
-from ..session.payloads import resolve_class
 
 __all__ = ["JSON_TYPE", "SortCodec", "codec_for_sort", "to_json", "from_json", "UnknownObject"]
 
@@ -73,7 +72,11 @@ class SortCodec:
         message = self.ros.deserialize(data)
         if not self.json:
             return message
-        return from_json(json.loads(message.data))  # type: ignore[attr-defined]
+        try:
+            return from_json(json.loads(message.data))  # type: ignore[attr-defined]
+        except (RecursionError, TypeError, KeyError, AttributeError, OverflowError) as error:
+            # Whatever a hostile recording's JSON provokes, it is not a recorded value.
+            raise ValueError(f"not a recorded value: {type(error).__name__}: {error}") from None
 
 
 def codec_for_sort(sort: Sort | None) -> SortCodec:
@@ -99,15 +102,19 @@ def to_json(value: object) -> Any:
         return value
     if isinstance(value, float):
         return value if math.isfinite(value) else {"$float": repr(value)}
-    if isinstance(value, (bytes, bytearray)):
-        return {"$bytes": base64.b64encode(bytes(value)).decode()}
+    if isinstance(value, bytearray):
+        return {"$bytearray": base64.b64encode(bytes(value)).decode()}
+    if isinstance(value, bytes):
+        return {"$bytes": base64.b64encode(value).decode()}
     if isinstance(value, complex):
         return {"$complex": [to_json(value.real), to_json(value.imag)]}
     if isinstance(value, list):
         return [to_json(v) for v in value]
     if isinstance(value, tuple):
         return {"$tuple": [to_json(v) for v in value]}
-    if isinstance(value, (set, frozenset)):
+    if isinstance(value, frozenset):
+        return {"$frozenset": [to_json(v) for v in value]}
+    if isinstance(value, set):
         return {"$set": [to_json(v) for v in value]}
     if isinstance(value, dict):
         return {"$dict": [[to_json(k), to_json(v)] for k, v in value.items()]}
@@ -139,8 +146,9 @@ def _numpy_json(value: object) -> Any:
 def from_json(data: Any) -> object:
     """The value :func:`to_json` wrote as ``data``.
 
-    A dataclass is rebuilt when its class can be imported (without calling its
-    ``__init__``, as the process transport does); otherwise it is an :class:`UnknownObject`.
+    A dataclass is rebuilt (without calling its ``__init__``, as the process transport
+    does) when its class's module is imported already: a recording never makes a module
+    be imported. Otherwise, and for other objects, it is an :class:`UnknownObject`.
 
     Raises:
         ValueError: ``data`` is not in this format.
@@ -162,9 +170,8 @@ def _read_dataclass(data: dict[str, Any]) -> object:
     if not isinstance(name, str) or not isinstance(fields, dict):
         raise ValueError("a recorded dataclass needs a class name and its fields")
     values = {field: from_json(v) for field, v in fields.items()}
-    try:
-        kind = resolve_class(name)
-    except AnodizeError:
+    kind = _imported_class(name)
+    if kind is None:
         return UnknownObject(name, json.dumps(fields)[:1000])
     if not dataclasses.is_dataclass(kind) or {f.name for f in dataclasses.fields(kind)} != set(values):
         return UnknownObject(name, json.dumps(fields)[:1000])
@@ -172,6 +179,18 @@ def _read_dataclass(data: dict[str, Any]) -> object:
     for field, value in values.items():
         object.__setattr__(instance, field, value)
     return instance
+
+
+def _imported_class(name: str) -> type | None:
+    """The class ``module:Qualified`` names, if its module is imported already: a recording
+    never makes anything be imported (importing runs a module's code)."""
+    module_name, _, qualified = name.partition(":")
+    value: object = sys.modules.get(module_name)
+    if value is None or not qualified:
+        return None
+    for part in qualified.split("."):
+        value = getattr(value, part, None)
+    return value if isinstance(value, type) else None
 
 
 def _read_ndarray(data: dict[str, Any]) -> object:
@@ -185,20 +204,33 @@ def _read_ndarray(data: dict[str, Any]) -> object:
         raise ValueError(f"a recorded array that does not decode: {error}") from None
 
 
+def _number(value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"a recorded complex number with a part that is not a number: {value!r}")
+    return float(value)
+
+
 def _pairs(items: Any) -> dict[Any, Any]:
     return {_hashable(from_json(k)): from_json(v) for k, v in items}
 
 
 def _hashable(value: object) -> object:
-    return tuple(value) if isinstance(value, list) else value
+    """A set member or dict key as it was: JSON lists were tuples, sets frozensets there."""
+    if isinstance(value, list):
+        return tuple(_hashable(v) for v in value)
+    if isinstance(value, set):
+        return frozenset(value)
+    return value
 
 
 _READERS: dict[str, Callable[[dict[str, Any]], object]] = {
     "$float": lambda d: float(d["$float"]),
     "$bytes": lambda d: base64.b64decode(d["$bytes"], validate=True),
-    "$complex": lambda d: complex(*d["$complex"]),
+    "$bytearray": lambda d: bytearray(base64.b64decode(d["$bytearray"], validate=True)),
+    "$complex": lambda d: complex(*(_number(from_json(v)) for v in d["$complex"])),
     "$tuple": lambda d: tuple(from_json(v) for v in d["$tuple"]),
     "$set": lambda d: {_hashable(from_json(v)) for v in d["$set"]},
+    "$frozenset": lambda d: frozenset(_hashable(from_json(v)) for v in d["$frozenset"]),
     "$dict": lambda d: _pairs(d["$dict"]),
     "$ndarray": _read_ndarray,
     "$dataclass": _read_dataclass,

@@ -26,12 +26,15 @@ from sessiontypes import StateMachine
 
 from ..isolation.sched import lower_thread_priority
 from ..session.channel import Channel
+from ..session.endpoint import put_each
 from .encoding import SortCodec, codec_for_sort
 from .plan import META, PROFILE, ChannelLabel, RecordPlan
 
-__all__ = ["Recorder", "RecordingChannel", "TappedChannel", "BACKLOG", "channel_metadata", "QOS_PROFILES"]
+__all__ = ["Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG", "channel_metadata",
+           "QOS_PROFILES"]
 
 BACKLOG = 64 * 2**20  # bytes a group's recorder may hold before its senders wait
+SEQUENCE_WRAP = 2**32 - 1  # the largest MCAP sequence number
 _FLUSH_EVERY = 0.1    # seconds
 
 # What anodize's channels offer, as rosbag2 writes it (metadata version 9): reliable, keep all, volatile.
@@ -93,6 +96,10 @@ class Recorder:
         self._closing = False
         self.written = 0
         self.unrecorded: dict[str, list[int | str]] = {}  # "A->B:label" -> [count, first reason]
+        self.broken = ""  # why the writer stopped, if it did
+        self._io = threading.Lock()  # the part file's writer: one thread at a time
+        self._pair_of: dict[int, tuple[str, str]] = {}  # MCAP channel -> its channel
+        self._writing: list[tuple[int, int, int, bytes]] = []  # the batch being written
         self._thread = threading.Thread(target=self._write_loop, name=f"anodize-record:{group}", daemon=True)
         self._thread.start()
 
@@ -113,10 +120,13 @@ class Recorder:
             channel_id, codec = self._channel(pair, label)
             return channel_id, stamp, codec.encode(payload)
         except Exception as error:  # the recording's problem, not the role's: say so at the end
-            key = f"{pair[0]}->{pair[1]}:{label}"
-            first = self.unrecorded.setdefault(key, [0, f"{type(error).__name__}: {error}"])
-            first[0] = int(first[0]) + 1
+            self._count_unrecorded(pair, label, f"{type(error).__name__}: {error}")
             return None
+
+    def _count_unrecorded(self, pair: tuple[str, str], label: str, reason: str) -> None:
+        key = f"{pair[0]}->{pair[1]}" + (f":{label}" if label else "")
+        first = self.unrecorded.setdefault(key, [0, reason])
+        first[0] = int(first[0]) + 1
 
     def queue(self, pair: tuple[str, str], encoded: tuple[int, int, bytes]) -> None:
         """Hand an encoded message to the writer (waiting while the writer is far behind)."""
@@ -124,7 +134,11 @@ class Recorder:
         with self._lock:
             while self._pending_bytes > self.backlog and not self._closing:
                 self._lock.wait(0.1)
-            sequence = self._sequence[pair] = self._sequence[pair] + 1
+            if self.broken:  # the writer failed (e.g. a full disk): counted, never waited for
+                self._count_unrecorded(pair, "", self.broken)
+                return
+            # MCAP's sequence is 32 bits: after 2**32 - 1 it wraps to 1 (verify knows).
+            sequence = self._sequence[pair] = self._sequence[pair] % SEQUENCE_WRAP + 1
             self._pending.append((channel_id, stamp, sequence, data))
             self._pending_bytes += len(data)
             self._lock.notify_all()
@@ -142,16 +156,32 @@ class Recorder:
         codec = codec_for_sort(item.sort)
         schema = self._schemas.get(codec.type_name)
         if schema is None:
-            schema = self._schemas[codec.type_name] = self._writer.register_schema(
-                codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+            with self._io:
+                schema = self._schemas[codec.type_name] = self._writer.register_schema(
+                    codec.type_name, "ros2msg", codec.ros.message_definition().encode())
         topic = self.plan.topics.get(key) or f"/anodize/{key[0]}/{key[1]}/{key[2]}"
         metadata = channel_metadata(item, codec, self.protocol, self.plan.group_of)
-        channel_id = self._writer.register_channel(topic, "cdr", schema, metadata)
+        with self._io:  # the writer thread may be writing messages to the same file
+            channel_id = self._writer.register_channel(topic, "cdr", schema, metadata)
+        self._pair_of[channel_id] = (key[0], key[1])
         found = self._channels[key] = (channel_id, codec)
         return found
 
     def _write_loop(self) -> None:
         lower_thread_priority()  # it inherited the group's real-time priority
+        try:
+            self._write_until_closed()
+        except Exception as error:  # a full disk, say: the run goes on, unrecorded, and says so
+            with self._lock:
+                self.broken = f"the recording's writer failed: {type(error).__name__}: {error}"
+                for channel_id, *_ in [*self._writing, *self._pending]:
+                    self._count_unrecorded(self._pair_of.get(channel_id, ("?", "?")), "", self.broken)
+                self._writing = []
+                self._pending.clear()
+                self._pending_bytes = 0
+                self._lock.notify_all()
+
+    def _write_until_closed(self) -> None:
         last_flush = time.monotonic()
         while True:
             with self._lock:
@@ -159,12 +189,14 @@ class Recorder:
                     self._lock.wait(_FLUSH_EVERY)
                     if time.monotonic() - last_flush >= _FLUSH_EVERY:
                         break
-                batch = list(self._pending)
+                batch = self._writing = list(self._pending)  # kept until written: a failure counts it
                 self._pending.clear()
                 closing = self._closing
-            for channel_id, stamp, sequence, data in batch:
-                self._writer.add_message(channel_id, stamp, data, stamp, sequence)
+            with self._io:
+                for channel_id, stamp, sequence, data in batch:
+                    self._writer.add_message(channel_id, stamp, data, stamp, sequence)
             self.written += len(batch)
+            self._writing = []
             with self._lock:
                 self._pending_bytes -= sum(len(item[3]) for item in batch)
                 self._lock.notify_all()
@@ -180,7 +212,7 @@ class Recorder:
             self._closing = True
             self._lock.notify_all()
         self._thread.join()
-        with contextlib.suppress(OSError, ValueError):
+        with contextlib.suppress(Exception):  # best effort: a broken writer fails again (the merge notes it)
             if self.unrecorded:
                 self._writer.add_metadata(f"{META}.unrecorded", {
                     key: f"{count} messages not recorded; the first: {reason}"
@@ -219,13 +251,17 @@ class TappedChannel:
         """Several messages (``Endpoint.send_many``): each seen, the batch handed on at once."""
         tokens = [self.leaving(label, payload) for label, payload in items] if self._at_sender else []
         put_many = getattr(self._inner, "put_many", None)
-        if put_many is not None:
-            put_many(items)
-        else:
-            for item in items:
-                self._inner.put(item)
-        for token in tokens:
-            self.left(token)
+        try:
+            if put_many is not None:
+                put_many(items)
+            else:
+                put_each(self._inner, items)
+        except BaseException as error:  # those that went out are recorded all the same
+            tokens = tokens[:getattr(error, "sent_in_batch", 0)]
+            raise
+        finally:
+            for token in tokens:
+                self.left(token)
 
     def take_ready(self, limit: int) -> list[tuple[str, object]]:
         """Messages already arrived (``Endpoint.recv_many``): at the receiving end each is

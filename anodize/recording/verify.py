@@ -29,6 +29,7 @@ from .channel_view import ChannelView, Node, sort_key
 from .encoding import JSON_TYPE, SortCodec, UnknownObject, codec_for_sort
 from .plan import META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
+from .tap import SEQUENCE_WRAP
 
 __all__ = ["Violation", "ChannelResult", "VerifyReport", "verify", "RECORDING_FAULT"]
 
@@ -179,6 +180,8 @@ class _ChannelCheck:
         previous, self.sequence = self.sequence, sequence
         if sequence == previous + 1:
             return ""
+        if sequence == 1 and previous == SEQUENCE_WRAP:  # 32 bits of numbering ran out: they wrap
+            return ""
         if sequence == 1:  # the sender's group started again: so does the channel
             self.reset()
             return ""
@@ -242,6 +245,11 @@ def _payload_problem(message: RecordedMessage, sort: Sort | None, codecs: _Codec
     recorded = message.topic.type_name
     if recorded != expected.type_name:
         return f"payload of the wrong sort: recorded a {recorded}, the label carries {_sort_text(sort)}"
+    try:  # first: it imports the class a declared sort names (the protocol's, not the recording's)
+        check = validator_for(sort)
+    except AnodizeError as error:  # the sort's class cannot be imported here
+        check = None
+        cannot_check = f"cannot check the payload: {error}"
     try:
         payload = codecs.decode(message.topic, message.data)
     except (AnodizeError, ValueError, KeyError, TypeError) as error:
@@ -250,10 +258,9 @@ def _payload_problem(message: RecordedMessage, sort: Sort | None, codecs: _Codec
         target = sort.target if sort is not None else None
         return "" if payload.class_name == target else (
             f"payload of the wrong sort: a recorded {payload.class_name}, the label carries {_sort_text(sort)}")
-    try:
-        reason = validator_for(sort)(payload)
-    except AnodizeError as error:  # the sort's class cannot be imported here
-        return f"cannot check the payload: {error}"
+    if check is None:
+        return cannot_check
+    reason = check(payload)
     return f"payload of the wrong sort: {reason}" if reason else ""
 
 

@@ -24,7 +24,7 @@ from ..errors import Action, AnodizeError, PeerFailedError, ProtocolViolationErr
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
 from .monitor import Monitor
 
-__all__ = ["Message", "Endpoint", "RoleStopped", "peers_of"]
+__all__ = ["Message", "Endpoint", "RoleStopped", "peers_of", "put_each"]
 
 
 _new_tuple = tuple.__new__  # builds a Message without NamedTuple's Python-level __new__
@@ -113,18 +113,22 @@ class Endpoint:
 
         Every message is checked as ``send`` checks it, and nothing is sent before the checks:
         if the local type refuses the k-th, the k before it are sent (they were allowed),
-        then the violation is raised. Returns how many were sent.
+        then the violation is raised. A batch that reaches a parallel composition goes on in
+        the branch that owns the channel. Returns how many were sent.
 
         Raises:
             ProtocolViolationError, PeerFailedError: as :meth:`send`.
         """
         if not self._plain and self._forked():
             return self._branch_for(self._send_route, to, "send", label).send_many(to, label, payloads)
+        pending = list(payloads)
         items: list[tuple[str, object]] = []
         refused: BaseException | None = None
         monitor = self._monitor
-        for payload in payloads:
+        for payload in pending:
             if monitor is not None:
+                if monitor.at_fork:  # the rest belongs to a parallel branch: send what we have, then go on there
+                    break
                 step = monitor.sends[monitor.state].get((to, label))
                 if step is not None and type(payload) in step[1]:
                     monitor.state = step[0]
@@ -139,6 +143,8 @@ class Endpoint:
             self._put_all(to, label, items)
         if refused is not None:
             raise refused
+        if len(items) < len(pending):  # at a fork
+            return len(items) + self.send_many(to, label, pending[len(items):])
         return len(items)
 
     def _put_all(self, to: str, label: str, items: list[tuple[str, object]]) -> None:
@@ -150,11 +156,14 @@ class Endpoint:
             raise AnodizeError(f"role {self.role} has no channel to {to}")
         channel, doorbell = out
         put_many = getattr(channel, "put_many", None)
-        if put_many is not None:
-            put_many(items)
-        else:
-            for item in items:
-                channel.put(item)
+        try:
+            if put_many is not None:
+                put_many(items)
+            else:
+                put_each(channel, items)
+        except BaseException as error:  # what did go out still counts
+            self.sent[to] += getattr(error, "sent_in_batch", 0)
+            raise
         self.sent[to] += len(items)
         waiting = self._waiting.get(to)
         if waiting is not None and (size := waiting()) > self.high_water[to]:
@@ -509,3 +518,13 @@ def peers_of(machine: StateMachine) -> tuple[set[str], set[str]]:
         if t.peer is not None:
             (sends if t.action == "send" else recvs).add(t.peer)
     return sends, recvs
+
+
+def put_each(channel: Channel, items: list[tuple[str, object]]) -> None:
+    """Put messages one by one; on a failure the exception's ``sent_in_batch`` says how many went."""
+    for sent, item in enumerate(items):
+        try:
+            channel.put(item)
+        except BaseException as error:
+            error.sent_in_batch = sent  # type: ignore[attr-defined]
+            raise

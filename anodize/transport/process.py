@@ -89,27 +89,49 @@ class PipeSender:
     def put_many(self, items: list[tuple[str, object]]) -> None:
         """Send several ``(label, payload)`` with one write (in pieces of at most 1 MiB).
 
+        A frame whose payload took a shared-memory slot is written at once, with those
+        before it: a slot counts as in flight from then on, and a batch holding more arrays
+        than the ring has slots would otherwise wait for slots that only its own unwritten
+        frames could free.
+
         Raises:
-            PayloadError, PeerFailedError: as :meth:`put`; the messages before the one whose
-                payload cannot travel are sent.
+            PayloadError, PeerFailedError: as :meth:`put`; the messages before the one that
+                failed are sent, and the exception's ``sent_in_batch`` says how many.
         """
         frames: list[bytes] = []
-        size = 0
-        for label, payload in items:
-            try:
-                frame = self.codec.message_frame(label, payload)
-            except EncodeError as error:
-                self._write(b"".join(frames))
-                raise PayloadError(f"role {self.sender}: cannot send {label} to {self.receiver}: "
-                                   f"{error}") from None
-            except BrokenPipeError:
-                raise self._peer_gone() from None
-            frames.append(frame)
-            size += len(frame)
-            if size >= _PIPE_SIZE:  # a batch no bigger than the pipe: the receiver starts on it sooner
-                self._write(b"".join(frames))
-                frames, size = [], 0
-        self._write(b"".join(frames))
+        size = sent = 0
+
+        def flush() -> None:
+            nonlocal frames, size, sent
+            self._write(b"".join(frames))
+            sent += len(frames)
+            frames, size = [], 0
+
+        try:
+            for label, payload in items:
+                slots_before = self._slots_used()
+                try:
+                    frame = self.codec.message_frame(label, payload)
+                except EncodeError as error:
+                    flush()
+                    raise PayloadError(f"role {self.sender}: cannot send {label} to {self.receiver}: "
+                                       f"{error}") from None
+                except BrokenPipeError:
+                    raise self._peer_gone() from None
+                frames.append(frame)
+                size += len(frame)
+                # A batch no bigger than the pipe (the receiver starts on it sooner); an array in a slot now.
+                if size >= _PIPE_SIZE or self._slots_used() != slots_before:
+                    flush()
+            flush()
+        except (AnodizeError, RoleStopped) as error:
+            error.sent_in_batch = sent  # type: ignore[union-attr]
+            raise
+
+    def _slots_used(self) -> int:
+        """How many arrays this channel has put in shared-memory slots so far."""
+        ring = self.codec.ring
+        return 0 if ring is None else ring.arrays_sent
 
     def _write(self, data: bytes) -> None:
         if not data:

@@ -338,6 +338,11 @@ class ArrayRing:
         weakref.finalize(memory, self._unclaim, segment, slot, token)  # keeps the segment mapped
         return array
 
+    @property
+    def arrays_sent(self) -> int:
+        """Arrays handed to the receiver through slots, over every generation (copied or in place)."""
+        return sum(segment.sent for segment in self._old) + (self._current.sent if self._current else 0)
+
     def owns(self, array: Any) -> bool:
         """Whether ``array`` is a claimed, unsent slot of the current ring."""
         return self._claim_of(array) is not None

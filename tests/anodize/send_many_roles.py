@@ -42,3 +42,30 @@ def batch_receiver(ep: Endpoint) -> None:
                     json.dump({"got": got, "batches": batches}, out)
                 return
             got.append(message.payload)
+
+
+ARRAYS = 12  # more than a ring's 8 slots
+
+
+def array_batch_sender(ep: Endpoint) -> None:
+    import numpy as np
+
+    ep.send_many("B", "frame", [np.full((300, 300), i, dtype=np.float64) for i in range(ARRAYS)])
+    ep.send("B", "fin")
+
+
+def array_receiver(ep: Endpoint) -> None:
+    firsts = []
+    while (message := ep.recv("A")).label == "frame":
+        firsts.append(float(message.payload[0, 0]))
+    with open(os.environ["SEND_MANY_OUT"], "w", encoding="utf-8") as out:
+        json.dump(firsts, out)
+
+
+def too_big_in_the_middle(ep: Endpoint) -> None:
+    ep.send_many("B", "s", ["a", "b", "x" * (65 * 2**20)])  # the third is over a frame's limit
+
+
+def string_receiver(ep: Endpoint) -> None:
+    while True:
+        ep.recv("A")

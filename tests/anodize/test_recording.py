@@ -203,10 +203,9 @@ def test_verify_names_the_channel_index_and_blame_of_a_mutation(
             first, second = messages[at[index]], messages[at[index + 1]]
             first[1], second[1] = second[1], first[1]  # the log times follow the messages
             messages[at[index]], messages[at[index + 1]] = second, first
-        else:  # a payload of another sort: a str where there was none or a non-str, else an int
-            _, payload = sent[channel][index]
-            wrong: object = 7 if isinstance(payload, str) else "not that sort"
-            spot[3] = codec_for_sort(None).encode(wrong)
+        else:  # a payload of no sort a label may carry (one label may carry several sorts on a channel)
+            string = codec_for_sort(None).ros
+            spot[3] = string.serialize(string.cls(data='{"$object": "nowhere:Nothing", "repr": "?"}'))
 
     _rewrite(folder / "run.mcap", folder / "mutated.mcap", change)
     with open_recording(folder / "mutated.mcap") as recording:
@@ -392,3 +391,100 @@ def test_a_killed_group_keeps_what_it_recorded_and_the_report_says_its_part_ende
         result = verify(recording, load_global(STREAM, "Stream"))
     assert result.conforms, result.text()
     assert result.channels["Talker->Listener"].messages == recording_roles.SENT_BEFORE_DYING
+
+
+# ---- the JSON of other sorts, and hostile recordings ---------------------------------------------
+
+_hashables = st.recursive(st.none() | st.booleans() | st.integers() | st.text(max_size=5) | st.binary(max_size=5),
+                          lambda inner: st.tuples(inner, inner) | st.frozensets(inner, max_size=3), max_leaves=6)
+_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=8) | st.binary(max_size=8)
+    | st.binary(max_size=8).map(bytearray) | st.complex_numbers(),
+    lambda inner: (st.lists(inner, max_size=3) | st.tuples(inner, inner) | st.sets(_hashables, max_size=3)
+                   | st.frozensets(_hashables, max_size=3) | st.dictionaries(_hashables, inner, max_size=3)),
+    max_leaves=12)
+
+
+def _same(a: object, b: object) -> bool:
+    """Equal, with the same types all the way down (nan equal to nan)."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, float):
+        return a == b or (a != a and b != b)
+    if isinstance(a, complex):
+        return _same(a.real, b.real) and _same(a.imag, b.imag)  # type: ignore[attr-defined]
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))  # type: ignore[arg-type]
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)  # type: ignore[attr-defined,index]
+    return a == b
+
+
+@settings(max_examples=examples(300), deadline=None)
+@given(value=_values)
+def test_every_builtin_value_reads_back_with_its_types(value: object) -> None:
+    assert _same(from_json(json.loads(json.dumps(to_json(value), allow_nan=False))), value)
+
+
+def test_a_recording_never_makes_a_module_be_imported(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    (tmp_path / "side_effect_module.py").write_text(
+        f"open({str(tmp_path / 'imported')!r}, 'w').close()\nclass Thing: pass\n", encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    value = from_json({"$dataclass": "side_effect_module:Thing", "fields": {}})
+    assert type(value).__name__ == "UnknownObject"
+    assert not (tmp_path / "imported").exists()
+
+
+def test_verify_of_a_recording_with_hostile_json_reports_it_without_a_traceback(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    global_type = load_global(BUYERS, "Buy")
+    _recorded_run(global_type, 7, tmp_path / "run.mcap")
+
+    def poison(messages: list[Any]) -> None:
+        messages[0][3] = codec_for_sort(None).ros.serialize(codec_for_sort(None).ros.cls(data="[" * 100_000))
+    _rewrite(tmp_path / "run.mcap", tmp_path / "deep.mcap", poison)
+    capsys.readouterr()
+    assert main(["verify", str(tmp_path / "deep.mcap")]) == 1
+    captured = capsys.readouterr()
+    assert "does not decode" in captured.out and "internal error" not in captured.err
+
+
+def test_sequence_numbers_that_wrap_after_32_bits_are_not_a_gap() -> None:
+    from anodize.recording.tap import SEQUENCE_WRAP
+    from anodize.recording.verify import _ChannelCheck
+
+    check = _ChannelCheck("Talker", "Listener", machines_of(load_global(STREAM, "Stream")))
+    check.sequence = SEQUENCE_WRAP - 2  # as after that many messages
+    assert [check._numbering(n) for n in (SEQUENCE_WRAP - 1, SEQUENCE_WRAP, 1, 2)] == ["", "", "", ""]
+    assert "missing" in check._numbering(4)
+
+
+def test_a_recorder_whose_writer_fails_never_blocks_its_senders(tmp_path: Path) -> None:
+    import threading
+
+    from anodize.recording.plan import record_plan
+    from anodize.recording.tap import Recorder
+
+    global_type = load_global(STREAM, "Stream")
+    machines = machines_of(global_type)
+    plan = record_plan(str(tmp_path / "parts"), machines, {"Talker": "t", "Listener": "l"}, {})
+    recorder = Recorder(plan, "t", 0, "Stream", {"Talker": machines["Talker"]})
+
+    def fail(*args: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    recorder._writer.add_message = fail  # type: ignore[method-assign]
+    done = threading.Event()
+
+    def send_a_lot() -> None:
+        for i in range(2000):
+            encoded = recorder.encode(("Talker", "Listener"), "number", i)
+            assert encoded is not None
+            recorder.queue(("Talker", "Listener"), encoded)
+        done.set()
+
+    threading.Thread(target=send_a_lot, daemon=True).start()
+    assert done.wait(10), "a sender waited for a writer that had died"
+    recorder.close()
+    assert "No space left on device" in recorder.broken
+    assert recorder.unrecorded

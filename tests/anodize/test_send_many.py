@@ -103,3 +103,53 @@ def test_recv_many_refuses_a_limit_below_one() -> None:
     system.group("b").role("B", receiver)
     report = system.run(timeout=5)
     assert isinstance(report.roles["B"].error, ValueError)
+
+
+FRAMES = sessiontypes.loads('type Array = "numpy:ndarray"\nglobal F(A, B) = mu t. A -> B : { frame(Array). t, fin }',
+                            "f.proto").globals["F"]
+STRINGS = sessiontypes.loads("global S(A, B) = mu t. A -> B : { s(str). t, fin }", "s.proto").globals["S"]
+
+
+def test_a_batch_of_more_arrays_than_the_ring_has_slots_goes_through(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SEND_MANY_OUT", str(tmp_path / "got.json"))
+    system = System(FRAMES, transport="process")
+    system.group("a").role("A", "send_many_roles:array_batch_sender")
+    system.group("b").role("B", "send_many_roles:array_receiver")
+    report = system.run(timeout=60)
+    assert report.ok, report.summary()
+    assert json.loads((tmp_path / "got.json").read_text()) == [float(i) for i in range(send_many_roles.ARRAYS)]
+
+
+def test_what_a_failed_batch_did_send_is_counted_and_recorded(tmp_path: Path) -> None:
+    system = System(STRINGS, transport="process")
+    system.group("a").role("A", "send_many_roles:too_big_in_the_middle")
+    system.group("b").role("B", "send_many_roles:string_receiver")
+    report = system.run(timeout=60, record=tmp_path / "r.mcap")
+    assert report.roles["A"].status == "failed" and "cannot send s to B" in str(report.roles["A"].error)
+    assert report.messages["A->B"] == 2
+    with open_recording(tmp_path / "r.mcap") as recording:
+        assert verify(recording, STRINGS).channels["A->B"].messages == 2
+
+
+def test_a_batch_that_reaches_a_parallel_composition_goes_on_in_its_branch() -> None:
+    forked = sessiontypes.loads("global G(A, B, C) = A -> B : n(int). (A -> B : n(int) || A -> C : m(int))",
+                                "g.proto").globals["G"]
+    got: list[object] = []
+
+    def a(ep: Any) -> None:
+        assert ep.send_many("B", "n", [1, 2]) == 2
+        ep.send("C", "m", 3)
+
+    def b(ep: Any) -> None:
+        got.extend(ep.recv("A").payload for _ in range(2))
+
+    def c(ep: Any) -> None:
+        got.append(ep.recv("A").payload)
+
+    system = System(forked)
+    system.group("a").role("A", a)
+    system.group("b").role("B", b).role("C", c)
+    report = system.run(timeout=10)
+    assert report.ok, report.summary()
+    assert sorted(got) == [1, 2, 3]
