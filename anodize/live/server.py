@@ -216,7 +216,9 @@ class LiveView:
 
     def _read_group(self, sock: socket.socket) -> None:
         group = None
-        with contextlib.suppress(OSError), sock:
+        # A frame the SDK refuses (a bad stamp) or stats that are not JSON end this group's feed,
+        # never the count of readers that end() waits for.
+        with contextlib.suppress(OSError, ValueError, OverflowError, TypeError), sock:
             while (frame := read_frame(sock)) is not None:
                 kind, index, stamp, data = frame
                 if kind == MESSAGE and 0 <= index < len(self._channels):

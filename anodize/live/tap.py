@@ -57,11 +57,12 @@ class LiveTap:
         self._closing = False
         self.shown = self.thinned = self.dropped = self.unencodable = 0
         self.inputs = [ClientInput(x, codec_for_sort(x.sort)) for x in plan.labels if x.sender in roles]
+        self._sock: socket.socket | None = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
-            self._sock: socket.socket | None = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
             self._sock.connect(plan.socket)
             send_frame(self._sock, HELLO, 0, 0, group.encode())
-        except OSError:
+        except OSError:  # not reachable (another host): the run goes on unshown, the report says so
+            self._sock.close()
             self._sock = None
             return
         for found in self.inputs:
