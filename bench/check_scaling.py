@@ -88,7 +88,7 @@ if str(IMPL) not in sys.path:
     sys.path.insert(0, str(IMPL))
 
 DEFAULT_SIZES = (100, 1_000, 10_000, 100_000)
-SHAPES = ("sequence", "choices", "deep-rec", "ref-dag", "ref-chain")
+SHAPES = ("sequence", "choices", "deep-rec", "ref-dag", "ref-chain", "routed")
 DEFAULT_JSON = REPO / "bench" / "results" / "check_scaling.json"
 
 # ---------------------------------------------------------------------------
@@ -180,12 +180,30 @@ def gen_ref_chain(n: int) -> tuple[str, list[str]]:
     return "\n".join(lines) + "\n", ["A", "B"]
 
 
+def gen_routed(n: int) -> tuple[str, list[str]]:
+    """The newer constructs chained (5 interactions a block): a choice among receivers that
+    the others learn from different peers, named payloads, and a multicast tail."""
+    roles = ["A", "B", "C"]
+    blocks, rest = divmod(n, 5)
+    out = ["global Routed =\n  mu t.\n"]
+    for i in range(blocks):
+        out.append(f"  A -> {{B : stop{i}. B -> C : s(n: int, tag: str). C -> A : ack(ok: bool). t,\n"
+                   f"    C : go{i}. C -> B : g(n: int, tag: str). B -> A : ack(ok: bool).\n")
+    for i in range(rest):
+        out.append(f"  A -> B, C : tail{i}(n: int, when: float).\n")
+    out.append("  t")
+    out.extend("\n  " + "}" * min(100, blocks - start) for start in range(0, blocks, 100))
+    out.append("\n")
+    return "".join(out), roles
+
+
 GENERATORS: dict[str, Callable[[int], tuple[str, list[str]]]] = {
     "sequence": gen_sequence,
     "choices": gen_choices,
     "deep-rec": gen_deep_rec,
     "ref-dag": gen_ref_dag,
     "ref-chain": gen_ref_chain,
+    "routed": gen_routed,
 }
 
 
