@@ -186,11 +186,9 @@ def gen_routed(n: int) -> tuple[str, list[str]]:
     roles = ["A", "B", "C"]
     blocks, rest = divmod(n, 5)
     out = ["global Routed =\n  mu t.\n"]
-    for i in range(blocks):
-        out.append(f"  A -> {{B : stop{i}. B -> C : s(n: int, tag: str). C -> A : ack(ok: bool). t,\n"
-                   f"    C : go{i}. C -> B : g(n: int, tag: str). B -> A : ack(ok: bool).\n")
-    for i in range(rest):
-        out.append(f"  A -> B, C : tail{i}(n: int, when: float).\n")
+    out.extend(f"  A -> {{B : stop{i}. B -> C : s(n: int, tag: str). C -> A : ack(ok: bool). t,\n"
+               f"    C : go{i}. C -> B : g(n: int, tag: str). B -> A : ack(ok: bool).\n" for i in range(blocks))
+    out.extend(f"  A -> B, C : tail{i}(n: int, when: float).\n" for i in range(rest))
     out.append("  t")
     out.extend("\n  " + "}" * min(100, blocks - start) for start in range(0, blocks, 100))
     out.append("\n")
