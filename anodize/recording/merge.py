@@ -64,22 +64,26 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
         schemas: dict[tuple[str, bytes], int] = {}
         known: dict[tuple[str, int, tuple[tuple[str, str], ...]], int] = {}  # a restarted group's channels again
         topics: dict[int, dict[str, Any]] = {}
-        for number, source in enumerate(sources):
-            for channel_id, (topic, type_name, definition, metadata) in source.channels.items():
-                schema = schemas.get((type_name, definition))
-                if schema is None:
-                    schema = schemas[(type_name, definition)] = writer.register_schema(type_name, "ros2msg", definition)
-                key = (topic, schema, tuple(sorted(metadata.items())))
-                if key in known:
-                    ids[(number, channel_id)] = known[key]
-                    continue
-                ids[(number, channel_id)] = new = known[key] = writer.register_channel(topic, "cdr", schema, metadata)
+
+        def channel_of(number: int, channel_id: int) -> int:
+            """The recording's channel of a part's, registered at its first message (one pass)."""
+            topic, type_name, definition, metadata = sources[number].channels[channel_id]
+            schema = schemas.get((type_name, definition))
+            if schema is None:
+                schema = schemas[(type_name, definition)] = writer.register_schema(type_name, "ros2msg", definition)
+            key = (topic, schema, tuple(sorted(metadata.items())))
+            new = known.get(key)
+            if new is None:
+                new = known[key] = writer.register_channel(topic, "cdr", schema, metadata)
                 topics[new] = {"name": topic, "type": type_name, "hash": metadata.get("topic_type_hash", ""),
                                "qos": metadata.get("offered_qos_profiles", ""), "count": 0}
+            ids[(number, channel_id)] = new
+            return new
+
         start, end = 2**63 - 1, 0
         for number, channel_id, log_time, publish_time, sequence, data in heapq.merge(
                 *(source.messages(n) for n, source in enumerate(sources)), key=lambda m: m[2]):
-            new = ids[(number, channel_id)]
+            new = ids.get((number, channel_id)) or channel_of(number, channel_id)
             writer.add_message(new, log_time, data, publish_time, sequence)
             topics[new]["count"] += 1
             start, end = min(start, log_time), max(end, log_time)
@@ -108,9 +112,6 @@ class _Part:
         self.notes: list[str] = []
         self.channels: dict[int, tuple[str, str, bytes, dict[str, str]]] = {}
         self._schemas: dict[int, tuple[str, bytes]] = {}
-        # A first pass for the channels: every part registers a channel before its first message.
-        for record in self._records():
-            self._note_definitions(record)
 
     def _records(self) -> Iterator[Any]:
         from mcap.stream_reader import StreamReader
@@ -124,6 +125,7 @@ class _Part:
                     self.notes.append(note)
 
     def _note_definitions(self, record: Any) -> None:
+        """Keep a schema or channel as it is read; a part's account of what it could not record."""
         from mcap.records import Channel, Metadata, Schema
 
         if isinstance(record, Schema):
@@ -137,9 +139,11 @@ class _Part:
     def messages(self, number: int) -> Iterator[tuple[int, int, int, int, int, bytes]]:
         from mcap.records import Message
 
-        for record in self._records():
+        for record in self._records():  # a part registers each channel before its first message
             if isinstance(record, Message):
                 yield number, record.channel_id, record.log_time, record.publish_time, record.sequence, record.data
+            else:
+                self._note_definitions(record)
 
 
 def _bag_metadata(file_name: str, topics: dict[int, dict[str, Any]], start: int, end: int,
