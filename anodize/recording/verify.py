@@ -24,7 +24,7 @@ from sessiontypes import GlobalType, Sort, StateMachine, Transition
 
 from ..errors import AnodizeError
 from ..ros import ros_type
-from ..session.payloads import validator_for
+from ..session.payloads import Validator, validator_for
 from .channel_view import ChannelView, Node, sort_key
 from .encoding import JSON_TYPE, SortCodec, UnknownObject, codec_for_sort
 from .plan import META, channel_labels
@@ -227,11 +227,31 @@ class _Codecs:
 
 def _fitting_sorts(message: RecordedMessage, taken: list[Transition], codecs: _Codecs
                    ) -> tuple[frozenset[str | None], str]:
-    """The sorts (keys) among ``taken``'s that the message's payload is of, and if none, why not."""
-    fits: set[str | None] = set()
+    """The sorts (keys) among ``taken``'s that the message's payload is of, and if none, why not.
+
+    The payload is decoded once, whatever the number of sorts its label may carry.
+    """
     reasons: list[str] = []
+    candidates: list[tuple[Sort | None, Validator | str]] = []
     for sort in {sort_key(t): t.sort for t in taken}.values():
-        reason = _payload_problem(message, sort, codecs)
+        recorded = message.topic.type_name
+        if recorded != codec_for_sort(sort).type_name:
+            reasons.append(f"payload of the wrong sort: recorded a {recorded}, the label carries {_sort_text(sort)}")
+            continue
+        try:  # before decoding: it imports the class a declared sort names (the protocol's, not the recording's)
+            candidates.append((sort, validator_for(sort)))
+        except AnodizeError as error:  # the sort's class cannot be imported here
+            candidates.append((sort, f"cannot check the payload: {error}"))
+    if not candidates:
+        return frozenset(), "; ".join(reasons)
+    try:
+        payload = codecs.decode(message.topic, message.data)
+    except (AnodizeError, ValueError, KeyError, TypeError) as error:
+        expected = " or ".join(_sort_text(sort) for sort, _ in candidates)
+        return frozenset(), "; ".join([*reasons, f"the payload does not decode as {expected}: {error}"])
+    fits: set[str | None] = set()
+    for sort, check in candidates:
+        reason = _payload_problem(payload, sort, check)
         if reason:
             reasons.append(reason)
         else:
@@ -239,27 +259,15 @@ def _fitting_sorts(message: RecordedMessage, taken: list[Transition], codecs: _C
     return frozenset(fits), "; ".join(reasons)
 
 
-def _payload_problem(message: RecordedMessage, sort: Sort | None, codecs: _Codecs) -> str:
-    """Why the message's payload is not of ``sort`` ("" if it is)."""
-    expected = codec_for_sort(sort)
-    recorded = message.topic.type_name
-    if recorded != expected.type_name:
-        return f"payload of the wrong sort: recorded a {recorded}, the label carries {_sort_text(sort)}"
-    try:  # first: it imports the class a declared sort names (the protocol's, not the recording's)
-        check = validator_for(sort)
-    except AnodizeError as error:  # the sort's class cannot be imported here
-        check = None
-        cannot_check = f"cannot check the payload: {error}"
-    try:
-        payload = codecs.decode(message.topic, message.data)
-    except (AnodizeError, ValueError, KeyError, TypeError) as error:
-        return f"the payload does not decode as {_sort_text(sort)}: {error}"
+def _payload_problem(payload: object, sort: Sort | None, check: Validator | str) -> str:
+    """Why a decoded payload is not of ``sort`` ("" if it is); ``check`` is the sort's validator,
+    or why there is none."""
     if isinstance(payload, UnknownObject):
         target = sort.target if sort is not None else None
         return "" if payload.class_name == target else (
             f"payload of the wrong sort: a recorded {payload.class_name}, the label carries {_sort_text(sort)}")
-    if check is None:
-        return cannot_check
+    if isinstance(check, str):
+        return check
     reason = check(payload)
     return f"payload of the wrong sort: {reason}" if reason else ""
 
