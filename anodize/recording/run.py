@@ -12,10 +12,10 @@ from sessiontypes import GlobalType
 from .merge import merge_parts
 from .plan import RecordPlan
 
-__all__ = ["Recording"]
+__all__ = ["RecordedRun"]
 
 
-class Recording:
+class RecordedRun:
     """The recording ``target`` of one run, made by the groups following ``plan``."""
 
     def __init__(self, target: str | os.PathLike[str], plan: RecordPlan) -> None:

@@ -24,7 +24,7 @@ from sessiontypes.graph import communication_graph
 from ..errors import AnodizeError, ConfigurationError
 from ..live.plan import LivePlan, live_plan
 from ..recording.plan import RecordPlan, record_plan
-from ..recording.run import Recording
+from ..recording.run import RecordedRun
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
 from .report import GroupStatus, RunReport
 from .supervisor import Elsewhere, Supervisor
@@ -200,7 +200,7 @@ class System:
             raise AnodizeError(f"global {gt.name}: roles {', '.join(missing)} are in no group")
         machines = {role: gt.project(role).fsm() for role in gt.roles}
         channels = tuple(communication_graph(gt).edges)
-        recording = Recording(record, self._record_plan(record, machines, channels)) if record is not None else None
+        recording = RecordedRun(record, self._record_plan(record, machines, channels)) if record is not None else None
         shown = None
         if live is not None:
             shown = live_plan(live.socket_path, machines, dict(self._placed), self._topic_names(machines, channels))
@@ -261,7 +261,7 @@ class System:
 
     def _run_dds(self, machines: dict[str, StateMachine], channels: tuple[tuple[str, str], ...],
                  timeout: float | None, grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None,
-                 liveness: float, host: str | None, wait: float, recording: Recording | None,
+                 liveness: float, host: str | None, wait: float, recording: RecordedRun | None,
                  shown: LivePlan | None = None) -> RunReport:
         from ..transport.dds import DOMAIN_ENV, DdsSettings  # only a DDS run loads Cyclone DDS
         from .ddsrunner import DdsRunner
@@ -322,7 +322,7 @@ def _with_live(report: RunReport, live: LiveView | None) -> RunReport:
     return dataclasses.replace(report, notes=(*report.notes, *live.end()))
 
 
-def _with_recording(report: RunReport, recording: Recording | None, gt: GlobalType, transport: str,
+def _with_recording(report: RunReport, recording: RecordedRun | None, gt: GlobalType, transport: str,
                     groups: Mapping[str, Group]) -> RunReport:
     if recording is None:
         return report
