@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import os
 import platform
 import statistics
@@ -56,9 +55,11 @@ REPO = BENCH.parent
 # This file is called tinman.py: with bench/ on the path, 'import tinman' would import it.
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != BENCH]
 sys.path.insert(0, str(REPO))
+sys.path.append(str(BENCH))  # last: bench's shared helpers (runs.py), after the real tinman package
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
+from runs import write_results  # noqa: E402
 
 from tinman.ate import evaluate_ate  # noqa: E402
 from tinman.cameras import LiveCamera  # noqa: E402
@@ -285,9 +286,7 @@ def main(argv: list[str] | None = None) -> int:
                    for world, result in results.items()},
         "ablations": {name: {"world": world, **summary} for name, (world, summary) in ablations.items()},
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    print(f"\nwrote {args.json} ({time.monotonic() - started:.0f} s)")
+    write_results(args.json, document, started)
     return 0
 
 

@@ -64,17 +64,13 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import multiprocessing
 import os
 import platform
-import shutil
 import statistics
 import sys
-import tempfile
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -86,6 +82,7 @@ for path in (str(REPO), str(BENCH)):  # bench/ too: group processes import trans
 
 import numpy as np  # noqa: E402
 import transport_roles as roles  # noqa: E402
+from runs import bench_env, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import RunReport, System  # noqa: E402
@@ -110,23 +107,6 @@ GLOBALS = _protocols()
 
 
 # ---- running one measurement ----------------------------------------------------------------
-@contextmanager
-def bench_env(**settings: Any) -> Iterator[Callable[[str], dict[str, Any]]]:
-    """Settings for the roles in ``$ANODIZE_BENCH``; yields a reader of what they reported."""
-    out = Path(tempfile.mkdtemp(prefix="anodize-bench-"))
-    os.environ[roles.ENV] = json.dumps({"out": str(out), **settings})
-
-    def result(name: str) -> dict[str, Any]:
-        path = out / f"{name}.json"
-        if not path.exists():
-            raise RuntimeError(f"the run produced no {name}.json")
-        return json.loads(path.read_text(encoding="utf-8"))  # type: ignore[no-any-return]
-
-    try:
-        yield result
-    finally:
-        os.environ.pop(roles.ENV, None)
-        shutil.rmtree(out, ignore_errors=True)
 
 
 def run_system(global_name: str, groups: dict[str, tuple[int | None, dict[str, Callable[..., None]]]],
@@ -160,7 +140,7 @@ def run_processes(targets: list[tuple[Callable[..., None], tuple[Any, ...]]], ti
 
 
 def frames_anodize(n: int, timeout: float, produce: bool = False, monitors: bool = True) -> dict[str, Any]:
-    with bench_env(frames=n, produce=produce) as result:
+    with bench_env(roles.ENV, frames=n, produce=produce) as (_, result):
         run_system("Frames", {"camera": (None, {"A": roles.frame_source}),
                               "viewer": (None, {"B": roles.frame_sink})}, timeout, monitors)
         return _frames_checked(result("frames"), n)
@@ -169,7 +149,7 @@ def frames_anodize(n: int, timeout: float, produce: bool = False, monitors: bool
 def frames_queue(n: int, timeout: float, produce: bool = False) -> dict[str, Any]:
     ctx = multiprocessing.get_context("spawn")
     queue, barrier = ctx.Queue(), ctx.Barrier(2)
-    with bench_env(produce=produce) as result:
+    with bench_env(roles.ENV, produce=produce) as (_, result):
         run_processes([(roles.queue_frame_source, (queue, barrier, n)),
                        (roles.queue_frame_sink, (queue, barrier, n))], timeout)
         return _frames_checked(result("frames"), n)
@@ -182,7 +162,7 @@ def _frames_checked(found: dict[str, Any], n: int) -> dict[str, Any]:
 
 
 def pingpong_anodize(rounds: int, warmup: int, timeout: float) -> dict[str, Any]:
-    with bench_env(rounds=rounds, warmup=warmup) as result:
+    with bench_env(roles.ENV, rounds=rounds, warmup=warmup) as (_, result):
         run_system("PingPong", {"client": (None, {"A": roles.ping_client}),
                                 "server": (None, {"B": roles.ping_server})}, timeout)
         return result("pingpong")
@@ -192,7 +172,7 @@ def pingpong_pipe(rounds: int, warmup: int, timeout: float) -> dict[str, Any]:
     ctx = multiprocessing.get_context("spawn")
     client_end, server_end = ctx.Pipe()
     barrier = ctx.Barrier(2)
-    with bench_env() as result:
+    with bench_env(roles.ENV) as (_, result):
         run_processes([(roles.pipe_client, (client_end, barrier, warmup, rounds)),
                        (roles.pipe_server, (server_end, barrier))], timeout)
         return result("pingpong")
@@ -200,7 +180,7 @@ def pingpong_pipe(rounds: int, warmup: int, timeout: float) -> dict[str, Any]:
 
 def jitter_run(seconds: float, burn: bool) -> dict[str, Any]:
     """One control loop run; the burner group burns or idles. Bounded by run(timeout=...)."""
-    with bench_env(jitter_seconds=seconds, burners=BURNERS, burn=burn) as result:
+    with bench_env(roles.ENV, jitter_seconds=seconds, burners=BURNERS, burn=burn) as (_, result):
         report = run_system("Jitter", {"control": (90, {"C": roles.control_loop}),
                                        "burner": (10, dict.fromkeys(BURNERS, roles.burner))},
                             timeout=seconds + 30)
@@ -367,9 +347,7 @@ def main(argv: list[str] | None = None) -> int:
         "round_trip": pingpong,
         "jitter": jitter,
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    print(f"\nwrote {args.json} ({time.monotonic() - started:.0f} s)")
+    write_results(args.json, document, started)
     return 0
 
 
