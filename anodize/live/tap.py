@@ -20,7 +20,6 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterable
-from queue import Empty, SimpleQueue
 
 from ..isolation.sched import lower_thread_priority
 from ..recording.encoding import SortCodec, codec_for_sort
@@ -79,10 +78,7 @@ class LiveTap:
             channel = queues.get(pair)
             if channel is None:
                 continue
-            if isinstance(channel, SimpleQueue) and end == "send":  # transports tell queues by their type
-                queues[pair] = _TappedQueue.replacing(channel, self, pair)
-            else:
-                queues[pair] = LiveChannel(channel, self, pair, tap_puts=(end == "send"))
+            queues[pair] = LiveChannel(channel, self, pair, tap_puts=(end == "send"))
 
     def offer(self, pair: tuple[str, str], label: str, payload: object) -> None:
         """A message of channel ``pair`` leaving (or arriving): shown unless it is thinned."""
@@ -179,26 +175,3 @@ class LiveChannel(TappedChannel):
     def leaving(self, label: str, payload: object) -> object:
         self._tap.offer(self._pair, label, payload)
         return None
-
-
-class _TappedQueue(SimpleQueue):  # type: ignore[type-arg]
-    """A queue between two roles of one group whose messages are also shown live; still a
-    SimpleQueue, which is how the process transport knows to wake its receiver with STOP."""
-
-    _tap: LiveTap
-    _pair: tuple[str, str]
-
-    @classmethod
-    def replacing(cls, old: SimpleQueue[object], tap: LiveTap, pair: tuple[str, str]) -> _TappedQueue:
-        """The queue that takes ``old``'s place, with what ``old`` holds (nothing runs yet)."""
-        new = cls()
-        new._tap, new._pair = tap, pair
-        with contextlib.suppress(Empty):
-            while True:
-                new.put(old.get_nowait())
-        return new
-
-    def put(self, item: object, block: bool = True, timeout: float | None = None) -> None:
-        if type(item) is tuple:  # messages are plain tuples, signals are not
-            self._tap.offer(self._pair, item[0], item[1])
-        super().put(item, block, timeout)

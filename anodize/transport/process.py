@@ -491,8 +491,11 @@ class ProcessNetwork(InprocNetwork):
         for role in self.local_roles:
             self.stop_event_for(role).set()
         os.eventfd_write(self.wake_fd, 1)  # wakes pipe readers; never drained: stop is final
+        local = self.local_roles
         for (sender, receiver), channel in self.queues.items():
-            if isinstance(channel, SimpleQueue):
+            # Channels inside this process, whatever wraps them (a bounded queue, a tap), and the
+            # queues standing for peers that are not there; pipe ends are woken by wake_fd.
+            if (sender in local and receiver in local) or isinstance(channel, SimpleQueue):
                 channel.put(STOP)
                 self.ring(receiver, sender)
 

@@ -43,3 +43,13 @@ def failing_consumer(ep: Endpoint) -> None:
     ep.recv("P")
     ep.sleep(0.5)
     raise RuntimeError("the consumer gives up")
+
+
+def silent_producer(ep: Endpoint) -> None:
+    """Send nothing: wait for the run to stop."""
+    ep.sleep(3600)
+
+
+def waiting_consumer(ep: Endpoint) -> None:
+    """Wait for a number that never comes."""
+    ep.recv("P")

@@ -70,3 +70,15 @@ def test_capacities_are_checked_against_the_protocol() -> None:
         stream("inproc", {"C->P": 2})
     with pytest.raises(ConfigurationError, match="expected a whole number of messages >= 1, got 0"):
         stream("inproc", {"P->C": 0})
+
+
+@pytest.mark.parametrize("capacities", [None, {"P->C": 2}])
+def test_a_receiver_waiting_on_its_groups_own_channel_is_stopped_by_the_timeout(
+        capacities: dict[str, int] | None) -> None:
+    system = anodize.System(STREAM, transport="process", capacities=capacities)
+    system.group("both").role("P", "capacity_roles:silent_producer").role("C", "capacity_roles:waiting_consumer")
+    report = system.run(timeout=1.0, grace=5.0)
+    consumer = report.roles["C"]
+    assert consumer.status is RoleStatus.STOPPED, report.summary()
+    # Woken by the stop, not killed with its group after the grace period ("its process ended").
+    assert "blocked in state 0 waiting for ?P" in report.summary(), report.summary()
