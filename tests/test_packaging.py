@@ -267,6 +267,9 @@ def test_wheel_installs_and_runs_outside_the_checkout(installed: Installed) -> N
         "print(json.dumps({m.__name__: m.__file__ for m in (anodize, sessiontypes, tinman)}"
         " | {'pytest': importlib.util.find_spec('pytest') is not None}))")], work))
     assert located.pop("pytest") is False
+    # The compiled hot path was built into the wheel wherever the checkout's could be built.
+    compiled = _ok([python, "-c", "from anodize.transport import frames; print(frames.COMPILED)"], work)
+    assert compiled.strip() == str(importlib.util.find_spec("anodize.transport._frames") is not None)
     assert located == {package: str(installed.site_packages / package / "__init__.py") for package in PACKAGES}
 
     anodize = installed.command("anodize")

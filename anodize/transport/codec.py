@@ -41,6 +41,7 @@ from enum import IntEnum
 from typing import TYPE_CHECKING, Any
 
 from ..errors import AnodizeError
+from .frames import decode_run as _decode_run
 
 if TYPE_CHECKING:
     from ..ros import RosType
@@ -226,33 +227,14 @@ class Codec:
         ``((label, payload), frame size)``; stop at the first other or incomplete frame.
 
         One loop for a run of small messages costs far less per message than a call per
-        frame. Anything else (another payload, a failure frame, a malformed or unknown
-        label) is left for :meth:`decode_body`, so every error is still reported there.
+        frame, and the compiled loop (:mod:`anodize.transport.frames`) far less again. Anything else
+        (another payload, a failure frame, a malformed or unknown label) is left for
+        :meth:`decode_body`, so every error is still reported there.
 
         Returns:
             The offset after the last frame decoded.
         """
-        names = self._label_names
-        size = len(buffer)
-        unpack_length, unpack_int = HEADER.unpack_from, _I64.unpack_from
-        while size - at >= 4:
-            (length,) = unpack_length(buffer, at)
-            end = at + 4 + length
-            if end > size or length < 6 or buffer[at + 4] != FrameKind.MESSAGE:  # 6: kind, label size, tag
-                break
-            (label_length,) = _U32.unpack_from(buffer, at + 5)
-            start = at + 9 + label_length
-            label = names.get(bytes(buffer[at + 9:start]))
-            if label is None:
-                break
-            if end == start + 1 and buffer[start] == Tag.NONE:
-                into.append(((label, None), 4 + length))
-            elif end == start + 9 and buffer[start] == Tag.INT:
-                into.append(((label, unpack_int(buffer, start + 1)[0]), 4 + length))
-            else:
-                break
-            at = end
-        return at
+        return _decode_run(buffer, at, self._label_names, into)
 
     # ---- encoding ----------------------------------------------------------------------
     def _encode(self, value: Any, out: io.BytesIO, depth: int) -> None:

@@ -69,3 +69,14 @@ def too_big_in_the_middle(ep: Endpoint) -> None:
 def string_receiver(ep: Endpoint) -> None:
     while True:
         ep.recv("A")
+
+
+def frames_receiver(ep: Endpoint) -> None:
+    """As ``counting_receiver``, noting also which decoder this process uses (compiled or not)."""
+    from anodize.transport import frames
+
+    got = []
+    while (message := ep.recv("A")).label == "num":
+        got.append(message.payload)
+    with open(os.environ["SEND_MANY_OUT"], "w", encoding="utf-8") as out:
+        json.dump({"compiled": frames.COMPILED, "got": got}, out)

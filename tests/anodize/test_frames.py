@@ -1,0 +1,168 @@
+"""The receiver's hot loop: the compiled ``decode_run`` against its pure-Python reference.
+
+Both must take exactly the same frames from any bytes (a peer's bytes are hostile), and a
+run between processes must work on either: ``ANODIZE_PURE_PYTHON=1`` makes a group's
+process use the reference.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import sysconfig
+from collections import deque
+from pathlib import Path
+
+import pytest
+from budget import examples
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+import send_many_roles
+
+import sessiontypes
+from anodize import System
+from anodize.transport import frames
+from anodize.transport.codec import HEADER, Codec, FrameKind, Tag
+
+try:
+    from anodize.transport._frames import decode_run as compiled_run
+except ImportError:
+    compiled_run = None
+
+CAN_BUILD = shutil.which("cc") is not None and Path(sysconfig.get_paths()["include"], "Python.h").exists()
+needs_compiled = pytest.mark.skipif(compiled_run is None, reason="anodize was installed without a C compiler "
+                                    "or Python's headers, so the compiled decoder was not built")
+NAMES = {b"num": "num", b"stop": "stop", "é".encode(): "é"}
+
+STREAM = sessiontypes.loads("global S(A, B) = mu t. A -> B : { num(int). t, fin }", "s.proto").globals["S"]
+
+
+def test_the_compiled_loop_is_built_wherever_it_can_be() -> None:
+    """The extension is optional only for machines without a compiler: here it must be there."""
+    if not CAN_BUILD:
+        pytest.skip("this machine has no C compiler or no Python headers: the extension is optional there")
+    assert compiled_run is not None
+    assert (os.environ.get("ANODIZE_PURE_PYTHON", "") in ("", "0")) == frames.COMPILED
+
+
+def test_the_reference_shares_the_codecs_constants() -> None:
+    assert (frames._MESSAGE, frames._NONE, frames._INT) == (FrameKind.MESSAGE, Tag.NONE, Tag.INT)
+
+
+small = st.tuples(st.sampled_from(["num", "stop", "é", "unknown"]),
+                  st.none() | st.integers(-2**63, 2**63 - 1)).map(lambda lp: Codec().message_frame(*lp))
+other = st.tuples(st.sampled_from(["num", "stop"]), st.floats() | st.text(max_size=3) | st.integers(2**63, 2**70)
+                  ).map(lambda lp: Codec().message_frame(*lp))
+garbage = st.one_of(
+    st.binary(max_size=16).map(lambda b: HEADER.pack(len(b)) + b),  # any body, framed
+    st.binary(max_size=16),  # not even framed
+    # A message frame whose label length runs past the frame, or up to its very end.
+    st.tuples(st.integers(0, 2**32 - 1), st.binary(max_size=10)).map(
+        lambda nb: HEADER.pack(5 + len(nb[1])) + b"M" + nb[0].to_bytes(4, "little") + nb[1]),
+    st.text(max_size=8).map(Codec.failure_frame),
+)
+
+
+@st.composite
+def crafted(draw: st.DrawFn) -> bytes:
+    """A message frame of a known label, with any tag and payload, and lengths a little off."""
+    label = draw(st.sampled_from(list(NAMES)))
+    body = (b"M" + ((len(label) + draw(st.sampled_from([0, 0, 0, -1, 1, 2**31]))) % 2**32).to_bytes(4, "little")
+            + label + bytes([draw(st.sampled_from([Tag.NONE, Tag.INT, Tag.TRUE, Tag.FLOAT]) | st.integers(0, 255))])
+            + draw(st.sampled_from([0, 1, 7, 8, 9]).flatmap(lambda n: st.binary(min_size=n, max_size=n))))
+    return HEADER.pack(max(0, len(body) + draw(st.sampled_from([0, 0, 0, -1, 1])))) + body
+
+
+@needs_compiled
+@settings(max_examples=examples(300))
+@given(stream=st.lists(st.one_of(small, small, other, garbage, crafted()), max_size=20).map(b"".join),
+       cut=st.integers(0, 12))
+def test_the_compiled_loop_takes_what_the_reference_takes(stream: bytes, cut: int) -> None:
+    buffer = bytearray(stream[:max(0, len(stream) - cut)])
+    assert compiled_run is not None
+    for start in range(len(buffer) + 1):  # a run stops at the first frame it leaves: start at each byte
+        expected: deque[tuple[object, int]] = deque()
+        got: deque[tuple[object, int]] = deque()
+        assert compiled_run(buffer, start, NAMES, got) == frames.decode_run_python(buffer, start, NAMES, expected)
+        assert list(got) == list(expected)
+        for (mine, _), (theirs, _) in zip(got, expected, strict=True):  # the same types, not just equal values
+            assert [type(x) for x in mine] == [type(x) for x in theirs]  # type: ignore[attr-defined]
+
+
+def _frame(label: bytes, tag: int, payload: bytes = b"", label_size: int | None = None, extra: int = 0) -> bytes:
+    body = b"M" + (len(label) if label_size is None else label_size).to_bytes(4, "little") + label + bytes([tag])
+    return HEADER.pack(len(body + payload) + extra) + body + payload
+
+
+EDGES = {  # frames one byte or one tag away from those a run takes
+    "none": _frame(b"num", Tag.NONE), "int": _frame(b"num", Tag.INT, (-5).to_bytes(8, "little", signed=True)),
+    "true": _frame(b"num", Tag.TRUE), "none and a byte": _frame(b"num", Tag.NONE, b"\0"),
+    "int of 7 bytes": _frame(b"num", Tag.INT, b"\1" * 7), "int of 9 bytes": _frame(b"num", Tag.INT, b"\1" * 9),
+    "float": _frame(b"num", Tag.FLOAT, b"\0" * 8), "unknown label": _frame(b"nun", Tag.NONE),
+    "label past the frame": _frame(b"num", Tag.NONE, label_size=5),
+    "label of 2**32-1": _frame(b"num", Tag.NONE, label_size=2**32 - 1),
+    "length one short": _frame(b"num", Tag.NONE, extra=-1), "length one long": _frame(b"num", Tag.NONE, extra=1),
+    "failure": Codec.failure_frame("x"), "empty label": _frame(b"", Tag.NONE),
+}
+
+
+@needs_compiled
+@pytest.mark.parametrize("edge", EDGES)
+def test_the_compiled_loop_treats_each_edge_as_the_reference_does(edge: str) -> None:
+    small_one = Codec().message_frame("stop", 7)
+    assert compiled_run is not None
+    for buffer in (bytearray(EDGES[edge]), bytearray(small_one + EDGES[edge] + small_one)):
+        expected: deque[tuple[object, int]] = deque()
+        got: deque[tuple[object, int]] = deque()
+        names = {**NAMES, b"": ""}
+        assert compiled_run(buffer, 0, names, got) == frames.decode_run_python(buffer, 0, names, expected)
+        assert list(got) == list(expected)
+
+
+@needs_compiled
+def test_the_compiled_loop_refuses_what_the_reference_refuses() -> None:
+    assert compiled_run is not None
+    for run in (compiled_run, frames.decode_run_python):
+        with pytest.raises(ValueError, match="negative"):
+            run(bytearray(b"\0" * 8), -1, NAMES, deque())
+    with pytest.raises(TypeError):
+        compiled_run(bytearray(), 0, [], deque())  # names must be a dict
+    with pytest.raises(TypeError):
+        compiled_run("not bytes", 0, NAMES, deque())
+
+
+@needs_compiled
+def test_a_failing_append_stops_the_compiled_loop_with_its_error() -> None:
+    class Full(deque):  # type: ignore[type-arg]
+        def append(self, item: object) -> None:
+            raise OverflowError("full")
+
+    frame = Codec().message_frame("num", 1)
+    assert compiled_run is not None
+    with pytest.raises(OverflowError, match="full"):
+        compiled_run(bytearray(frame * 3), 0, NAMES, Full())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("pure", [False, True])
+def test_a_stream_between_processes_arrives_whole_with_either_decoder(
+        pure: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    if not pure and not frames.COMPILED:
+        pytest.skip("the compiled decoder was not built here (no C compiler or no Python headers)")
+    if pure:
+        monkeypatch.setenv("ANODIZE_PURE_PYTHON", "1")
+    else:
+        monkeypatch.delenv("ANODIZE_PURE_PYTHON", raising=False)
+    monkeypatch.setenv("SEND_MANY_OUT", str(tmp_path / "got.json"))
+    system = System(STREAM, transport="process")
+    system.group("a").role("A", "send_many_roles:batch_sender")  # one write for many frames: runs to decode
+    system.group("b").role("B", "send_many_roles:frames_receiver")
+    report = system.run(timeout=60)
+    assert report.ok, report.summary()
+    result = json.loads((tmp_path / "got.json").read_text())
+    assert result == {"compiled": not pure, "got": list(range(send_many_roles.COUNT))}
