@@ -38,6 +38,9 @@ _READ_SIZE = 64 * 1024
 _PIPE_SIZE = 1 << 20  # ask the kernel for 1 MiB pipes: fewer blocked senders when streaming
 BRIDGE_MESSAGES = 256  # a bridged channel's queue holds at most this many messages...
 BRIDGE_BYTES = 4 * 2**20  # ...and this many bytes of frames: then the pipe fills and its sender blocks
+# A failure frame stays within PIPE_BUF (4096 bytes; 4 UTF-8 bytes a character at most), so it is
+# written whole even beside the sender's own unlocked small frames.
+_CAUSE_CHARS = (select.PIPE_BUF - 16) // 4
 _EOF_CAUSE_WAIT = 2.0  # seconds to wait for the supervisor's word on why a peer's process ended
 
 
@@ -81,10 +84,20 @@ class PipeSender:
             except BrokenPipeError:  # waiting for a shared-memory slot, the receiver went away
                 raise self._peer_gone() from None
         elif isinstance(item, PeerFailure):
-            frame = Codec.failure_frame(item.cause)
+            frame = Codec.failure_frame(item.cause[:_CAUSE_CHARS])
         else:
             return  # STOP is local to each process
-        self._write(frame)
+        if len(frame) <= select.PIPE_BUF:
+            # One write of at most PIPE_BUF bytes to a pipe is whole and never interleaved with
+            # another writer's (POSIX): no lock against put_failure, whose frames are as small.
+            try:
+                written = os.write(self.fd, frame)
+                if written != len(frame):  # not on a blocking pipe; kept whole should it ever happen
+                    _write_all(self.fd, frame[written:])
+            except OSError:
+                raise self._peer_gone() from None
+        else:
+            self._write(frame)
 
     def put_many(self, items: list[tuple[str, object]]) -> None:
         """Send several ``(label, payload)`` with one write (in pieces of at most 1 MiB).
@@ -157,7 +170,7 @@ class PipeSender:
         """Best effort, from another thread: tell the receiver this sender failed."""
         if self._lock.acquire(timeout=1.0):  # a writer blocked on a full pipe must not block us
             try:
-                _write_all(self.fd, Codec.failure_frame(cause))
+                _write_all(self.fd, Codec.failure_frame(cause[:_CAUSE_CHARS]))
             except OSError:
                 pass
             finally:
@@ -222,6 +235,9 @@ class PipeReceiver:
         Raises:
             queue.Empty: nothing arrived within ``timeout`` seconds.
         """
+        if self._ready and not self._pushed:  # the commonest case first: a message decoded already
+            item, self.frame_size = self._ready.popleft()
+            return item
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             if self._pushed:
