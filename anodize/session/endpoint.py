@@ -12,11 +12,12 @@ part in.
 
 from __future__ import annotations
 
+import os
 import queue
 import threading
 import time
 from collections.abc import Callable, Collection, Iterable
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, NoReturn
 
 from sessiontypes import StateMachine
 
@@ -38,8 +39,34 @@ class Message(NamedTuple):
     payload: Any = None
 
 
-class Endpoint:
-    """One role's (or one parallel branch's) view of the session."""
+def _compiled_core() -> type | None:
+    """The compiled core (``_endpoint_core.c``), unless it was not built or ANODIZE_PURE_PYTHON is set."""
+    if os.environ.get("ANODIZE_PURE_PYTHON", "") not in ("", "0"):
+        return None
+    try:
+        from ._endpoint_core import EndpointCore, configure
+    except ImportError:  # built without a C compiler: the Python core does the work
+        return None
+    configure(Message)
+    return EndpointCore
+
+
+COMPILED_CORE = _compiled_core()
+if TYPE_CHECKING:
+    _Core = object
+else:
+    _Core = COMPILED_CORE or object
+
+
+class Endpoint(_Core):
+    """One role's (or one parallel branch's) view of the session.
+
+    ``send`` and ``recv`` are written here in Python, the reference. Where the compiled core
+    was built (:data:`COMPILED_CORE`) the class inherits it and uses its ``send`` and ``recv``
+    instead: they take the commonest path (no parallel branches, an allowed message of an
+    exact type, no failure, no timeout) in C and hand everything else to these
+    (``_send_python``, ``_recv_python``), so both behave the same.
+    """
 
     def __init__(self, role: str, protocol: str, machine: StateMachine, network: Network,
                  monitored: bool = True, peers: tuple[set[str], set[str]] | None = None) -> None:
@@ -93,8 +120,8 @@ class Endpoint:
         if self._network.alarm:
             self._refuse_if_down(to, label)
         out = self._out.get(to)
-        if out is None:  # only reachable without a monitor
-            raise AnodizeError(f"role {self.role} has no channel to {to}")
+        if out is None:
+            self._no_channel(to)
         channel, doorbell = out
         # A plain tuple: the garbage collector stops tracking those, not tuple subclasses,
         # and a backlog of tracked objects slows every collection.
@@ -152,8 +179,8 @@ class Endpoint:
         if self._network.alarm:
             self._refuse_if_down(to, label)
         out = self._out.get(to)
-        if out is None:  # only reachable without a monitor
-            raise AnodizeError(f"role {self.role} has no channel to {to}")
+        if out is None:
+            self._no_channel(to)
         channel, doorbell = out
         put_many = getattr(channel, "put_many", None)
         try:
@@ -171,6 +198,10 @@ class Endpoint:
         if doorbell is not None:
             for _ in items:  # one ring per message, as send() rings
                 doorbell.put(self.role)
+
+    def _no_channel(self, to: str) -> NoReturn:
+        """Raise for a send to a role this one has no channel to (only reachable without a monitor)."""
+        raise AnodizeError(f"role {self.role} has no channel to {to}")
 
     def _refuse_if_down(self, to: str, label: str) -> None:
         """Raise if ``to`` has failed or this role must stop (checked only once an alarm is up)."""
@@ -469,7 +500,7 @@ class Endpoint:
             branches = []
             for machine in self._machine.forks[fork_state]:
                 sends_to, receives_from = peers_of(machine)
-                branch = Endpoint(self.role, self.protocol, machine, self._network,
+                branch = type(self)(self.role, self.protocol, machine, self._network,
                                   self._monitor is not None, (sends_to, receives_from))
                 branch._doorbell = self._doorbell
                 branches.append(branch)
@@ -508,6 +539,16 @@ class Endpoint:
         for branch in self._branches:
             found.update(branch._all_in())
         return found
+
+
+    # The Python core's send and recv, by these names too: the compiled core hands them what
+    # it does not take itself.
+    _send_python = send
+    _recv_python = recv
+
+
+if COMPILED_CORE is not None:  # the compiled core's send and recv (same calls, same errors) take over
+    del Endpoint.send, Endpoint.recv
 
 
 def peers_of(machine: StateMachine) -> tuple[set[str], set[str]]:

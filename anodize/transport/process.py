@@ -253,8 +253,10 @@ class PipeReceiver:
                     return STOP  # the sender's group ended because the run is stopping
                 return PeerFailure(self.sender, cause)
             failed = self.network.failed.get(self.sender)
-            if failed is not None and not self._fill(0):  # all it wrote before failing is read
-                return PeerFailure(self.sender, failed)
+            if failed is not None:
+                if not self._fill(0):  # all it wrote before failing is read
+                    return PeerFailure(self.sender, failed)
+                continue  # decode what that read brought before waiting for more
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
             if not self._fill(left) and deadline is not None and time.monotonic() >= deadline:
                 raise Empty

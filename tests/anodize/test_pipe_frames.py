@@ -66,3 +66,22 @@ def test_a_frame_larger_than_pipe_buf_arrives_whole_beside_small_ones() -> None:
     writer.start()
     assert [receiver.get(timeout=10) for _ in items] == items
     writer.join()
+
+
+def test_a_receiver_told_its_sender_failed_still_takes_all_the_pipe_holds_first() -> None:
+    """Messages wait in the pipe, unread, when the supervisor says the sender failed (its write
+    end still open, as a forked child of its group may hold it): every one comes out, then the
+    failure. The read that finds them must not be followed by a wait for more, which would
+    never end here."""
+    sender, receiver = _ends()
+    count = 1_000  # about 21 KiB of frames: one read takes them all
+    for number in range(count):
+        sender.put(("num", number))
+    receiver.network.note_failed("A", "crashed")
+    got: list[object] = []
+    taking = threading.Thread(target=lambda: got.extend(receiver.get() for _ in range(count + 1)), daemon=True)
+    taking.start()
+    taking.join(timeout=30)  # a bound on a hang, not a measure of speed
+    assert not taking.is_alive(), f"the receiver waited with {count - len(got)} messages read but not handed out"
+    assert got[:count] == [("num", n) for n in range(count)]
+    assert isinstance(got[count], PeerFailure) and got[count].cause == "crashed"

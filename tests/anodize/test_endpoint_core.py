@@ -1,0 +1,167 @@
+"""The compiled core of ``Endpoint`` (``_endpoint_core.c``) against the Python core.
+
+The compiled ``send`` and ``recv`` take the commonest path in C and hand the rest to the
+Python ones, which stay the reference. Here both cores are driven through the same random
+actions (allowed and not: any peer, any label, payloads of any type, signals in the
+channels) on generated protocols, and must agree at every step: what returns or what is
+raised (type and message), the monitor's state, the counts, and what each channel holds.
+``test_the_endpoint_tests_pass_on_the_python_core`` then runs the endpoint test files in a
+process where ``ANODIZE_PURE_PYTHON=1`` leaves the compiled core out altogether.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import random
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+from budget import examples
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+_HERE = Path(__file__).resolve().parent
+for _folder in (_HERE, _HERE.parent / "sessiontypes"):
+    if str(_folder) not in sys.path:
+        sys.path.insert(0, str(_folder))
+
+from role_drivers import load_global, machines_of, payload_for  # noqa: E402
+from strategies import GeneratedGlobal, global_protocols  # noqa: E402
+
+from anodize import RoleStopped  # noqa: E402
+from anodize.session.channel import STOP, Corrupt, PeerFailure  # noqa: E402
+from anodize.session.endpoint import COMPILED_CORE, Endpoint  # noqa: E402
+from anodize.transport.inproc import InprocNetwork  # noqa: E402
+
+needs_compiled = pytest.mark.skipif(COMPILED_CORE is None, reason="anodize was installed without a C compiler "
+                                    "or Python's headers, so the compiled core was not built")
+
+
+class PythonEndpoint(Endpoint):
+    """An endpoint on the Python core, whatever its base class."""
+
+    send = Endpoint._send_python
+    recv = Endpoint._recv_python
+
+
+def _outcome(call: Any, *args: object) -> tuple[str, str]:
+    try:
+        return "returned", repr(call(*args))
+    except (Exception, RoleStopped) as error:  # compared, not handled
+        return type(error).__name__, str(error)
+
+
+def _contents(channel: Any) -> list[object]:
+    """What a channel holds, taken out and put back."""
+    items = []
+    while True:
+        try:
+            items.append(channel.get_nowait())
+        except queue.Empty:
+            break
+    for item in items:
+        channel.put(item)
+    return [item if isinstance(item, tuple)
+            else f"Corrupt({item.reason})" if isinstance(item, Corrupt) else repr(item) for item in items]
+
+
+def _signal(kind: int, peer: str) -> object:
+    return [PeerFailure(peer, "crashed"), STOP, Corrupt("bad frame")][kind]
+
+
+def _setup(cls: type[Endpoint], generated: GeneratedGlobal, role: str,
+           monitored: bool) -> tuple[Endpoint, InprocNetwork]:
+    global_type = load_global(generated.text)
+    machines = machines_of(global_type)
+    network = InprocNetwork([(a, b) for a in global_type.roles for b in global_type.roles if a != b],
+                            doorbell_roles=[r for r, machine in machines.items() if machine.forks])
+    return cls(role, "G", machines[role], network, monitored), network
+
+
+@needs_compiled
+@settings(max_examples=examples(150), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(global_protocols(), st.data(), st.booleans())
+def test_both_cores_agree_on_every_action(generated: GeneratedGlobal, data: st.DataObject, monitored: bool) -> None:
+    roles = generated.roles
+    role = data.draw(st.sampled_from(roles))
+    compiled, compiled_net = _setup(Endpoint, generated, role, monitored)
+    python, python_net = _setup(PythonEndpoint, generated, role, monitored)
+    assert type(compiled).send is not type(python).send
+    machine = machines_of(load_global(generated.text))[role]
+    labels = sorted({t.label for t in machine.all_transitions() if t.label} | {"bogus"})
+    sorts = [t.sort for t in machine.all_transitions()]
+    rng = random.Random(data.draw(st.integers(0, 2**32 - 1)))
+    peers = [r for r in roles if r != role] + ["Nobody"]
+    for _ in range(data.draw(st.integers(1, 30))):
+        peer = data.draw(st.sampled_from(peers))
+        payload = rng.choice([None, 1, True, "x", 2.5, b"b", [1], {"x": 1}, payload_for(rng.choice(sorts), rng)])
+        label = data.draw(st.sampled_from(labels))
+        action = data.draw(st.sampled_from(["send", "send", "recv", "recv", "incoming", "signal", "alarm"]))
+        if action == "incoming" and peer != "Nobody":  # a message arrives from peer, allowed or not
+            for net in (compiled_net, python_net):
+                net.queues[(peer, role)].put((label, payload))
+            continue
+        if action == "signal" and peer != "Nobody":
+            kind = rng.randrange(3)
+            for net in (compiled_net, python_net):
+                net.queues[(peer, role)].put(_signal(kind, peer))
+            continue
+        if action == "alarm":  # a peer failed, which every later send to it must refuse
+            for net in (compiled_net, python_net):
+                net.failed[peer] = "crashed"
+                net.alarm = True
+            continue
+        results = []
+        for endpoint, net in ((compiled, compiled_net), (python, python_net)):
+            if action == "send":
+                results.append(_outcome(endpoint.send, peer, label, payload))
+            else:
+                channel = net.queues.get((peer, role))
+                # recv() without a timeout must never block here: only on a channel holding something.
+                timeout = None if channel is not None and not channel.empty() else 0
+                args = (peer,) if timeout is None and rng.random() < 0.5 else (peer, timeout)
+                results.append(_outcome(endpoint.recv, *args))
+        assert results[0] == results[1], (action, peer, label, payload)
+        assert compiled.state == python.state
+        assert (compiled.sent, compiled.received, compiled.high_water) == (python.sent, python.received,
+                                                                           python.high_water)
+        for pair in compiled_net.queues:
+            assert _contents(compiled_net.queues[pair]) == _contents(python_net.queues[pair]), pair
+        for ringing in compiled_net.doorbells:  # roles with parallel branches: a ring per message
+            assert _contents(compiled_net.doorbells[ringing]) == _contents(python_net.doorbells[ringing])
+
+
+@needs_compiled
+def test_the_compiled_core_takes_keywords_and_defaults_as_the_python_core_does() -> None:
+    generated = GeneratedGlobal("global G(A, B) = mu t. A -> B : { num(int). t, fin }", None, ("A", "B"))  # type: ignore[arg-type]
+    compiled, network = _setup(Endpoint, generated, "A", True)
+    compiled.send(to="B", label="num", payload=1)
+    compiled.send("B", label="num", payload=2)
+    compiled.send("B", "fin")
+    assert _contents(network.queues[("A", "B")]) == [("num", 1), ("num", 2), ("fin", None)]
+    receiver, network = _setup(Endpoint, generated, "B", True)
+    network.queues[("A", "B")].put(("num", 3))
+    network.queues[("A", "B")].put(("num", 4))
+    assert receiver.recv(frm="A") == ("num", 3) and type(receiver.recv("A", timeout=1.0)).__name__ == "Message"
+    with pytest.raises(TypeError):
+        compiled.send()  # type: ignore[call-arg]
+
+
+@pytest.mark.slow
+def test_the_endpoint_tests_pass_on_the_python_core() -> None:
+    """The pure-Python fallback is what runs where nothing was compiled: it must pass the same tests."""
+    files = ["test_endpoint_core.py", "test_runtime_properties.py", "test_send_many.py", "test_frames.py",
+             "test_pipe_frames.py", "test_faults.py"]
+    env = {**os.environ, "ANODIZE_PURE_PYTHON": "1"}
+    check = ("from anodize.session.endpoint import COMPILED_CORE; from anodize.transport.frames import COMPILED; "
+             "assert COMPILED_CORE is None and not COMPILED")
+    subprocess.run([sys.executable, "-c", check], env=env, check=True)
+    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider",
+                             "-k", "not test_the_endpoint_tests_pass_on_the_python_core", *files],
+                            cwd=_HERE, env=env, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
