@@ -1,4 +1,5 @@
-/* The compiled hot path of anodize.transport.codec: decoding runs of small frames.
+/* The compiled hot path of the process transport: decoding runs of small frames (receiver)
+ * and writing the commonest frames (sender).
  *
  * decode_run() is Codec.decode_run in C, to the byte: the same frames are taken, the same
  * tuples appended, the same offset returned, and the same frames (anything but a message
@@ -12,8 +13,12 @@
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <errno.h>
+#include <limits.h>
 #include <stdint.h>
 #include <string.h>
+#include <structmember.h>
+#include <unistd.h>
 
 #define KIND_MESSAGE 0x4D /* FrameKind.MESSAGE */
 #define TAG_NONE 0        /* Tag.NONE */
@@ -139,6 +144,166 @@ static PyObject *decode_run(PyObject *module, PyObject *const *args, Py_ssize_t 
     return PyLong_FromSsize_t(at);
 }
 
+/* SmallFrameWriter(fd, empty_frames, int_prefixes, fallback): PipeSender.put for the commonest
+ * messages. Called with (label, payload): when the payload is None or an int of 8 bytes and the
+ * codec has already built that label's frame (empty_frames) or prefix (int_prefixes), it writes
+ * the frame (at most PIPE_BUF bytes: one write, never split nor interleaved) and returns None;
+ * anything else, and any failed write, goes to fallback(item), the Python put, which builds
+ * the frame, fills those caches and reports errors as it always does. */
+typedef struct {
+    PyObject_HEAD
+    vectorcallfunc vectorcall;
+    int fd;
+    PyObject *empty_frames; /* label -> whole frame */
+    PyObject *int_prefixes; /* label -> frame up to the int's 8 bytes */
+    PyObject *fallback;
+} Writer;
+
+static int write_whole(int fd, const char *data, Py_ssize_t size)
+{
+    while (size > 0) {
+        ssize_t written;
+        Py_BEGIN_ALLOW_THREADS
+        written = write(fd, data, (size_t)size);
+        Py_END_ALLOW_THREADS
+        if (written < 0) {
+            if (errno == EINTR) {
+                if (PyErr_CheckSignals() < 0) {
+                    return -1; /* a signal handler raised: as os.write would */
+                }
+                continue;
+            }
+            return 1; /* the fallback repeats the write and reports the error its way */
+        }
+        data += written;
+        size -= written;
+    }
+    return 0;
+}
+
+static PyObject *writer_call(Writer *self, PyObject *const *args, size_t nargsf, PyObject *kwnames)
+{
+    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
+    if (nargs != 1 || kwnames != NULL) {
+        return PyObject_Vectorcall(self->fallback, args, nargsf, kwnames);
+    }
+    PyObject *item = args[0];
+    if (!PyTuple_CheckExact(item) || PyTuple_GET_SIZE(item) != 2) {
+        return PyObject_CallOneArg(self->fallback, item);
+    }
+    PyObject *label = PyTuple_GET_ITEM(item, 0), *payload = PyTuple_GET_ITEM(item, 1);
+    char frame[PIPE_BUF];
+    Py_ssize_t size = 0;
+    if (payload == Py_None) {
+        PyObject *whole = PyDict_GetItemWithError(self->empty_frames, label);
+        if (whole != NULL && PyBytes_CheckExact(whole) && PyBytes_GET_SIZE(whole) <= PIPE_BUF) {
+            size = PyBytes_GET_SIZE(whole);
+            memcpy(frame, PyBytes_AS_STRING(whole), (size_t)size);
+        }
+    } else if (PyLong_CheckExact(payload)) {
+        int overflow = 0;
+        long long value = PyLong_AsLongLongAndOverflow(payload, &overflow);
+        PyObject *prefix = overflow == 0 && !(value == -1 && PyErr_Occurred())
+            ? PyDict_GetItemWithError(self->int_prefixes, label) : NULL;
+        if (prefix != NULL && PyBytes_CheckExact(prefix) && PyBytes_GET_SIZE(prefix) <= PIPE_BUF - 8) {
+            size = PyBytes_GET_SIZE(prefix);
+            memcpy(frame, PyBytes_AS_STRING(prefix), (size_t)size);
+            unsigned long long bits = (unsigned long long)value;
+            for (int i = 0; i < 8; i++) { /* little-endian, as struct's "<q" */
+                frame[size++] = (char)(bits >> (8 * i));
+            }
+        }
+    }
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    if (size > 0) {
+        int failed = write_whole(self->fd, frame, size);
+        if (failed < 0) {
+            return NULL;
+        }
+        if (failed == 0) {
+            Py_RETURN_NONE;
+        }
+        /* Nothing was written (a pipe takes PIPE_BUF bytes whole or not at all): the fallback
+         * writes again and turns the error into the peer's failure. */
+    }
+    return PyObject_CallOneArg(self->fallback, item);
+}
+
+static PyObject *writer_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
+{
+    int fd;
+    PyObject *empty_frames, *int_prefixes, *fallback;
+    static char *names[] = {"fd", "empty_frames", "int_prefixes", "fallback", NULL};
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "iO!O!O:SmallFrameWriter", names, &fd, &PyDict_Type,
+                                     &empty_frames, &PyDict_Type, &int_prefixes, &fallback)) {
+        return NULL;
+    }
+    if (!PyCallable_Check(fallback)) {
+        PyErr_SetString(PyExc_TypeError, "SmallFrameWriter: fallback must be callable");
+        return NULL;
+    }
+    Writer *self = (Writer *)type->tp_alloc(type, 0);
+    if (self == NULL) {
+        return NULL;
+    }
+    self->fd = fd;
+    self->empty_frames = Py_NewRef(empty_frames);
+    self->int_prefixes = Py_NewRef(int_prefixes);
+    self->fallback = Py_NewRef(fallback);
+    self->vectorcall = (vectorcallfunc)writer_call;
+    return (PyObject *)self;
+}
+
+static int writer_traverse(Writer *self, visitproc visit, void *arg)
+{
+    Py_VISIT(Py_TYPE(self));
+    Py_VISIT(self->empty_frames);
+    Py_VISIT(self->int_prefixes);
+    Py_VISIT(self->fallback);
+    return 0;
+}
+
+static int writer_clear(Writer *self)
+{
+    Py_CLEAR(self->empty_frames);
+    Py_CLEAR(self->int_prefixes);
+    Py_CLEAR(self->fallback); /* a bound method of the PipeSender that holds this writer: a cycle */
+    return 0;
+}
+
+static void writer_dealloc(Writer *self)
+{
+    PyTypeObject *type = Py_TYPE(self);
+    PyObject_GC_UnTrack(self);
+    writer_clear(self);
+    type->tp_free((PyObject *)self);
+    Py_DECREF(type);
+}
+
+static PyMemberDef writer_members[] = {
+    {"__vectorcalloffset__", T_PYSSIZET, offsetof(Writer, vectorcall), READONLY, NULL},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PyType_Slot writer_slots[] = {
+    {Py_tp_doc, "SmallFrameWriter(fd, empty_frames, int_prefixes, fallback): PipeSender.put, "
+                "compiled for messages without a payload or with an 8-byte int."},
+    {Py_tp_new, writer_new},
+    {Py_tp_call, PyVectorcall_Call},
+    {Py_tp_dealloc, writer_dealloc},
+    {Py_tp_traverse, writer_traverse},
+    {Py_tp_clear, writer_clear},
+    {Py_tp_members, writer_members},
+    {0, NULL},
+};
+
+static PyType_Spec writer_spec = {
+    "anodize.transport._frames.SmallFrameWriter", sizeof(Writer), 0,
+    Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC | Py_TPFLAGS_HAVE_VECTORCALL, writer_slots,
+};
+
 static PyMethodDef methods[] = {
     {"decode_run", (PyCFunction)(void (*)(void))decode_run, METH_FASTCALL,
      "decode_run(buffer, at, names, into) -> int\n\nCodec.decode_run in C (see anodize.transport.codec)."},
@@ -153,5 +318,15 @@ static struct PyModuleDef frames_module = {
 
 PyMODINIT_FUNC PyInit__frames(void)
 {
-    return PyModule_Create(&frames_module);
+    PyObject *module = PyModule_Create(&frames_module);
+    if (module == NULL) {
+        return NULL;
+    }
+    PyObject *writer_type = PyType_FromSpec(&writer_spec);
+    if (writer_type == NULL || PyModule_AddObject(module, "SmallFrameWriter", writer_type) < 0) {
+        Py_XDECREF(writer_type);
+        Py_DECREF(module);
+        return NULL;
+    }
+    return module;
 }

@@ -169,6 +169,11 @@ class Codec:
                               "size travel through shared memory instead)")
         return self._framed(body)
 
+    def small_frames(self) -> tuple[dict[str, bytes], dict[str, bytes]]:
+        """The frames :meth:`message_frame` has cached: per label, the whole frame without a
+        payload, and the frame up to a small int's 8 bytes (live: filled as labels are sent)."""
+        return self._empty_frames, self._int_prefixes
+
     def _head(self, label: str) -> bytes:
         """The frame kind and the label, as every message frame of ``label`` begins."""
         head = self._labels.get(label)

@@ -1,4 +1,5 @@
-"""Decoding runs of small frames: the receiver's hot loop, compiled when it can be.
+"""Decoding runs of small frames, the receiver's hot loop, compiled when it can be (and the
+sender's twin, :data:`SmallFrameWriter`).
 
 :func:`decode_run_python` is the reference; ``_frames.c`` is the same loop in C, built at
 install when a C compiler and Python's headers are there (``pyproject.toml``, an optional
@@ -15,7 +16,7 @@ import struct
 from collections import deque
 from collections.abc import Callable
 
-__all__ = ["COMPILED", "decode_run", "decode_run_python"]
+__all__ = ["COMPILED", "SmallFrameWriter", "decode_run", "decode_run_python"]
 
 # The codec's constants (codec.py; a test checks they agree): frame kind and payload tags.
 _MESSAGE = 0x4D  # FrameKind.MESSAGE
@@ -71,6 +72,17 @@ def _compiled() -> DecodeRun | None:
     return compiled
 
 
+def _small_frame_writer() -> type | None:
+    if _COMPILED_RUN is None:
+        return None
+    from ._frames import SmallFrameWriter
+
+    return SmallFrameWriter
+
+
 _COMPILED_RUN = _compiled()
 COMPILED: bool = _COMPILED_RUN is not None
 decode_run: DecodeRun = _COMPILED_RUN or decode_run_python
+# The sender's side: PipeSender.put in C for messages without a payload or with a small int
+# (_frames.c), None where nothing was compiled. PipeSender says how it is used.
+SmallFrameWriter: type | None = _small_frame_writer()

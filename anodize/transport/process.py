@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 from ..errors import AnodizeError, PeerFailedError, RoleStopped
 from ..session.channel import STOP, Channel, Corrupt, PeerFailure
 from .codec import HEADER, MAX_FRAME, Codec, DecodeError, EncodeError, FrameKind
+from .frames import SmallFrameWriter
 from .inproc import InprocNetwork
 from .shm import ArrayRing
 
@@ -67,6 +68,14 @@ class PipeSender:
         self._lock = threading.Lock()  # a failure frame must not split a message frame
         self.closed = False
         _grow_pipe(fd)
+        if SmallFrameWriter is not None:
+            # Compiled (frames.py): messages without a payload or with a small int, whose frame
+            # the codec has built once, are written in C; it hands every other item to put_python.
+            self.put = SmallFrameWriter(fd, *codec.small_frames(), self.put_python)  # type: ignore[method-assign]
+
+    def put_python(self, item: object) -> None:
+        """:meth:`put` in Python: the reference, and the compiled writer's fallback."""
+        PipeSender.put(self, item)
 
     def put(self, item: object) -> None:
         """Send ``(label, payload)``, or a :class:`PeerFailure` telling the receiver why we stop.

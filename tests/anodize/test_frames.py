@@ -14,6 +14,7 @@ import sys
 import sysconfig
 from collections import deque
 from pathlib import Path
+from typing import Any
 
 import pytest
 from budget import examples
@@ -166,3 +167,80 @@ def test_a_stream_between_processes_arrives_whole_with_either_decoder(
     assert report.ok, report.summary()
     result = json.loads((tmp_path / "got.json").read_text())
     assert result == {"compiled": not pure, "got": list(range(send_many_roles.COUNT))}
+
+
+def _pipe_bytes(put_items: Any, items: list[tuple[str, object]]) -> bytes:
+    """What ``put_items`` writes for ``items`` into a fresh pipe, read back whole."""
+    read, write = os.pipe()
+    try:
+        put_items(write, items)
+        os.close(write)
+        chunks = []
+        while chunk := os.read(read, 65536):
+            chunks.append(chunk)
+        return b"".join(chunks)
+    finally:
+        os.close(read)
+
+
+@needs_compiled
+@settings(max_examples=examples(200))
+@given(st.lists(st.tuples(st.sampled_from(["num", "stop", "é", "x" * 5000]),
+                          st.none() | st.integers(-2**70, 2**70) | st.booleans() | st.floats(allow_nan=False)
+                          | st.text(max_size=3)), max_size=30))
+def test_the_compiled_writer_writes_the_frames_the_codec_builds(items: list[tuple[str, object]]) -> None:
+    """Small ints and no payload in C (once the codec has cached the label's frame), the rest by
+    the fallback: the bytes in the pipe are the codec's frames, in order."""
+    assert frames.SmallFrameWriter is not None
+
+    def compiled(fd: int, items: list[tuple[str, object]]) -> None:
+        codec = Codec()
+
+        def fallback(item: object) -> None:
+            label, payload = item  # type: ignore[misc]
+            os.write(fd, codec.message_frame(label, payload))
+
+        write = frames.SmallFrameWriter(fd, *codec.small_frames(), fallback)
+        for item in items:
+            write(item)
+
+    def reference(fd: int, items: list[tuple[str, object]]) -> None:
+        codec = Codec()
+        for label, payload in items:
+            os.write(fd, codec.message_frame(label, payload))
+
+    assert _pipe_bytes(compiled, items) == _pipe_bytes(reference, items)
+
+
+@needs_compiled
+def test_the_compiled_writer_takes_a_cached_label_itself_and_hands_on_the_rest() -> None:
+    assert frames.SmallFrameWriter is not None
+    codec = Codec()
+    handed: list[object] = []
+    read, write = os.pipe()
+    writer = frames.SmallFrameWriter(write, *codec.small_frames(), handed.append)
+    writer(("num", 1))  # the codec has not built this label's prefix yet
+    codec.message_frame("num", 0)
+    codec.message_frame("num", None)
+    writer(("num", 2))
+    writer(("num", None))
+    writer(("num", 2**63))  # too big for 8 bytes
+    writer(("num", True))  # a bool is not an int here, as in the codec
+    writer(["num", 3])  # not a tuple
+    assert handed == [("num", 1), ("num", 2**63), ("num", True), ["num", 3]]
+    os.close(write)
+    assert os.read(read, 1000) == codec.message_frame("num", 2) + codec.message_frame("num", None)
+    os.close(read)
+    # A write that fails (the read end is gone) goes to the fallback, which reports it its way.
+    gone_read, gone_write = os.pipe()
+    os.close(gone_read)
+    failed: list[object] = []
+
+    def report(item: object) -> None:
+        failed.append(item)
+        raise ConnectionError("the receiver is gone")
+
+    with pytest.raises(ConnectionError, match="receiver is gone"):
+        frames.SmallFrameWriter(gone_write, *codec.small_frames(), report)(("num", 5))
+    assert failed == [("num", 5)]
+    os.close(gone_write)
