@@ -33,6 +33,13 @@ typedef struct {
     PyObject *sends;
     PyObject *recvs;
     PyObject *recv_peers;
+    Py_ssize_t state_offset; /* where the monitor's `state` slot lies in it, or -1: use getattr */
+    /* The last step taken each way, with the state, peer and label objects it was looked up
+     * for: a stream repeats them, and the tables never change, so it is taken again without a
+     * look-up. Strong references, so the identities compared cannot be reused meanwhile. */
+    Py_ssize_t send_state, recv_state;
+    PyObject *send_peer, *send_label, *send_step;
+    PyObject *recv_peer, *recv_label, *recv_step;
 } Core;
 
 static PyObject *str_state, *str_sends, *str_recvs, *str_recv_peers, *str_alarm, *str_put, *str_get,
@@ -63,13 +70,51 @@ static int cache_tables(Core *self)
     Py_XSETREF(self->recvs, recvs);
     Py_XSETREF(self->recv_peers, peers);
     Py_XSETREF(self->cached, Py_NewRef(self->monitor));
+    Py_CLEAR(self->send_peer);
+    Py_CLEAR(self->send_label);
+    Py_CLEAR(self->send_step);
+    Py_CLEAR(self->recv_peer);
+    Py_CLEAR(self->recv_label);
+    Py_CLEAR(self->recv_step);
+    /* Monitor declares __slots__: its `state` is then a member descriptor holding an object at
+     * a fixed offset, read and written there as the descriptor itself does. */
+    self->state_offset = -1;
+    PyObject *descriptor = _PyType_Lookup(Py_TYPE(self->monitor), str_state); /* borrowed */
+    if (descriptor != NULL && Py_IS_TYPE(descriptor, &PyMemberDescr_Type)) {
+        PyMemberDef *member = ((PyMemberDescrObject *)descriptor)->d_member;
+        if (member->type == T_OBJECT_EX && !(member->flags & READONLY)) {
+            self->state_offset = member->offset;
+        }
+    }
+    return 0;
+}
+
+/* The monitor's state object (a new reference), or NULL with an exception set. */
+static PyObject *get_state(Core *self)
+{
+    if (self->state_offset >= 0) {
+        PyObject *state = *(PyObject **)((char *)self->monitor + self->state_offset);
+        if (state != NULL) {
+            return Py_NewRef(state);
+        }
+    }
+    return PyObject_GetAttr(self->monitor, str_state); /* raises as Python would, if unset */
+}
+
+static int set_state(Core *self, PyObject *state)
+{
+    if (self->state_offset < 0) {
+        return PyObject_SetAttr(self->monitor, str_state, state);
+    }
+    PyObject **slot = (PyObject **)((char *)self->monitor + self->state_offset);
+    Py_XSETREF(*slot, Py_NewRef(state));
     return 0;
 }
 
 /* The monitor's state, checked to index `table`; -1 with an exception set otherwise. */
 static Py_ssize_t current_state(Core *self, PyObject *table)
 {
-    PyObject *state = PyObject_GetAttr(self->monitor, str_state);
+    PyObject *state = get_state(self);
     if (state == NULL) {
         return -1;
     }
@@ -85,36 +130,46 @@ static Py_ssize_t current_state(Core *self, PyObject *table)
     return index;
 }
 
-/* The step the monitor takes on (peer, label) with `payload` in a table of `kind`, taken at once
- * if allowed with an exact payload type: 1 taken, 0 not found or needs the full check, -1 error. */
-static int try_step(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload)
+/* The step the monitor takes on (peer, label) with `payload`, in `tables` (sends or recvs, with
+ * the last step taken that way in *last_*), taken at once if allowed with an exact payload type:
+ * 1 taken, 0 not found or needs the full check, -1 error. */
+static int try_step(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
+                    Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step)
 {
     Py_ssize_t state = current_state(self, tables);
     if (state < 0) {
         return -1;
     }
-    PyObject *table = PyList_GET_ITEM(tables, state);
-    if (!PyDict_CheckExact(table)) {
-        PyErr_SetString(PyExc_TypeError, "EndpointCore: a monitor table must be a dict");
-        return -1;
-    }
-    PyObject *key = PyTuple_Pack(2, peer, label);
-    if (key == NULL) {
-        return -1;
-    }
-    PyObject *step = PyDict_GetItemWithError(table, key); /* borrowed */
-    Py_DECREF(key);
-    if (step == NULL) {
-        return PyErr_Occurred() ? -1 : 0;
-    }
-    if (!PyTuple_CheckExact(step) || PyTuple_GET_SIZE(step) < 2 || !PyAnySet_Check(PyTuple_GET_ITEM(step, 1))) {
-        return 0;
+    PyObject *step = *last_step; /* borrowed */
+    if (step == NULL || state != *last_state || peer != *last_peer || label != *last_label) {
+        PyObject *table = PyList_GET_ITEM(tables, state);
+        if (!PyDict_CheckExact(table)) {
+            PyErr_SetString(PyExc_TypeError, "EndpointCore: a monitor table must be a dict");
+            return -1;
+        }
+        PyObject *key = PyTuple_Pack(2, peer, label);
+        if (key == NULL) {
+            return -1;
+        }
+        step = PyDict_GetItemWithError(table, key); /* borrowed */
+        Py_DECREF(key);
+        if (step == NULL) {
+            return PyErr_Occurred() ? -1 : 0;
+        }
+        if (!PyTuple_CheckExact(step) || PyTuple_GET_SIZE(step) < 2
+                || !PyAnySet_Check(PyTuple_GET_ITEM(step, 1))) {
+            return 0;
+        }
+        *last_state = state;
+        Py_XSETREF(*last_peer, Py_NewRef(peer));
+        Py_XSETREF(*last_label, Py_NewRef(label));
+        Py_XSETREF(*last_step, Py_NewRef(step));
     }
     int exact = PySet_Contains(PyTuple_GET_ITEM(step, 1), (PyObject *)Py_TYPE(payload));
     if (exact <= 0) {
         return exact;
     }
-    return PyObject_SetAttr(self->monitor, str_state, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
+    return set_state(self, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
 }
 
 /* counts[peer] += 1 */
@@ -167,7 +222,8 @@ static PyObject *core_send(Core *self, PyObject *const *args, Py_ssize_t nargsf,
         if (cache_tables(self) < 0) {
             return NULL;
         }
-        int stepped = try_step(self, self->sends, to, label, payload);
+        int stepped = try_step(self, self->sends, to, label, payload, &self->send_state, &self->send_peer,
+                               &self->send_label, &self->send_step);
         if (stepped < 0) {
             return NULL;
         }
@@ -303,7 +359,8 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
     Py_DECREF(channel);
     PyObject *label = PyTuple_GET_ITEM(item, 0), *payload = PyTuple_GET_ITEM(item, 1);
     if (monitored) {
-        int stepped = try_step(self, self->recvs, frm, label, payload);
+        int stepped = try_step(self, self->recvs, frm, label, payload, &self->recv_state, &self->recv_peer,
+                               &self->recv_label, &self->recv_step);
         if (stepped == 0) { /* the full check, which raises (blaming the sender) or steps */
             PyObject *done = call_method(self->monitor, str_recv, frm, label, payload, 3);
             stepped = done == NULL ? -1 : 1;
@@ -341,6 +398,12 @@ static int core_traverse(Core *self, visitproc visit, void *arg)
     Py_VISIT(self->sends);
     Py_VISIT(self->recvs);
     Py_VISIT(self->recv_peers);
+    Py_VISIT(self->send_peer);
+    Py_VISIT(self->send_label);
+    Py_VISIT(self->send_step);
+    Py_VISIT(self->recv_peer);
+    Py_VISIT(self->recv_label);
+    Py_VISIT(self->recv_step);
     return 0;
 }
 
@@ -361,6 +424,12 @@ static int core_clear(Core *self)
     Py_CLEAR(self->sends);
     Py_CLEAR(self->recvs);
     Py_CLEAR(self->recv_peers);
+    Py_CLEAR(self->send_peer);
+    Py_CLEAR(self->send_label);
+    Py_CLEAR(self->send_step);
+    Py_CLEAR(self->recv_peer);
+    Py_CLEAR(self->recv_label);
+    Py_CLEAR(self->recv_step);
     return 0;
 }
 
@@ -382,6 +451,7 @@ static PyObject *core_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
         self->plain = Py_NewRef(Py_False);
         self->doorbell = Py_NewRef(Py_None);
         self->monitor = Py_NewRef(Py_None);
+        self->state_offset = -1;
     }
     return (PyObject *)self;
 }

@@ -101,7 +101,20 @@ def test_both_cores_agree_on_every_action(generated: GeneratedGlobal, data: st.D
         peer = data.draw(st.sampled_from(peers))
         payload = rng.choice([None, 1, True, "x", 2.5, b"b", [1], {"x": 1}, payload_for(rng.choice(sorts), rng)])
         label = data.draw(st.sampled_from(labels))
-        action = data.draw(st.sampled_from(["send", "send", "recv", "recv", "incoming", "signal", "alarm"]))
+        action = data.draw(st.sampled_from(["send", "send", "recv", "recv", "incoming", "signal", "alarm",
+                                            "allowed", "allowed", "allowed"]))
+        if action == "allowed":  # what the local type allows now, with a payload of its sort
+            state = python._monitor.state if python._monitor is not None else None
+            allowed = machine.expected(state) if isinstance(state, int) else []
+            if not allowed:
+                continue
+            step = rng.choice(allowed)
+            assert step.peer is not None
+            peer, label, payload = step.peer, step.label, payload_for(step.sort, rng)
+            if step.action == "recv":  # it arrives first
+                for net in (compiled_net, python_net):
+                    net.queues[(peer, role)].put((label, payload))
+            action = step.action
         if action == "incoming" and peer != "Nobody":  # a message arrives from peer, allowed or not
             for net in (compiled_net, python_net):
                 net.queues[(peer, role)].put((label, payload))
@@ -138,7 +151,7 @@ def test_both_cores_agree_on_every_action(generated: GeneratedGlobal, data: st.D
 
 @needs_compiled
 def test_the_compiled_core_takes_keywords_and_defaults_as_the_python_core_does() -> None:
-    generated = GeneratedGlobal("global G(A, B) = mu t. A -> B : { num(int). t, fin }", None, ("A", "B"))  # type: ignore[arg-type]
+    generated = _protocol("global G(A, B) = mu t. A -> B : { num(int). t, fin }")
     compiled, network = _setup(Endpoint, generated, "A", True)
     compiled.send(to="B", label="num", payload=1)
     compiled.send("B", label="num", payload=2)
@@ -150,6 +163,45 @@ def test_the_compiled_core_takes_keywords_and_defaults_as_the_python_core_does()
     assert receiver.recv(frm="A") == ("num", 3) and type(receiver.recv("A", timeout=1.0)).__name__ == "Message"
     with pytest.raises(TypeError):
         compiled.send()  # type: ignore[call-arg]
+
+
+def _protocol(text: str) -> GeneratedGlobal:
+    roles = tuple(text[text.index("(") + 1:text.index(")")].split(", "))
+    return GeneratedGlobal(text, None, roles)  # type: ignore[arg-type]
+
+
+REPEATS = _protocol("global G(A, B, C) = A -> B : l0(int). A -> B : l0(int). B -> A : l1. B -> A : l1. "
+                    "A -> B : l1(int). A -> C : l1(int). end")
+LOOP = _protocol("global G(A, B) = mu t. A -> B : { l0(int). t, l1(int). B -> A : l0. B -> A : l1. end }")
+
+
+@needs_compiled
+@pytest.mark.parametrize(("protocol", "script"), [
+    (REPEATS, [("send", "B", "l0", 1), ("send", "B", "l0", 2), ("send", "B", "l0", 3)]),  # the third is refused
+    (REPEATS, [("send", "B", "l0", 1), ("send", "B", "l0", 2), ("recv", "B", "l1", None), ("recv", "B", "l1", None),
+               ("recv", "B", "l1", None), ("send", "B", "l1", 4), ("send", "B", "l1", 5), ("send", "C", "l1", 6)]),
+    (REPEATS, [("send", "B", "l0", 1), ("send", "B", "l0", 2.5), ("send", "B", "l0", 2)]),  # a refused payload
+    (LOOP, [("send", "B", "l0", 1), ("send", "B", "l0", 2), ("send", "B", "l1", 3), ("recv", "B", "l0", None),
+            ("recv", "B", "l0", None), ("recv", "B", "l1", None)]),  # the same state, another label
+], ids=["same message, next state", "receives, then the same label to another peer", "payload type",
+        "same state, other label"])
+def test_a_repeated_message_is_checked_in_the_state_it_is_sent_in(
+        protocol: GeneratedGlobal, script: list[tuple[str, str, str, object]]) -> None:
+    """The compiled core remembers the last step it took each way; a message like the last one,
+    in another state, with another label or to another peer, must still be checked there."""
+    outcomes = []
+    for cls in (Endpoint, PythonEndpoint):
+        endpoint, network = _setup(cls, protocol, "A", True)
+        seen = []
+        for action, peer, label, payload in script:
+            if action == "recv":
+                network.queues[(peer, "A")].put((label, payload))
+                seen.append((_outcome(endpoint.recv, peer), endpoint.state))
+            else:
+                seen.append((_outcome(endpoint.send, peer, label, payload), endpoint.state))
+        outcomes.append(seen)
+    assert outcomes[0] == outcomes[1]
+    assert any(result[0] == "ProtocolViolationError" for result, _ in outcomes[0])
 
 
 @pytest.mark.slow
