@@ -152,11 +152,15 @@ class Endpoint(_Core):
         items: list[tuple[str, object]] = []
         refused: BaseException | None = None
         monitor = self._monitor
+        state: int | None = None  # the state whose step for (to, label) is in `step`
+        step = None
         for payload in pending:
             if monitor is not None:
-                if monitor.at_fork:  # the rest belongs to a parallel branch: send what we have, then go on there
-                    break
-                step = monitor.sends[monitor.state].get((to, label))
+                if monitor.state != state:  # looked up again only when the state changes
+                    state = monitor.state
+                    if state in monitor.fork_states:  # the rest is a parallel branch's: send these, go on there
+                        break
+                    step = monitor.sends[state].get((to, label))
                 if step is not None and type(payload) in step[1]:
                     monitor.state = step[0]
                 else:
@@ -286,14 +290,26 @@ class Endpoint(_Core):
             return messages
         batch: list[tuple[str, object]] = take(limit - 1)
         monitor = self._monitor
-        for index, item in enumerate(batch):
-            if monitor is not None:
-                step = monitor.recvs[monitor.state].get((frm, item[0]))
+        if monitor is None:
+            messages.extend(_new_tuple(Message, item) for item in batch)
+        else:
+            state = monitor.state
+            table = monitor.recvs[state]
+            label: str | None = None  # the label whose step from this state is in `step`
+            step = None
+            for index, item in enumerate(batch):
+                if item[0] != label:  # a stream repeats its label: looked up again when it changes
+                    label = item[0]
+                    step = table.get((frm, label))
                 if step is None or type(item[1]) not in step[1]:  # the next recv checks it in full
                     self._in[frm].give_back(batch[index:])  # type: ignore[attr-defined]
                     break
-                monitor.state = step[0]
-            messages.append(_new_tuple(Message, item))
+                if step[0] != state:
+                    state = step[0]
+                    table = monitor.recvs[state]
+                    label = None
+                messages.append(_new_tuple(Message, item))
+            monitor.state = state
         self.received[frm] += len(messages) - 1
         return messages
 

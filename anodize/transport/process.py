@@ -68,10 +68,12 @@ class PipeSender:
         self._lock = threading.Lock()  # a failure frame must not split a message frame
         self.closed = False
         _grow_pipe(fd)
+        self._small: Any = None
         if SmallFrameWriter is not None:
             # Compiled (frames.py): messages without a payload or with a small int, whose frame
             # the codec has built once, are written in C; it hands every other item to put_python.
-            self.put = SmallFrameWriter(fd, *codec.small_frames(), self.put_python)  # type: ignore[method-assign]
+            self._small = SmallFrameWriter(fd, *codec.small_frames(), self.put_python)
+            self.put = self._small  # type: ignore[method-assign]
 
     def put_python(self, item: object) -> None:
         """:meth:`put` in Python: the reference, and the compiled writer's fallback."""
@@ -130,7 +132,20 @@ class PipeSender:
             frames, size = [], 0
 
         try:
-            for label, payload in items:
+            index = 0
+            while index < len(items):
+                if self._small is not None:  # a run of small messages, compiled: in order, after those before
+                    if frames:
+                        flush()
+                    taken, failed = self._small.write_many(items, index)
+                    sent += taken
+                    index += taken
+                    if failed:
+                        raise self._peer_gone()
+                    if index == len(items):
+                        break
+                label, payload = items[index]
+                index += 1
                 slots_before = self._slots_used()
                 try:
                     frame = self.codec.message_frame(label, payload)
@@ -281,11 +296,15 @@ class PipeReceiver:
         ready = self._ready
         if not ready:
             self._at = self.codec.decode_run(self._buffer, self._at, ready)
-        taken: list[tuple[str, object]] = []
-        while ready and len(taken) < limit:
-            item, self.frame_size = ready.popleft()
-            taken.append(item)  # type: ignore[arg-type]
-        return taken
+        if not ready:
+            return []
+        if len(ready) <= limit:  # all of them, at the speed of C
+            entries = list(ready)
+            ready.clear()
+        else:
+            entries = [ready.popleft() for _ in range(limit)]
+        self.frame_size = entries[-1][1]
+        return [entry[0] for entry in entries]  # type: ignore[misc]
 
     def give_back(self, items: list[tuple[str, object]]) -> None:
         """Put messages taken with :meth:`take_ready` back, first in line, in order."""

@@ -7,11 +7,13 @@ process use the reference.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
 import sys
 import sysconfig
+import threading
 from collections import deque
 from pathlib import Path
 from typing import Any
@@ -174,15 +176,21 @@ def test_a_stream_between_processes_arrives_whole_with_either_decoder(
 def _pipe_bytes(put_items: Any, items: list[tuple[str, object]]) -> bytes:
     """What ``put_items`` writes for ``items`` into a fresh pipe, read back whole."""
     read, write = os.pipe()
-    try:
-        put_items(write, items)
-        os.close(write)
-        chunks = []
+    chunks: list[bytes] = []
+
+    def drain() -> None:  # concurrently: a batch may be larger than the pipe
         while chunk := os.read(read, 65536):
             chunks.append(chunk)
-        return b"".join(chunks)
+
+    reader = threading.Thread(target=drain)
+    reader.start()
+    try:
+        put_items(write, items)
     finally:
+        os.close(write)
+        reader.join()
         os.close(read)
+    return b"".join(chunks)
 
 
 @needs_compiled
@@ -246,3 +254,48 @@ def test_the_compiled_writer_takes_a_cached_label_itself_and_hands_on_the_rest()
         CompiledWriter(gone_write, *codec.small_frames(), report)(("num", 5))
     assert failed == [("num", 5)]
     os.close(gone_write)
+
+
+@needs_compiled
+@settings(max_examples=examples(200))
+@given(st.lists(st.tuples(st.sampled_from(["num", "stop", "new"]),
+                          st.none() | st.integers(-2**64, 2**64) | st.just(1.5)), max_size=40),
+       st.integers(0, 45), st.integers(0, 5000))
+def test_the_compiled_batch_writes_the_run_of_cached_small_frames(
+        items: list[tuple[str, object]], start: int, repeat: int) -> None:
+    """``write_many`` takes the items from ``start`` while their frames are cached (ints of 8
+    bytes or no payload, labels the codec has built), in writes of at most 64 KiB."""
+    assert CompiledWriter is not None
+    codec = Codec()
+    for label in ("num", "stop"):  # "new" has never been sent: not cached
+        codec.message_frame(label, 0)
+        codec.message_frame(label, None)
+    items = items * (200 if repeat > 2500 else 1)  # some batches larger than one write of 64 KiB
+    start = min(start, len(items))
+    taken: list[int] = []
+
+    def write_many(fd: int, items: list[tuple[str, object]]) -> None:
+        result = CompiledWriter(fd, *codec.small_frames(), lambda item: None).write_many(items, start)
+        taken.append(result[0])
+        assert result[1] == 0
+
+    written = _pipe_bytes(write_many, items)
+    run = 0
+    for label, payload in items[start:]:
+        if label == "new" or not (payload is None or (type(payload) is int and -2**63 <= payload < 2**63)):
+            break
+        run += 1
+    assert taken == [run]
+    assert written == b"".join(codec.message_frame(label, payload) for label, payload in items[start:start + run])
+
+
+@needs_compiled
+def test_a_failed_batch_write_says_why_and_how_many_frames_went() -> None:
+    assert CompiledWriter is not None
+    codec = Codec()
+    codec.message_frame("num", 0)
+    read, write = os.pipe()
+    os.close(read)
+    taken, error = CompiledWriter(write, *codec.small_frames(), lambda item: None).write_many([("num", 1)] * 10, 0)
+    os.close(write)
+    assert (taken, error) == (0, errno.EPIPE)
