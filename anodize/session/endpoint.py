@@ -149,12 +149,15 @@ class Endpoint(_Core):
         if not self._plain and self._forked():
             return self._branch_for(self._send_route, to, "send", label).send_many(to, label, payloads)
         pending = list(payloads)
-        items: list[tuple[str, object]] = []
-        refused: BaseException | None = None
         monitor = self._monitor
+        # A stream loops on one message: while the state sends it and stays, only each payload's
+        # type is to check, all at once (the loop below checks one by one, from where this stops).
+        looping = 0 if monitor is None else _looping_sends(monitor, to, label, pending)
+        items: list[tuple[str, object]] = [(label, payload) for payload in pending[:looping]]
+        refused: BaseException | None = None
         state: int | None = None  # the state whose step for (to, label) is in `step`
         step = None
-        for payload in pending:
+        for payload in pending[looping:]:
             if monitor is not None:
                 if monitor.state != state:  # looked up again only when the state changes
                     state = monitor.state
@@ -290,8 +293,8 @@ class Endpoint(_Core):
             return messages
         batch: list[tuple[str, object]] = take(limit - 1)
         monitor = self._monitor
-        if monitor is None:
-            messages.extend(_new_tuple(Message, item) for item in batch)
+        if monitor is None or _loops_on_all(monitor, frm, batch):  # nothing to check, or types only: done
+            messages.extend([_new_tuple(Message, item) for item in batch])
         else:
             state = monitor.state
             table = monitor.recvs[state]
@@ -565,6 +568,31 @@ class Endpoint(_Core):
 
 if COMPILED_CORE is not None:  # the compiled core's send and recv (same calls, same errors) take over
     del Endpoint.send, Endpoint.recv
+
+
+def _looping_sends(monitor: Monitor, to: str, label: str, payloads: list[object]) -> int:
+    """How many of ``payloads`` the monitor allows at once, sent as ``label`` to ``to``: all of them
+    when the current state sends that message and stays (a loop) and every payload's type is one
+    the step takes exactly; else none (the caller checks them one by one)."""
+    state = monitor.state
+    if state in monitor.fork_states:
+        return 0
+    step = monitor.sends[state].get((to, label))
+    if step is None or step[0] != state or not set(map(type, payloads)) <= step[1]:
+        return 0
+    return len(payloads)
+
+
+def _loops_on_all(monitor: Monitor, frm: str, batch: list[tuple[str, object]]) -> bool:
+    """Whether the monitor allows every message of ``batch`` from ``frm`` at once, as
+    :func:`_looping_sends` does for sends: one label, received in a loop, payloads of exact types."""
+    if not batch:
+        return True
+    state = monitor.state
+    label = batch[0][0]
+    step = monitor.recvs[state].get((frm, label))
+    return (step is not None and step[0] == state and {item[0] for item in batch} == {label}
+            and {type(item[1]) for item in batch} <= step[1])
 
 
 def peers_of(machine: StateMachine) -> tuple[set[str], set[str]]:

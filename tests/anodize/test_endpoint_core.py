@@ -35,7 +35,9 @@ from strategies import GeneratedGlobal, global_protocols  # noqa: E402
 from anodize import RoleStopped  # noqa: E402
 from anodize.session.channel import STOP, Corrupt, PeerFailure  # noqa: E402
 from anodize.session.endpoint import COMPILED_CORE, Endpoint  # noqa: E402
+from anodize.transport.codec import Codec  # noqa: E402
 from anodize.transport.inproc import InprocNetwork  # noqa: E402
+from anodize.transport.process import ProcessNetwork  # noqa: E402
 
 needs_compiled = pytest.mark.skipif(COMPILED_CORE is None, reason="anodize was installed without a C compiler "
                                     "or Python's headers, so the compiled core was not built")
@@ -80,6 +82,11 @@ def _setup(cls: type[Endpoint], generated: GeneratedGlobal, role: str,
     network = InprocNetwork([(a, b) for a in global_type.roles for b in global_type.roles if a != b],
                             doorbell_roles=[r for r, machine in machines.items() if machine.forks])
     return cls(role, "G", machines[role], network, monitored), network
+
+
+def _protocol(text: str) -> GeneratedGlobal:
+    roles = tuple(text[text.index("(") + 1:text.index(")")].split(", "))
+    return GeneratedGlobal(text, None, roles)  # type: ignore[arg-type]
 
 
 @needs_compiled
@@ -149,6 +156,101 @@ def test_both_cores_agree_on_every_action(generated: GeneratedGlobal, data: st.D
             assert _contents(compiled_net.doorbells[ringing]) == _contents(python_net.doorbells[ringing])
 
 
+@settings(max_examples=examples(150), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(global_protocols(), st.data())
+def test_a_batch_does_what_its_messages_one_by_one_do(generated: GeneratedGlobal, data: st.DataObject) -> None:
+    """``send_many`` against ``send`` in a loop, and ``recv_many`` against ``recv`` in a loop: the
+    same messages go or come, the same state follows, the same error ends the batch."""
+    roles = generated.roles
+    role = data.draw(st.sampled_from(roles))
+    machine = machines_of(load_global(generated.text))[role]
+    steps = [t for t in machine.expected(machine.initial) if t.peer is not None]  # where the batch starts
+    if not steps:
+        return
+    rng = random.Random(data.draw(st.integers(0, 2**32 - 1)))
+    chosen = data.draw(st.sampled_from(steps))
+    values = [payload_for(chosen.sort, rng) for _ in range(data.draw(st.integers(0, 12)))]
+    values += data.draw(st.lists(st.sampled_from([None, 1, "x", 2.5, True, b"b"]), max_size=3))
+    values = data.draw(st.permutations(values))
+    _compare_batch(generated, role, chosen.action, chosen.peer, chosen.label, values)
+
+
+def _compare_batch(generated: GeneratedGlobal, role: str, action: str, peer: str, label: str,
+                   values: list[object]) -> None:
+    """``send_many``/``recv_many`` of ``values`` against ``send``/``recv`` one by one."""
+    batch, batch_net = _setup(Endpoint, generated, role, True)
+    single, single_net = _setup(Endpoint, generated, role, True)
+    if action == "send":
+        expected = ("returned", repr(len(values)))
+        for value in values:
+            result = _outcome(single.send, peer, label, value)
+            if result[0] != "returned":
+                expected = result
+                break
+        assert _outcome(batch.send_many, peer, label, values) == expected
+    elif values:
+        if action == "recv pipe":  # between processes, where recv_many takes what one read brought
+            batch, batch_net = _pipe_setup(generated, role, peer)
+            single, single_net = _pipe_setup(generated, role, peer)
+        for net in (batch_net, single_net):
+            for value in values:
+                net.queues[(peer, role)].put((label, value))
+        try:
+            got = batch.recv_many(peer, 1024, 0)
+        except (Exception, RoleStopped) as error:  # the first is received as recv() would: so it fails
+            assert _outcome(single.recv, peer, 0) == (type(error).__name__, str(error))
+        else:  # then as many as recv() takes one by one, stopping before any it would have to refuse
+            assert got == [single.recv(peer, 0) for _ in got]
+    assert (batch.state, batch.sent, batch.received) == (single.state, single.sent, single.received)
+    if action == "recv pipe":
+        rest = len(values) - batch.received[peer]  # what recv_many left is there, for recv to take
+        assert [_outcome(batch.recv, peer, 0) for _ in range(rest)] == [_outcome(single.recv, peer, 0)
+                                                                         for _ in range(rest)]
+        return
+    for pair in batch_net.queues:
+        assert _contents(batch_net.queues[pair]) == _contents(single_net.queues[pair]), pair
+
+
+def _pipe_setup(generated: GeneratedGlobal, role: str, peer: str) -> tuple[Endpoint, Any]:
+    """An endpoint of ``role`` whose channel from ``peer`` is a pipe; the network's queue for that
+    pair is the pipe's sending end, so a test puts messages there as ``peer`` would."""
+    global_type = load_global(generated.text)
+    read, write = os.pipe()
+    channels = [(a, b) for a in global_type.roles for b in global_type.roles if a != b]
+    receiving = ProcessNetwork([role], channels, {(peer, role): read}, {}, lambda pair: Codec())
+    sending = ProcessNetwork([peer], channels, {(peer, role): write}, {}, lambda pair: Codec())
+    endpoint = Endpoint(role, "G", machines_of(global_type)[role], receiving, True)
+    sending.queues = {(peer, role): sending.queues[(peer, role)]}
+    return endpoint, sending
+
+
+STREAMS = _protocol("global G(A, B) = mu t. A -> B : { l0(int). t, l1(str). B -> A : l2. end, "
+                    "l3(int). A -> B : l3(int). A -> B : l3(int). end }")
+
+
+@pytest.mark.parametrize(("role", "action", "peer", "label", "values"), [
+    ("A", "send", "B", "l0", [1, 2, 3, 4]),
+    ("A", "send", "B", "l0", [1, 2, "x", 4]),  # a payload of another type stops the batch there
+    ("A", "send", "B", "l0", [1, True, 3]),  # a bool is not an int here
+    ("A", "send", "B", "l1", ["x", "y"]),  # leaves the loop: the second is refused
+    ("B", "recv", "A", "l0", [1, 2, 3, 4]),
+    ("B", "recv", "A", "l0", [1, 2, 2.5, 4]),
+    ("B", "recv", "A", "l1", ["x", "y"]),
+    ("B", "recv pipe", "A", "l0", [1, 2, 3, 4]),
+    ("B", "recv pipe", "A", "l0", [1, 2, 2.5, 4]),
+    ("B", "recv pipe", "A", "l0", [1, 2, None, 4]),
+    ("B", "recv pipe", "A", "l1", ["x", "y"]),
+    ("B", "recv pipe", "A", "l3", [1, 2, 3, 4]),  # the same label, but not a loop
+    ("A", "send", "B", "l3", [1, 2, 3, 4]),
+], ids=["loop", "loop, wrong type", "loop, bool", "leaves the loop", "recv loop", "recv loop, wrong type",
+        "recv leaves the loop", "pipe loop", "pipe loop, wrong type", "pipe loop, None",
+        "pipe leaves the loop", "pipe, same label, no loop", "same label, no loop"])
+def test_a_batch_on_a_loop_checks_every_message(role: str, action: str, peer: str, label: str,
+                                                values: list[object]) -> None:
+    _compare_batch(STREAMS, role, action, peer, label, values)
+
+
 @needs_compiled
 def test_the_compiled_core_takes_keywords_and_defaults_as_the_python_core_does() -> None:
     generated = _protocol("global G(A, B) = mu t. A -> B : { num(int). t, fin }")
@@ -163,11 +265,6 @@ def test_the_compiled_core_takes_keywords_and_defaults_as_the_python_core_does()
     assert receiver.recv(frm="A") == ("num", 3) and type(receiver.recv("A", timeout=1.0)).__name__ == "Message"
     with pytest.raises(TypeError):
         compiled.send()  # type: ignore[call-arg]
-
-
-def _protocol(text: str) -> GeneratedGlobal:
-    roles = tuple(text[text.index("(") + 1:text.index(")")].split(", "))
-    return GeneratedGlobal(text, None, roles)  # type: ignore[arg-type]
 
 
 REPEATS = _protocol("global G(A, B, C) = A -> B : l0(int). A -> B : l0(int). B -> A : l1. B -> A : l1. "
