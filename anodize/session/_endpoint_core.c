@@ -80,7 +80,8 @@ static int cache_tables(Core *self)
      * a fixed offset, read and written there as the descriptor itself does. */
     self->state_offset = -1;
     PyObject *descriptor = _PyType_Lookup(Py_TYPE(self->monitor), str_state); /* borrowed */
-    if (descriptor != NULL && Py_IS_TYPE(descriptor, &PyMemberDescr_Type)) {
+    if (descriptor != NULL && Py_IS_TYPE(descriptor, &PyMemberDescr_Type)
+            && PyObject_TypeCheck(self->monitor, ((PyDescrObject *)descriptor)->d_type)) {
         PyMemberDef *member = ((PyMemberDescrObject *)descriptor)->d_member;
         if (member->type == T_OBJECT_EX && !(member->flags & READONLY)) {
             self->state_offset = member->offset;
@@ -130,11 +131,23 @@ static Py_ssize_t current_state(Core *self, PyObject *table)
     return index;
 }
 
+static int try_step_in(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
+                       Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step);
+
 /* The step the monitor takes on (peer, label) with `payload`, in `tables` (sends or recvs, with
  * the last step taken that way in *last_*), taken at once if allowed with an exact payload type:
  * 1 taken, 0 not found or needs the full check, -1 error. */
 static int try_step(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
                     Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step)
+{
+    Py_INCREF(tables); /* a peer's or label's own __hash__ or __eq__ may re-enter and replace it */
+    int result = try_step_in(self, tables, peer, label, payload, last_state, last_peer, last_label, last_step);
+    Py_DECREF(tables);
+    return result;
+}
+
+static int try_step_in(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
+                       Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step)
 {
     Py_ssize_t state = current_state(self, tables);
     if (state < 0) {
@@ -165,11 +178,13 @@ static int try_step(Core *self, PyObject *tables, PyObject *peer, PyObject *labe
         Py_XSETREF(*last_label, Py_NewRef(label));
         Py_XSETREF(*last_step, Py_NewRef(step));
     }
+    Py_INCREF(step);
     int exact = PySet_Contains(PyTuple_GET_ITEM(step, 1), (PyObject *)Py_TYPE(payload));
-    if (exact <= 0) {
-        return exact;
+    if (exact > 0) {
+        exact = set_state(self, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
     }
-    return set_state(self, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
+    Py_DECREF(step);
+    return exact;
 }
 
 /* counts[peer] += 1 */
@@ -326,21 +341,28 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
     }
     PyObject *frm = args[0];
     int monitored = self->monitor != NULL && self->monitor != Py_None;
+    PyObject *monitor = NULL; /* the monitor read before get(), as the Python core reads it */
     if (monitored) {
         if (cache_tables(self) < 0) {
             return NULL;
         }
-        Py_ssize_t state = current_state(self, self->recv_peers);
-        if (state < 0) {
+        PyObject *table = Py_NewRef(self->recv_peers); /* what reading the state may run cannot free it */
+        Py_ssize_t state = current_state(self, table);
+        PyObject *peers = state < 0 ? NULL : Py_NewRef(PyList_GET_ITEM(table, state)); /* nor frm's __eq__ */
+        Py_DECREF(table);
+        if (peers == NULL) {
             return NULL;
         }
-        int allowed = PySequence_Contains(PyList_GET_ITEM(self->recv_peers, state), frm);
+        int allowed = PySequence_Contains(peers, frm);
+        Py_DECREF(peers);
         if (allowed <= 0) { /* not now: the Python core raises the violation */
             return allowed < 0 ? NULL : pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
         }
+        monitor = Py_NewRef(self->monitor);
     }
     PyObject *channel = PyDict_GetItemWithError(self->in, frm); /* borrowed */
     if (channel == NULL) {
+        Py_XDECREF(monitor);
         return PyErr_Occurred() ? NULL : pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
     }
     Py_INCREF(channel);
@@ -348,9 +370,11 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
     PyObject *item = PyObject_VectorcallMethod(str_get, get_args + 1, 1 | PY_VECTORCALL_ARGUMENTS_OFFSET, kw_timeout);
     if (item == NULL) {
         Py_DECREF(channel);
+        Py_XDECREF(monitor);
         return NULL;
     }
     if (!PyTuple_CheckExact(item) || PyTuple_GET_SIZE(item) != 2) { /* a signal, or not a message */
+        Py_XDECREF(monitor);
         PyObject *accepted = call_method((PyObject *)self, str_accept, frm, item, channel, 3);
         Py_DECREF(item);
         Py_DECREF(channel);
@@ -358,6 +382,20 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
     }
     Py_DECREF(channel);
     PyObject *label = PyTuple_GET_ITEM(item, 0), *payload = PyTuple_GET_ITEM(item, 1);
+    if (monitored && (self->monitor != monitor || self->cached != monitor)) {
+        /* The monitor was replaced while get() ran (any code can run there): the full check on
+         * the one read before, as the Python core does. */
+        PyObject *done = call_method(monitor, str_recv, frm, label, payload, 3);
+        Py_DECREF(monitor);
+        if (done == NULL) {
+            Py_DECREF(item);
+            return NULL;
+        }
+        Py_DECREF(done);
+        monitored = 0;
+    } else if (monitored) {
+        Py_DECREF(monitor);
+    }
     if (monitored) {
         int stepped = try_step(self, self->recvs, frm, label, payload, &self->recv_state, &self->recv_peer,
                                &self->recv_label, &self->recv_step);

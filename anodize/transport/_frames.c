@@ -13,6 +13,7 @@
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <pythread.h>
 #include <errno.h>
 #include <limits.h>
 #include <stdint.h>
@@ -71,18 +72,20 @@ static PyObject *decode_run(PyObject *module, PyObject *const *args, Py_ssize_t 
     const unsigned char *data = (const unsigned char *)view.buf;
     const Py_ssize_t size = view.len;
     PyObject *raw = NULL;   /* the last label's bytes, and its name: a stream repeats a label */
-    PyObject *label = NULL; /* borrowed from names, which the caller keeps alive */
+    PyObject *label = NULL; /* a strong reference: append() may run code that changes names */
     int failed = 0;
     while (size - at >= 4) {
-        const Py_ssize_t length = (Py_ssize_t)read_u32(data + at);
-        if (length > size - at - 4 || length < 6 || data[at + 4] != KIND_MESSAGE) {
+        /* Lengths compared as unsigned 64-bit numbers: a 32-bit Py_ssize_t cannot hold them all. */
+        const uint64_t length = read_u32(data + at);
+        if (length > (uint64_t)(size - at - 4) || length < 6 || data[at + 4] != KIND_MESSAGE) {
             break; /* incomplete, too short for kind, label size and tag, or not a message */
         }
-        const Py_ssize_t end = at + 4 + length;
-        const Py_ssize_t label_length = (Py_ssize_t)read_u32(data + at + 5);
-        if (label_length > end - at - 9) {
+        const Py_ssize_t end = at + 4 + (Py_ssize_t)length;
+        const uint64_t label_bytes_left = length - 5; /* after kind and label size: at least 1 */
+        if ((uint64_t)read_u32(data + at + 5) > label_bytes_left) {
             break; /* the label runs past the frame: the Python decoder reports it */
         }
+        const Py_ssize_t label_length = (Py_ssize_t)read_u32(data + at + 5);
         const Py_ssize_t start = at + 9 + label_length;
         const unsigned char *label_bytes = data + at + 9;
         if (raw == NULL || PyBytes_GET_SIZE(raw) != label_length
@@ -93,7 +96,8 @@ static PyObject *decode_run(PyObject *module, PyObject *const *args, Py_ssize_t 
                 failed = 1;
                 break;
             }
-            label = PyDict_GetItemWithError(names, raw);
+            PyObject *found = PyDict_GetItemWithError(names, raw);
+            Py_XSETREF(label, Py_XNewRef(found));
             if (label == NULL) {
                 failed = PyErr_Occurred() != NULL;
                 break; /* a label not seen yet: decode_body learns it */
@@ -112,7 +116,7 @@ static PyObject *decode_run(PyObject *module, PyObject *const *args, Py_ssize_t 
             break;
         }
         PyObject *message = PyTuple_New(2);
-        PyObject *frame_size = PyLong_FromSsize_t(4 + length);
+        PyObject *frame_size = PyLong_FromSsize_t(4 + (Py_ssize_t)length);
         PyObject *entry = PyTuple_New(2);
         if (message == NULL || frame_size == NULL || entry == NULL) {
             Py_XDECREF(message);
@@ -136,6 +140,7 @@ static PyObject *decode_run(PyObject *module, PyObject *const *args, Py_ssize_t 
         at = end;
     }
     Py_XDECREF(raw);
+    Py_XDECREF(label);
     PyBuffer_Release(&view);
     Py_DECREF(append);
     if (failed) {
@@ -157,7 +162,29 @@ typedef struct {
     PyObject *empty_frames; /* label -> whole frame */
     PyObject *int_prefixes; /* label -> frame up to the int's 8 bytes */
     PyObject *fallback;
+    /* The channel's one lock: every frame is written holding it, by this writer and by PipeSender
+     * (which takes it as its own lock, through acquire/release), so that no frame, nor a failure
+     * frame written from another thread, lands inside another that takes several writes. */
+    PyThread_type_lock lock;
+    int locked;
 } Writer;
+
+/* Take the lock, waiting without the GIL if another thread holds it. */
+static void take_lock(Writer *self)
+{
+    if (!PyThread_acquire_lock(self->lock, NOWAIT_LOCK)) {
+        Py_BEGIN_ALLOW_THREADS
+        PyThread_acquire_lock(self->lock, WAIT_LOCK);
+        Py_END_ALLOW_THREADS
+    }
+    self->locked = 1;
+}
+
+static void give_lock(Writer *self)
+{
+    self->locked = 0;
+    PyThread_release_lock(self->lock);
+}
 
 static int write_whole(int fd, const char *data, Py_ssize_t size)
 {
@@ -240,13 +267,15 @@ static PyObject *writer_write_many(Writer *self, PyObject *args)
         PyMem_Free(ends);
         return PyErr_NoMemory();
     }
-    Py_ssize_t taken = 0, in_batch = 0, size = 0, count = PyList_GET_SIZE(items);
+    Py_ssize_t taken = 0, in_batch = 0, size = 0;
     int error = 0;
-    for (Py_ssize_t index = start; index <= count && !error; index++) {
+    for (Py_ssize_t index = start; !error; index++) {
         Py_ssize_t framed = 0;
         char frame[PIPE_BUF];
-        if (index < count) {
-            framed = small_frame(self, PyList_GET_ITEM(items, index), frame);
+        if (index < PyList_GET_SIZE(items)) { /* re-read: the list may change while the GIL is released */
+            PyObject *item = Py_NewRef(PyList_GET_ITEM(items, index));
+            framed = small_frame(self, item, frame);
+            Py_DECREF(item);
             if (framed < 0) {
                 PyMem_Free(batch);
                 PyMem_Free(ends);
@@ -255,19 +284,34 @@ static PyObject *writer_write_many(Writer *self, PyObject *args)
         }
         if (in_batch > 0 && (framed == 0 || size + framed > BATCH_BYTES || in_batch == MOST_FRAMES)) {
             Py_ssize_t written = 0;
+            int interrupted = 0;
+            take_lock(self);
             Py_BEGIN_ALLOW_THREADS
             while (written < size) {
                 ssize_t n = write(self->fd, batch + written, (size_t)(size - written));
-                if (n < 0) {
-                    if (errno == EINTR) {
-                        continue; /* signal handlers run at the next Python step; the batch goes on */
-                    }
+                if (n < 0 && errno != EINTR) {
                     error = errno;
                     break;
                 }
-                written += n;
+                written += n > 0 ? n : 0;
+                if (written < size) {
+                    /* Interrupted (EINTR, or a signal cut a long write short): run the signal
+                     * handlers, as os.write and the loop around it would; one may raise. */
+                    Py_BLOCK_THREADS
+                    interrupted = PyErr_CheckSignals() < 0;
+                    Py_UNBLOCK_THREADS
+                    if (interrupted) {
+                        break;
+                    }
+                }
             }
             Py_END_ALLOW_THREADS
+            give_lock(self);
+            if (interrupted) {
+                PyMem_Free(batch);
+                PyMem_Free(ends);
+                return NULL;
+            }
             for (Py_ssize_t k = 0; k < in_batch && ends[k] <= written; k++) {
                 taken++;
             }
@@ -285,7 +329,59 @@ static PyObject *writer_write_many(Writer *self, PyObject *args)
     return Py_BuildValue("(ni)", taken, error);
 }
 
+/* acquire(blocking=True, timeout=-1) -> bool, as threading.Lock.acquire. */
+static PyObject *writer_acquire(Writer *self, PyObject *args, PyObject *kwargs)
+{
+    int blocking = 1;
+    double timeout = -1;
+    static char *names[] = {"blocking", "timeout", NULL};
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|pd:acquire", names, &blocking, &timeout)) {
+        return NULL;
+    }
+    PY_TIMEOUT_T microseconds = !blocking ? 0 : timeout < 0 ? -1 : (PY_TIMEOUT_T)(timeout * 1e6);
+    PyLockStatus status = PyThread_acquire_lock_timed(self->lock, 0, 0);
+    if (status != PY_LOCK_ACQUIRED && microseconds != 0) {
+        Py_BEGIN_ALLOW_THREADS
+        status = PyThread_acquire_lock_timed(self->lock, microseconds, 0);
+        Py_END_ALLOW_THREADS
+    }
+    if (status != PY_LOCK_ACQUIRED) {
+        Py_RETURN_FALSE;
+    }
+    self->locked = 1;
+    Py_RETURN_TRUE;
+}
+
+static PyObject *writer_release(Writer *self, PyObject *unused)
+{
+    (void)unused;
+    if (!self->locked) {
+        PyErr_SetString(PyExc_RuntimeError, "release unlocked lock");
+        return NULL;
+    }
+    give_lock(self);
+    Py_RETURN_NONE;
+}
+
+static PyObject *writer_enter(Writer *self, PyObject *unused)
+{
+    (void)unused;
+    take_lock(self);
+    Py_RETURN_TRUE;
+}
+
+static PyObject *writer_exit(Writer *self, PyObject *args)
+{
+    (void)args;
+    return writer_release(self, NULL);
+}
+
 static PyMethodDef writer_methods[] = {
+    {"acquire", (PyCFunction)(void (*)(void))writer_acquire, METH_VARARGS | METH_KEYWORDS,
+     "acquire(blocking=True, timeout=-1) -> bool: the channel's lock, as threading.Lock's."},
+    {"release", (PyCFunction)writer_release, METH_NOARGS, "release(): as threading.Lock's."},
+    {"__enter__", (PyCFunction)writer_enter, METH_NOARGS, NULL},
+    {"__exit__", (PyCFunction)writer_exit, METH_VARARGS, NULL},
     {"write_many", (PyCFunction)writer_write_many, METH_VARARGS,
      "write_many(items, start) -> (taken, errno): the items from start on whose frames are cached, "
      "written in few writes; see PipeSender.put_many."},
@@ -305,7 +401,9 @@ static PyObject *writer_call(Writer *self, PyObject *const *args, size_t nargsf,
         return NULL;
     }
     if (size > 0) {
+        take_lock(self);
         int failed = write_whole(self->fd, frame, size);
+        give_lock(self);
         if (failed < 0) {
             return NULL;
         }
@@ -340,6 +438,11 @@ static PyObject *writer_new(PyTypeObject *type, PyObject *args, PyObject *kwargs
     self->int_prefixes = Py_NewRef(int_prefixes);
     self->fallback = Py_NewRef(fallback);
     self->vectorcall = (vectorcallfunc)writer_call;
+    self->lock = PyThread_allocate_lock();
+    if (self->lock == NULL) {
+        Py_DECREF(self);
+        return PyErr_NoMemory();
+    }
     return (PyObject *)self;
 }
 
@@ -365,6 +468,12 @@ static void writer_dealloc(Writer *self)
     PyTypeObject *type = Py_TYPE(self);
     PyObject_GC_UnTrack(self);
     writer_clear(self);
+    if (self->lock != NULL) {
+        if (self->locked) {
+            PyThread_release_lock(self->lock);
+        }
+        PyThread_free_lock(self->lock);
+    }
     type->tp_free((PyObject *)self);
     Py_DECREF(type);
 }

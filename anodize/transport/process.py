@@ -39,8 +39,8 @@ _READ_SIZE = 64 * 1024
 _PIPE_SIZE = 1 << 20  # ask the kernel for 1 MiB pipes: fewer blocked senders when streaming
 BRIDGE_MESSAGES = 256  # a bridged channel's queue holds at most this many messages...
 BRIDGE_BYTES = 4 * 2**20  # ...and this many bytes of frames: then the pipe fills and its sender blocks
-# A failure frame stays within PIPE_BUF (4096 bytes; 4 UTF-8 bytes a character at most), so it is
-# written whole even beside the sender's own unlocked small frames.
+# A failure frame stays within PIPE_BUF (4096 bytes; 4 UTF-8 bytes a character at most): one
+# write, which a reader sees whole even when the writer dies right after it.
 _CAUSE_CHARS = (select.PIPE_BUF - 16) // 4
 _EOF_CAUSE_WAIT = 2.0  # seconds to wait for the supervisor's word on why a peer's process ended
 
@@ -65,14 +65,17 @@ class PipeSender:
         self.network = network
         self.sender = sender
         self.receiver = receiver
-        self._lock = threading.Lock()  # a failure frame must not split a message frame
+        # Every frame is written holding this lock, so that none (nor a failure frame written from
+        # another thread) lands inside another that takes several writes.
+        self._lock: Any = threading.Lock()
         self.closed = False
         _grow_pipe(fd)
         self._small: Any = None
         if SmallFrameWriter is not None:
             # Compiled (frames.py): messages without a payload or with a small int, whose frame
             # the codec has built once, are written in C; it hands every other item to put_python.
-            self._small = SmallFrameWriter(fd, *codec.small_frames(), self.put_python)
+            # Its lock is the channel's lock.
+            self._small = self._lock = SmallFrameWriter(fd, *codec.small_frames(), self.put_python)
             self.put = self._small  # type: ignore[method-assign]
 
     def put_python(self, item: object) -> None:
@@ -95,20 +98,10 @@ class PipeSender:
             except BrokenPipeError:  # waiting for a shared-memory slot, the receiver went away
                 raise self._peer_gone() from None
         elif isinstance(item, PeerFailure):
-            frame = Codec.failure_frame(item.cause[:_CAUSE_CHARS])
+            frame = Codec.failure_frame(_fitted(item.cause))
         else:
             return  # STOP is local to each process
-        if len(frame) <= select.PIPE_BUF:
-            # One write of at most PIPE_BUF bytes to a pipe is whole and never interleaved with
-            # another writer's (POSIX): no lock against put_failure, whose frames are as small.
-            try:
-                written = os.write(self.fd, frame)
-                if written != len(frame):  # not on a blocking pipe; kept whole should it ever happen
-                    _write_all(self.fd, frame[written:])
-            except OSError:
-                raise self._peer_gone() from None
-        else:
-            self._write(frame)
+        self._write(frame)
 
     def put_many(self, items: list[tuple[str, object]]) -> None:
         """Send several ``(label, payload)`` with one write (in pieces of at most 1 MiB).
@@ -137,7 +130,7 @@ class PipeSender:
                 if self._small is not None:  # a run of small messages, compiled: in order, after those before
                     if frames:
                         flush()
-                    taken, failed = self._small.write_many(items, index)
+                    taken, failed = self._small.write_many(items, index)  # holding the lock for each write
                     sent += taken
                     index += taken
                     if failed:
@@ -194,7 +187,7 @@ class PipeSender:
         """Best effort, from another thread: tell the receiver this sender failed."""
         if self._lock.acquire(timeout=1.0):  # a writer blocked on a full pipe must not block us
             try:
-                _write_all(self.fd, Codec.failure_frame(cause[:_CAUSE_CHARS]))
+                _write_all(self.fd, Codec.failure_frame(_fitted(cause)))
             except OSError:
                 pass
             finally:
@@ -544,6 +537,14 @@ class ProcessNetwork(InprocNetwork):
             if (sender in local and receiver in local) or isinstance(channel, SimpleQueue):
                 channel.put(STOP)
                 self.ring(receiver, sender)
+
+
+def _fitted(cause: str) -> str:
+    """``cause`` shortened, visibly, to fit a failure frame in one write."""
+    if len(cause) <= _CAUSE_CHARS:
+        return cause
+    cut = " [... cut to fit one write]"
+    return cause[:_CAUSE_CHARS - len(cut)] + cut
 
 
 def _silence(fd: int) -> None:

@@ -314,3 +314,57 @@ def test_the_endpoint_tests_pass_on_the_python_core() -> None:
                              "-k", "not test_the_endpoint_tests_pass_on_the_python_core", *files],
                             cwd=_HERE, env=env, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
+
+
+@needs_compiled
+@pytest.mark.parametrize("replacement", ["another monitor", "not a monitor"])
+def test_a_monitor_replaced_while_a_receive_waits_checks_as_the_python_core_does(replacement: str) -> None:
+    """Any code can run in a channel's get(); should it replace the endpoint's monitor, the
+    message is checked by the monitor read before, in both cores."""
+    from anodize.session.monitor import Monitor
+
+    def receive_after_a_replacement(cls: type[Endpoint]) -> tuple[tuple[str, str], object]:
+        endpoint, network = _setup(cls, _protocol("global G(A, B) = mu t. A -> B : { num(int). t, fin }"), "B", True)
+        channel = network.queues[("A", "B")]
+        for number in range(2):
+            channel.put(("num", number))
+        endpoint.recv("A")  # the compiled core's tables and steps are cached now
+        before = endpoint._monitor
+        assert before is not None
+
+        class Replacing:
+            def put(self, item: object) -> None:
+                channel.put(item)
+
+            def get(self, timeout: float | None = None) -> object:
+                endpoint._monitor = (Monitor(before.machine, "G", "B") if replacement == "another monitor"
+                                     else object())  # type: ignore[assignment]
+                return channel.get(timeout=timeout)
+
+        endpoint._in["A"] = Replacing()  # type: ignore[assignment]
+        return _outcome(endpoint.recv, "A"), before.state
+
+    assert receive_after_a_replacement(PythonEndpoint) == receive_after_a_replacement(Endpoint)
+
+
+@needs_compiled
+def test_a_stand_in_monitor_with_the_monitors_descriptor_is_refused_as_python_refuses_it() -> None:
+    from anodize.session.monitor import Monitor
+
+    def send_with_a_stand_in(cls: type[Endpoint]) -> tuple[str, str]:
+        endpoint, _ = _setup(cls, _protocol("global G(A, B) = mu t. A -> B : { num(int). t, fin }"), "A", True)
+        real = endpoint._monitor
+        assert real is not None
+
+        class StandIn:  # not a Monitor: Monitor's slot descriptor does not apply to it
+            state = Monitor.state
+            sends, recvs, recv_peers = real.sends, real.recvs, real.recv_peers
+
+            def send(self, *args: object) -> None:
+                real.send(*args)  # type: ignore[arg-type]
+
+        endpoint._monitor = StandIn()  # type: ignore[assignment]
+        return _outcome(endpoint.send, "B", "num", 1)
+
+    python, compiled = send_with_a_stand_in(PythonEndpoint), send_with_a_stand_in(Endpoint)
+    assert python == compiled and python[0] == "TypeError"
