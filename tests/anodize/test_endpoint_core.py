@@ -302,7 +302,7 @@ def test_a_repeated_message_is_checked_in_the_state_it_is_sent_in(
 
 
 @pytest.mark.slow
-def test_the_endpoint_tests_pass_on_the_python_core() -> None:
+def test_the_endpoint_tests_pass_on_the_python_core(tmp_path: Path) -> None:
     """The pure-Python fallback is what runs where nothing was compiled: it must pass the same tests."""
     files = ["test_endpoint_core.py", "test_runtime_properties.py", "test_send_many.py", "test_frames.py",
              "test_pipe_frames.py", "test_faults.py"]
@@ -311,8 +311,9 @@ def test_the_endpoint_tests_pass_on_the_python_core() -> None:
              "assert COMPILED_CORE is None and not COMPILED")
     subprocess.run([sys.executable, "-c", check], env=env, check=True)
     result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider",
-                             "-k", "not test_the_endpoint_tests_pass_on_the_python_core", *files],
-                            cwd=_HERE, env=env, capture_output=True, text=True, timeout=600)
+                             "-k", "not test_the_endpoint_tests_pass_on_the_python_core",
+                             *(str(_HERE / name) for name in files)],
+                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)  # nothing left here
     assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
 
 
