@@ -418,56 +418,26 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
     return message;
 }
 
+/* Every object field of Core, once: what traverse visits and clear clears. */
+#define CORE_OBJECTS(X) \
+    X(role) X(plain) X(monitor) X(network) X(out) X(in) X(sent) X(received) X(waiting) \
+    X(high_water) X(doorbell) X(cached) X(sends) X(recvs) X(recv_peers) \
+    X(send_peer) X(send_label) X(send_step) X(recv_peer) X(recv_label) X(recv_step)
+
 static int core_traverse(Core *self, visitproc visit, void *arg)
 {
     Py_VISIT(Py_TYPE(self));
-    Py_VISIT(self->role);
-    Py_VISIT(self->plain);
-    Py_VISIT(self->monitor);
-    Py_VISIT(self->network);
-    Py_VISIT(self->out);
-    Py_VISIT(self->in);
-    Py_VISIT(self->sent);
-    Py_VISIT(self->received);
-    Py_VISIT(self->waiting);
-    Py_VISIT(self->high_water);
-    Py_VISIT(self->doorbell);
-    Py_VISIT(self->cached);
-    Py_VISIT(self->sends);
-    Py_VISIT(self->recvs);
-    Py_VISIT(self->recv_peers);
-    Py_VISIT(self->send_peer);
-    Py_VISIT(self->send_label);
-    Py_VISIT(self->send_step);
-    Py_VISIT(self->recv_peer);
-    Py_VISIT(self->recv_label);
-    Py_VISIT(self->recv_step);
+#define VISIT_FIELD(field) Py_VISIT(self->field);
+    CORE_OBJECTS(VISIT_FIELD)
+#undef VISIT_FIELD
     return 0;
 }
 
 static int core_clear(Core *self)
 {
-    Py_CLEAR(self->role);
-    Py_CLEAR(self->plain);
-    Py_CLEAR(self->monitor);
-    Py_CLEAR(self->network);
-    Py_CLEAR(self->out);
-    Py_CLEAR(self->in);
-    Py_CLEAR(self->sent);
-    Py_CLEAR(self->received);
-    Py_CLEAR(self->waiting);
-    Py_CLEAR(self->high_water);
-    Py_CLEAR(self->doorbell);
-    Py_CLEAR(self->cached);
-    Py_CLEAR(self->sends);
-    Py_CLEAR(self->recvs);
-    Py_CLEAR(self->recv_peers);
-    Py_CLEAR(self->send_peer);
-    Py_CLEAR(self->send_label);
-    Py_CLEAR(self->send_step);
-    Py_CLEAR(self->recv_peer);
-    Py_CLEAR(self->recv_label);
-    Py_CLEAR(self->recv_step);
+#define CLEAR_FIELD(field) Py_CLEAR(self->field);
+    CORE_OBJECTS(CLEAR_FIELD)
+#undef CLEAR_FIELD
     return 0;
 }
 
