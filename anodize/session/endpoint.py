@@ -559,7 +559,6 @@ class Endpoint(_Core):
             found.update(branch._all_in())
         return found
 
-
     # The Python core's send and recv, by these names too: the compiled core hands them what
     # it does not take itself.
     _send_python = send
