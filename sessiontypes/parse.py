@@ -249,7 +249,7 @@ class _Builder(Transformer[Token, Any]):
     # ---- declarations ----
     def type_decl(self, children: list[Any]) -> s.TypeDecl:
         keyword, name, _, string = children
-        target = str(string)[1:-1].encode().decode("unicode_escape")
+        target = _unescape(str(string)[1:-1])
         return s.TypeDecl(self._name(name), target, _location(self.path, keyword))
 
     def roles(self, children: list[Any]) -> tuple[s.Name, ...]:
@@ -440,3 +440,13 @@ def _hint(token: Token, expected: set[str]) -> str:
     if token.type in {"BANG", "QUERY", "PLUS", "AMP"} and "NAME" in expected and "LBRACE" not in expected:
         return "'!', '?', '+' and '&' belong in local types"
     return ""
+
+
+_ESCAPES = {"n": "\n", "t": "\t", "\\": "\\", '"': '"'}
+
+
+def _unescape(body: str) -> str:
+    r"""A string literal's text: ``\\``, ``\"``, ``\n`` and ``\t`` stand for their character, any
+    other backslash for itself (no warning, no error: a target is checked later), every other
+    character as written (not re-decoded, so non-ASCII text stays intact)."""
+    return re.sub(r"\\(.)", lambda m: _ESCAPES.get(m[1], m[0]), body)

@@ -530,3 +530,17 @@ def test_syntax_error_location_counts_unicode_characters() -> None:
         sessiontypes.loads("global P = μ t. A → B x. t", "u.proto")
     assert caught.value.location == Location("u.proto", 1, 23)
     assert caught.value.got == "'x'"
+
+
+@pytest.mark.parametrize(("literal", "target"), [
+    (r'"pkg.mod:Cls"', "pkg.mod:Cls"),
+    (r'"a\"b"', 'a"b'),
+    (r'"a\\b"', "a\\b"),
+    (r'"a\sb"', r"a\sb"),  # an unknown escape stands for itself: no warning, and the target check reports it
+    ('"modé:Clé"', "modé:Clé"),  # non-ASCII text is kept as written
+])
+def test_a_type_declarations_string_is_read_without_surprises(literal: str, target: str,
+                                                              recwarn: pytest.WarningsRecorder) -> None:
+    (decl,) = parse_file(f"type X = {literal}\n", "t.proto").declarations
+    assert isinstance(decl, s.TypeDecl) and decl.target == target
+    assert not recwarn.list
