@@ -93,7 +93,7 @@ static int cache_tables(Core *self)
 /* The monitor's state object (a new reference), or NULL with an exception set. */
 static PyObject *get_state(Core *self)
 {
-    if (self->state_offset >= 0) {
+    if (self->state_offset >= 0 && self->cached == self->monitor) { /* the offset is this monitor's */
         PyObject *state = *(PyObject **)((char *)self->monitor + self->state_offset);
         if (state != NULL) {
             return Py_NewRef(state);
@@ -104,7 +104,7 @@ static PyObject *get_state(Core *self)
 
 static int set_state(Core *self, PyObject *state)
 {
-    if (self->state_offset < 0) {
+    if (self->state_offset < 0 || self->cached != self->monitor) {
         return PyObject_SetAttr(self->monitor, str_state, state);
     }
     PyObject **slot = (PyObject **)((char *)self->monitor + self->state_offset);
@@ -140,7 +140,10 @@ static int try_step_in(Core *self, PyObject *tables, PyObject *peer, PyObject *l
 static int try_step(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
                     Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step)
 {
-    Py_INCREF(tables); /* a peer's or label's own __hash__ or __eq__ may re-enter and replace it */
+    if (!PyUnicode_CheckExact(peer) || !PyUnicode_CheckExact(label)) {
+        return 0; /* a str subclass may run code as a key: the full check, in Python */
+    }
+    Py_INCREF(tables); /* a payload type's metaclass may run code and replace it */
     int result = try_step_in(self, tables, peer, label, payload, last_state, last_peer, last_label, last_step);
     Py_DECREF(tables);
     return result;
@@ -228,7 +231,9 @@ static PyObject *call_method(PyObject *obj, PyObject *name, PyObject *a, PyObjec
 static PyObject *core_send(Core *self, PyObject *const *args, Py_ssize_t nargsf, PyObject *kwnames)
 {
     Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
-    if (kwnames != NULL || nargs < 2 || nargs > 3 || self->plain != Py_True || self->out == NULL
+    /* Role names of exact type str: no code of theirs runs in the look-ups below. */
+    if (kwnames != NULL || nargs < 2 || nargs > 3 || !PyUnicode_CheckExact(args[0]) || self->plain != Py_True
+            || self->out == NULL
             || self->sent == NULL || self->waiting == NULL || self->high_water == NULL || self->network == NULL) {
         return pass_on(self, str_send_python, args, (size_t)nargsf, kwnames);
     }
@@ -336,6 +341,7 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
 {
     Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
     if (kwnames != NULL || nargs < 1 || nargs > 2 || (nargs == 2 && args[1] != Py_None) || message_type == NULL
+            || !PyUnicode_CheckExact(args[0])
             || self->plain != Py_True || self->doorbell != Py_None || self->in == NULL || self->received == NULL) {
         return pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
     }
