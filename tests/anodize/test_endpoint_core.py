@@ -369,3 +369,26 @@ def test_a_stand_in_monitor_with_the_monitors_descriptor_is_refused_as_python_re
 
     python, compiled = send_with_a_stand_in(PythonEndpoint), send_with_a_stand_in(Endpoint)
     assert python == compiled and python[0] == "TypeError"
+
+
+@needs_compiled
+def test_names_of_a_str_subclass_take_the_python_path_with_the_same_result() -> None:
+    """A role name or label of a str subclass may run its own code inside a look-up: the compiled
+    core leaves such calls to the Python core, and the outcome is the same."""
+    class Name(str):
+        def __eq__(self, other: object) -> bool:
+            return str.__eq__(self, other)
+
+        __hash__ = str.__hash__
+
+    def run(cls: type[Endpoint]) -> list[tuple[str, str]]:
+        stream = _protocol("global G(A, B) = mu t. A -> B : { num(int). t, fin }")
+        sender, network = _setup(cls, stream, "A", True)
+        results = [_outcome(sender.send, Name("B"), Name("num"), 1), _outcome(sender.send, "B", Name("num"), 2),
+                   _outcome(sender.send, Name("B"), "nope", 3)]
+        receiver, _ = _setup(cls, stream, "B", True)
+        receiver._in["A"] = network.queues[("A", "B")]
+        results += [_outcome(receiver.recv, Name("A")), _outcome(receiver.recv, "A")]
+        return [*results, (sender.state, receiver.state)]
+
+    assert run(PythonEndpoint) == run(Endpoint)
