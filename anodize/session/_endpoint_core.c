@@ -193,6 +193,10 @@ static int try_step_in(Core *self, PyObject *tables, PyObject *peer, PyObject *l
 /* counts[peer] += 1 */
 static int count_one(PyObject *counts, PyObject *peer)
 {
+    if (counts == NULL || !PyDict_Check(counts)) { /* deleted or replaced while a put or get ran */
+        PyErr_SetString(PyExc_AttributeError, "EndpointCore: the endpoint's counts are gone");
+        return -1;
+    }
     PyObject *count = PyDict_GetItemWithError(counts, peer);
     if (count == NULL) {
         if (!PyErr_Occurred()) {
@@ -291,12 +295,17 @@ static PyObject *core_send(Core *self, PyObject *const *args, Py_ssize_t nargsf,
         Py_DECREF(doorbell);
         return NULL;
     }
+    if (self->waiting == NULL || self->high_water == NULL) { /* deleted while the put ran */
+        Py_DECREF(doorbell);
+        PyErr_SetString(PyExc_AttributeError, "EndpointCore: the endpoint's high-water marks are gone");
+        return NULL;
+    }
     PyObject *size_of = PyDict_GetItemWithError(self->waiting, to); /* borrowed */
     if (size_of != NULL) { /* the channel's high-water mark */
         Py_INCREF(size_of);
         PyObject *size = PyObject_CallNoArgs(size_of);
         Py_DECREF(size_of);
-        PyObject *mark = size ? PyDict_GetItemWithError(self->high_water, to) : NULL;
+        PyObject *mark = size && self->high_water != NULL ? PyDict_GetItemWithError(self->high_water, to) : NULL;
         int higher = mark ? PyObject_RichCompareBool(size, mark, Py_GT) : -1;
         if (higher > 0) {
             higher = PyDict_SetItem(self->high_water, to, size);
