@@ -186,24 +186,27 @@ static void give_lock(Writer *self)
     PyThread_release_lock(self->lock);
 }
 
-static int write_whole(int fd, const char *data, Py_ssize_t size)
+/* Write `size` bytes of `data` to fd as os.write in a loop would: the GIL released while each
+ * write waits, and after an interrupted or short write the signal handlers run (one may
+ * raise). *written counts the bytes that went. Returns 0 when all went, -1 with an exception
+ * set when a handler raised, or the errno of the write that failed. */
+static int write_out(int fd, const char *data, Py_ssize_t size, Py_ssize_t *written)
 {
-    while (size > 0) {
-        ssize_t written;
+    *written = 0;
+    while (*written < size) {
+        ssize_t n;
+        int failure;
         Py_BEGIN_ALLOW_THREADS
-        written = write(fd, data, (size_t)size);
+        n = write(fd, data + *written, (size_t)(size - *written));
+        failure = n < 0 ? errno : 0;
         Py_END_ALLOW_THREADS
-        if (written < 0) {
-            if (errno == EINTR) {
-                if (PyErr_CheckSignals() < 0) {
-                    return -1; /* a signal handler raised: as os.write would */
-                }
-                continue;
-            }
-            return 1; /* the fallback repeats the write and reports the error its way */
+        if (failure != 0 && failure != EINTR) {
+            return failure;
         }
-        data += written;
-        size -= written;
+        *written += n > 0 ? n : 0;
+        if (*written < size && PyErr_CheckSignals() < 0) {
+            return -1;
+        }
     }
     return 0;
 }
@@ -283,31 +286,11 @@ static PyObject *writer_write_many(Writer *self, PyObject *args)
             }
         }
         if (in_batch > 0 && (framed == 0 || size + framed > BATCH_BYTES || in_batch == MOST_FRAMES)) {
-            Py_ssize_t written = 0;
-            int interrupted = 0;
+            Py_ssize_t written;
             take_lock(self);
-            Py_BEGIN_ALLOW_THREADS
-            while (written < size) {
-                ssize_t n = write(self->fd, batch + written, (size_t)(size - written));
-                if (n < 0 && errno != EINTR) {
-                    error = errno;
-                    break;
-                }
-                written += n > 0 ? n : 0;
-                if (written < size) {
-                    /* Interrupted (EINTR, or a signal cut a long write short): run the signal
-                     * handlers, as os.write and the loop around it would; one may raise. */
-                    Py_BLOCK_THREADS
-                    interrupted = PyErr_CheckSignals() < 0;
-                    Py_UNBLOCK_THREADS
-                    if (interrupted) {
-                        break;
-                    }
-                }
-            }
-            Py_END_ALLOW_THREADS
+            error = write_out(self->fd, batch, size, &written);
             give_lock(self);
-            if (interrupted) {
+            if (error < 0) { /* a signal handler raised */
                 PyMem_Free(batch);
                 PyMem_Free(ends);
                 return NULL;
@@ -401,8 +384,9 @@ static PyObject *writer_call(Writer *self, PyObject *const *args, size_t nargsf,
         return NULL;
     }
     if (size > 0) {
+        Py_ssize_t written;
         take_lock(self);
-        int failed = write_whole(self->fd, frame, size);
+        int failed = write_out(self->fd, frame, size, &written);
         give_lock(self);
         if (failed < 0) {
             return NULL;
