@@ -12,7 +12,6 @@ part in.
 
 from __future__ import annotations
 
-import os
 import queue
 import threading
 import time
@@ -22,6 +21,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple, NoReturn
 from sessiontypes import StateMachine
 
 from ..errors import Action, AnodizeError, PeerFailedError, ProtocolViolationError, RoleStopped
+from . import compiled
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
 from .monitor import Monitor
 
@@ -41,7 +41,7 @@ class Message(NamedTuple):
 
 def _compiled_core() -> type | None:
     """The compiled core (``_endpoint_core.c``), unless it was not built or ANODIZE_PURE_PYTHON is set."""
-    if os.environ.get("ANODIZE_PURE_PYTHON", "") not in ("", "0"):
+    if not compiled.allowed():
         return None
     try:
         from ._endpoint_core import EndpointCore, configure

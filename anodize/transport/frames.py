@@ -11,10 +11,11 @@ tests/anodize/test_frames.py compares them on arbitrary bytes.
 
 from __future__ import annotations
 
-import os
 import struct
 from collections import deque
 from collections.abc import Callable
+
+from ..session import compiled
 
 __all__ = ["COMPILED", "SmallFrameWriter", "decode_run", "decode_run_python"]
 
@@ -63,13 +64,13 @@ def decode_run_python(buffer: bytearray, at: int, names: dict[bytes, str],
 
 
 def _compiled() -> DecodeRun | None:
-    if os.environ.get("ANODIZE_PURE_PYTHON", "") not in ("", "0"):
+    if not compiled.allowed():
         return None
     try:
-        from ._frames import decode_run as compiled
+        from ._frames import decode_run
     except ImportError:  # built without a C compiler: the reference does the work
         return None
-    return compiled
+    return decode_run
 
 
 def _small_frame_writer() -> type | None:
