@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 __all__ = [
     "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
-    "LinearityError", "Action", "RoleError", "RoleStopped", "error_to_data", "error_from_data",
+    "LinearityError", "MissingExtraError", "Action", "RoleError", "RoleStopped", "error_to_data", "error_from_data",
 ]
 
 
@@ -24,6 +24,26 @@ class AnodizeError(Exception):
 class ConfigurationError(AnodizeError, ValueError):
     """A system declared wrongly: a bad group, priority, memory size, CPU set, policy,
     transport or role placement (also a ``ValueError``, as lark's configuration errors are)."""
+
+
+class MissingExtraError(AnodizeError, ImportError):
+    """Raised when a feature needs a library that an optional extra installs and it is missing.
+
+    Attributes:
+        feature: what was asked for, e.g. ``"the DDS transport"``.
+        extra: the extra that installs it, e.g. ``"dds"``.
+        module: the module that could not be imported.
+    """
+
+    def __init__(self, feature: str, extra: str, module: str) -> None:
+        super().__init__(feature, extra, module)
+        self.feature = feature
+        self.extra = extra
+        self.module = module
+
+    def __str__(self) -> str:
+        return (f"{self.feature} needs the Python package of module {self.module!r}, which is not installed; "
+                f"install it with: pip install 'anodize[{self.extra}]'")
 
 
 @dataclass(frozen=True, slots=True)
