@@ -18,6 +18,7 @@ from typing import Any
 
 from ..errors import AnodizeError
 from .checks import Compiled, compile_message, failure_text
+from .idl import idl_class
 
 __all__ = ["DEFAULT_DISTRO", "RosType", "ros_type", "RosDecodeError", "RosEncodeError"]
 
@@ -146,11 +147,14 @@ class RosType:
         text: str = self._store.generate_msgdef(self.name, ros_version=2)[0]
         return text
 
+    def field_descriptions(self) -> list[tuple[str, Any]]:
+        """rosbags' definition of the fields: ``(field name, (node type, detail))`` in order."""
+        fields: list[tuple[str, Any]] = self._store.fielddefs[self.name][1]
+        return fields
+
     def idl_class(self) -> type:
         """The Cyclone DDS ``IdlStruct`` of this type (see :func:`anodize.ros.idl.idl_class`)."""
-        from .idl import idl_class
-
-        return idl_class(self)
+        return idl_class(self, ros_type)
 
 
 _LOCK = threading.RLock()  # resolving a type resolves the types of its fields, under the same lock
