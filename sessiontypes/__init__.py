@@ -10,6 +10,7 @@ compile local types to state machines; generate typed endpoint code.
 """
 
 from .check import ProtocolModule
+from .declarations import GlobalType, LocalType
 from .errors import (
     Diagnostic,
     ProjectionError,
@@ -20,9 +21,7 @@ from .errors import (
     UnknownRoleError,
 )
 from .fsm import StateMachine, Transition
-from .global_types import GlobalType
 from .loader import load, loads, read_source
-from .local_types import LocalType
 from .location import Location
 from .sorts import Message, Sort
 

@@ -41,9 +41,9 @@ from dataclasses import dataclass, field, replace
 
 from . import local_types as lt
 from .check import ProtocolModule
+from .declarations import GlobalType
 from .errors import Diagnostic, ProtocolError
 from .fsm import StateMachine, Transition
-from .global_types import GlobalType
 from .location import Location
 from .sorts import Sort
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["BUILTIN_SORTS", "Sort", "Field", "Message", "builtin_sort", "record_sort"]
+__all__ = ["BUILTIN_SORTS", "Sort", "Field", "Message", "builtin_sort", "record_sort", "print_message"]
 
 # Every spelling of a builtin sort, mapped to its canonical name.
 BUILTIN_SORTS: dict[str, str] = {
@@ -94,3 +94,15 @@ class Message:
     label: str
     sort: Sort | None = None
     empty_parens: bool = field(default=False, compare=False)
+
+
+def print_message(message: Message) -> str:
+    """``Sort``, ``label(Sort)``, ``label(f: Sort, ...)`` or ``label``."""
+    if message.sort is None:
+        # 'int' alone would read back as label int carrying an int.
+        if message.empty_parens or message.label in BUILTIN_SORTS:
+            return f"{message.label}()"
+        return message.label
+    if message.label == message.sort.spelling:  # never for a record: its spelling has ':'
+        return message.label
+    return f"{message.label}({message.sort.spelling})"

@@ -22,7 +22,7 @@ def body(text: str, name: str = "P") -> g.GlobalTerm:
     return sessiontypes.loads(text).globals[name].body
 
 
-def local(text: str, name: str = "L") -> lt.LocalType:
+def local(text: str, name: str = "L") -> sessiontypes.LocalType:
     return sessiontypes.loads(text).locals[name]
 
 
