@@ -11,7 +11,11 @@ a :class:`Select` or :class:`Offer` (see :func:`select_among` and
 :func:`offer_among`), so each behaviour has exactly one representation. ``peer`` is
 ``None`` in the binary form of Fig. 1 (one implicit peer).
 
-``str()`` of any term is its canonical print (LANGUAGE.md section 5).
+``str()`` of any term is its canonical print (LANGUAGE.md section 5), written
+here (:func:`print_local`) rather than in :mod:`sessiontypes.printer` so that
+this module imports no stage: the printer needs the terms, and the terms'
+``str()`` needs the print. The named :class:`~sessiontypes.LocalType` users
+hold, with ``fsm()``, is in :mod:`sessiontypes.declarations`.
 """
 
 from __future__ import annotations

@@ -8,6 +8,10 @@ A message prints as ``Sort`` when its label is the sort's spelling,
 payloads, and ``label`` when it carries nothing.
 Global types print in the same style (``A->B:msg.G``, ``A->{B:msg.G, C:msg.G}``) so that printing then
 parsing gives the same type back.
+
+The print of local terms lives with them (:mod:`sessiontypes.local_types`, whose
+``str()`` it is) and that of a message with it (:mod:`sessiontypes.sorts`); this
+module prints global terms and gathers all three under one name.
 """
 
 from __future__ import annotations

@@ -23,6 +23,7 @@ from .idl import idl_class
 __all__ = ["DEFAULT_DISTRO", "RosType", "ros_type", "RosDecodeError", "RosEncodeError"]
 
 DEFAULT_DISTRO = "jazzy"
+_STORES_MODULE = "rosbags.typesys.stores"  # rosbags' modules of message classes, one per typestore
 
 
 class RosDecodeError(AnodizeError):
@@ -194,8 +195,27 @@ def _typestore(distro: str) -> Any:
         known = sorted(s.value.removeprefix("ros2_") for s in Stores if s.value.startswith("ros2_"))
         if distro not in known:
             raise AnodizeError(f"unknown ROS 2 distribution {distro!r}; rosbags knows {', '.join(known)}")
-        store = _STORES[distro] = get_typestore(Stores(f"ros2_{distro}"))
+        store = _STORES[distro] = get_typestore(Stores(_store_name(distro)))
     return store
+
+
+def _store_name(distro: str) -> str:
+    """rosbags' name of the typestore of ROS 2 ``distro`` (``ros2_jazzy``)."""
+    return f"ros2_{distro}"
+
+
+def rosbags_class(name: str, distro: str | None = None) -> tuple[str, str]:
+    """Where rosbags defines the class of message ``name``: ``(module, class name)``.
+
+    What :attr:`RosType.cls` is, spelled for an import (``rosbags.typesys.stores.ros2_jazzy``,
+    ``geometry_msgs__msg__Twist``) without importing rosbags: generated code names it.
+
+    Args:
+        name: ``pkg/msg/Name``, with or without the ``ros:`` of a sort's binding.
+        distro: the distribution (default :data:`DEFAULT_DISTRO`).
+    """
+    package, kind, message = name.removeprefix("ros:").split("/")
+    return f"{_STORES_MODULE}.{_store_name((distro or DEFAULT_DISTRO).lower())}", f"{package}__{kind}__{message}"
 
 
 def _resolve(name: str, distro: str) -> RosType:
