@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from . import syntax as s
 from .errors import Diagnostic
 from .location import Location
-from .sorts import BUILTIN_SORTS, Field, Message, Sort, builtin_sort, record_sort
+from .sorts import BUILTIN_SORTS, Field, Interaction, Sort, builtin_sort, record_sort
 
 __all__ = ["Reporter", "SortTable"]
 
@@ -67,17 +67,17 @@ class SortTable:
         self.used.add(name.text)
         return Sort(name.text, name.text, decl.target)
 
-    def message(self, syntax: s.MessageSyntax) -> Message:
+    def message(self, syntax: s.MessageSyntax) -> Interaction:
         """Apply the abbreviation rule: a bare sort name labels a value of that sort."""
         if syntax.fields is not None:
-            return Message(syntax.label.text, self.record(syntax.label, syntax.fields))
+            return Interaction(syntax.label.text, self.record(syntax.label, syntax.fields))
         if syntax.parens:
             if syntax.sort is None:
-                return Message(syntax.label.text, None, self.is_sort(syntax.label.text))
-            return Message(syntax.label.text, self.sort(syntax.sort))
+                return Interaction(syntax.label.text, None, self.is_sort(syntax.label.text))
+            return Interaction(syntax.label.text, self.sort(syntax.sort))
         if self.is_sort(syntax.label.text):
-            return Message(syntax.label.text, self.sort(syntax.label))
-        return Message(syntax.label.text)
+            return Interaction(syntax.label.text, self.sort(syntax.label))
+        return Interaction(syntax.label.text)
 
     def record(self, label: s.Name, fields: tuple[s.FieldSyntax, ...]) -> Sort | None:
         """The record sort of named payloads; reports repeated field names and unknown sorts."""

@@ -18,7 +18,7 @@ from . import local_types as lt
 from .deep import run_deep
 from .local_types import describe_local
 from .location import Location
-from .sorts import Message, Sort, print_message
+from .sorts import Interaction, Sort, print_message
 
 __all__ = ["Action", "Transition", "StateMachine", "build_term_machine"]
 
@@ -40,7 +40,7 @@ class Transition:
     def __str__(self) -> str:
         """The action in local-type notation: ``!Peer(msg)``, or ``!Sort`` in binary form."""
         arrow = "!" if self.action == "send" else "?"
-        message = print_message(Message(self.label, self.sort))
+        message = print_message(Interaction(self.label, self.sort))
         return f"{arrow}{self.peer}({message})" if self.peer else f"{arrow}{message}"
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .location import NOWHERE, Location
-from .sorts import Message
+from .sorts import Interaction
 
 __all__ = [
     "Branch", "Choice", "RoutedBranch", "Routed", "Rec", "Var", "End", "Parallel", "GlobalTerm",
@@ -25,7 +25,7 @@ __all__ = [
 class Branch:
     """One labelled alternative of a :class:`Choice` and what follows it."""
 
-    message: Message
+    message: Interaction
     continuation: GlobalTerm
     location: Location = field(default=NOWHERE, compare=False, repr=False)
 
@@ -46,7 +46,7 @@ class RoutedBranch:
     """One alternative of a :class:`Routed` choice: its receiver, its message, what follows."""
 
     receiver: str
-    message: Message
+    message: Interaction
     continuation: GlobalTerm
     location: Location = field(default=NOWHERE, compare=False, repr=False)
     receiver_location: Location = field(default=NOWHERE, compare=False, repr=False)

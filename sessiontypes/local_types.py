@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 from .location import NOWHERE, Location
 from .printing import Printer, PrintTooLongError, run_print
-from .sorts import Message, print_message
+from .sorts import Interaction, print_message
 
 __all__ = [
     "Branch", "Send", "Recv", "Select", "Offer", "SelectAmong", "OfferAmong", "Rec", "Var", "End",
@@ -48,7 +48,7 @@ class Branch(_Printable):
     of the local text it was parsed from).
     """
 
-    message: Message
+    message: Interaction
     continuation: LocalTerm
     location: Location = field(default=NOWHERE, compare=False)
 
@@ -61,7 +61,7 @@ class Send(_Printable):
     """``!peer(message).continuation``."""
 
     peer: str | None
-    message: Message
+    message: Interaction
     continuation: LocalTerm
     location: Location = field(default=NOWHERE, compare=False)
 
@@ -74,7 +74,7 @@ class Recv(_Printable):
     """``?peer(message).continuation``."""
 
     peer: str | None
-    message: Message
+    message: Interaction
     continuation: LocalTerm
     location: Location = field(default=NOWHERE, compare=False)
 

@@ -22,7 +22,7 @@ from . import local_types as lt
 from . import syntax as s
 from .expand import Binder, Scope, Walk
 from .filescope import Reporter, SortTable  # re-exported
-from .sorts import Message
+from .sorts import Interaction
 
 __all__ = ["Reporter", "SortTable", "global_walk", "local_walk", "resolve_global", "resolve_local"]
 
@@ -151,7 +151,7 @@ def _resolve_l(walk: LocalWalk, node: s.LSyntax | None,
             if peer is None and not walk.sorts.is_sort(message.label.text):
                 walk.reporter.error(message.label.location, f"unknown sort '{message.label.text}'; "
                                     f"the binary form {direction}Sort sends or receives a value of a sort")
-                resolved = Message(message.label.text)
+                resolved = Interaction(message.label.text)
             else:
                 resolved = walk.sorts.message(message)
             cont = _resolve_l(walk, rest, scope, depth + 1, parallel_depth)
