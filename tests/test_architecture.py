@@ -55,7 +55,7 @@ def import_cycles(*packages: str) -> list[list[str]]:
     function-level import is still a circle) and under ``TYPE_CHECKING``.
     """
     graph = grimp.build_graph(*packages, cache_dir=None)
-    edges = nx.DiGraph()
+    edges: nx.DiGraph[str] = nx.DiGraph()
     for module in graph.modules:
         edges.add_edges_from((module, imported) for imported in graph.find_modules_directly_imported_by(module))
     return sorted(sorted(group) for group in nx.strongly_connected_components(edges) if len(group) > 1)

@@ -546,7 +546,7 @@ def test_generated_imports_resolve_to_the_runtime_s_own_objects() -> None:
     assert lines
     for line in lines:
         module_name, _, names = line.removeprefix("from ").partition(" import ")
-        module = importlib.import_module(module_name)
+        classes = importlib.import_module(module_name)
         for class_name in [name.split(" as ")[0] for name in names.split(", ")]:
             package, kind, message = class_name.split("__")
-            assert getattr(module, class_name) is ros_type(f"{package}/{kind}/{message}").cls
+            assert getattr(classes, class_name) is ros_type(f"{package}/{kind}/{message}").cls
