@@ -104,9 +104,12 @@ def benchmark(name: str, document: dict[str, Any]) -> str:
         raise GenerationError(f"bench/results/{name}.json: expected a table of a header and rows, got {table!r}")
     source = document.get("source", {})
     commit = f", commit `{source['commit'][:10]}`" if isinstance(source, dict) and source.get("commit") else ""
+    options = document.get("options", {})
+    quick = (" A `--quick` smoke run: fewer repetitions and smaller workloads than the defaults."
+             if isinstance(options, dict) and options.get("quick") else "")
     return "\n".join([
         f"## {document['title']}", "",
-        f"`bench/{name}.py`, {document.get('date', 'undated')}{commit}: {document['how']}.", "",
+        f"`bench/{name}.py`, {document.get('date', 'undated')}{commit}: {document['how']}.{quick}", "",
         _load(document["load"]), "",
         *_table(table), "",
     ])
