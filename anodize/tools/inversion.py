@@ -172,7 +172,7 @@ class InversionReport:
 
     inversions: tuple[Inversion, ...]
     waits: int
-    inheritance_applied: bool = INHERITANCE_APPLIED
+    inheritance_applied: bool
 
     @property
     def unbounded(self) -> tuple[Inversion, ...]:
@@ -265,7 +265,7 @@ def analyse_inversions(config: SystemConfig, global_type: GlobalType) -> Inversi
                       f"(see {_and([f'{waiter} -> {role}' for role in further])})")
             inversion = dataclasses.replace(inversion, unbounded=(*inversion.unbounded, reason))
         inversions.append(inversion)
-    return InversionReport(tuple(inversions), graph.number_of_nodes())
+    return InversionReport(tuple(inversions), graph.number_of_nodes(), INHERITANCE_APPLIED)
 
 
 def _beyond(graph: nx.DiGraph[Wait], chain: tuple[Wait, ...]) -> list[str]:
