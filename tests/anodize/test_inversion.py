@@ -340,3 +340,13 @@ def test_lint_tinman_by_name_prints_its_inversions(
     assert "  preempted by: perception (priority 50, CPUs any) over Planner" in analysis
     assert analysis.endswith("6 priority inversions (6 unbounded) among 11 waits; "
                              "priority inheritance is not applied yet\n")
+
+
+def test_the_guide_shows_tinmans_real_inversion_analysis(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(REPO)
+    main(["lint", "tinman"])
+    analysis = capsys.readouterr().out.split("\n\n", 1)[1]
+    guide = (REPO / "docs" / "guide" / "inversion.md").read_text(encoding="utf-8")
+    shown = guide.split("$ anodize lint tinman\n", 1)[1].split("```", 1)[0]
+    assert shown.split("\n\n", 1)[1] == analysis
