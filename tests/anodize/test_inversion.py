@@ -350,3 +350,12 @@ def test_the_guide_shows_tinmans_real_inversion_analysis(
     guide = (REPO / "docs" / "guide" / "inversion.md").read_text(encoding="utf-8")
     shown = guide.split("$ anodize lint tinman\n", 1)[1].split("```", 1)[0]
     assert shown.split("\n\n", 1)[1] == analysis
+
+
+def test_a_named_system_without_a_system_file_is_a_usage_error(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("anodize.tools.cli._named_systems", lambda: ["demo"])
+    monkeypatch.setattr("anodize.tools.named.find_named", lambda name: object())
+    assert main(["lint", "demo"]) == 2
+    assert capsys.readouterr().err == (
+        "anodize lint: error: named system demo has no system file to lint (it declares no system_file)\n")
