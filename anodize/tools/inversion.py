@@ -279,8 +279,9 @@ def _and(names: list[str]) -> str:
 
 
 def _chains(graph: nx.DiGraph[Wait], start: Wait) -> list[tuple[Wait, ...]]:
-    """The shortest chain from ``start`` to each wait it can lead to, visiting no role twice
-    (a role is in one state at a time, so a chain back through it is not a wait it can have)."""
+    """The chains from ``start``, shortest first, visiting no role twice (a role is in one state
+    at a time, so a chain back through it is not a wait it can have). A wait is extended once per
+    set of roles before it: the count is bounded by waits x subsets of roles, small for a protocol."""
     chains: list[tuple[Wait, ...]] = []
     seen: set[tuple[Wait, frozenset[str]]] = set()
     queue: deque[tuple[Wait, ...]] = deque([(start,)])
