@@ -246,8 +246,9 @@ def analyse_inversions(config: SystemConfig, global_type: GlobalType) -> Inversi
     machines = {role: global_type.project(role).fsm() for role in global_type.roles if role not in config.external}
     graph = waits_for_graph(machines, capacities)
     found: dict[tuple[str, str], tuple[Wait, ...]] = {}
+    chains = {start: _chains(graph, start) for start in graph.nodes}
     for start in graph.nodes:
-        for chain in _chains(graph, start):
+        for chain in chains[start]:
             high, low = parties[start.role], parties[chain[-1].peer]
             if (low.external and high.priority is not None) or low.rank < high.rank:
                 key = (high.role, low.role)
@@ -258,7 +259,7 @@ def analyse_inversions(config: SystemConfig, global_type: GlobalType) -> Inversi
     inversions = []
     for (waiter, waited), inversion in alone.items():
         # the lower role's own waits stretch this one: unbounded if they are
-        beyond = _beyond(graph, found[waiter, waited])
+        beyond = _beyond(found[waiter, waited], chains)
         further = [role for role in beyond if (waiter, role) in alone and not alone[waiter, role].bounded]
         if further:
             reason = (f"{waited} can itself wait on {_and(further)}, and that is unbounded "
@@ -268,10 +269,10 @@ def analyse_inversions(config: SystemConfig, global_type: GlobalType) -> Inversi
     return InversionReport(tuple(inversions), graph.number_of_nodes(), INHERITANCE_APPLIED)
 
 
-def _beyond(graph: nx.DiGraph[Wait], chain: tuple[Wait, ...]) -> list[str]:
+def _beyond(chain: tuple[Wait, ...], chains: dict[Wait, list[tuple[Wait, ...]]]) -> list[str]:
     """The roles the chain's last role can in turn wait on (through chains), sorted."""
     on_chain = {w.role for w in chain} | {chain[-1].peer}
-    return sorted({w.peer for longer in _chains(graph, chain[-1]) for w in longer[1:]} - on_chain)
+    return sorted({w.peer for longer in chains[chain[-1]] for w in longer[1:]} - on_chain)
 
 
 def _and(names: list[str]) -> str:
@@ -279,21 +280,39 @@ def _and(names: list[str]) -> str:
 
 
 def _chains(graph: nx.DiGraph[Wait], start: Wait) -> list[tuple[Wait, ...]]:
-    """The chains from ``start``, shortest first, visiting no role twice (a role is in one state
-    at a time, so a chain back through it is not a wait it can have). A wait is extended once per
-    set of roles before it: the count is bounded by waits x subsets of roles, small for a protocol."""
+    """The chains from ``start``, shortest first, in which no two waits can be of one thread
+    at once (a role, or a parallel branch of it, is in one state at a time, so a chain back
+    through it is not a wait it can have).
+
+    A wait reached again with at least the threads of an earlier visit leads nowhere new
+    and is not followed again: that keeps dense protocols tractable.
+    """
     chains: list[tuple[Wait, ...]] = []
-    seen: set[tuple[Wait, frozenset[str]]] = set()
+    visits: dict[Wait, list[frozenset[tuple[str, str]]]] = {}
     queue: deque[tuple[Wait, ...]] = deque([(start,)])
     while queue:
         chain = queue.popleft()
         chains.append(chain)
-        roles = frozenset(w.role for w in chain) | {chain[-1].peer}
+        threads = frozenset(_thread(w) for w in chain)
         for following in sorted(graph.successors(chain[-1])):
-            if following.peer not in roles and (following, roles) not in seen:
-                seen.add((following, roles))
-                queue.append((*chain, following))
+            if any(_together(_thread(following), t) for t in threads):
+                continue
+            extended = threads | {_thread(following)}
+            if any(earlier <= extended for earlier in visits.get(following, [])):
+                continue
+            visits.setdefault(following, []).append(extended)
+            queue.append((*chain, following))
     return chains
+
+
+def _thread(wait: Wait) -> tuple[str, str]:
+    """The role and the branch of it a wait is in: ``("Move", "0.2.")`` for state ``0.2.0``."""
+    return wait.role, wait.state[:wait.state.rfind(".") + 1]
+
+
+def _together(first: tuple[str, str], second: tuple[str, str]) -> bool:
+    """Whether two waits are of one thread: one role, in one branch or one enclosing the other."""
+    return first[0] == second[0] and (first[1].startswith(second[1]) or second[1].startswith(first[1]))
 
 
 def _inversion(chain: tuple[Wait, ...], parties: dict[str, Party], config: SystemConfig) -> Inversion:
