@@ -1,8 +1,8 @@
 """Priority inversion before the run: where a higher-priority role can wait on a lower one.
 
 :func:`inversion_report` reads a system file's protocol and groups (it imports no role
-code), builds the waits-for graph of the global type (:mod:`.waits`) and follows it
-from every wait of every role: when a chain of waits (A waits on B, which waits on C,
+code), builds the waits-for graph of the global type (:mod:`.waits`) and finds the
+shortest chains from every role (:mod:`.chains`): when a chain of waits (A waits on B, which waits on C,
 through the protocol's states) leads from a role to a role of lower priority in
 another group, that is an :class:`Inversion`. For each one it says which roles and
 groups take part, their priorities and CPU sets, which other groups can preempt the
@@ -19,15 +19,13 @@ priority anodize knows, and a chain ends at it.
 from __future__ import annotations
 
 import dataclasses
-from collections import deque
 from dataclasses import dataclass
 from typing import Any
-
-import networkx as nx
 
 import sessiontypes
 from sessiontypes import GlobalType
 
+from .chains import ChainSearch
 from .config import ConfigError, GroupConfig, SystemConfig
 from .waits import Wait, waits_for_graph
 
@@ -111,6 +109,10 @@ class Inversion:
         uncoverable: why priority inheritance over channels cannot cover a link (an
             external role, a group on another host); empty when it could cover all.
         unbounded: what can stretch the wait without bound, as things are now.
+        exact: False when the chain search gave up before finding the shortest chain that
+            repeats no role (a large protocol, :data:`.chains.EXACT_SEARCH_WORK`): the chain
+            shown is the shortest path, which passes through a role twice and so may be a wait
+            that cannot happen.
     """
 
     high: Party
@@ -120,6 +122,7 @@ class Inversion:
     preemptions: tuple[Preemption, ...]
     uncoverable: tuple[str, ...]
     unbounded: tuple[str, ...]
+    exact: bool = True
 
     @property
     def bounded(self) -> bool:
@@ -138,12 +141,16 @@ class Inversion:
         inheritance += "; applied" if INHERITANCE_APPLIED else "; not applied yet"
         unbounded = "; ".join(self.unbounded) or "nothing (the wait is bounded by the lower roles' own work)"
         kind = "unbounded" if self.unbounded else "bounded"
-        return [f"{kind} inversion: {self.high.describe()} can wait on {self.low.describe()}",
-                f"  chain: {chain} -> {self.low.role}",
-                "  roles: " + ", ".join(p.describe() for p in self.parties),
-                f"  preempted by: {preempted}",
-                f"  priority inheritance: {inheritance}",
-                f"  unbounded: {unbounded}"]
+        lines = [f"{kind} inversion: {self.high.describe()} can wait on {self.low.describe()}",
+                 f"  chain: {chain} -> {self.low.role}",
+                 "  roles: " + ", ".join(p.describe() for p in self.parties),
+                 f"  preempted by: {preempted}",
+                 f"  priority inheritance: {inheritance}",
+                 f"  unbounded: {unbounded}"]
+        if not self.exact:
+            lines.append("  note: the protocol is too large for the exact chain search; this chain passes "
+                         "through a role twice and may not be a wait that can happen")
+        return lines
 
     def to_dict(self) -> dict[str, Any]:
         """The inversion as JSON-ready values."""
@@ -157,7 +164,7 @@ class Inversion:
                                   "cpus": list(p.cpus) if p.cpus is not None else None}
                                  for p in self.preemptions],
                 "inheritance_could_cover": not self.uncoverable, "inheritance_uncoverable": list(self.uncoverable),
-                "unbounded": list(self.unbounded)}
+                "unbounded": list(self.unbounded), "exact": self.exact}
 
 
 @dataclass(frozen=True)
@@ -245,21 +252,23 @@ def analyse_inversions(config: SystemConfig, global_type: GlobalType) -> Inversi
     capacities = {_channel(key): n for key, n in config.capacities.items()}
     machines = {role: global_type.project(role).fsm() for role in global_type.roles if role not in config.external}
     graph = waits_for_graph(machines, capacities)
+    search = ChainSearch(graph)
     found: dict[tuple[str, str], tuple[Wait, ...]] = {}
-    chains = {start: _chains(graph, start) for start in graph.nodes}
-    for start in graph.nodes:
-        for chain in chains[start]:
-            high, low = parties[start.role], parties[chain[-1].peer]
+    inexact: set[tuple[str, str]] = set()
+    for role in sorted({wait.role for wait in graph.nodes}):
+        chains = search.from_role(role)
+        for peer, chain in chains.shortest.items():
+            high, low = parties[role], parties[peer]
             if (low.external and high.priority is not None) or low.rank < high.rank:
-                key = (high.role, low.role)
-                if key not in found or (len(chain), chain) < (len(found[key]), found[key]):
-                    found[key] = chain
+                found[role, peer] = chain
+                if peer in chains.inexact:
+                    inexact.add((role, peer))
     order = sorted(found, key=lambda key: (-parties[key[0]].rank, key[0], -parties[key[1]].rank, key[1]))
-    alone = {key: _inversion(found[key], parties, config) for key in order}
+    alone = {key: _inversion(found[key], parties, config, exact=key not in inexact) for key in order}
     inversions = []
     for (waiter, waited), inversion in alone.items():
         # the lower role's own waits stretch this one: unbounded if they are
-        beyond = _beyond(found[waiter, waited], chains)
+        beyond = _beyond(found[waiter, waited], search)
         further = [role for role in beyond if (waiter, role) in alone and not alone[waiter, role].bounded]
         if further:
             reason = (f"{waited} can itself wait on {_and(further)}, and that is unbounded "
@@ -269,53 +278,18 @@ def analyse_inversions(config: SystemConfig, global_type: GlobalType) -> Inversi
     return InversionReport(tuple(inversions), graph.number_of_nodes(), INHERITANCE_APPLIED)
 
 
-def _beyond(chain: tuple[Wait, ...], chains: dict[Wait, list[tuple[Wait, ...]]]) -> list[str]:
+def _beyond(chain: tuple[Wait, ...], search: ChainSearch) -> list[str]:
     """The roles the chain's last role can in turn wait on (through chains), sorted."""
     on_chain = {w.role for w in chain} | {chain[-1].peer}
-    return sorted({w.peer for longer in chains[chain[-1]] for w in longer[1:]} - on_chain)
+    return sorted(search.from_waits((chain[-1],)).shortest.keys() - on_chain)
 
 
 def _and(names: list[str]) -> str:
     return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
-def _chains(graph: nx.DiGraph[Wait], start: Wait) -> list[tuple[Wait, ...]]:
-    """The chains from ``start``, shortest first, in which no two waits can be of one thread
-    at once (a role, or a parallel branch of it, is in one state at a time, so a chain back
-    through it is not a wait it can have).
-
-    A wait reached again with at least the threads of an earlier visit leads nowhere new
-    and is not followed again: that keeps dense protocols tractable.
-    """
-    chains: list[tuple[Wait, ...]] = []
-    visits: dict[Wait, list[frozenset[tuple[str, str]]]] = {}
-    queue: deque[tuple[Wait, ...]] = deque([(start,)])
-    while queue:
-        chain = queue.popleft()
-        chains.append(chain)
-        threads = frozenset(_thread(w) for w in chain)
-        for following in sorted(graph.successors(chain[-1])):
-            if any(_together(_thread(following), t) for t in threads):
-                continue
-            extended = threads | {_thread(following)}
-            if any(earlier <= extended for earlier in visits.get(following, [])):
-                continue
-            visits.setdefault(following, []).append(extended)
-            queue.append((*chain, following))
-    return chains
-
-
-def _thread(wait: Wait) -> tuple[str, str]:
-    """The role and the branch of it a wait is in: ``("Move", "0.2.")`` for state ``0.2.0``."""
-    return wait.role, wait.state[:wait.state.rfind(".") + 1]
-
-
-def _together(first: tuple[str, str], second: tuple[str, str]) -> bool:
-    """Whether two waits are of one thread: one role, in one branch or one enclosing the other."""
-    return first[0] == second[0] and (first[1].startswith(second[1]) or second[1].startswith(first[1]))
-
-
-def _inversion(chain: tuple[Wait, ...], parties: dict[str, Party], config: SystemConfig) -> Inversion:
+def _inversion(chain: tuple[Wait, ...], parties: dict[str, Party], config: SystemConfig,
+               exact: bool) -> Inversion:
     on_chain = tuple(parties[r] for r in (chain[0].role, *(w.peer for w in chain)))
     high, low = on_chain[0], on_chain[-1]
     preemptions = sorted({p for party in on_chain[1:] for p in _preemptions(party, high, config)},
@@ -337,7 +311,7 @@ def _inversion(chain: tuple[Wait, ...], parties: dict[str, Party], config: Syste
         unbounded += [f"{p.group} can preempt {p.role} for as long as it runs" for p in preemptions]
         unbounded += [f"{party.role} has no real-time priority: any process on the machine can delay it"
                       for party in on_chain[1:] if not party.external and party.priority is None]
-    return Inversion(high, low, chain, on_chain, tuple(preemptions), tuple(uncoverable), tuple(unbounded))
+    return Inversion(high, low, chain, on_chain, tuple(preemptions), tuple(uncoverable), tuple(unbounded), exact)
 
 
 def _preemptions(party: Party, high: Party, config: SystemConfig) -> list[Preemption]:
