@@ -37,6 +37,7 @@ class TinManError(AnodizeError):
 class TinMan:
     """The named system ``tinman``."""
 
+    system_file = SYSTEM_FILE  # what 'anodize lint tinman' reads
     summary = ("TinMan, the robot system of the Anodize paper: camera, visual odometry, planner, "
                "joystick control and a simulated robot in four groups of different criticality. "
                "Writes report.json and trajectory.png.")

@@ -383,15 +383,16 @@ def test_lint_prints_findings_and_a_summary_and_exits_1(
         "a back channel outside the protocol (P: 13:10 enters it (with); C: 19:10 enters it (with))\n"
         f"{fixture}:7:1: warning: queue.Queue handoff is shared by group a (P) and group b (C): used as "
         "a back channel outside the protocol (P: 14:9 calls .put(); C: 21:5 calls .get())\n"
-        "2 findings in 1 module\n")
+        "2 findings in 1 module\n"
+        "no priority inversion among 1 wait\n")
 
 
 def test_lint_of_a_clean_system_exits_0(
         capsys: pytest.CaptureFixture[str], system_file: Callable[..., Path]) -> None:
-    assert run(capsys, "lint", str(system_file("constants:producer", "constants:consumer"))) == (
-        0, "no isolation problems found in 1 module\n", "")
+    clean = "no isolation problems found in 1 module\nno priority inversion among 1 wait\n"
+    assert run(capsys, "lint", str(system_file("constants:producer", "constants:consumer"))) == (0, clean, "")
     path = system_file("back_channel:producer", "back_channel:consumer", same_group=True)
-    assert run(capsys, "lint", str(path)) == (0, "no isolation problems found in 1 module\n", "")
+    assert run(capsys, "lint", str(path)) == (0, clean, "")
 
 
 def test_lint_of_a_bad_system_file_prints_one_error_line(
