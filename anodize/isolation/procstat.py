@@ -30,7 +30,10 @@ class ProcSample:
     Attributes:
         at: ``time.monotonic()`` when it was read.
         cpu: seconds of CPU (user + system) the process has used, all its threads.
-        waited: per thread id, seconds it has spent runnable on a run queue, not running.
+        waited: per thread id, seconds it has spent runnable on a run queue, not running. The
+            kernel adds a wait when it ends: a thread still waiting has not been counted yet.
+        ran: per thread id, seconds it has run on a CPU.
+        slices: per thread id, how many times it has been put on a CPU.
         states: per thread id, its scheduler state letter (``R``, ``S``, ``D``, ``T``, ...).
         cpus: the CPUs its threads last ran on.
     """
@@ -38,6 +41,8 @@ class ProcSample:
     at: float
     cpu: float
     waited: dict[int, float]
+    ran: dict[int, float]
+    slices: dict[int, int]
     states: dict[int, str]
     cpus: frozenset[int]
 
@@ -56,12 +61,20 @@ def _stat_fields(path: str) -> list[str] | None:
         return None
 
 
-def _run_delay(path: str) -> float | None:
+def _schedstat(path: str) -> tuple[float, float, int] | None:
+    """(seconds run on a CPU, seconds waited on a run queue, times put on a CPU) from a
+    ``schedstat`` file."""
     try:
         with open(path) as f:
-            return int(f.read().split()[1]) / 1e9
-    except (OSError, ValueError, IndexError):
+            ran, waited, slices = f.read().split()[:3]
+        return int(ran) / 1e9, int(waited) / 1e9, int(slices)
+    except (OSError, ValueError):
         return None
+
+
+def _run_delay(path: str) -> float | None:
+    times = _schedstat(path)
+    return None if times is None else times[1]
 
 
 def sample(pid: int) -> ProcSample | None:
@@ -72,6 +85,8 @@ def sample(pid: int) -> ProcSample | None:
         return None
     cpu = (int(fields[11]) + int(fields[12])) / _TICKS  # utime, stime: fields 14 and 15 of stat(5)
     waited: dict[int, float] = {}
+    ran: dict[int, float] = {}
+    slices: dict[int, int] = {}
     states: dict[int, str] = {}
     cpus: set[int] = set()
     try:
@@ -80,16 +95,16 @@ def sample(pid: int) -> ProcSample | None:
         tids = []
     for tid in tids:
         task = _stat_fields(f"/proc/{pid}/task/{tid}/stat")
-        delay = _run_delay(f"/proc/{pid}/task/{tid}/schedstat")
-        if task is None or delay is None:
+        times = _schedstat(f"/proc/{pid}/task/{tid}/schedstat")
+        if task is None or times is None:
             continue  # the thread ended between the listing and the read
         states[tid] = task[0]
-        waited[tid] = delay
+        ran[tid], waited[tid], slices[tid] = times
         if len(task) > 36:
             cpus.add(int(task[36]))  # field 39, processor: the CPU it last ran on
     if not states:
         states[pid] = fields[0]
-    return ProcSample(at=at, cpu=cpu, waited=waited, states=states, cpus=frozenset(cpus))
+    return ProcSample(at=at, cpu=cpu, waited=waited, ran=ran, slices=slices, states=states, cpus=frozenset(cpus))
 
 
 def own_run_delay() -> float | None:

@@ -72,12 +72,26 @@ Verdict = Alive | Starved | Frozen | HoldingGil
 
 
 def waited_between(before: ProcSample, now: ProcSample) -> float:
-    """The largest growth of one thread's run-queue wait from ``before`` to ``now`` (a thread
-    born in between counts from zero)."""
-    return max((now.waited[tid] - before.waited.get(tid, 0.0) for tid in now.waited), default=0.0)
+    """How long the group waited for a CPU from ``before`` to ``now`` (two consecutive looks):
+    the largest wait of one of its threads (a thread born in between counts from zero).
+
+    The kernel adds a wait to a thread's count only when the wait ends, so a thread still
+    on the run queue (throttled by a CPU quota, or behind a higher priority) shows none
+    yet: a thread runnable at both looks and never put on a CPU in between waited for all
+    the time it did not run. Sum it over consecutive looks: a long wait is seen piecewise.
+    """
+    window = now.at - before.at
+    longest = 0.0
+    for tid, waited in now.waited.items():
+        grew = waited - before.waited.get(tid, 0.0)
+        if (now.states.get(tid) == "R" and before.states.get(tid) == "R" and tid in before.ran
+                and now.slices.get(tid) == before.slices.get(tid)):
+            grew = max(grew, window - (now.ran.get(tid, 0.0) - before.ran[tid]))
+        longest = max(longest, grew)
+    return min(longest, window)
 
 
-def judge(*, silent: float, limit: float, stalled: float, before: ProcSample | None,
+def judge(*, silent: float, limit: float, stalled: float, waited: float, before: ProcSample | None,
           now: ProcSample | None) -> Verdict:
     """The verdict on one group.
 
@@ -85,6 +99,8 @@ def judge(*, silent: float, limit: float, stalled: float, before: ProcSample | N
         silent: seconds since the group's last heartbeat was sent.
         limit: the liveness limit, seconds.
         stalled: seconds of that silence in which the supervisor itself did not run.
+        waited: seconds of it the group waited for a CPU (:func:`waited_between`, summed over
+            the looks since ``before``).
         before: the group's process as sampled at (or just before) its last heartbeat.
         now: the group's process as sampled now; None where ``/proc`` does not say.
     """
@@ -96,7 +112,7 @@ def judge(*, silent: float, limit: float, stalled: float, before: ProcSample | N
     if now is None or before is None or now.at <= before.at:
         return Frozen(silent, "the kernel's view is not available, so the heartbeats decide")
     window = now.at - before.at
-    waited = min(max(0.0, waited_between(before, now)), window, silent)
+    waited = min(max(0.0, waited), window, silent)
     # The group's wait and the supervisor's stall may be the same moment (the machine
     # stalled): excuse the larger, never their sum.
     excused = max(excused, waited)
@@ -144,9 +160,10 @@ def overlap(episodes: Sequence[tuple[float, float]] | deque[tuple[float, float]]
     return sum(max(0.0, min(b, end) - max(a, start)) for a, b in episodes)
 
 
-def stall(*, expected: float | None, woke: float, queued: float | None) -> float:
+def stall(*, expected: float | None, woke: float, queued: float | None, away: float = 0.0) -> float:
     """How long the watching thread was held up in one turn of its loop: how late it woke
-    against when it asked to (``expected``, None when it was woken by data), or the growth
-    of its own run-queue wait (``queued``), whichever is larger."""
+    against the latest it asked to (``expected``; None when it did not wait), the growth of
+    its own run-queue wait (``queued``), or the time it spent away from the loop since the
+    last turn (``away``: handling events, or stopped), whichever is largest."""
     late = 0.0 if expected is None else max(0.0, woke - expected)
-    return max(late, queued or 0.0)
+    return max(late, queued or 0.0, away)

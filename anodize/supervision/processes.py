@@ -181,7 +181,7 @@ class ProcessRunner:
         started = time.monotonic()
         if by_object and not self.pending:
             woken = wait(list(by_object), timeout)
-            self.watch.turn(None if woken else started + timeout, time.monotonic())
+            self.watch.turn(started, started + timeout, time.monotonic())
             for ready in woken:
                 inc = by_object[ready]
                 if inc.ended:
@@ -193,9 +193,9 @@ class ProcessRunner:
                     self._exited(inc)
         elif not by_object and not self.pending:
             time.sleep(min(timeout, 0.01))
-            self.watch.turn(started + min(timeout, 0.01), time.monotonic())
+            self.watch.turn(started, started + min(timeout, 0.01), time.monotonic())
         else:
-            self.watch.turn(None, time.monotonic())
+            self.watch.turn(started, None, time.monotonic())
         self._check_start_timeouts()
         self._check_liveness()
         self._account_memory()

@@ -16,11 +16,25 @@ from dataclasses import dataclass
 from ..isolation import procstat
 from ..isolation.procstat import ProcSample
 from ..isolation.watchdog import prioritise_watcher
-from .liveness import STARVATION_BOUND, Alive, StallLog, Starved, Verdict, judge, stall
+from .liveness import STARVATION_BOUND, Alive, StallLog, Starved, Verdict, judge, stall, waited_between
 
 __all__ = ["LivenessWatch", "SAMPLE_EVERY"]
 
 SAMPLE_EVERY = 0.25  # seconds between two looks at every group's process (its heartbeat period)
+
+
+@dataclass
+class _Looks:
+    """A group's process: the look at (or just before) its last heartbeat, the latest look,
+    and how long it waited for a CPU between the two."""
+
+    anchor: ProcSample
+    latest: ProcSample
+    waited: float = 0.0
+
+    def add(self, looked: ProcSample) -> None:
+        self.waited += waited_between(self.latest, looked)
+        self.latest = looked
 
 
 @dataclass
@@ -43,12 +57,13 @@ class LivenessWatch:
     def __init__(self, limit: float) -> None:
         self.limit = limit
         self.stalls = StallLog(horizon=(STARVATION_BOUND + 1) * limit, least=0.05)
-        self.anchors: dict[str, ProcSample] = {}
+        self.looks: dict[str, _Looks] = {}
         self.episodes: dict[str, _Episode] = {}
         self.starved_total: dict[str, float] = {}
         self.scheduling = ""
         self._restore: Callable[[], None] | None = None
         self._last_delay: float | None = None
+        self._last_turn: float | None = None
         self._next_sample = 0.0
 
     # ---- the watching thread ---------------------------------------------------------------
@@ -62,13 +77,14 @@ class LivenessWatch:
         if restore is not None:
             restore()
 
-    def turn(self, expected: float | None, woke: float) -> None:
-        """One turn of the watching loop ended its wait at ``woke``; it asked to wake at
-        ``expected`` (None: it was woken by data)."""
+    def turn(self, started: float, expected: float | None, woke: float) -> None:
+        """One turn of the watching loop began at ``started`` and ended its wait at ``woke``;
+        it asked to wake at ``expected`` at the latest (None: it did not wait)."""
         delay = procstat.own_run_delay()
         queued = None if delay is None or self._last_delay is None else delay - self._last_delay
-        self._last_delay = delay
-        self.stalls.add(woke, stall(expected=expected, woke=woke, queued=queued))
+        away = 0.0 if self._last_turn is None else started - self._last_turn
+        self._last_delay, self._last_turn = delay, woke
+        self.stalls.add(woke, stall(expected=expected, woke=woke, queued=queued, away=away))
 
     # ---- the groups ------------------------------------------------------------------------
     def sample(self, groups: dict[str, tuple[int, float]], now: float) -> None:
@@ -78,9 +94,18 @@ class LivenessWatch:
             return
         self._next_sample = now + SAMPLE_EVERY
         for name, (pid, heard) in groups.items():
-            looked = procstat.sample(pid)
-            if looked is not None and (name not in self.anchors or looked.at <= heard):
-                self.anchors[name] = looked
+            self._look(name, pid, heard)
+
+    def _look(self, name: str, pid: int, heard: float) -> ProcSample | None:
+        looked = procstat.sample(pid)
+        if looked is None:
+            return None
+        looks = self.looks.get(name)
+        if looks is None or looked.at <= heard:
+            self.looks[name] = _Looks(anchor=looked, latest=looked)
+        else:
+            looks.add(looked)
+        return looked
 
     def check(self, name: str, pid: int, heard: float, now: float) -> tuple[Verdict, list[str]]:
         """The verdict on group ``name`` last heard at ``heard``, and notes for the report."""
@@ -88,13 +113,15 @@ class LivenessWatch:
         stalled = self.stalls.within(heard, now)
         if silent - stalled <= self.limit:
             return Alive(), self.over(name)
-        verdict = judge(silent=silent, limit=self.limit, stalled=stalled, before=self.anchors.get(name),
-                        now=procstat.sample(pid))
+        looked = self._look(name, pid, heard)
+        looks = self.looks.get(name)
+        verdict = judge(silent=silent, limit=self.limit, stalled=stalled, waited=looks.waited if looks else 0.0,
+                        before=looks.anchor if looks else None, now=looked)
         if not isinstance(verdict, Starved):
             return verdict, []
         episode = self.episodes.get(name)
         if episode is None:
-            cpus = self.anchors[name].cpus if name in self.anchors else frozenset()
+            cpus = looks.anchor.cpus if looks else frozenset()
             named = procstat.rivals(cpus, exclude=pid)
             by = procstat.machine_load() + (f"; runnable there: {', '.join(named)}" if named else "")
             episode = self.episodes[name] = _Episode(since=heard, silent=0.0, waited=0.0, by=by)
@@ -114,7 +141,7 @@ class LivenessWatch:
 
     def forget(self, name: str) -> list[str]:
         """Group ``name``'s process is gone or replaced: drop its samples, report an open episode."""
-        self.anchors.pop(name, None)
+        self.looks.pop(name, None)
         return self.over(name)
 
     def notes(self) -> list[str]:
