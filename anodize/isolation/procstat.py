@@ -18,7 +18,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-__all__ = ["ProcSample", "sample", "own_run_delay", "rivals", "machine_load"]
+__all__ = ["ProcSample", "sample", "own_run_delay", "rivals", "machine_load", "cpu_quota"]
 
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -120,6 +120,33 @@ def machine_load() -> str:
     except (OSError, ValueError, IndexError):
         return f"the machine ({os.cpu_count() or '?'} CPUs, load unknown)"
     return f"the machine: load {load:.1f} on {os.cpu_count() or '?'} CPUs"
+
+
+def cpu_quota(pid: int) -> str | None:
+    """``"its cgroup's CPU quota (1 ms per 1000 ms)"`` when ``pid``'s cpu cgroup (v1 ``cpu`` or
+    v2) caps its CPU time, else None."""
+    try:
+        with open(f"/proc/{pid}/cgroup") as f:
+            own = {controller: path for line in f
+                   for _, controllers, path in [line.rstrip("\n").split(":", 2)]
+                   for controller in (controllers.split(",") if controllers else [""])}
+    except (OSError, ValueError):
+        return None
+    quota: tuple[int, int] | None = None
+    try:
+        if "cpu" in own:
+            base = os.path.join("/sys/fs/cgroup/cpu", own["cpu"].lstrip("/"))
+            with open(os.path.join(base, "cpu.cfs_quota_us")) as q, open(os.path.join(base, "cpu.cfs_period_us")) as p:
+                quota = int(q.read()), int(p.read())
+        elif "" in own:
+            with open(os.path.join("/sys/fs/cgroup", own[""].lstrip("/"), "cpu.max")) as m:
+                limit, period = m.read().split()
+                quota = (-1 if limit == "max" else int(limit)), int(period)
+    except (OSError, ValueError):
+        return None
+    if quota is None or quota[0] < 0:
+        return None
+    return f"its cgroup's CPU quota ({quota[0] / 1000:g} ms per {quota[1] / 1000:g} ms)"
 
 
 def rivals(cpus: frozenset[int], exclude: int, most: int = 3) -> list[str]:

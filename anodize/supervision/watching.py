@@ -124,6 +124,9 @@ class LivenessWatch:
             cpus = looks.anchor.cpus if looks else frozenset()
             named = procstat.rivals(cpus, exclude=pid)
             by = procstat.machine_load() + (f"; runnable there: {', '.join(named)}" if named else "")
+            quota = procstat.cpu_quota(pid)
+            if quota:
+                by = f"{quota}; {by}"
             episode = self.episodes[name] = _Episode(since=heard, silent=0.0, waited=0.0, by=by)
         episode.silent = max(episode.silent, verdict.silent)
         episode.waited = max(episode.waited, verdict.waited)

@@ -88,7 +88,7 @@ def test_a_starved_group_is_reported_not_killed_and_finishes(tmp_path: Path, mon
     assert report.groups["b"].status is GroupState.DONE, report.summary()
     starved = [note for note in group.notes if note.startswith("starved, not failed")]
     assert starved, report.summary()
-    assert "waiting for a CPU" in starved[0] and "by the machine" in starved[0]
+    assert "waiting for a CPU" in starved[0] and "by its cgroup's CPU quota (1 ms per 1000 ms)" in starved[0]
 
 
 def test_a_stopped_supervisor_blames_no_group(tmp_path: Path) -> None:

@@ -76,3 +76,24 @@ def test_rivals_names_runnable_tasks_on_the_cpus_asked_about() -> None:
     finally:
         spinner.kill()
         spinner.wait()
+
+
+CPU_CGROUPS = "/sys/fs/cgroup/cpu"
+
+
+@pytest.mark.skipif(not os.access(os.path.join(CPU_CGROUPS, "cgroup.procs"), os.W_OK),
+                    reason="needs a writable cgroup v1 cpu controller at /sys/fs/cgroup/cpu (root)")
+def test_a_cpu_quota_is_named(child: subprocess.Popen[bytes]) -> None:
+    cgroup = os.path.join(CPU_CGROUPS, f"anodize-test-{os.getpid()}-quota")
+    os.makedirs(cgroup, exist_ok=True)
+    try:
+        assert procstat.cpu_quota(child.pid) is None  # the parent of every test cgroup has none
+        with open(os.path.join(cgroup, "cpu.cfs_quota_us"), "w") as f:
+            f.write("50000")
+        with open(os.path.join(cgroup, "cgroup.procs"), "w") as f:
+            f.write(str(child.pid))
+        assert procstat.cpu_quota(child.pid) == "its cgroup's CPU quota (50 ms per 100 ms)"
+    finally:
+        child.kill()
+        child.wait()
+        os.rmdir(cgroup)
