@@ -11,14 +11,16 @@ the rule can be tested on synthetic numbers:
   blames a group for a gap in which it could not have looked;
 - minus the time the group was runnable but not given a CPU (the largest growth of a
   thread's run-queue wait): that is **starvation**, reported, not failed;
-- what remains is *charged* silence. Past the limit the group is failed: **frozen**
-  when it is stopped (at once), **holding the GIL** when it used the CPU it had, and
-  **frozen** when it slept through it (no CPU, no wait: its heartbeat thread should
-  have run and did not).
+- past the limit the group is failed: **frozen** when it is stopped (at once); **holding
+  the GIL** when, silent, it used ``BUSY_SHARE`` x the limit of CPU (a heartbeat needs
+  milliseconds of it: a process that ran that long and sent none is running a call that
+  does not let its heartbeat thread have the GIL); **frozen** when its *charged* silence
+  (what remains) passes the limit although it slept (no CPU, no wait: its heartbeat
+  thread should have run and did not).
 
 Starvation is not an excuse forever: a starved group that gets the CPU and still says
-nothing is charged for that time, and no group is let off for more than
-``STARVATION_BOUND`` times the limit of silence in all.
+nothing is failed once it has used that much CPU, or slept that long, and no group is
+let off for more than ``STARVATION_BOUND`` times the limit of silence in all.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ __all__ = ["Alive", "Starved", "Frozen", "HoldingGil", "Verdict", "judge", "Stal
            "BUSY_SHARE"]
 
 STARVATION_BOUND = 10  # times the limit: the longest silence starvation can excuse
-BUSY_SHARE = 0.3  # of the time it could run: a silent process that used this much CPU is running code
+BUSY_SHARE = 0.3  # x the limit: CPU seconds a silent process may use before it counts as running code
 
 
 @dataclass(frozen=True)
@@ -60,8 +62,9 @@ class Frozen:
 
 @dataclass(frozen=True)
 class HoldingGil:
-    """Failed: the process used the CPU (``cpu`` seconds of ``charged``) but sent nothing:
-    a call that holds the GIL, so its heartbeat thread cannot run."""
+    """Failed: the process used ``cpu`` seconds of CPU while silent (``charged`` seconds of
+    the silence are not excused) but sent nothing: a call that holds the GIL, so its
+    heartbeat thread cannot run."""
 
     silent: float
     charged: float
@@ -117,13 +120,14 @@ def judge(*, silent: float, limit: float, stalled: float, waited: float, before:
     # stalled): excuse the larger, never their sum.
     excused = max(excused, waited)
     charged = silent - excused
+    # The first look may predate the last heartbeat: count its CPU time pro rata.
+    cpu = max(0.0, now.cpu - before.cpu) * min(1.0, silent / window)
+    if cpu >= BUSY_SHARE * limit:
+        return HoldingGil(silent, charged, cpu)
     if charged <= limit:
         if silent > STARVATION_BOUND * limit:
             return Frozen(silent, f"starved past the bound ({STARVATION_BOUND:g} x the limit)")
         return Starved(silent, waited)
-    cpu = max(0.0, now.cpu - before.cpu)
-    if cpu >= BUSY_SHARE * min(charged, window):
-        return HoldingGil(silent, charged, cpu)
     return Frozen(silent, f"asleep: {cpu:.2f} s of CPU and {waited:.2f} s waiting for one in the "
                           f"{window:.1f} s looked at (a deadlock, or a call that blocks holding the GIL)")
 

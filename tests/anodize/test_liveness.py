@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from anodize.isolation.procstat import ProcSample
 from anodize.supervision.liveness import (
+    BUSY_SHARE,
     STARVATION_BOUND,
     Alive,
     Frozen,
@@ -92,6 +93,21 @@ def test_a_process_asleep_with_no_heartbeat_is_frozen() -> None:
     assert isinstance(verdict, Frozen) and verdict.why.startswith("asleep")
 
 
+def test_a_call_holding_the_gil_is_failed_although_the_machine_is_busy() -> None:
+    # On a busy machine it waits for the CPU 80% of the time, but the 20% it runs is far
+    # more than a heartbeat needs.
+    verdict = judge_(silent=3.5, limit=LIMIT, stalled=0, before=look(0, cpu=1.0),
+                     now=look(3.5, cpu=1.7, waited=2.8, state="R"))
+    assert isinstance(verdict, HoldingGil) and verdict.charged < LIMIT
+
+
+def test_the_cpu_of_a_first_look_before_the_last_heartbeat_counts_pro_rata() -> None:
+    # Looked at 0.3 s before its last heartbeat, busy on a whole CPU until then (a healthy busy
+    # group), then starved for 2.2 s: not 0.3 s of CPU while silent, but 0.3 * 2.2 / 2.5.
+    before, now = look(0, cpu=0.0), look(2.5, cpu=0.3, waited=2.2, state="R")
+    assert isinstance(judge_(silent=2.2, limit=LIMIT, stalled=0, before=before, now=now), Starved)
+
+
 def test_a_starved_group_that_then_runs_and_says_nothing_is_failed() -> None:
     # Starved for 3 s, then 2.5 s on the CPU (holding the GIL) without a heartbeat.
     verdict = judge_(silent=5.5, limit=LIMIT, stalled=0, before=look(0), now=look(5.5, cpu=2.5, waited=3.0))
@@ -118,7 +134,8 @@ def test_no_group_is_failed_within_the_limit_of_time_it_could_run(silent: float,
                                                                    waited: float, stopped: bool) -> None:
     now = look(silent, cpu=cpu, waited=waited, state="T" if stopped else "R")
     verdict = judge_(silent=silent, limit=LIMIT, stalled=stalled, before=look(0), now=now)
-    if silent - max(stalled, min(waited, silent)) <= LIMIT and silent <= STARVATION_BOUND * LIMIT and not stopped:
+    if (silent - max(stalled, min(waited, silent)) <= LIMIT and silent <= STARVATION_BOUND * LIMIT and not stopped
+            and cpu < BUSY_SHARE * LIMIT):
         assert isinstance(verdict, Alive | Starved)
     if silent - stalled > LIMIT and stopped:
         assert isinstance(verdict, Frozen)
@@ -128,7 +145,9 @@ def test_no_group_is_failed_within_the_limit_of_time_it_could_run(silent: float,
 def test_a_failed_verdict_always_had_more_than_the_limit_to_run_in(silent: float, waited: float, cpu: float) -> None:
     verdict = judge_(silent=silent, limit=LIMIT, stalled=0, before=look(0), now=look(silent, cpu=cpu, waited=waited))
     if isinstance(verdict, HoldingGil):
-        assert verdict.charged > LIMIT
+        assert verdict.cpu >= BUSY_SHARE * LIMIT and silent > LIMIT
+    if isinstance(verdict, Frozen):
+        assert silent - min(waited, silent) > LIMIT or silent > STARVATION_BOUND * LIMIT
     if isinstance(verdict, Starved):
         assert verdict.silent > LIMIT and verdict.silent - verdict.waited <= LIMIT
 
