@@ -11,7 +11,9 @@ import sys
 import textwrap
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import liveness_roles as roles
 import pytest
@@ -29,7 +31,7 @@ LIMIT = 1.0
 pytestmark = pytest.mark.slow
 
 
-def run(client: object, timeout: float = 60) -> RunReport:
+def run(client: Callable[..., Any], timeout: float = 60) -> RunReport:
     system = anodize.System(PING, transport="process")
     system.group("a").role("A", client)
     system.group("b").role("B", roles.server)
@@ -122,7 +124,7 @@ def test_a_stopped_supervisor_blames_no_group(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(("client", "words"), [(roles.holds_the_gil_on_the_cpu, "a call that holds the GIL"),
                                                (roles.holds_the_gil_asleep, "frozen: asleep")])
-def test_a_call_holding_the_gil_is_still_failed(client: object, words: str) -> None:
+def test_a_call_holding_the_gil_is_still_failed(client: Callable[..., Any], words: str) -> None:
     report = run(client)
     group = report.groups["a"]
     assert group.status is GroupState.FAILED, report.summary()
