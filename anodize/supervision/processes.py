@@ -134,7 +134,6 @@ class ProcessRunner:
 
     def _on_ready(self, inc: _Incarnation, ready: control.Ready) -> None:
         inc.ready = True
-        inc.last_heard = time.monotonic()  # the limit counts from the start of its roles, not its imports
         self.watch.forget(inc.group.name)
         inc.baseline = ready.baseline
         inc.baseline_resident = rss(inc.pid or 0) or 0
