@@ -11,17 +11,25 @@ period, the kernel pauses *every* RT task on that CPU, the high-priority ones
 too, so a runaway must be demoted before that happens. The watchdog's own thread asks for
 SCHED_FIFO 99 so that it still runs when FIFO groups fill every CPU; it sleeps
 between samples, so it never competes for long.
+
+:func:`prioritise_watcher` places the supervisor's own watching loop just above
+ordinary work (SCHED_FIFO 1): CPU hogs at normal priority cannot blind it, and it
+never delays a real-time group; a FIFO group that keeps the CPUs from it is what
+the watchdog demotes.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
 
-__all__ = ["Watchdog", "rt_throttling", "BUSY_SHARE"]
+__all__ = ["Watchdog", "rt_throttling", "BUSY_SHARE", "prioritise_watcher", "WATCHER_PRIORITY"]
+
+WATCHER_PRIORITY = 1  # SCHED_FIFO: above every ordinary task, below every real-time group
 
 BUSY_SHARE = 0.9  # of one CPU, on average over the window, counts as spinning
 _SAMPLE = 0.1  # seconds
@@ -48,6 +56,36 @@ def cpu_seconds(pid: int) -> float | None:
         return None
     ticks = os.sysconf("SC_CLK_TCK")
     return (int(fields[11]) + int(fields[12])) / ticks  # utime, stime: fields 14 and 15
+
+
+def prioritise_watcher() -> tuple[str, Callable[[], None]]:
+    """Raise the calling thread to SCHED_FIFO ``WATCHER_PRIORITY``; describe what was applied
+    and return how to undo it.
+
+    The policy is reset on fork (``SCHED_RESET_ON_FORK``), so the group processes and
+    threads this thread starts keep the scheduling they had before. Meant for a loop that
+    sleeps between looks (never one that busy-waits). Where SCHED_FIFO is refused the
+    thread stays as it is and the description says so.
+    """
+    if os.environ.get("ANODIZE_NO_RT"):
+        return "SCHED_OTHER (SCHED_FIFO disabled by ANODIZE_NO_RT)", _nothing
+    tid = threading.get_native_id()  # the undoing may run on another thread
+    try:
+        policy, param = os.sched_getscheduler(tid), os.sched_getparam(tid)
+        os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(WATCHER_PRIORITY))
+    except (OSError, AttributeError) as error:
+        reason = getattr(error, "strerror", None) or "not supported here"
+        return f"SCHED_OTHER (SCHED_FIFO refused: {reason})", _nothing
+
+    def restore() -> None:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(tid, policy, param)
+
+    return f"SCHED_FIFO {WATCHER_PRIORITY}", restore
+
+
+def _nothing() -> None:
+    """Nothing to undo."""
 
 
 def demote(pid: int) -> int:

@@ -10,6 +10,7 @@ backstop of a memory bound, the real-time watchdog and the start-up deadline.
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 import secrets
@@ -33,8 +34,10 @@ from ..transport.shm import remove_run_segments, remove_stale_segments
 from . import control
 from .group import Group, reference_of
 from .groupproc import EXIT_MEMORY, GroupSpec, group_main
+from .liveness import Frozen, HoldingGil
 from .report import RoleReport, RoleStatus
 from .supervisor import Counts, Event, GroupExited, GroupFailed, Note, Ready, RoleEnded
+from .watching import LivenessWatch
 
 __all__ = ["ProcessRunner", "WATCHDOG_LIMIT"]
 
@@ -90,6 +93,7 @@ class ProcessRunner:
         self.pending: list[Event] = []
         self.next_memory_check = 0.0
         self.watchdog = Watchdog(WATCHDOG_LIMIT, self._demoted)
+        self.watch = LivenessWatch(liveness)  # the liveness rule's samples (see .liveness)
         self.start_timeout = _START_TIMEOUT
         remove_stale_segments()  # of earlier runs whose supervisor was killed
         remove_stale_cgroups()
@@ -130,6 +134,7 @@ class ProcessRunner:
 
     def _on_ready(self, inc: _Incarnation, ready: control.Ready) -> None:
         inc.ready = True
+        self.watch.forget(inc.group.name)
         inc.baseline = ready.baseline
         inc.baseline_resident = rss(inc.pid or 0) or 0
         note = ready.memory_note
@@ -171,8 +176,12 @@ class ProcessRunner:
             if inc.control is not None:
                 by_object[inc.control] = inc
             by_object[inc.process.sentinel] = inc
+        self.watch.begin()
+        started = time.monotonic()
         if by_object and not self.pending:
-            for ready in wait(list(by_object), timeout):
+            woken = wait(list(by_object), timeout)
+            self.watch.turn(started, started + timeout, time.monotonic())
+            for ready in woken:
                 inc = by_object[ready]
                 if inc.ended:
                     continue
@@ -183,6 +192,9 @@ class ProcessRunner:
                     self._exited(inc)
         elif not by_object and not self.pending:
             time.sleep(min(timeout, 0.01))
+            self.watch.turn(started, started + min(timeout, 0.01), time.monotonic())
+        else:
+            self.watch.turn(started, None, time.monotonic())
         self._check_start_timeouts()
         self._check_liveness()
         self._account_memory()
@@ -206,7 +218,7 @@ class ProcessRunner:
         if inc.reader.eof:
             inc.control = None
         if frames:
-            inc.last_heard = time.monotonic()
+            inc.last_heard = max(inc.last_heard, _sent_at(messages, time.monotonic()))
         for message in messages:
             self._on_message(inc, message)
 
@@ -257,24 +269,37 @@ class ProcessRunner:
                 self.kill(inc.group.name)
 
     def _check_liveness(self) -> None:
-        """A group silent past its deadline is failed: frozen (SIGSTOP), or a call holding the GIL,
-        or half a control message and nothing more."""
+        """A group silent past the limit *in time it could run* is failed: stopped (SIGSTOP), a
+        call holding the GIL, asleep, or half a control message and nothing more. A group the
+        machine did not give the CPU is reported starved, not failed (the rule: .liveness)."""
         now = time.monotonic()
+        watched = {name: (inc.pid, inc.last_heard) for name, inc in self.current.items()
+                   if inc.ready and not inc.ended and not inc.failed and inc.pid is not None}
+        self.watch.sample(watched, now)
         for inc in self.current.values():
-            if inc.ended or inc.failed or not inc.ready:
+            if inc.ended or inc.failed or not inc.ready or inc.pid is None:
                 continue
-            silent = now - inc.last_heard
-            if silent <= self.liveness:
+            name = inc.group.name
+            if now - inc.last_heard > self.liveness and inc.control is not None and inc.control.poll(0):
+                self._read(inc)  # what it sent while this loop did not run is not silence
+            verdict, notes = self.watch.check(name, inc.pid, inc.last_heard, now)
+            self.pending.extend(Note(group=name, text=text) for text in notes)
+            if not isinstance(verdict, Frozen | HoldingGil):
                 continue
             partial = inc.reader.partial_since if inc.reader is not None else None
             if partial is not None:
-                self._fail(inc, RoleError("ControlError", f"group {inc.group.name} sent part of a control "
+                self._fail(inc, RoleError("ControlError", f"group {name} sent part of a control "
                                                           f"message and nothing more for {now - partial:.1f} s"))
             else:
-                self._fail(inc, RoleError("Unresponsive", f"group {inc.group.name} sent no heartbeat for "
-                                                          f"{silent:.1f} s (the limit is {self.liveness:g} s): "
-                                                          "frozen, stopped (SIGSTOP), or a call that holds the GIL"))
-            self.kill(inc.group.name)
+                if isinstance(verdict, HoldingGil):
+                    why = (f"its process ran ({verdict.cpu:.1f} s of CPU) but its heartbeat thread did not: "
+                           "a call that holds the GIL")
+                else:
+                    why = f"frozen: {verdict.why}"
+                self._fail(inc, RoleError("Unresponsive", f"group {name} sent no heartbeat for {verdict.silent:.1f} s "
+                                                          f"(the limit is {self.liveness:g} s): {why}"))
+            self.pending.extend(Note(group=name, text=text) for text in self.watch.forget(name))
+            self.kill(name)
 
     def _fail(self, inc: _Incarnation, error: BaseException) -> None:
         if not inc.failed:
@@ -293,6 +318,7 @@ class ProcessRunner:
         if inc.cgroup is not None:
             inc.cgroup.kill_all()
         self.watchdog.forget(inc.group.name)
+        self.pending.extend(Note(group=inc.group.name, text=text) for text in self.watch.forget(inc.group.name))
         if code != 0:
             self._fail(inc, self._death_cause(inc, code))
         note = ""
@@ -372,7 +398,7 @@ class ProcessRunner:
 
     def notes(self) -> list[str]:
         notes = [(f"real-time guard: kernel RT throttling {rt_throttling()}; watchdog demotes a SCHED_FIFO "
-                  f"group that keeps a CPU busy for {WATCHDOG_LIMIT:g} s")]
+                  f"group that keeps a CPU busy for {WATCHDOG_LIMIT:g} s"), *self.watch.notes()]
         if self.transport == "process":
             piped = sorted(f"{a}->{b}" for a, b in self.capacities if self.group_of.get(a) != self.group_of.get(b))
             if piped:
@@ -382,6 +408,7 @@ class ProcessRunner:
 
     def close(self) -> None:
         self.watchdog.stop()
+        self.watch.end()
         for name, inc in self.current.items():
             if inc.process is not None and inc.process.is_alive():
                 self.kill(name)
@@ -403,6 +430,15 @@ def _role_report(group: str, message: control.RoleEnded) -> RoleReport:
         error = RoleError("ControlError", f"role reported failed with status {message.status!r} and no error")
     return RoleReport(name=message.role, group=group, status=status, error=error, where=message.where,
                       traceback=message.traceback, detail=message.detail)
+
+
+def _sent_at(messages: Sequence[object], now: float) -> float:
+    """When the group last proved alive: the send time of its latest heartbeat (data that sat
+    unread in the pipe while the supervisor did not run is not silence), else now."""
+    beats = [m.at for m in messages if isinstance(m, control.Beat)]
+    if len(beats) < len(messages) or not all(isinstance(at, float) and math.isfinite(at) for at in beats):
+        return now
+    return min(now, max(beats))
 
 
 def _sys_path() -> list[str]:
