@@ -20,11 +20,12 @@ from .errors import (
     ProtocolViolationError,
     RoleStopped,
 )
-from .session import Endpoint, Message, State
+from .session import Endpoint, EndpointStatistics, Message, State
 from .supervision import Group, GroupReport, GroupStatus, RoleReport, RunReport, System
 
 __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
     "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
+    "EndpointStatistics",
 ]
