@@ -16,6 +16,7 @@ import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from .._extras import import_extra
 from ..errors import AnodizeError
 from .checks import attr_name
 
@@ -47,11 +48,9 @@ def idl_class(ros: RosType) -> type:
 
 
 def _build(ros: RosType) -> type:
-    try:
-        from cyclonedds.idl import make_idl_struct
-    except ImportError:
-        raise AnodizeError("the DDS class of a ROS 2 message type needs the Cyclone DDS binding: "
-                           "pip install cyclonedds") from None
+    import_extra("cyclonedds.idl", "ros", "the DDS class of a ROS 2 message type")
+    from cyclonedds.idl import make_idl_struct
+
     from .messages import ros_type
 
     definition = ros._store.fielddefs[ros.name][1]  # rosbags' Typestore: anodize.ros's own
