@@ -8,7 +8,12 @@
     >>> _ = system.group("g").role("A", a).role("B", b)
     >>> system.run(timeout=5).ok
     True
+
+The public API is what this module exports (``__all__``) and :mod:`anodize.errors`; every
+other module under ``anodize`` is private, whatever its name (tests/test_exports.py).
 """
+
+from typing import TYPE_CHECKING, Any
 
 from .errors import (
     Action,
@@ -16,15 +21,58 @@ from .errors import (
     ConfigurationError,
     LinearityError,
     MemoryBoundError,
+    MissingExtraError,
     PeerFailedError,
     ProtocolViolationError,
+    RoleError,
     RoleStopped,
 )
-from .session import Endpoint, Message, State
+from .isolation.sched import lower_thread_priority
+from .live.inputs import ClientInput, client_input
+from .recording.reader import RecordingError
+from .recording.replay_network import ReplayDivergenceError
+from .ros.messages import RosDecodeError, RosEncodeError
+from .session import Endpoint, EndpointStatistics, Message, State
 from .supervision import Group, GroupReport, GroupStatus, RoleReport, RunReport, System
+from .tools.config import ConfigError, SystemConfig, build_system, load_config
+from .tools.named import Finished, NamedSystem, Prepared
+from .transport.codec import DecodeError, EncodeError
+from .transport.process import PayloadError
+from .transport.shm import RingAllocationError, RingFullError
+
+if TYPE_CHECKING:
+    from .transport.dds import StartBarrierError as StartBarrierError
 
 __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
     "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
+    "EndpointStatistics",
+    # System files and named systems (`anodize run FILE`, `anodize run NAME`), as TinMan uses them.
+    "SystemConfig", "load_config", "build_system", "NamedSystem", "Prepared", "Finished",
+    # Helpers for roles: messages from live-view clients, a thread below its role's priority.
+    "ClientInput", "client_input", "lower_thread_priority",
+    # Every other error a user can meet, wherever it is raised.
+    "RoleError", "MissingExtraError", "ConfigError", "EncodeError", "DecodeError", "PayloadError",
+    "RingFullError", "RingAllocationError", "RecordingError", "ReplayDivergenceError",
+    "RosEncodeError", "RosDecodeError",
 ]
+
+# Public names whose module needs an extra: imported on first use, so `import anodize` needs none
+# (a missing extra raises MissingExtraError there). Reachable as attributes (anodize.StartBarrierError)
+# but not in __all__, so `from anodize import *` works without the extra too.
+_NEEDS_AN_EXTRA = {"StartBarrierError": (".transport.dds", "cyclonedds", "dds")}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _NEEDS_AN_EXTRA:
+        raise AttributeError(f"module 'anodize' has no attribute {name!r}")
+    import importlib
+
+    from ._extras import import_extra
+
+    module, needs, extra = _NEEDS_AN_EXTRA[name]
+    import_extra(needs, extra, f"anodize.{name}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value

@@ -54,7 +54,7 @@ BENCH = Path(__file__).resolve().parent
 REPO = BENCH.parent
 # This file is called tinman.py: with bench/ on the path, 'import tinman' would import it.
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != BENCH]
-sys.path.insert(0, str(REPO))
+sys.path[:0] = [str(REPO), str(REPO / "tinman" / "src")]  # the checkout's anodize and TinMan
 sys.path.append(str(BENCH))  # last: bench's shared helpers (runs.py), after the real tinman package
 
 import cv2  # noqa: E402

@@ -279,7 +279,8 @@ def test_the_command_check_catches_what_it_should() -> None:
 
 def _globals_of_the_repository() -> set[str]:
     names: set[str] = set()
-    for path in [*REPO.glob("protocols/*.proto"), *REPO.glob("examples/**/*.proto"), *REPO.glob("tinman/*.proto")]:
+    for path in [*REPO.glob("protocols/*.proto"), *REPO.glob("examples/**/*.proto"),
+                 *REPO.glob("tinman/src/tinman/*.proto")]:
         names |= set(re.findall(r"^\s*global\s+(\w+)", path.read_text(encoding="utf-8"), re.MULTILINE))
     return names
 
@@ -296,6 +297,7 @@ def test_report_block(checked: Checked) -> None:
 
 @pytest.mark.parametrize("checked", [c for c in ALL if c.verb == "usage"], ids=_id)
 def test_usage_block(checked: Checked) -> None:
-    sources = "".join(p.read_text(encoding="utf-8") for p in [*REPO.glob("anodize/**/*.py"), *REPO.glob("tinman/*.py")])
+    sources = "".join(p.read_text(encoding="utf-8")
+                      for p in [*REPO.glob("anodize/**/*.py"), *REPO.glob("tinman/src/tinman/*.py")])
     for option in sorted(set(re.findall(r"--[a-z][a-z-]*", checked.code))):
         assert f'"{option}"' in sources, f"{option}: no front end defines it"

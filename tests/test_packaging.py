@@ -1,13 +1,21 @@
-"""Packaging: the wheel works outside the checkout, and typed endpoints type-check anywhere.
+"""Packaging: the wheels work outside the checkout, the core installs alone, typed endpoints type-check anywhere.
 
-``test_wheel_installs_and_runs_outside_the_checkout`` builds the wheel from a clean copy
-of the source tree, installs it with ``--no-deps`` into a fresh venv outside the checkout
+The repository holds two distributions: ``anodize`` (packages ``sessiontypes`` and ``anodize``;
+pyproject.toml) and TinMan, ``anodize-tinman`` (package ``tinman``; tinman/pyproject.toml).
+
+``test_wheel_installs_and_runs_outside_the_checkout`` builds both wheels from a clean copy
+of the source tree, installs them with ``--no-deps`` into a fresh venv outside the checkout
 and runs the installed commands there. The venv gets its dependencies without a download:
-a ``.pth`` file adds a folder of links to exactly the distributions anodize's declared
-runtime requirements pull in (followed transitively through the metadata of the
-environment running the tests). anodize's own packages and the test tools (pytest, mypy,
-...) are not among them, so a module the wheel misses, or an import of an undeclared
+a ``.pth`` file adds a folder of links to exactly the distributions the two declare (TinMan's,
+and anodize's with the extras TinMan asks for), followed transitively through the metadata of
+the environment running the tests. anodize's own packages and the test tools (pytest, mypy,
+...) are not among them, so a module a wheel misses, or an import of an undeclared
 dependency, fails here as it would for a user.
+
+``test_the_core_installs_and_runs_without_the_extras`` installs the anodize wheel the way a
+user does (``pip install``, which fetches lark, networkx and numpy from the package index)
+into a clean venv, and runs ``anodize check`` and ``anodize run`` of a two-role protocol
+there, on the inproc and processes transports; asking for DDS fails naming ``anodize[dds]``.
 
 ``test_typed_endpoints_type_check_outside_the_checkout`` generates endpoint modules with
 the development install's ``anodize project`` in a folder outside the checkout and runs
@@ -27,22 +35,24 @@ import re
 import shutil
 import subprocess
 import sys
+import tomllib
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 from packaging.requirements import Requirement
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("sessiontypes", "anodize", "tinman")
+PACKAGES = ("sessiontypes", "anodize", "tinman")  # every import package of the two distributions
+ANODIZE_PACKAGES = ("sessiontypes", "anodize")      # the anodize wheel's; TinMan's wheel holds tinman
+TINMAN = REPO / "tinman"                             # TinMan's distribution (pyproject.toml, src/tinman)
 # What a clean checkout would not have: never copied into the wheel's source tree.
 NOT_SOURCE = shutil.ignore_patterns(".git", ".venv", "venv", "build", "dist", "*.egg-info", "__pycache__",
                                     "*.pyc", ".mypy_cache", ".pytest_cache", ".ruff_cache", ".hypothesis",
                                     ".import_linter_cache", "out", "results")
 BIN = Path(sys.executable).parent  # the development install's commands (anodize, mypy)
-
-pytestmark = pytest.mark.slow
 
 PING_PROTO = """\
 global Ping(A, B) =
@@ -148,9 +158,10 @@ OUT_OF_ORDER = 'start.send_title("Ulysses").send_share(30)'  # B1 must receive t
 
 @dataclass(frozen=True)
 class Installed:
-    """The wheel installed in a venv outside the checkout."""
+    """The two wheels installed in a venv outside the checkout."""
 
-    wheel: Path
+    wheel: Path         # anodize's
+    tinman_wheel: Path  # TinMan's
     venv: Path
     python: Path
     site_packages: Path
@@ -182,13 +193,36 @@ def _outside_the_checkout(path: Path) -> Path:
     return path
 
 
+def _project(folder: Path) -> dict[str, Any]:
+    """The [project] table of the pyproject.toml in ``folder``."""
+    with (folder / "pyproject.toml").open("rb") as file:
+        project: dict[str, Any] = tomllib.load(file)["project"]
+    return project
+
+
+def _declared(folder: Path, extras: set[str] | frozenset[str] = frozenset()) -> list[Requirement]:
+    """The requirements a distribution of this repository declares, with the extras asked for."""
+    project = _project(folder)
+    optional = project.get("optional-dependencies", {})
+    return [Requirement(text) for text in [*project["dependencies"], *(r for x in sorted(extras) for r in optional[x])]]
+
+
 def _runtime_distributions() -> list[importlib.metadata.Distribution]:
-    """The distributions anodize's runtime requirements pull in, transitively (no extras)."""
+    """The distributions TinMan's and anodize's declared requirements pull in, transitively.
+
+    The first level is read from the two pyproject.toml files (the checkout's, not an installed
+    copy's metadata); anodize's requirement on itself (TinMan's ``anodize[dds,...]``) adds
+    anodize's own with those extras. Third-party requirements are followed through the
+    metadata of the environment running the tests (their own extras are not followed).
+    """
     found: dict[str, importlib.metadata.Distribution] = {}
-    wanted = [Requirement(text) for text in importlib.metadata.requires("anodize") or []]
+    wanted = _declared(TINMAN)
     while wanted:
         requirement = wanted.pop()
         if requirement.marker is not None and not requirement.marker.evaluate({"extra": ""}):
+            continue
+        if requirement.name == "anodize":
+            wanted.extend(_declared(REPO, requirement.extras))
             continue
         distribution = importlib.metadata.distribution(requirement.name)
         name = re.sub(r"[-_.]+", "-", distribution.metadata["Name"]).lower()
@@ -200,8 +234,8 @@ def _runtime_distributions() -> list[importlib.metadata.Distribution]:
 
 
 def _link_dependencies(folder: Path) -> list[str]:
-    """Link the top-level entries (packages, modules, .libs, dist-info) of anodize's runtime
-    dependencies into ``folder``; returns the distributions' names."""
+    """Link the top-level entries (packages, modules, .libs, dist-info) of the runtime dependencies
+    of TinMan and anodize into ``folder``; returns the distributions' names."""
     folder.mkdir()
     names = []
     for distribution in _runtime_distributions():
@@ -216,27 +250,41 @@ def _link_dependencies(folder: Path) -> list[str]:
     return names
 
 
+@dataclass(frozen=True)
+class Wheels:
+    """The two wheels, built from a clean copy of the checkout."""
+
+    anodize: Path
+    tinman: Path
+
+
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
+def wheels(tmp_path_factory: pytest.TempPathFactory) -> Wheels:
     if importlib.util.find_spec("venv") is None:
         pytest.skip("this Python has no venv module (Debian: apt-get install python3-venv)")
-    root = _outside_the_checkout(tmp_path_factory.mktemp("packaging"))
-
-    # The wheel, from a copy of the source tree: nothing stale in a build/ folder gets in,
-    # and nothing is written into the checkout. The build requirements are those of the
-    # environment running the tests (scripts/bootstrap installs them): no download.
+    root = _outside_the_checkout(tmp_path_factory.mktemp("wheels"))
+    # From a copy of the source tree: nothing stale in a build/ folder gets in, and nothing is
+    # written into the checkout. The build requirements are those of the environment running
+    # the tests (scripts/bootstrap installs them): no download.
     source = root / "source"
     shutil.copytree(REPO, source, symlinks=True, ignore=NOT_SOURCE)
     dist = root / "dist"
-    _ok([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
-         "--check-build-dependencies", "--disable-pip-version-check", "-q", "-w", dist, source], root, 300)
-    (wheel,) = dist.glob("anodize-*.whl")
+    for project in (source, source / "tinman"):
+        _ok([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
+             "--check-build-dependencies", "--disable-pip-version-check", "-q", "-w", dist, project], root, 300)
+    (anodize,) = dist.glob("anodize-[0-9]*.whl")
+    (tinman,) = dist.glob("anodize_tinman-*.whl")
+    return Wheels(anodize, tinman)
 
+
+@pytest.fixture(scope="module")
+def installed(wheels: Wheels, tmp_path_factory: pytest.TempPathFactory) -> Installed:
+    root = _outside_the_checkout(tmp_path_factory.mktemp("packaging"))
     venv = root / "venv"
     _ok([sys.executable, "-m", "venv", "--without-pip", venv], root)
     python = venv / "bin" / "python"
     _ok([sys.executable, "-m", "pip", "--python", python, "install", "--no-deps", "--no-index",
-         "--disable-pip-version-check", "-q", wheel], root, 300)
+         "--disable-pip-version-check", "-q", wheels.anodize, wheels.tinman], root, 300)
     site_packages = Path(_ok([python, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
                              root).strip())
     dependencies = root / "dependencies"
@@ -246,19 +294,41 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
         f"import site; site.addsitedir({str(dependencies)!r})\n", encoding="utf-8")
     work = root / "work"
     work.mkdir()
-    return Installed(wheel, venv, python, site_packages, work)
+    return Installed(wheels.anodize, wheels.tinman, venv, python, site_packages, work)
 
 
+def _files(folder: Path, packages: tuple[str, ...]) -> set[str]:
+    """The files of ``packages`` (folders in ``folder``), as paths relative to ``folder``."""
+    return {path.relative_to(folder).as_posix() for package in packages for path in (folder / package).rglob("*")
+            if path.is_file() and "__pycache__" not in path.parts and path.suffix != ".pyc"}
+
+
+def _in_wheel(wheel: Path) -> set[str]:
+    with zipfile.ZipFile(wheel) as archive:
+        return {name for name in archive.namelist() if ".dist-info/" not in name}
+
+
+def test_tinman_requires_the_anodize_of_its_release() -> None:
+    anodize, tinman = _project(REPO), _project(TINMAN)
+    assert tinman["version"] == anodize["version"]
+    (requirement,) = (r for r in _declared(TINMAN) if r.name == "anodize")
+    assert str(requirement.specifier) == f"=={anodize['version']}"
+    assert requirement.extras <= set(anodize["optional-dependencies"])
+    # TinMan's command and named system belong to TinMan's distribution, not anodize's.
+    assert set(anodize["scripts"]) == {"anodize"} and "entry-points" not in anodize
+    assert tinman["scripts"] == {"tinman": "tinman.cli:run"}
+    assert tinman["entry-points"] == {"anodize.systems": {"tinman": "tinman.app:TINMAN"}}
+
+
+@pytest.mark.slow
 def test_wheel_installs_and_runs_outside_the_checkout(installed: Installed) -> None:
-    # Every file of the three packages is in the wheel, with their data files; nothing else is.
-    with zipfile.ZipFile(installed.wheel) as archive:
-        in_wheel = {name for name in archive.namelist() if ".dist-info/" not in name}
-    in_source = {path.relative_to(REPO).as_posix() for package in PACKAGES
-                 for path in (REPO / package).rglob("*")
-                 if path.is_file() and "__pycache__" not in path.parts and path.suffix != ".pyc"}
-    assert sorted(in_wheel ^ in_source) == []
-    assert {"sessiontypes/grammar.lark", "tinman/tinman.toml", "tinman/tinman.proto",
-            *(f"{package}/py.typed" for package in PACKAGES)} <= in_wheel
+    # Every file of the packages is in its distribution's wheel, with their data files; nothing else is.
+    in_wheel = _in_wheel(installed.wheel)
+    assert sorted(in_wheel ^ _files(REPO, ANODIZE_PACKAGES)) == []
+    in_tinman_wheel = _in_wheel(installed.tinman_wheel)
+    assert sorted(in_tinman_wheel ^ _files(TINMAN / "src", ("tinman",))) == []
+    assert {"sessiontypes/grammar.lark", *(f"{package}/py.typed" for package in ANODIZE_PACKAGES)} <= in_wheel
+    assert {"tinman/tinman.toml", "tinman/tinman.proto", "tinman/py.typed"} <= in_tinman_wheel
 
     # The installed packages are imported, not the checkout; the test tools are not there.
     work, python = installed.work, installed.python
@@ -273,22 +343,7 @@ def test_wheel_installs_and_runs_outside_the_checkout(installed: Installed) -> N
     assert located == {package: str(installed.site_packages / package / "__init__.py") for package in PACKAGES}
 
     anodize = installed.command("anodize")
-    # The grammar loads (sessiontypes/grammar.lark), from a protocol outside the checkout.
-    (work / "ping.proto").write_text(PING_PROTO, encoding="utf-8")
-    assert _ok([anodize, "check", "ping.proto"], work) == "ping.proto: ok (1 global, 0 locals)\n"
-    # A tiny system with its roles in a module beside it, on both transports.
-    (work / "pingroles.py").write_text(PING_ROLES, encoding="utf-8")
-    for transport in ("inproc", "process"):
-        system = work / f"ping_{transport}.toml"
-        system.write_text(PING_SYSTEM.format(transport=transport), encoding="utf-8")
-        for ran in work.glob("ran_*.txt"):
-            ran.unlink()
-        report_file = work / f"report_{transport}.json"
-        _ok([anodize, "run", system.name, "--quiet", "--json", report_file.name], work)
-        report = json.loads(report_file.read_text(encoding="utf-8"))
-        assert (report["ok"], report["transport"]) == (True, transport), report
-        for role in "AB":  # each role (a child process with "process") ran on the installed anodize
-            assert (work / f"ran_{role}.txt").read_text(encoding="utf-8") == located["anodize"]
+    _check_and_run_ping(anodize, work, located["anodize"])
 
     # TinMan: its commands, its named system, its system file and the protocol beside it.
     assert _ok([installed.command("tinman"), "--help"], work).startswith("usage: tinman")
@@ -309,6 +364,63 @@ def test_wheel_installs_and_runs_outside_the_checkout(installed: Installed) -> N
         f"{tinman / 'tinman.proto'} ['TinMan', 'TinManParallel']\n")
 
 
+def _check_and_run_ping(anodize: Path, work: Path, anodize_file: str) -> None:
+    """``anodize check`` a two-role protocol and ``anodize run`` it on the inproc and process
+    transports, in ``work``; each role must run on the anodize at ``anodize_file``."""
+    # The grammar loads (sessiontypes/grammar.lark), from a protocol outside the checkout.
+    (work / "ping.proto").write_text(PING_PROTO, encoding="utf-8")
+    assert _ok([anodize, "check", "ping.proto"], work) == "ping.proto: ok (1 global, 0 locals)\n"
+    # A tiny system with its roles in a module beside it, on both transports.
+    (work / "pingroles.py").write_text(PING_ROLES, encoding="utf-8")
+    for transport in ("inproc", "process"):
+        system = work / f"ping_{transport}.toml"
+        system.write_text(PING_SYSTEM.format(transport=transport), encoding="utf-8")
+        for ran in work.glob("ran_*.txt"):
+            ran.unlink()
+        report_file = work / f"report_{transport}.json"
+        _ok([anodize, "run", system.name, "--quiet", "--json", report_file.name], work)
+        report = json.loads(report_file.read_text(encoding="utf-8"))
+        assert (report["ok"], report["transport"]) == (True, transport), report
+        for role in "AB":  # each role (a child process with "process") ran on the installed anodize
+            assert (work / f"ran_{role}.txt").read_text(encoding="utf-8") == anodize_file
+
+
+@pytest.mark.slow
+def test_the_core_installs_and_runs_without_the_extras(wheels: Wheels,
+                                                       tmp_path_factory: pytest.TempPathFactory) -> None:
+    root = _outside_the_checkout(tmp_path_factory.mktemp("core"))
+    venv = root / "venv"
+    _ok([sys.executable, "-m", "venv", "--without-pip", venv], root)
+    python = venv / "bin" / "python"
+    # As a user installs it: pip reads the wheel's requirements and fetches them from the
+    # package index (lark, networkx and numpy: three wheels, no build).
+    _ok([sys.executable, "-m", "pip", "--python", python, "install", "--disable-pip-version-check", "-q",
+         "--only-binary", ":all:", wheels.anodize], root, 600)
+    distributions = _ok([python, "-c", (
+        "import importlib.metadata as m, re\n"
+        "print(' '.join(sorted(re.sub(r'[-_.]+', '-', d.metadata['Name']).lower() for d in m.distributions())))")],
+        root)
+    assert distributions.split() == ["anodize", "lark", "networkx", "numpy"]
+    work = root / "work"
+    work.mkdir()
+    located = _ok([python, "-c", "import anodize; print(anodize.__file__)"], work).strip()
+    assert Path(located).is_relative_to(venv), located
+    anodize = venv / "bin" / "anodize"
+    _check_and_run_ping(anodize, work, located)
+
+    # What needs an extra says which one, where it is asked for.
+    system = work / "ping_dds.toml"
+    system.write_text(PING_SYSTEM.format(transport="dds"), encoding="utf-8")
+    done = _run([anodize, "run", system.name, "--quiet"], work)
+    assert done.returncode != 0, done.stdout
+    assert ("the DDS transport needs the Python package of module 'cyclonedds', which is not installed; "
+            "install it with: pip install 'anodize[dds]'") in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr, done.stderr
+    # The demo is not part of the core.
+    assert _run([python, "-c", "import tinman"], work).returncode == 1
+    assert not (venv / "bin" / "tinman").exists()
+
+
 def _mypy(work: Path, program: str, cache: str, *options: str | Path) -> tuple[int, str]:
     """``mypy --strict`` of the development install on ``program``, from ``work``."""
     done = _run([BIN / "mypy", "--strict", "--no-color-output", "--no-error-summary", "--cache-dir", cache,
@@ -317,6 +429,7 @@ def _mypy(work: Path, program: str, cache: str, *options: str | Path) -> tuple[i
     return done.returncode, done.stdout
 
 
+@pytest.mark.slow
 def test_typed_endpoints_type_check_outside_the_checkout(installed: Installed,
                                                          tmp_path_factory: pytest.TempPathFactory) -> None:
     work = _outside_the_checkout(tmp_path_factory.mktemp("typed"))

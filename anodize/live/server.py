@@ -23,6 +23,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from .._extras import import_extra
 from ..errors import AnodizeError
 from ..recording.encoding import SortCodec, codec_for_sort
 from ..session.payloads import validator_for
@@ -45,18 +46,20 @@ _STATUS_SCHEMA = {
                        "restarts": {"type": "integer"}, "note": {"type": "string"}}}}},
 }
 
+FEATURE = "the live view in Foxglove (--foxglove)"
+
 
 def open_live_view(port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> LiveView:
     """Start a Foxglove WebSocket server on ``host:port`` (0: any free port; see ``LiveView.port``).
 
     Raises:
-        AnodizeError: foxglove-sdk is not installed, or the port cannot be had.
+        MissingExtraError: foxglove-sdk is not installed (``anodize[live]``).
+        AnodizeError: the port cannot be had.
     """
-    try:
-        import foxglove
-        from foxglove.websocket import Capability, ServerListener
-    except ImportError:
-        raise AnodizeError("the live view in Foxglove needs Foxglove's SDK: pip install 'anodize[ros]'") from None
+    import_extra("foxglove.websocket", "live", FEATURE)
+    import foxglove
+    from foxglove.websocket import Capability, ServerListener
+
     view = LiveView()
 
     class Listener(ServerListener):
@@ -91,7 +94,7 @@ class LiveView:
     """
 
     def __init__(self) -> None:
-        import foxglove
+        foxglove = import_extra("foxglove", "live", FEATURE)
 
         self.context = foxglove.Context()
         self.server: Any = None

@@ -19,9 +19,12 @@ from io import StringIO
 from pathlib import Path
 from typing import Any
 
+from .._extras import import_extra
 from .plan import META, PROFILE
 
 __all__ = ["MergeResult", "merge_parts", "recording_file"]
+
+FEATURE = "recording a run (--record)"
 
 
 @dataclass
@@ -51,6 +54,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
         target: the recording asked for (see :func:`recording_file`).
         run_info: the ``anodize`` metadata record: protocol source, global, transport, ...
     """
+    import_extra("mcap.writer", "record", FEATURE)
     from mcap.writer import CompressionType, Writer
 
     path, folder = recording_file(target)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .._extras import import_extra
 from ..errors import AnodizeError
 from .plan import META
 
@@ -63,6 +64,7 @@ class Recording:
             self._read_summaries()
 
     def _open_bag(self, path: Path) -> None:
+        import_extra("rosbags.rosbag2", "record", "reading a rosbag2 recording")
         from rosbags.rosbag2 import Reader
 
         try:
@@ -73,6 +75,7 @@ class Recording:
         self.topics = [RecordedTopic(c.topic, c.msgtype, {}, c.id) for c in self._bag.connections]
 
     def _read_summaries(self) -> None:
+        import_extra("mcap.reader", "record", "reading an MCAP recording")
         from mcap.reader import make_reader
 
         for number, file in enumerate(self._files):

@@ -24,6 +24,7 @@ from typing import Any
 
 from sessiontypes import StateMachine
 
+from .._extras import import_extra
 from ..isolation.sched import lower_thread_priority
 from ..session.channel import Channel
 from ..session.endpoint import put_each
@@ -33,6 +34,7 @@ from .plan import META, PROFILE, ChannelLabel, RecordPlan
 __all__ = ["Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG", "channel_metadata",
            "QOS_PROFILES"]
 
+FEATURE = "recording a run (--record)"
 BACKLOG = 64 * 2**20  # bytes a group's recorder may hold before its senders wait
 SEQUENCE_WRAP = 2**32 - 1  # the largest MCAP sequence number
 _FLUSH_EVERY = 0.1    # seconds
@@ -73,6 +75,7 @@ class Recorder:
 
     def __init__(self, plan: RecordPlan, group: str, incarnation: int, protocol: str,
                  machines: Mapping[str, StateMachine], memory: int | None = None) -> None:
+        import_extra("mcap.writer", "record", FEATURE)
         from mcap.writer import CompressionType, Writer
 
         self.plan = plan

@@ -16,6 +16,7 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
+from .._extras import import_extra
 from ..errors import AnodizeError
 from .checks import attr_name
 
@@ -56,7 +57,8 @@ def idl_class(ros: IdlSource, resolve: Resolve) -> type:
     ``resolve`` gives the types of nested message fields.
 
     Raises:
-        AnodizeError: the Cyclone DDS binding is not installed, or the type has a field
+        MissingExtraError: the Cyclone DDS binding is not installed (the ros extra).
+        AnodizeError: the type has a field
             kind the binding cannot declare (``wstring``).
     """
     key = (ros.name, ros.distro)
@@ -70,11 +72,9 @@ def idl_class(ros: IdlSource, resolve: Resolve) -> type:
 
 
 def _build(ros: IdlSource, resolve: Resolve) -> type:
-    try:  # imported only here: the Cyclone DDS binding is optional (the dds extra)
-        from cyclonedds.idl import make_idl_struct
-    except ImportError:
-        raise AnodizeError("the DDS class of a ROS 2 message type needs the Cyclone DDS binding: "
-                           "pip install cyclonedds") from None
+    import_extra("cyclonedds.idl", "ros", "the DDS class of a ROS 2 message type")
+    from cyclonedds.idl import make_idl_struct
+
     fields = {attr_name(field_name): _member(ros, field_name, description, resolve)
               for field_name, description in ros.field_descriptions()}
     return make_idl_struct(ros.dds_name.rpartition("::")[2], ros.dds_name, fields)

@@ -16,6 +16,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any
 
+from .._extras import import_extra
 from ..errors import AnodizeError
 from .checks import Compiled, compile_message, failure_text
 from .idl import idl_class
@@ -187,11 +188,9 @@ def ros_type(name: str, distro: str | None = None) -> RosType:
 def _typestore(distro: str) -> Any:
     store = _STORES.get(distro)
     if store is None:
-        try:
-            from rosbags.typesys import Stores, get_typestore
-        except ImportError:
-            raise AnodizeError("ROS 2 message types (\"ros:pkg/msg/Name\" sorts) need rosbags: "
-                               "it is a dependency of anodize: pip install 'rosbags>=0.11.9'") from None
+        import_extra("rosbags.typesys", "ros", 'ROS 2 message types ("ros:pkg/msg/Name" sorts)')
+        from rosbags.typesys import Stores, get_typestore
+
         known = sorted(s.value.removeprefix("ros2_") for s in Stores if s.value.startswith("ros2_"))
         if distro not in known:
             raise AnodizeError(f"unknown ROS 2 distribution {distro!r}; rosbags knows {', '.join(known)}")

@@ -7,6 +7,7 @@ channels beneath it come from a transport through the small interface of
 
 from .endpoint import Endpoint, Message
 from .monitor import Monitor
+from .statistics import EndpointStatistics
 from .typed import State
 
-__all__ = ["Endpoint", "Message", "Monitor", "State"]
+__all__ = ["Endpoint", "EndpointStatistics", "Message", "Monitor", "State"]

@@ -15,6 +15,7 @@ from __future__ import annotations
 import queue
 import threading
 import time
+import warnings
 from collections.abc import Callable, Collection, Iterable
 from typing import TYPE_CHECKING, Any, NamedTuple, NoReturn
 
@@ -24,8 +25,9 @@ from ..errors import Action, AnodizeError, PeerFailedError, ProtocolViolationErr
 from . import compiled
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
 from .monitor import Monitor
+from .statistics import EndpointStatistics
 
-__all__ = ["Message", "Endpoint", "RoleStopped", "peers_of", "put_each"]
+__all__ = ["Message", "Endpoint", "EndpointStatistics", "RoleStopped", "peers_of", "put_each"]
 
 
 _new_tuple = tuple.__new__  # builds a Message without NamedTuple's Python-level __new__
@@ -37,6 +39,11 @@ class Message(NamedTuple):
 
     label: str
     payload: Any = None
+
+
+def _deprecated(old: str, field: str) -> None:
+    warnings.warn(f"Endpoint.{old} is deprecated; use Endpoint.statistics().{field}", DeprecationWarning,
+                  stacklevel=3)
 
 
 def _compiled_core() -> type | None:
@@ -435,29 +442,28 @@ class Endpoint(_Core):
         assert self._monitor is not None
         return self._monitor.violation(Action("end", None, ""), blame=self.role)
 
+    def statistics(self) -> EndpointStatistics:
+        """Per peer, the messages sent and received and the most that waited, with the branches'."""
+        own = EndpointStatistics(self.sent, self.received, self.high_water)
+        if not self._branches:
+            return own
+        return EndpointStatistics.combined(own, (branch.statistics() for branch in self._branches))
+
+    # Deprecated: the three dicts before statistics(); kept one release for callers outside anodize.
     def sent_counts(self) -> dict[str, int]:
-        """Messages sent per peer, this endpoint's and its branches'."""
-        counts = dict(self.sent)
-        for branch in self._branches or ():
-            for peer, n in branch.sent_counts().items():
-                counts[peer] = counts.get(peer, 0) + n
-        return counts
+        """Deprecated: ``statistics().sent``."""
+        _deprecated("sent_counts()", "sent")
+        return dict(self.statistics().sent)
 
     def high_water_marks(self) -> dict[str, int]:
-        """Per peer, the most messages that waited in the channel to it (where that is known)."""
-        marks = dict(self.high_water)
-        for branch in self._branches or ():
-            for peer, n in branch.high_water_marks().items():
-                marks[peer] = max(marks.get(peer, 0), n)
-        return marks
+        """Deprecated: ``statistics().high_water``."""
+        _deprecated("high_water_marks()", "high_water")
+        return dict(self.statistics().high_water)
 
     def received_counts(self) -> dict[str, int]:
-        """Messages received per peer, this endpoint's and its branches'."""
-        counts = dict(self.received)
-        for branch in self._branches or ():
-            for peer, n in branch.received_counts().items():
-                counts[peer] = counts.get(peer, 0) + n
-        return counts
+        """Deprecated: ``statistics().received``."""
+        _deprecated("received_counts()", "received")
+        return dict(self.statistics().received)
 
     @property
     def state(self) -> str:

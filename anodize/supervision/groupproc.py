@@ -269,12 +269,10 @@ class _GroupProcess:
     def _heartbeat(self, final: bool = False) -> None:
         used = max(0, (data_size() or self.baseline) - self.baseline)
         self.peak = max(self.peak, used)
-        sent = {f"{role}->{peer}": n for role, ep in self.endpoints.items()
-                for peer, n in ep.sent_counts().items()}
-        received = {f"{peer}->{role}": n for role, ep in self.endpoints.items()
-                    for peer, n in ep.received_counts().items()}
-        waiting = {f"{role}->{peer}": n for role, ep in self.endpoints.items()
-                   for peer, n in ep.high_water_marks().items()}
+        statistics = {role: ep.statistics() for role, ep in self.endpoints.items()}
+        sent = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.sent.items()}
+        received = {f"{peer}->{role}": n for role, st in statistics.items() for peer, n in st.received.items()}
+        waiting = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.high_water.items()}
         self._send(Beat(at=time.monotonic(), memory=used, peak=self.peak, sent=sent, received=received,
                         waiting=waiting, final=final))
 

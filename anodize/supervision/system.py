@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 from sessiontypes import GlobalType, StateMachine
 from sessiontypes.graph import communication_graph
 
+from .._extras import import_extra
 from ..errors import AnodizeError, ConfigurationError
 from ..live.plan import LivePlan, live_plan
 from ..recording.plan import RecordPlan, record_plan
@@ -263,7 +264,8 @@ class System:
                  timeout: float | None, grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None,
                  liveness: float, host: str | None, wait: float, recording: RecordedRun | None,
                  shown: LivePlan | None = None) -> RunReport:
-        from ..transport.dds import DOMAIN_ENV, DdsSettings  # only a DDS run loads Cyclone DDS
+        import_extra("cyclonedds", "dds", "the DDS transport")  # only a DDS run loads Cyclone DDS
+        from ..transport.dds import DOMAIN_ENV, DdsSettings
         from .ddsrunner import DdsRunner
 
         if not wait > 0:

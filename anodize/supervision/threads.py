@@ -141,12 +141,10 @@ class ThreadRunner:
         for name, inc in self.current.items():
             if inc.over:
                 continue
-            sent = {f"{role}->{peer}": n for role, ep in inc.endpoints.items()
-                    for peer, n in ep.sent_counts().items()}
-            received = {f"{peer}->{role}": n for role, ep in inc.endpoints.items()
-                        for peer, n in ep.received_counts().items()}
-            waiting = {f"{role}->{peer}": n for role, ep in inc.endpoints.items()
-                       for peer, n in ep.high_water_marks().items()}
+            statistics = {role: ep.statistics() for role, ep in inc.endpoints.items()}
+            sent = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.sent.items()}
+            received = {f"{peer}->{role}": n for role, st in statistics.items() for peer, n in st.received.items()}
+            waiting = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.high_water.items()}
             counts.append(Counts(group=name, incarnation=inc.number, at=time.monotonic(), sent=sent,
                                  received=received, waiting=waiting))
         return counts

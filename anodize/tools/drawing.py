@@ -1,4 +1,4 @@
-"""Pictures of communication graphs (PNG/SVG) with matplotlib."""
+"""Pictures of communication graphs (PNG/SVG) with matplotlib (the ``graph`` extra)."""
 
 from __future__ import annotations
 
@@ -7,14 +7,15 @@ from pathlib import Path
 
 import networkx as nx
 
+from .._extras import import_extra
+
 
 def draw_communication_graph(graph: nx.DiGraph[str], path: Path) -> None:
     """Draw roles on a circle, one labelled arrow per channel, and save to ``path``.
 
     The format follows the suffix (``.png`` or ``.svg``).
     """
-    import matplotlib
-
+    matplotlib = import_extra("matplotlib", "graph", "drawing a communication graph (.png/.svg)")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

@@ -436,7 +436,7 @@ def test_generated_modules_and_programs_pass_mypy_strict(programs: Path) -> None
         program = (FIXTURES / source).read_text(encoding="utf-8")
         assert program.count(old) == 1, old
         (programs / f"broken_{name}.py").write_text(program.replace(old, new), encoding="utf-8")
-    has_tinman_messages = (REPO / "tinman" / "messages.py").exists()
+    has_tinman_messages = (REPO / "tinman" / "src" / "tinman" / "messages.py").exists()
     for proto in [*PROTOCOLS, FEATURES, ROS, QUOTES, ROUTE]:
         for module in generate(proto):
             if has_tinman_messages or "tinman.messages" not in module.text:
@@ -445,7 +445,7 @@ def test_generated_modules_and_programs_pass_mypy_strict(programs: Path) -> None
     assert {"parallel_a.py", "features_a.py", "ringstop_a.py", "drive_pilot.py"} <= set(files)
 
     # Imported modules (anodize) are followed silently: only the files named are judged.
-    environment = {**os.environ, "MYPYPATH": str(REPO)}
+    environment = {**os.environ, "MYPYPATH": os.pathsep.join((str(REPO), str(REPO / "tinman" / "src")))}
     result = subprocess.run(
         [sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent", "--no-color-output",
          "--no-error-summary", "--cache-dir", str(programs / ".mypy_cache"), *files],

@@ -36,6 +36,7 @@ from anodize.tools.cli import main
 from anodize.tools.recordings import topic_map
 
 ROOT = Path(__file__).parents[2]
+TINMAN = ROOT / "tinman" / "src" / "tinman"  # the tinman package of the checkout
 SETTINGS = settings(deadline=None, max_examples=examples(25),
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture,
                                            HealthCheck.filter_too_much])
@@ -275,21 +276,21 @@ def _ros_bag(path: Path, twists: list[float], joy_type: str = "sensor_msgs/msg/J
 
 def test_verify_checks_a_plain_ros_bag_through_a_topic_map(tmp_path: Path) -> None:
     _ros_bag(tmp_path / "good", [0.1, 0.2, 0.3])
-    args = ["verify", str(tmp_path / "good"), "--protocol", str(ROOT / "tinman" / "tinman.proto"),
-            "--global", "TinManParallel", "--topics", str(ROOT / "tinman" / "tinman.toml")]
+    args = ["verify", str(tmp_path / "good"), "--protocol", str(TINMAN / "tinman.proto"),
+            "--global", "TinManParallel", "--topics", str(TINMAN / "tinman.toml")]
     assert main(args) == 0
-    gt = sessiontypes.load(ROOT / "tinman" / "tinman.proto").globals["TinManParallel"]
+    gt = sessiontypes.load(TINMAN / "tinman.proto").globals["TinManParallel"]
     with open_recording(tmp_path / "good") as recording:
-        report = verify(recording, gt, topic_map(str(ROOT / "tinman" / "tinman.toml"), gt))
+        report = verify(recording, gt, topic_map(str(TINMAN / "tinman.toml"), gt))
     assert {name: r.messages for name, r in report.channels.items()} == {"Joy->Control": 3, "Control->Move": 3}
     assert "Camera->VisOdom" in report.missing
 
 
 def test_a_topic_of_the_wrong_type_in_a_ros_bag_is_the_senders_violation(tmp_path: Path) -> None:
     _ros_bag(tmp_path / "bad", [0.1, 0.2], joy_type="std_msgs/msg/String")
-    gt = sessiontypes.load(ROOT / "tinman" / "tinman.proto").globals["TinManParallel"]
+    gt = sessiontypes.load(TINMAN / "tinman.proto").globals["TinManParallel"]
     with open_recording(tmp_path / "bad") as recording:
-        report = verify(recording, gt, topic_map(str(ROOT / "tinman" / "tinman.toml"), gt))
+        report = verify(recording, gt, topic_map(str(TINMAN / "tinman.toml"), gt))
     violation = report.channels["Joy->Control"].violation
     assert violation is not None and violation.index == 0 and violation.blamed == "Joy"
     assert "std_msgs/msg/String" in violation.reason and "sensor_msgs/msg/Joy" in violation.reason
@@ -334,7 +335,7 @@ def test_tinman_records_and_its_recording_verifies(tmp_path: Path) -> None:
         twists[10][3] = twists[10][3][:20]  # a Twist is 52 bytes of CDR
     _rewrite(out / "run.mcap", tmp_path / "cut.mcap", cut_the_tenth_twist)
     with open_recording(tmp_path / "cut.mcap") as recording:
-        report = verify(recording, sessiontypes.load(ROOT / "tinman" / "tinman.proto").globals["TinManParallel"])
+        report = verify(recording, sessiontypes.load(TINMAN / "tinman.proto").globals["TinManParallel"])
     violation = report.channels["Move->Gazebo"].violation
     assert violation is not None and violation.index == 10 and violation.blamed == "Move", report.text()
     assert "does not decode" in violation.reason

@@ -153,7 +153,7 @@ def test_without_rosbags_the_error_says_what_to_install(monkeypatch: pytest.Monk
     monkeypatch.setattr(ros_messages, "_STORES", {})
     monkeypatch.setattr(ros_messages, "_TYPES", {})
     monkeypatch.setitem(sys.modules, "rosbags.typesys", None)  # import fails
-    expected = "need rosbags: it is a dependency of anodize: pip install 'rosbags"
+    expected = "install it with: pip install 'anodize[ros]'"
     with pytest.raises(AnodizeError, match=re.escape(expected)):
         ros_type("geometry_msgs/msg/Twist")
 

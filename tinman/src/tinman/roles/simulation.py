@@ -8,8 +8,7 @@ import time
 
 import numpy as np
 
-from anodize import Endpoint, PeerFailedError, RoleStopped
-from anodize.isolation.sched import lower_thread_priority
+from anodize import Endpoint, PeerFailedError, RoleStopped, lower_thread_priority
 
 from ..cameras import LiveCamera, RecordedCamera
 from ..faults import blinded, start_faults

@@ -1,6 +1,6 @@
 """``anodize run tinman``: TinMan as a named system of anodize.
 
-Registered under the ``anodize.systems`` entry point (see pyproject.toml), so
+Registered under the ``anodize.systems`` entry point (see tinman/pyproject.toml), so
 anodize finds it by name without importing tinman. It runs ``tinman.toml``,
 then writes ``report.json`` and ``trajectory.png`` into the output folder.
 """
@@ -16,9 +16,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from anodize import AnodizeError, GroupStatus, RunReport
-from anodize.tools.config import SystemConfig, build_system, load_config
-from anodize.tools.named import Finished, Prepared
+from anodize import (
+    AnodizeError,
+    Finished,
+    GroupStatus,
+    Prepared,
+    RunReport,
+    SystemConfig,
+    build_system,
+    load_config,
+)
 
 from .outcome import build_report
 from .settings import FAULTS, Settings, export

@@ -7,8 +7,7 @@ import time
 
 import numpy as np
 
-from anodize import Endpoint, PeerFailedError, RoleStopped
-from anodize.live import client_input
+from anodize import Endpoint, PeerFailedError, RoleStopped, client_input
 
 from ..faults import start_faults
 from ..geometry import robot_pose

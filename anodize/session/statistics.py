@@ -1,0 +1,50 @@
+"""What an endpoint has done so far, as one read-only record."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+__all__ = ["EndpointStatistics"]
+
+
+def _frozen(counts: Mapping[str, int]) -> Mapping[str, int]:
+    return MappingProxyType(dict(counts))
+
+
+@dataclass(frozen=True)
+class EndpointStatistics:
+    """Per peer, what one endpoint (with its parallel branches) has sent, received and seen wait.
+
+    ``sent`` and ``received`` count messages; ``high_water`` is the most messages that waited
+    at once in the channel to that peer, where the transport can tell. The mappings are
+    read-only copies: a record never changes after :meth:`anodize.Endpoint.statistics`
+    returns it.
+    """
+
+    sent: Mapping[str, int] = field(default_factory=dict)
+    received: Mapping[str, int] = field(default_factory=dict)
+    high_water: Mapping[str, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        # Copied into read-only views, so the endpoint's live counters never leak out.
+        for name in ("sent", "received", "high_water"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+
+    @classmethod
+    def combined(cls, own: EndpointStatistics, branches: Iterable[EndpointStatistics]) -> EndpointStatistics:
+        """``own`` with its branches' records added: counts summed, high-water marks the maximum."""
+        sent, received, high_water = dict(own.sent), dict(own.received), dict(own.high_water)
+        for branch in branches:
+            for peer, n in branch.sent.items():
+                sent[peer] = sent.get(peer, 0) + n
+            for peer, n in branch.received.items():
+                received[peer] = received.get(peer, 0) + n
+            for peer, n in branch.high_water.items():
+                high_water[peer] = max(high_water.get(peer, 0), n)
+        return cls(sent, received, high_water)
+
+    def __repr__(self) -> str:
+        return (f"EndpointStatistics(sent={dict(self.sent)!r}, received={dict(self.received)!r}, "
+                f"high_water={dict(self.high_water)!r})")
