@@ -21,10 +21,23 @@ from .errors import (
     RoleStopped,
 )
 from .session import Endpoint, Message, State
-from .supervision import Group, GroupReport, GroupStatus, RoleReport, RunReport, System
+from .supervision import (
+    Dds,
+    Group,
+    GroupReport,
+    GroupStatus,
+    Inproc,
+    Processes,
+    RoleReport,
+    RosBridge,
+    RunReport,
+    System,
+)
+from .taps import ChannelTap
 
 __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
     "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
+    "Inproc", "Processes", "Dds", "RosBridge", "ChannelTap",
 ]

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from anodize import AnodizeError, GroupStatus, RunReport
+from anodize import AnodizeError, GroupStatus, RosBridge, RunReport
 from anodize.tools.config import SystemConfig, build_system, load_config
 from anodize.tools.named import Finished, Prepared
 
@@ -83,7 +83,7 @@ class TinMan:
         if args.paper:
             config = dataclasses.replace(config, global_name=PAPER_GLOBAL)
         if getattr(args, "transport", None) is not None:
-            config = dataclasses.replace(config, transport=args.transport)
+            config = config.on_transport(args.transport)
         if args.external:
             config = _external(config, args.external)
         groups = {role: group.name for group in config.groups.values() for role in group.roles}
@@ -187,7 +187,7 @@ def _external(config: SystemConfig, roles: list[str]) -> SystemConfig:
     Raises:
         TinManError: not on DDS, or not a role of TinMan.
     """
-    if config.transport != "dds":
+    if config.transport.kind != "dds":
         raise TinManError("--external needs --transport dds: a ROS 2 node plays the role on TinMan's ROS topics")
     every = [role for group in config.groups.values() for role in group.roles]
     unknown = [role for role in roles if role not in every]
@@ -195,8 +195,8 @@ def _external(config: SystemConfig, roles: list[str]) -> SystemConfig:
         raise TinManError(f"--external {unknown[0]}: TinMan has no role {unknown[0]}; its roles are {', '.join(every)}")
     groups = {name: dataclasses.replace(group, roles={r: f for r, f in group.roles.items() if r not in roles})
               for name, group in config.groups.items()}
-    return dataclasses.replace(config, groups={name: g for name, g in groups.items() if g.roles},
-                               external=tuple(dict.fromkeys(roles)))
+    ros = dataclasses.replace(config.ros or RosBridge(), external=frozenset(roles))
+    return dataclasses.replace(config, groups={name: g for name, g in groups.items() if g.roles}, ros=ros)
 
 
 def _check_terminal() -> None:
