@@ -151,8 +151,8 @@ BAD = {
     "empty_global": ('protocol = "p.proto"\nglobal = ""\n' + GROUP,
                      'global: expected a non-empty string, got ""'),
     "transport": (MINIMAL + 'transport = "tcp"\n' + GROUP,
-                  'transport: expected "inproc" or "process" or "dds", or a table [transport] with kind = ..., '
-                  'got "tcp"'),
+                  ('transport: expected "inproc" or "process" or "dds", or a table [transport] with kind = ..., '
+                   'got "tcp"')),
     "transport_kind": (MINIMAL + '[transport]\nkind = "tcp"\n' + GROUP,
                        'transport.kind: expected "inproc" or "process" or "dds", got "tcp"'),
     "transport_no_kind": (MINIMAL + '[transport]\nliveness = 3\n' + GROUP,
