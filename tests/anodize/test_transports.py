@@ -150,9 +150,10 @@ def test_the_dds_and_ros_keywords_build_dds_and_a_ros_bridge() -> None:
 def test_the_shims_check_what_they_always_checked() -> None:
     with pytest.raises(ConfigurationError, match="transport 'tcp': expected one of inproc, process, dds"):
         anodize.System(STREAM, transport="tcp")
-    with warnings.catch_warnings(), pytest.raises(ConfigurationError, match="Dds domain: .* got 300"):
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        anodize.System(STREAM, transport="process", domain=300)
+        with pytest.raises(ConfigurationError, match=r"Dds domain: .* got 300"):
+            anodize.System(STREAM, transport="process", domain=300)
     with pytest.raises(ConfigurationError, match="liveness: expected a number of seconds > 0, got 0"):
         stream().run(liveness=0)
 
@@ -162,13 +163,13 @@ def test_the_run_keywords_become_the_transport_s_fields() -> None:
         assert legacy_run(Processes(), 5, None, None) == Processes(liveness=5)
     with pytest.warns(DeprecationWarning, match=r"System.run\(host=..., wait=...\)"):
         assert legacy_run(Dds(), None, "robot", 3.0) == Dds(host="robot", wait=3.0)
-    with pytest.warns(DeprecationWarning):  # only Dds has hosts: elsewhere checked, and without effect
+    with pytest.warns(DeprecationWarning, match="liveness=..., host=..., wait=..."):  # only Dds has hosts
         assert legacy_run(Inproc(), 1.0, "robot", 3.0) == Inproc()
     assert legacy_run(Processes(), None, None, None) == Processes()
 
 
 def test_run_liveness_still_runs_with_a_warning_pointing_at_the_caller() -> None:
-    with pytest.warns(DeprecationWarning) as caught:
+    with pytest.warns(DeprecationWarning, match=r"System.run\(liveness=...\)") as caught:
         report = stream().run(timeout=10, liveness=1.0)
     assert report.ok, report.summary()
     assert caught[0].filename == __file__
