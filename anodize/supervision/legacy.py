@@ -80,8 +80,10 @@ def legacy_run(transport: Transport, liveness: float | None, host: str | None, w
         Dds(host=host, wait=30.0 if wait is None else wait)
     fields = {f.name for f in dataclasses.fields(transport)}
     changed = dataclasses.replace(transport, **{k: v for k, v in given.items() if k in fields})  # type: ignore[arg-type]
+    idle = [k for k in given if k not in fields]
     _deprecated(f"System.run({', '.join(f'{k}=...' for k in given)})",
-                f"the transport's fields: System(..., transport={type(changed).__name__}({_fields(changed)}))")
+                f"the transport's fields: System(..., transport={type(changed).__name__}({_fields(changed)}))"
+                + (f" ({', '.join(idle)}: no such field, no effect on {type(changed).__name__})" if idle else ""))
     return changed
 
 
@@ -91,7 +93,7 @@ def legacy_taps(record: str | os.PathLike[str] | None, live: ChannelTap | None) 
     if record is not None:
         # Supervision does not import anodize.recording (it sits above, behind the tap protocol); only
         # this deprecated keyword reaches up for it, by name, and it goes with the keyword.
-        recording: Any = importlib.import_module("anodize.recording.run")
+        recording: Any = importlib.import_module("anodize.recording")
         taps.append(recording.Recording(record))
         _deprecated("System.run(record=path)", "System.run(taps=[anodize.recording.Recording(path)])")
     if live is not None:

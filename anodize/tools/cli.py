@@ -437,7 +437,7 @@ def _taps(record: str | os.PathLike[str] | None, foxglove: int | None) -> Iterat
     then ``--foxglove``."""
     taps: list[ChannelTap] = []
     if record is not None:
-        from ..recording.run import Recording
+        from ..recording import Recording
 
         taps.append(Recording(record))
     with _live_view(foxglove) as live:
