@@ -1,4 +1,4 @@
-"""The runner of ``transport="dds"``: the groups of this host as processes, joined to the rest by DDS.
+"""The runner of ``Dds``: the groups of this host as processes, joined to the rest by DDS.
 
 It is the process runner (:mod:`.processes`: isolation, memory bounds, priorities,
 liveness of the local groups) without pipes: each group's process joins the

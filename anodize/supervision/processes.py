@@ -1,4 +1,4 @@
-"""The runner of ``transport="process"``: one OS process per group.
+"""The runner of ``Processes``: one OS process per group.
 
 It spawns one process per group (:mod:`.groupproc`), wires a pipe for every
 channel between roles of different groups, and then only listens: to each

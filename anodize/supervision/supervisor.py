@@ -117,7 +117,7 @@ class Note:
 Event = Ready | Counts | RoleEnded | GroupFailed | GroupExited | Note
 
 
-# ---- what supervisors on other hosts say (transport="dds", anodize run --host) ----------------
+# ---- what supervisors on other hosts say (Dds, anodize run --host) ---------------------------
 @dataclass(frozen=True)
 class StopWord:
     """Every group of the run stops."""

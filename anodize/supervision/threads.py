@@ -1,4 +1,4 @@
-"""The runner of ``transport="inproc"``: every role is a thread of this process.
+"""The runner of ``Inproc``: every role is a thread of this process.
 
 Groups started together share one :class:`~anodize.transport.inproc.InprocNetwork`;
 a group restarted later gets a fresh network with the groups restarted with it,
