@@ -71,6 +71,9 @@ class System:
         old = (domain, run_id, ros_topics, external, ros_distro, ros_domain)
         if isinstance(transport, str):
             transport, old_ros = legacy_system(transport, *old)
+            if old_ros is not None and ros is not None:
+                raise ConfigurationError("ros=RosBridge(...) and the ros_topics, external, ros_distro or ros_domain "
+                                         "keywords it replaces: give the RosBridge alone")
             ros = ros if old_ros is None else old_ros
         elif any(x is not None for x in old):
             raise ConfigurationError("domain, run_id, ros_topics, external, ros_distro and ros_domain are the "

@@ -76,6 +76,8 @@ def test_a_system_refuses_what_is_not_a_transport_and_external_roles_off_dds() -
         anodize.System(STREAM, transport=Processes(), ros=RosBridge(external={"C"}))
     with pytest.raises(ConfigurationError, match="are the fields of Dds"):
         anodize.System(STREAM, transport=Dds(), domain=3)
+    with pytest.warns(DeprecationWarning, match="deprecated"), pytest.raises(ConfigurationError, match="alone"):
+        anodize.System(STREAM, transport="dds", ros_topics={"P->C:data": "/d"}, ros=RosBridge())
 
 
 def test_a_system_runs_inproc_by_default() -> None:
