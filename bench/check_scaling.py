@@ -87,6 +87,8 @@ for _i, _arg in enumerate(sys.argv):
 if str(IMPL) not in sys.path:
     sys.path.insert(0, str(IMPL))
 
+from runs import LoadWatch, write_results  # noqa: E402  (bench/runs.py, beside this script)
+
 DEFAULT_SIZES = (100, 1_000, 10_000, 100_000)
 SHAPES = ("sequence", "choices", "deep-rec", "ref-dag", "ref-chain", "routed")
 DEFAULT_JSON = REPO / "bench" / "results" / "check_scaling.json"
@@ -435,6 +437,22 @@ def render_table(results: list[dict[str, Any]], clock: str = "wall") -> str:
     return "\n".join(lines)
 
 
+def table_rows(results: list[dict[str, Any]], clock: str = "wall") -> list[list[str]]:
+    """The results as table rows (the first the header); call after :func:`render_table`, which adds the growth."""
+    rows = [["shape", "interactions", "parse s", "check s", "project all roles s", "total s", "growth vs 10x smaller",
+             "n log n reference"]]
+    for r in results:
+        if not r.get("ok"):
+            rows.append([r["shape"], f"{r['size']:,}", "FAILED", "", "", "", "", str(r.get("error", "?"))[:60]])
+            continue
+        med = r["median"] if clock == "wall" else {k[4:]: v for k, v in r["median"].items() if k.startswith("cpu_")}
+        growth, ref = r.get("growth_total"), r.get("nlogn_ref")
+        seconds = [f"{med[k]:.3f}" for k in ("parse", "check", "project_all", "total")]
+        rows.append([r["shape"], f"{r['size']:,}", *seconds,
+                     f"{growth:.1f}x" if growth is not None else "-", f"{ref:.1f}x" if ref is not None else "-"])
+    return rows
+
+
 def render_verdicts(results: list[dict[str, Any]], size: int = 10_000, clock: str = "wall") -> list[str]:
     lines = []
     for r in results:
@@ -583,6 +601,8 @@ def main(argv: list[str] | None = None) -> int:
     if any(n < 1 for n in sizes):
         parser.error("sizes must be positive")
 
+    started = time.monotonic()
+    watch = LoadWatch()
     results: list[dict[str, Any]] = []
     for shape in shapes:
         gave_up: str | None = None
@@ -618,11 +638,12 @@ def main(argv: list[str] | None = None) -> int:
         print(line)
 
     payload = {"meta": _fingerprint(), "gc_off": args.gc_off, "clock": args.clock, "sizes": sizes, "shapes": shapes,
-               "results": results, "verdicts_10000": verdicts, "table": table}
-    out = Path(args.json)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
-    print(f"\nJSON written to {out}")
+               "results": results, "verdicts_10000": verdicts, "text_table": table,
+               "table": table_rows(results, args.clock)}
+    how = (f"parse, check and project generated protocols, each case in a fresh subprocess; {args.clock} seconds, "
+           f"median of 3 (1 at 100,000 interactions) unless --repeat; {os.cpu_count()} CPUs")
+    write_results(Path(args.json), payload, started, title="Checking and projection as protocols grow", how=how,
+                  watch=watch)
     return 0 if all(r.get("ok") for r in results) else 1
 
 

@@ -68,7 +68,7 @@ os.environ["PYTHONPATH"] = os.pathsep.join(
 
 import dds_roles as roles  # noqa: E402
 import numpy as np  # noqa: E402
-from runs import bench_env, print_table, write_results  # noqa: E402
+from runs import LoadWatch, bench_env, print_table, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import Dds, Inproc, Processes, System  # noqa: E402
@@ -256,6 +256,7 @@ def main(argv: list[str] | None = None) -> int:
         args.frames, args.repeat = min(args.frames, 50), 1
 
     started = time.monotonic()
+    watch = LoadWatch()
     results = {
         "messages": measure("messages", "per_second", args.repeat,
                             lambda way: messages(way, args.messages, args.timeout), STREAM_WAYS),
@@ -266,10 +267,11 @@ def main(argv: list[str] | None = None) -> int:
     }
     rows = table(results)
     cyclone = importlib.metadata.version("cyclonedds")
-    print(f"anodize transport=\"dds\" vs raw Cyclone DDS {cyclone} vs transport=\"process\", "
+    how = (f"anodize transport=\"dds\" vs raw Cyclone DDS {cyclone} vs transport=\"process\", "
           f"2 groups on one host, {os.cpu_count()} CPUs, Python {platform.python_version()}, DDS domain {DOMAIN}, "
           f"median of {args.repeat}; {args.messages:,} messages, {args.rounds:,} round trips "
           f"(after {args.warmup:,}), {args.frames:,} frames per run")
+    print(how)
     print()
     print_table(rows, (0, 5, 6))
 
@@ -285,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
         "table": rows,
         **results,
     }
-    write_results(args.json, document, started)
+    write_results(args.json, document, started, title="Groups across machines: DDS", how=how, watch=watch)
     return 0
 
 

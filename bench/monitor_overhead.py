@@ -43,7 +43,6 @@ import argparse
 import cProfile
 import datetime
 import io
-import json
 import platform
 import pstats
 import statistics
@@ -58,6 +57,8 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
+
+from runs import LoadWatch, write_results  # noqa: E402  (bench/runs.py, beside this script)
 
 import sessiontypes  # noqa: E402
 from anodize import Endpoint, System  # noqa: E402
@@ -397,6 +398,22 @@ def print_tables(results: dict[str, Any], calls: dict[str, dict[str, float]],
                       f" {row['calls']:>8}  {row['function']} ({row['where']})")
 
 
+def table_rows(results: dict[str, Any]) -> list[list[str]]:
+    """The workloads as table rows (the first the header), as the performance page prints them."""
+    rows = [["workload", "raw", "unmonitored", "monitored", "monitored / raw", "monitored / unmonitored", "target"]]
+    for workload, entry in results.items():
+        if workload == "stream":
+            cells = [f"{entry['messages_per_second'][w] / 1e3:,.0f} k msg/s" for w in WAYS]
+        else:
+            cells = [f"{entry['microseconds_per_round'][w]:.1f} us/round" for w in WAYS]
+        target = entry.get("target", "")
+        if target:
+            target += ": met" if entry["meets_target"] else ": NOT met"
+        rows.append([f"{workload} ({entry['n']:,})", *cells, f"{entry['ratio_monitored_to_raw']:.2f}x",
+                     f"{entry['ratio_monitored_to_unmonitored']:.2f}x", target])
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--stream-n", type=int, default=200_000)
@@ -409,6 +426,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.repeat < 1:
         parser.error("--repeat must be at least 1")
 
+    started = time.monotonic()
+    watch = LoadWatch()
     results = run_workloads(args.stream_n, args.rounds, args.repeat)
     calls = per_call(args.stream_n, args.repeat)
     profiles = None if args.no_profile else profile_stream(min(args.stream_n, 100_000), args.top)
@@ -426,9 +445,10 @@ def main(argv: list[str] | None = None) -> int:
         "per_call_microseconds": calls,
         "profile": profiles,
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    print(f"\nwrote {args.json}")
+    how = (f"inproc transport, two threads; median of {args.repeat}; {args.stream_n:,} streamed messages, "
+           f"{args.rounds:,} rounds; Python {platform.python_version()}")
+    write_results(args.json, {**document, "table": table_rows(results)}, started, title="What monitoring costs",
+                  how=how, watch=watch)
     return 0
 
 

@@ -308,9 +308,10 @@ def main(argv: list[str] | None = None) -> int:
 
     versions = {"python": platform.python_version(), "numpy": np.__version__, "pyzmq": zmq.__version__,
                 "libzmq": zmq.zmq_version(), "cyclonedds": importlib.metadata.version("cyclonedds")}
-    print(f"anodize vs peers, {load['cpus']} CPUs, Python {versions['python']}, pyzmq {versions['pyzmq']} "
+    how = (f"anodize vs peers, {load['cpus']} CPUs, Python {versions['python']}, pyzmq {versions['pyzmq']} "
           f"(libzmq {versions['libzmq']}), cyclonedds {versions['cyclonedds']}; median (min-max) of {args.repeat}; "
           f"{args.messages:,} messages, {args.frames:,} frames, {args.rounds:,} round trips per run")
+    print(how)
     print(LoadWatch.headline(load))
     if source.get("uncommitted"):
         print(f"measured with uncommitted changes to {', '.join(source['uncommitted'])} (on {source['commit'][:10]})")
@@ -334,7 +335,8 @@ def main(argv: list[str] | None = None) -> int:
         "targets": targets,
         **results,
     }
-    write_results(args.json, document, started)
+    write_results(args.json, document, started, title="Against other ways of moving messages", how=how,
+                  watch=watch)
     return 0
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -26,7 +27,7 @@ from typing import Any
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from runs import print_table, write_results  # noqa: E402
+from runs import LoadWatch, print_table, write_results  # noqa: E402
 
 ROOT = HERE.parent
 
@@ -75,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", default=str(HERE / "results" / "recording.json"))
     args = parser.parse_args(argv)
     started = time.monotonic()
+    watch = LoadWatch()
     plain: list[dict[str, Any]] = []
     recorded: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="anodize-bench-rec-") as folder:
@@ -100,8 +102,11 @@ def main(argv: list[str] | None = None) -> int:
     rows.append(["verify (messages/s)", "", f"{median(recorded, 'verify_messages_per_s'):.0f}", ""])
     print()
     print_table(rows, text_columns=(0,))
-    write_results(Path(args.json), {"runs": args.runs, "duration_s": args.duration,
-                                    "without_record": plain, "with_record": recorded}, started)
+    how = (f"anodize run tinman for {args.duration:g} s, {args.runs} runs each without and with --record, "
+           f"alternating; medians; {os.cpu_count()} CPUs")
+    write_results(Path(args.json), {"runs": args.runs, "duration_s": args.duration, "table": rows,
+                                    "without_record": plain, "with_record": recorded}, started,
+                  title="What recording costs TinMan", how=how, watch=watch)
     return 0
 
 

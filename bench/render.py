@@ -53,7 +53,7 @@ sys.path.append(str(BENCH))  # last: bench's shared helpers (runs.py), after the
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
-from runs import write_results  # noqa: E402
+from runs import LoadWatch, write_results  # noqa: E402
 
 from tinman.geometry import FR1, camera_pose  # noqa: E402
 from tinman.mission import simulate_mission  # noqa: E402
@@ -159,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
         args.repeat, args.seconds = 2, 3.0
 
     started = time.monotonic()
+    watch = LoadWatch()
     if args.cpu not in os.sched_getaffinity(0):
         raise SystemExit(f"bench/render.py: CPU {args.cpu} is not available to this process")
     os.sched_setaffinity(0, {args.cpu})
@@ -176,10 +177,11 @@ def main(argv: list[str] | None = None) -> int:
     load_after = os.getloadavg()
     agree = agreement(chosen[RAY], chosen[WARP], poses[::AGREEMENT_EVERY])
 
-    print(f"TinMan renderers, DEFAULT_WORLD at {FR1.width}x{FR1.height}, {len(poses)} poses of the patrol "
+    how = (f"TinMan renderers, DEFAULT_WORLD at {FR1.width}x{FR1.height}, {len(poses)} poses of the patrol "
           f"({args.seconds:g} s at {FRAME_RATE:g} fps), pinned to CPU {args.cpu}, OpenCV {cv2.__version__} "
           f"(1 thread), numpy {np.__version__}, Python {platform.python_version()}, "
           f"load average {load_before[0]:.2f} -> {load_after[0]:.2f} on {os.cpu_count()} CPUs")
+    print(how)
     print()
     rows = table(results, agree)
     print_table(rows)
@@ -200,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
         "fps_median": {name: statistics.median(r["fps"] for r in runs) for name, runs in results.items()},
         "agreement": agree,
     }
-    write_results(args.json, document, started)
+    write_results(args.json, document, started, title="TinMan's simulated camera", how=how, watch=watch)
     return 0
 
 

@@ -75,7 +75,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402  # ros_peer reports a missing compiler or Fast DDS as a pytest skip
 import ros_images_roles as roles  # noqa: E402
 from ros_peer import finish_peer, ros_peer_binary, start_peer  # noqa: E402
-from runs import bench_env, print_table, write_results  # noqa: E402
+from runs import LoadWatch, bench_env, print_table, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import Dds, Inproc, Processes, RosBridge, System  # noqa: E402
@@ -328,6 +328,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--images: at least 2 (rates are taken from the first to the last receipt)")
 
     started = time.monotonic()
+    watch = LoadWatch()
     load_start = os.getloadavg()
     found = measure(args.repeat, args.images, args.timeout)
     load_end = os.getloadavg()
@@ -339,10 +340,11 @@ def main(argv: list[str] | None = None) -> int:
         peer = peer_binary()
     except (SkippedError, RuntimeError) as why:
         peer = f"none ({why})"
-    print(f"640x480 rgb8 sensor_msgs/msg/Image on ROS topic {ROS_TOPIC}, {args.images:,} images per run, "
+    how = (f"640x480 rgb8 sensor_msgs/msg/Image on ROS topic {ROS_TOPIC}, {args.images:,} images per run, "
           f"median of {args.repeat}; {os.cpu_count()} CPUs, Python {platform.python_version()}, Cyclone DDS "
           f"{cyclone}, ROS_DOMAIN_ID {DOMAIN}; load average {load_start[0]:.2f} at the start, "
-          f"{load_end[0]:.2f} at the end (shared machine)")
+          f"{load_end[0]:.2f} at the end")
+    print(how)
     print()
     print_table(rows, (0, 3, 4))
     print()
@@ -367,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         "notes": notes(found, args.images, rmem),
         "images": found,
     }
-    write_results(args.json, document, started)
+    write_results(args.json, document, started, title="ROS 2 images per second", how=how, watch=watch)
     return 0
 
 

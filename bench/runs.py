@@ -3,6 +3,7 @@ group processes, the results those roles write back, tables, and the machine's l
 
 from __future__ import annotations
 
+import datetime
 import json
 import os
 import shutil
@@ -50,11 +51,25 @@ def print_table(rows: list[list[str]], text_columns: tuple[int, ...]) -> None:
                                  for i, w in enumerate(widths)) + "|")
 
 
-def write_results(path: Path, document: dict[str, Any], started: float) -> None:
-    """Write a benchmark's JSON and say where, with the seconds since ``started`` (monotonic)."""
+def write_results(path: Path, document: dict[str, Any], started: float, *, title: str, how: str,
+                  watch: LoadWatch) -> None:
+    """Write a benchmark's JSON and say where, with the seconds since ``started`` (monotonic).
+
+    Every result file carries what the documentation's performance page prints of it (the page
+    is generated from these files, docs/hooks.py): ``title``, ``how`` (one line: what was run,
+    how often, on what), ``table`` (rows of cells, the first the header; ``document`` must hold
+    it) and ``load``, what ``watch`` saw of the machine's load (unless ``document`` has it).
+    """
+    table = document.get("table")
+    if not (isinstance(table, list) and table and all(isinstance(row, list) for row in table)):
+        raise ValueError(f"{path.name}: expected the table as a list of rows of cells, got {table!r}")
+    full = {"title": title, "how": how, **document}
+    full.setdefault("date", datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"))
+    full.setdefault("load", watch.result())
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    print(f"\nwrote {path} ({time.monotonic() - started:.0f} s)")
+    path.write_text(json.dumps(full, indent=2) + "\n", encoding="utf-8")
+    print(f"\n{LoadWatch.headline(full['load'])}")
+    print(f"wrote {path} ({time.monotonic() - started:.0f} s)")
 
 
 def source_state(repo: Path, *paths: str) -> dict[str, Any]:

@@ -59,7 +59,7 @@ sys.path.append(str(BENCH))  # last: bench's shared helpers (runs.py), after the
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
-from runs import write_results  # noqa: E402
+from runs import LoadWatch, write_results  # noqa: E402
 
 from tinman.ate import evaluate_ate  # noqa: E402
 from tinman.cameras import LiveCamera  # noqa: E402
@@ -238,6 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         args.render_frames = min(args.render_frames, 30)
 
     started = time.monotonic()
+    watch = LoadWatch()
     directories = {world: sequence_directory(world) for world in worlds}  # generating uses both cores
     sequences = {world: TumSequence.open(directory) for world, directory in directories.items()}
     cpu = pin_to_one_cpu(args.cpu)
@@ -262,10 +263,11 @@ def main(argv: list[str] | None = None) -> int:
     load_after = os.getloadavg()
 
     frames = results[worlds[0]]["runs"][0]["frames"]
-    print(f"TinMan visual odometry and simulated camera, worlds {', '.join(worlds)} ({frames} frames each "
+    how = (f"TinMan visual odometry and simulated camera, worlds {', '.join(worlds)} ({frames} frames each "
           f"at {sequences[worlds[0]].frame_rate:.0f} fps), pinned to CPU {cpu}, OpenCV 1 thread, "
           f"Python {platform.python_version()}, OpenCV {cv2.__version__}, "
           f"load average {load_before[0]:.1f} -> {load_after[0]:.1f} on {os.cpu_count()} CPUs")
+    print(how)
     print()
     rows = table(results, ablations)
     print_table(rows)
@@ -286,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
                    for world, result in results.items()},
         "ablations": {name: {"world": world, **summary} for name, (world, summary) in ablations.items()},
     }
-    write_results(args.json, document, started)
+    write_results(args.json, document, started, title="TinMan visual odometry", how=how, watch=watch)
     return 0
 
 

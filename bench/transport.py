@@ -82,7 +82,7 @@ for path in (str(REPO), str(BENCH)):  # bench/ too: group processes import trans
 
 import numpy as np  # noqa: E402
 import transport_roles as roles  # noqa: E402
-from runs import bench_env, write_results  # noqa: E402
+from runs import LoadWatch, bench_env, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import Processes, RunReport, System  # noqa: E402
@@ -325,6 +325,7 @@ def main(argv: list[str] | None = None) -> int:
         os.environ["ANODIZE_NO_RT"] = "1"  # inherited by every group process
 
     started = time.monotonic()
+    watch = LoadWatch()
     frames = measure_frames(args.frames, args.repeat)
     produced = measure_frames(args.frames, args.repeat, produce=True)
     pingpong = measure_pingpong(args.rounds, args.warmup, args.repeat)
@@ -347,7 +348,10 @@ def main(argv: list[str] | None = None) -> int:
         "round_trip": pingpong,
         "jitter": jitter,
     }
-    write_results(args.json, document, started)
+    how = (f"anodize process transport vs multiprocessing, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
+           f"median of {args.repeat}; {args.frames:,} frames, {args.rounds:,} round trips per run, "
+           f"{args.jitter_seconds:g} s of jitter loop per configuration")
+    write_results(args.json, document, started, title="Across processes", how=how, watch=watch)
     return 0
 
 

@@ -9,7 +9,11 @@ compile local types to state machines; generate typed endpoint code.
     !B(ping).?B(pong)
 """
 
+import warnings
+from typing import TYPE_CHECKING
+
 from .check import ProtocolModule
+from .declarations import GlobalType, LocalType
 from .errors import (
     Diagnostic,
     ProjectionError,
@@ -20,14 +24,27 @@ from .errors import (
     UnknownRoleError,
 )
 from .fsm import StateMachine, Transition
-from .global_types import GlobalType
 from .loader import load, loads, read_source
-from .local_types import LocalType
 from .location import Location
-from .sorts import Message, Sort
+from .sorts import Interaction, Sort
+
+# Old names kept importable for one release, with a DeprecationWarning: old name -> new name.
+_RENAMED = {"Message": "Interaction"}
 
 __all__ = [
     "load", "loads", "read_source", "ProtocolModule", "GlobalType", "LocalType", "StateMachine", "Transition",
-    "Message", "Sort", "Location", "Diagnostic", "ProtocolError", "ProtocolSyntaxError",
+    "Interaction", "Sort", "Location", "Diagnostic", "ProtocolError", "ProtocolSyntaxError",
     "ProtocolEncodingError", "ProtocolCheckError", "ProjectionError", "UnknownRoleError",
 ]
+
+
+if not TYPE_CHECKING:  # hidden from type checkers: they then report the old name, and typos, as errors
+    def __getattr__(name: str) -> object:
+        """``sessiontypes.Message``: the old name of :class:`Interaction`, deprecated."""
+        new = _RENAMED.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        warnings.warn(f"sessiontypes.{name} is renamed sessiontypes.{new} (anodize.Message is a received "
+                      "message, a different thing); the old name goes in the next release",
+                      DeprecationWarning, stacklevel=2)
+        return globals()[new]

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from . import global_types as g
 from . import local_types as lt
 from . import syntax as s
+from .declarations import GlobalType, LocalType
 from .deep import run_deep
 from .errors import Diagnostic, ProjectionError
 from .location import Location
@@ -36,8 +37,8 @@ class ProtocolModule:
     """
 
     path: str
-    globals: dict[str, g.GlobalType]
-    locals: dict[str, lt.LocalType]
+    globals: dict[str, GlobalType]
+    locals: dict[str, LocalType]
     sorts: dict[str, Sort]
     warnings: tuple[Diagnostic, ...] = field(default=())
 
@@ -63,13 +64,13 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
     # The declaration bodies resolution shares between uses (it adds to them as
     # it goes); every pass below memoises on them, across all the globals.
     shared = Sharing(globals_walk.shared)
-    global_types: dict[str, g.GlobalType] = {}
+    global_types: dict[str, GlobalType] = {}
     for decl in globals_.values():
         before = len(reporter.diagnostics)
         body = resolve_global(decl, globals_walk)
         roles = _check_roles(decl, body, reporter, shared)
         _check_parallel_global(body, reporter, shared)
-        global_type = g.GlobalType(decl.name.text, roles, body, decl.location, sorts.defined(),
+        global_type = GlobalType(decl.name.text, roles, body, decl.location, sorts.defined(),
                                    source.lines, shared)
         global_types[decl.name.text] = global_type
         if not _has_error(reporter.diagnostics[before:]):
@@ -77,13 +78,13 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
 
     locals_walk = local_walk(reporter, sorts, locals_, names["global"] | names["type"])
     shared_l = Sharing(locals_walk.shared)
-    local_types: dict[str, lt.LocalType] = {}
+    local_types: dict[str, LocalType] = {}
     for ldecl in locals_.values():
         body_l = resolve_local(ldecl, locals_walk)
         _check_local_forms(ldecl, body_l, reporter, shared_l)
         _check_parallel_local(body_l, reporter, shared_l)
         role = ldecl.role.text if ldecl.role else None
-        local_types[ldecl.name.text] = lt.LocalType(ldecl.name.text, role, body_l, "", ldecl.location)
+        local_types[ldecl.name.text] = LocalType(ldecl.name.text, role, body_l, "", ldecl.location)
 
     for name, type_decl in types.items():
         if name not in sorts.used:
@@ -315,7 +316,7 @@ def _check_local_forms(decl: s.LocalDecl, body: lt.LocalTerm, reporter: Reporter
                        "with the multiparty form (!Peer(msg)); use one of them")
 
 
-def _check_projectable(global_type: g.GlobalType, reporter: Reporter) -> None:
+def _check_projectable(global_type: GlobalType, reporter: Reporter) -> None:
     for role in global_type.roles:
         try:
             global_type.project(role)

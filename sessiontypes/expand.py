@@ -24,13 +24,11 @@ from __future__ import annotations
 from bisect import bisect_left
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Generic, TypeVar
+from typing import Generic, TypeVar
 
 from . import syntax as s
 from .errors import Diagnostic
-
-if TYPE_CHECKING:
-    from .resolve import Reporter, SortTable
+from .filescope import Reporter, SortTable
 
 __all__ = ["Binder", "Scope", "Capture", "Walk", "components"]
 

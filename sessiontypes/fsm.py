@@ -13,13 +13,14 @@ import json
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from . import dot
 from . import local_types as lt
 from .deep import run_deep
+from .local_types import describe_local
 from .location import Location
-from .printer import describe_local
-from .sorts import Message, Sort
+from .sorts import Interaction, Sort, print_message
 
-__all__ = ["Action", "Transition", "StateMachine", "build_state_machine", "build_term_machine"]
+__all__ = ["Action", "Transition", "StateMachine", "build_term_machine"]
 
 Action = Literal["send", "recv"]
 Key = tuple[Action, "str | None", str]
@@ -38,10 +39,8 @@ class Transition:
 
     def __str__(self) -> str:
         """The action in local-type notation: ``!Peer(msg)``, or ``!Sort`` in binary form."""
-        from .printer import print_message
-
         arrow = "!" if self.action == "send" else "?"
-        message = print_message(Message(self.label, self.sort))
+        message = print_message(Interaction(self.label, self.sort))
         return f"{arrow}{self.peer}({message})" if self.peer else f"{arrow}{message}"
 
 
@@ -142,6 +141,7 @@ class StateMachine:
 
     def to_networkx(self) -> Any:
         """A ``networkx.MultiDiGraph``; fork branches are nested with prefixed node names."""
+        # Lazy: networkx takes longer to import than all of sessiontypes, and monitors never need it.
         import networkx as nx
 
         graph: nx.MultiDiGraph[str] = nx.MultiDiGraph(name=f"{self.protocol} {self.role or ''}".strip())
@@ -165,20 +165,12 @@ class StateMachine:
 
     def to_dot(self) -> str:
         """Graphviz DOT text: one node per state, one edge per transition."""
-        from .dot import to_dot
-
         graph = self.to_networkx()
         for _, data in graph.nodes(data=True):
             data["_initial"] = data.pop("initial")
         graph.add_node("__start", shape="point", label="")
         graph.add_edge("__start", f"s{self.initial}")
-        return to_dot(graph, graph.graph["name"], {"rankdir": "LR"})
-
-
-def build_state_machine(local_type: lt.LocalType) -> StateMachine:
-    """Compile a named local type to its state machine."""
-    # A 'local' declaration has no protocol; its own name identifies the machine.
-    return build_term_machine(local_type.body, local_type.role, local_type.protocol or local_type.name)
+        return dot.to_dot(graph, graph.graph["name"], {"rankdir": "LR"})
 
 
 def build_term_machine(term: lt.LocalTerm, role: str | None = None, protocol: str = "") -> StateMachine:

@@ -12,12 +12,14 @@ from typing import Any
 import networkx as nx
 
 from . import global_types as g
-from .printer import print_message
+from .declarations import GlobalType
+from .dot import to_dot
+from .sorts import print_message
 
 __all__ = ["communication_graph", "graph_to_dot"]
 
 
-def communication_graph(global_type: g.GlobalType) -> nx.DiGraph[str]:
+def communication_graph(global_type: GlobalType) -> nx.DiGraph[str]:
     """Return a ``networkx.DiGraph``: nodes are roles, edges carry ``messages`` (a list)."""
     graph: nx.DiGraph[str] = nx.DiGraph(name=global_type.name)
     graph.add_nodes_from(global_type.roles)
@@ -51,8 +53,6 @@ def communication_graph(global_type: g.GlobalType) -> nx.DiGraph[str]:
 
 def graph_to_dot(graph: nx.DiGraph[str]) -> str:
     """Graphviz DOT text for a communication graph."""
-    from .dot import to_dot
-
     styled: Any = nx.DiGraph()
     for node in graph.nodes:
         styled.add_node(node, shape="box", style="rounded")

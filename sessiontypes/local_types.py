@@ -11,23 +11,25 @@ a :class:`Select` or :class:`Offer` (see :func:`select_among` and
 :func:`offer_among`), so each behaviour has exactly one representation. ``peer`` is
 ``None`` in the binary form of Fig. 1 (one implicit peer).
 
-``str()`` of any term is its canonical print (LANGUAGE.md section 5).
+``str()`` of any term is its canonical print (LANGUAGE.md section 5), written
+here (:func:`print_local`) rather than in :mod:`sessiontypes.printer` so that
+this module imports no stage: the printer needs the terms, and the terms'
+``str()`` needs the print. The named :class:`~sessiontypes.LocalType` users
+hold, with ``fsm()``, is in :mod:`sessiontypes.declarations`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 from .location import NOWHERE, Location
-from .sorts import Message
-
-if TYPE_CHECKING:
-    from .fsm import StateMachine
+from .printing import Printer, PrintTooLongError, run_print
+from .sorts import Interaction, print_message
 
 __all__ = [
     "Branch", "Send", "Recv", "Select", "Offer", "SelectAmong", "OfferAmong", "Rec", "Var", "End",
-    "Parallel", "LocalTerm", "LocalType", "select", "offer", "select_among", "offer_among", "sends_of", "receives_of",
+    "Parallel", "LocalTerm", "select", "offer", "select_among", "offer_among", "sends_of", "receives_of",
+    "print_local", "describe_local",
 ]
 
 
@@ -35,8 +37,6 @@ class _Printable:
     __slots__ = ()
 
     def __str__(self) -> str:
-        from .printer import print_local
-
         return print_local(self)  # type: ignore[arg-type]
 
 
@@ -48,7 +48,7 @@ class Branch(_Printable):
     of the local text it was parsed from).
     """
 
-    message: Message
+    message: Interaction
     continuation: LocalTerm
     location: Location = field(default=NOWHERE, compare=False)
 
@@ -61,7 +61,7 @@ class Send(_Printable):
     """``!peer(message).continuation``."""
 
     peer: str | None
-    message: Message
+    message: Interaction
     continuation: LocalTerm
     location: Location = field(default=NOWHERE, compare=False)
 
@@ -74,7 +74,7 @@ class Recv(_Printable):
     """``?peer(message).continuation``."""
 
     peer: str | None
-    message: Message
+    message: Interaction
     continuation: LocalTerm
     location: Location = field(default=NOWHERE, compare=False)
 
@@ -237,41 +237,91 @@ def receives_of(term: Recv | Offer | OfferAmong) -> tuple[Recv, ...]:
     raise AssertionError(term)
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class LocalType:
-    """A named local type: a projection of a global type, or a ``local`` declaration.
+def print_local(term: LocalTerm, limit: int | None = None) -> str:
+    """The canonical print of a local type term.
 
-    Attributes:
-        name: the ``local`` declaration's name, or the role's name for a projection.
-        role: the role this type describes (``None`` if a ``local`` declaration
-            does not say ``at ROLE``).
-        body: the local type term.
-        protocol: the global type it was projected from ("" for declarations).
-        location: where it was declared (or the global's declaration).
+    Raises:
+        PrintTooLongError: ``limit`` is given and the print is longer.
     """
+    return run_print(_local, term, limit)
 
-    name: str
-    role: str | None
-    body: LocalTerm
-    protocol: str = ""
-    location: Location = NOWHERE
 
-    def fsm(self) -> StateMachine:
-        """Compile to a deterministic state machine (see :mod:`sessiontypes.fsm`)."""
-        from .fsm import build_state_machine
+def describe_local(term: LocalTerm, limit: int = 4000) -> str:
+    """The print of ``term`` if it is at most ``limit`` characters, else its first step and a note.
 
-        return build_state_machine(self)
+    For messages and state descriptions, which must stay short whatever the type.
+    """
+    try:
+        return print_local(term, limit)
+    except PrintTooLongError:
+        return f"{_local_head(term)} (longer than {limit} characters written out)"
 
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, LocalType):
-            return NotImplemented
-        return (self.name, self.role, self.body, self.protocol) == (
-            other.name, other.role, other.body, other.protocol)
 
-    def __hash__(self) -> int:
-        return hash((self.name, self.role, self.body, self.protocol))
+def _local_head(term: LocalTerm) -> str:
+    """The first action or choice of ``term``, its continuations left out as ``...``."""
+    names: list[str] = []
+    while isinstance(term, Rec):
+        names.append(f"mu {term.var}.")
+        term = term.body
+    match term:
+        case Send() | Recv():
+            arrow = "!" if isinstance(term, Send) else "?"
+            peer = "" if term.peer is None else f"{term.peer}({print_message(term.message)})"
+            head = f"{arrow}{peer or term.message.sort or term.message.label}..."
+        case Select(peer=peer, branches=branches) | Offer(peer=peer, branches=branches):
+            symbol = "+" if isinstance(term, Select) else "&"
+            head = f"{symbol}{peer or ''}{{{', '.join(print_message(b.message) + '...' for b in branches)}}}"
+        case SelectAmong(branches=actions) | OfferAmong(branches=actions):
+            symbol = "+" if isinstance(term, SelectAmong) else "&"
+            arrow = "!" if isinstance(term, SelectAmong) else "?"
+            head = f"{symbol}{{{', '.join(f'{arrow}{a.peer}({print_message(a.message)})...' for a in actions)}}}"
+        case Parallel(branches=branches):
+            head = "(" + " || ".join(["..."] * len(branches)) + ")"
+        case _:
+            head = "..."
+    return "".join(names) + head
 
-    def __str__(self) -> str:
-        from .printer import print_local
 
-        return print_local(self.body)
+def _local(term: LocalTerm, printer: Printer) -> str:
+    known = printer.known(term)
+    if known is not None:
+        return known
+    start = term
+    # Sequences are printed in a loop: a long protocol is one long sequence.
+    parts: list[str] = []
+    while isinstance(term, (Send, Recv)):
+        arrow = "!" if isinstance(term, Send) else "?"
+        if term.peer is None:
+            parts.append(f"{arrow}{term.message.sort or term.message.label}")
+        else:
+            parts.append(f"{arrow}{term.peer}({print_message(term.message)})")
+        term = term.continuation
+    match term:
+        case End():
+            if parts:
+                return printer.checked(start, ".".join(parts))
+            tail = "end"
+        case Var(name=name):
+            tail = name
+        case Rec(var=var, body=body):
+            tail = f"mu {var}.{_local(body, printer)}"
+        case Select(peer=peer, branches=branches) | Offer(peer=peer, branches=branches):
+            symbol = "+" if isinstance(term, Select) else "&"
+            inner = ", ".join([_local_branch(b, printer) for b in branches])
+            tail = f"{symbol}{peer or ''}{{{inner}}}"
+        case SelectAmong(branches=actions) | OfferAmong(branches=actions):
+            symbol = "+" if isinstance(term, SelectAmong) else "&"
+            tail = f"{symbol}{{{', '.join([_local(a, printer) for a in actions])}}}"
+        case Parallel(branches=branches):
+            tail = "(" + " || ".join([_local(b, printer) for b in branches]) + ")"
+        case _:
+            raise AssertionError(f"unexpected local term {term!r}")
+    parts.append(tail)
+    return printer.checked(start, ".".join(parts))
+
+
+def _local_branch(branch: Branch, printer: Printer) -> str:
+    head = print_message(branch.message)
+    if isinstance(branch.continuation, End):
+        return head
+    return f"{head}.{_local(branch.continuation, printer)}"

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 from . import local_types as lt
 from .recursion import equivalent, free_vars, unfold
-from .sorts import Message
+from .sorts import Interaction
 
 __all__ = ["merge", "MergeError"]
 
@@ -146,7 +146,7 @@ def _peers(peers: list[str | None]) -> str:
     return " and ".join(str(p) for p in peers)
 
 
-def _same_sort(ours: Message, theirs: Message) -> None:
+def _same_sort(ours: Interaction, theirs: Interaction) -> None:
     if ours != theirs:
         raise MergeError(f"label '{ours.label}' carries {_sort_name(ours)} in one and "
                          f"{_sort_name(theirs)} in the other")
@@ -159,7 +159,7 @@ def _labels(branches: tuple[lt.Send | lt.Recv, ...]) -> str:
     return names if len(branches) == 1 else f"one of {names}"
 
 
-def _sort_name(message: Message) -> str:
+def _sort_name(message: Interaction) -> str:
     return str(message.sort) if message.sort else "nothing"
 
 

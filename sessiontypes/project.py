@@ -24,34 +24,34 @@ from .races import check_races, has_offer_among
 from .recursion import free_vars, substitute, unfold  # re-exported
 from .sharing import Sharing, find_shared
 
-__all__ = ["project_global", "project", "merge", "MergeError", "unfold", "substitute", "free_vars"]
+__all__ = ["project_declared", "project", "merge", "MergeError", "unfold", "substitute", "free_vars"]
 
 
-def project_global(global_type: g.GlobalType, role: str) -> lt.LocalType:
-    """Project a declared global type onto ``role``.
+def project_declared(protocol: str, roles: tuple[str, ...], body: g.GlobalTerm, role: str,
+                     source_lines: tuple[str, ...], shared: Sharing) -> lt.LocalTerm:
+    """Project the body of the declared global type ``protocol`` onto ``role``.
+
+    ``shared`` holds the nodes the body shares (and their projections, which
+    this adds to); ``source_lines`` are its file's, for error messages. Users
+    call :meth:`sessiontypes.GlobalType.project`, which caches the result.
 
     Raises:
-        UnknownRoleError: ``role`` is not one of ``global_type.roles``.
+        UnknownRoleError: ``role`` is not one of ``roles``.
         ProjectionError: some choice's branches do not merge for ``role``, or (a
             :class:`~sessiontypes.errors.ChoiceRaceError`) a message may overtake the
             one from which ``role`` learns a choice.
     """
-    cached = global_type.cached_projections.get(role)
-    if cached is not None:
-        return cached
-    if role not in global_type.roles:
-        raise UnknownRoleError(global_type.name, role, global_type.roles)
-    projector = _Projector(global_type.name, role, global_type.source_lines, global_type.shared)
-    body = run_deep(projector.project, global_type.body)
-    if has_offer_among(body):
-        check_races(global_type.name, role, global_type.body, body, projector.project, global_type.source_lines)
-    local = lt.LocalType(role, role, body, global_type.name, global_type.location)
-    global_type.cached_projections[role] = local
+    if role not in roles:
+        raise UnknownRoleError(protocol, role, roles)
+    projector = _Projector(protocol, role, source_lines, shared)
+    local = run_deep(projector.project, body)
+    if has_offer_among(local):
+        check_races(protocol, role, body, local, projector.project, source_lines)
     return local
 
 
 def project(term: g.GlobalTerm, role: str, protocol: str = "<global>") -> lt.LocalTerm:
-    """Project a global type term onto ``role`` (see :func:`project_global`)."""
+    """Project a global type term onto ``role`` (see :func:`project_declared`)."""
     nodes = find_shared(term, _children)
     shared = Sharing(nodes)
     return run_deep(_Projector(protocol, role, (), shared).project, term)

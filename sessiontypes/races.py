@@ -30,7 +30,7 @@ from .errors import ChoiceRaceError
 from .fsm import StateMachine, build_term_machine
 from .location import Location
 from .printer import print_message
-from .sorts import Message
+from .sorts import Interaction
 
 __all__ = ["check_races", "has_offer_among"]
 
@@ -148,7 +148,7 @@ class _Walk:
         return [(p, env, machine if k else None, state, watches) for p, k in zip(parts, kept, strict=True)]
 
     def step(self, machine: StateMachine | None, state: int, watches: frozenset[_Watch], sender: str,
-             receiver: str, message: Message, location: Location) -> tuple[int, frozenset[_Watch]] | None:
+             receiver: str, message: Interaction, location: Location) -> tuple[int, frozenset[_Watch]] | None:
         """One interaction: check and update the watches, step the role's machine."""
         role = self.role
         updated: set[_Watch] = set()
@@ -176,7 +176,7 @@ class _Walk:
                 state = moved.target
         return state, frozenset(updated)
 
-    def race(self, watch: _Watch, sender: str, message: Message, location: Location) -> ChoiceRaceError:
+    def race(self, watch: _Watch, sender: str, message: Interaction, location: Location) -> ChoiceRaceError:
         deciding, decider, decided_at = watch.decided_by
         peers = sorted(watch.peers | {decider})
         line = self.source_lines[location.line - 1] if 0 < location.line <= len(self.source_lines) else ""

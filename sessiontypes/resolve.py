@@ -15,101 +15,16 @@ body is resolved once per context and shared (:mod:`sessiontypes.expand`).
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
 
 from . import global_types as g
 from . import local_types as lt
 from . import syntax as s
-from .errors import Diagnostic
 from .expand import Binder, Scope, Walk
-from .location import Location
-from .sorts import BUILTIN_SORTS, Field, Message, Sort, builtin_sort, record_sort
+from .filescope import Reporter, SortTable  # re-exported
+from .sorts import Interaction
 
 __all__ = ["Reporter", "SortTable", "global_walk", "local_walk", "resolve_global", "resolve_local"]
-
-_TARGET = re.compile(
-    r"^(?:[A-Za-z_][\w]*(?:\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*"
-    r"|ros:[A-Za-z_]\w*/(?:msg|srv|action)/[A-Za-z_]\w*)$"
-)
-
-
-@dataclass
-class Reporter:
-    """Collects diagnostics for one source file."""
-
-    source: s.SourceFile
-    diagnostics: list[Diagnostic] = field(default_factory=list)
-
-    def error(self, location: Location, message: str) -> None:
-        self.diagnostics.append(
-            Diagnostic("error", location, message, self.source.line(location.line)))
-
-    def warning(self, location: Location, message: str) -> None:
-        self.diagnostics.append(
-            Diagnostic("warning", location, message, self.source.line(location.line)))
-
-
-class SortTable:
-    """The builtin sorts and the file's ``type`` declarations; records uses."""
-
-    def __init__(self, declarations: Mapping[str, s.TypeDecl], reporter: Reporter) -> None:
-        self.declared = dict(declarations)
-        self.used: set[str] = set()
-        self.reporter = reporter
-        for decl in declarations.values():
-            if not _TARGET.match(decl.target):
-                reporter.error(decl.name.location,
-                               f"type {decl.name.text} is bound to {decl.target!r}; expected "
-                               "\"module:QualifiedName\" or \"ros:package/msg/Name\"")
-
-    def is_sort(self, name: str) -> bool:
-        return name in BUILTIN_SORTS or name in self.declared
-
-    def sort(self, name: s.Name) -> Sort | None:
-        """The sort called ``name``; reports an unknown sort and returns None."""
-        if name.text in BUILTIN_SORTS:
-            return builtin_sort(name.text)
-        decl = self.declared.get(name.text)
-        if decl is None:
-            self.reporter.error(name.location, f"unknown sort '{name.text}'; expected a builtin "
-                                "sort (int, nat, bool, str, float, bytes) or a declared type")
-            return None
-        self.used.add(name.text)
-        return Sort(name.text, name.text, decl.target)
-
-    def message(self, syntax: s.MessageSyntax) -> Message:
-        """Apply the abbreviation rule: a bare sort name labels a value of that sort."""
-        if syntax.fields is not None:
-            return Message(syntax.label.text, self.record(syntax.label, syntax.fields))
-        if syntax.parens:
-            if syntax.sort is None:
-                return Message(syntax.label.text, None, self.is_sort(syntax.label.text))
-            return Message(syntax.label.text, self.sort(syntax.sort))
-        if self.is_sort(syntax.label.text):
-            return Message(syntax.label.text, self.sort(syntax.label))
-        return Message(syntax.label.text)
-
-    def record(self, label: s.Name, fields: tuple[s.FieldSyntax, ...]) -> Sort | None:
-        """The record sort of named payloads; reports repeated field names and unknown sorts."""
-        resolved: list[Field] = []
-        seen: set[str] = set()
-        for f in fields:
-            if f.name.text in seen:
-                self.reporter.error(f.name.location, f"duplicate field '{f.name.text}' in message "
-                                    f"'{label.text}'")
-            seen.add(f.name.text)
-            sort = self.sort(f.sort)
-            if sort is not None:
-                resolved.append(Field(f.name.text, sort))
-        if len(resolved) < len(fields) or len(seen) < len(fields):
-            return None  # already reported
-        return record_sort(tuple(resolved))
-
-    def defined(self) -> dict[str, Sort]:
-        return {name: Sort(name, name, d.target) for name, d in self.declared.items()}
-
 
 def _check_labels(reporter: Reporter, labels: Iterable[s.Name]) -> None:
     seen: set[str] = set()
@@ -236,7 +151,7 @@ def _resolve_l(walk: LocalWalk, node: s.LSyntax | None,
             if peer is None and not walk.sorts.is_sort(message.label.text):
                 walk.reporter.error(message.label.location, f"unknown sort '{message.label.text}'; "
                                     f"the binary form {direction}Sort sends or receives a value of a sort")
-                resolved = Message(message.label.text)
+                resolved = Interaction(message.label.text)
             else:
                 resolved = walk.sorts.message(message)
             cont = _resolve_l(walk, rest, scope, depth + 1, parallel_depth)

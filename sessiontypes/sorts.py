@@ -1,4 +1,4 @@
-"""Payload sorts and messages (a label with an optional payload sort).
+"""Payload sorts and interactions (a label with an optional payload sort).
 
 A sort is a builtin, a declared ``type``, or a *record* of named fields
 (``quote(price: int, date: str)``; docs/language.md): a value of a
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["BUILTIN_SORTS", "Sort", "Field", "Message", "builtin_sort", "record_sort"]
+__all__ = ["BUILTIN_SORTS", "Sort", "Field", "Interaction", "builtin_sort", "record_sort", "print_message"]
 
 # Every spelling of a builtin sort, mapped to its canonical name.
 BUILTIN_SORTS: dict[str, str] = {
@@ -83,8 +83,11 @@ def record_sort(fields: tuple[Field, ...]) -> Sort:
 
 
 @dataclass(frozen=True, slots=True)
-class Message:
-    """A label and the sort of the value it carries (``None``: no payload).
+class Interaction:
+    """What one interaction of a type carries: a label and the sort of its value (``None``: no payload).
+
+    Called ``Message`` up to 0.1.0; ``anodize.Message`` is a different thing, a
+    label with the value a role received.
 
     ``empty_parens`` records that a payload-less label was written ``label()``
     because its name is a sort's; the printer keeps the parentheses so the
@@ -94,3 +97,15 @@ class Message:
     label: str
     sort: Sort | None = None
     empty_parens: bool = field(default=False, compare=False)
+
+
+def print_message(message: Interaction) -> str:
+    """``Sort``, ``label(Sort)``, ``label(f: Sort, ...)`` or ``label``."""
+    if message.sort is None:
+        # 'int' alone would read back as label int carrying an int.
+        if message.empty_parens or message.label in BUILTIN_SORTS:
+            return f"{message.label}()"
+        return message.label
+    if message.label == message.sort.spelling:  # never for a record: its spelling has ':'
+        return message.label
+    return f"{message.label}({message.sort.spelling})"

@@ -8,7 +8,12 @@ import sys
 import tomllib
 from pathlib import Path
 
+import grimp
+import networkx as nx
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("sessiontypes", "anodize", "tinman")
 
 
 def _imports(path: Path) -> set[str]:
@@ -41,3 +46,56 @@ def test_sessiontypes_depends_only_on_stdlib_lark_networkx() -> None:
     allowed = {"lark", "networkx", "sessiontypes", "__future__"} | set(sys.stdlib_module_names)
     for path in (ROOT / "sessiontypes").glob("*.py"):
         assert _imports(path) <= allowed, (path.name, _imports(path) - allowed)
+
+
+def import_cycles(*packages: str) -> list[list[str]]:
+    """Each group of modules of ``packages`` that import one another, directly or not.
+
+    Every import counts: at module level, inside functions (a circle "closed" by a
+    function-level import is still a circle) and under ``TYPE_CHECKING``.
+    """
+    graph = grimp.build_graph(*packages, cache_dir=None)
+    edges: nx.DiGraph[str] = nx.DiGraph()
+    for module in graph.modules:
+        edges.add_edges_from((module, imported) for imported in graph.find_modules_directly_imported_by(module))
+    return sorted(sorted(group) for group in nx.strongly_connected_components(edges) if len(group) > 1)
+
+
+def test_no_import_cycles() -> None:
+    assert import_cycles(*PACKAGES) == []
+
+
+def test_import_cycles_are_found_through_function_level_and_type_checking_imports(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    package = tmp_path / "circled"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "terms.py").write_text("def show() -> str:\n    from .printer import text\n    return text()\n")
+    (package / "printer.py").write_text("from .terms import show\n\ndef text() -> str:\n    return ''\n")
+    (package / "typed.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .user import U\n")
+    (package / "user.py").write_text("from .typed import TYPE_CHECKING\n")
+    (package / "leaf.py").write_text("from . import printer\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert import_cycles("circled") == [["circled.printer", "circled.terms"], ["circled.typed", "circled.user"]]
+
+
+def test_sessiontypes_imports_itself_only_at_module_level() -> None:
+    """No stage is imported inside a function (the way a circle used to be hidden)."""
+    found = []
+    for path in sorted((ROOT / "sessiontypes").rglob("*.py")):
+        for function in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(function, ast.FunctionDef | ast.AsyncFunctionDef):
+                found += [f"{path.relative_to(ROOT)}:{node.lineno}" for node in ast.walk(function)
+                          if isinstance(node, ast.ImportFrom)
+                          and (node.level > 0 or (node.module or "").startswith("sessiontypes"))]
+    assert found == []
+
+
+def test_sessiontypes_layers_contract_lists_every_module() -> None:
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    (contract,) = [c for c in pyproject["tool"]["importlinter"]["contracts"] if c.get("containers") == ["sessiontypes"]]
+    assert contract["exhaustive"] is True
+    listed = {name.strip() for layer in contract["layers"] for name in layer.split("|")}
+    modules = {p.stem for p in (ROOT / "sessiontypes").glob("*.py") if p.stem != "__init__"}
+    modules |= {p.parent.name for p in (ROOT / "sessiontypes").glob("*/__init__.py")}
+    assert listed == modules

@@ -14,7 +14,7 @@ the development install's ``anodize project`` in a folder outside the checkout a
 ``mypy --strict`` there (no MYPYPATH), against the development install and against the
 wheel's venv: a program that follows the protocol passes, one that calls out of order
 fails on that call, and ``anodize`` is always found (an editable install mypy cannot
-follow makes it ``import-not-found`` and the states ``Any``; docs/decisions.md).
+follow makes it ``import-not-found`` and the states ``Any``; docs/decisions/0005-packaging-and-editable-installs.md).
 """
 
 from __future__ import annotations

@@ -13,6 +13,6 @@ Needs rosbags (a dependency of anodize); :meth:`RosType.idl_class` needs the
 Cyclone DDS binding. Neither is imported before a type is resolved.
 """
 
-from .messages import DEFAULT_DISTRO, RosDecodeError, RosEncodeError, RosType, ros_type
+from .messages import DEFAULT_DISTRO, RosDecodeError, RosEncodeError, RosType, ros_type, rosbags_class
 
-__all__ = ["DEFAULT_DISTRO", "RosType", "ros_type", "RosDecodeError", "RosEncodeError"]
+__all__ = ["DEFAULT_DISTRO", "RosType", "ros_type", "rosbags_class", "RosDecodeError", "RosEncodeError"]

@@ -13,24 +13,47 @@ serialiser writes the same XCDR1 bytes as :meth:`~anodize.ros.RosType.serialize`
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
 
 from ..errors import AnodizeError
 from .checks import attr_name
 
-if TYPE_CHECKING:
-    from .messages import RosType
+__all__ = ["IdlSource", "idl_class"]
 
-__all__ = ["idl_class"]
+
+class IdlSource(Protocol):
+    """What a class is built from: :class:`anodize.ros.RosType` is one.
+
+    A protocol rather than ``RosType`` itself so that this module sits below
+    ``messages`` (which calls it) instead of in a circle with it.
+    """
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def distro(self) -> str: ...
+
+    @property
+    def dds_name(self) -> str: ...
+
+    def field_descriptions(self) -> Sequence[tuple[str, Any]]:
+        """rosbags' field definitions of the type: ``(field name, (node type, detail))``."""
+        ...
+
+
+Resolve = Callable[[str, str], IdlSource]  # (pkg/msg/Name, distro) -> the nested type
 
 _BASE, _NAME, _ARRAY = 1, 2, 3  # rosbags.interfaces.Nodetype: a primitive, a message, a fixed array
 _LOCK = threading.RLock()  # a type's class is built after those of its fields, under the same lock
 _CLASSES: dict[tuple[str, str], type] = {}  # (name, distro) -> its one class
 
 
-def idl_class(ros: RosType) -> type:
+def idl_class(ros: IdlSource, resolve: Resolve) -> type:
     """The ``IdlStruct`` subclass for ``ros``, typename ``ros.dds_name``; one per (name, distro).
+
+    ``resolve`` gives the types of nested message fields.
 
     Raises:
         AnodizeError: the Cyclone DDS binding is not installed, or the type has a field
@@ -42,27 +65,23 @@ def idl_class(ros: RosType) -> type:
         with _LOCK:
             found = _CLASSES.get(key)
             if found is None:
-                found = _CLASSES[key] = _build(ros)
+                found = _CLASSES[key] = _build(ros, resolve)
     return found
 
 
-def _build(ros: RosType) -> type:
-    try:
+def _build(ros: IdlSource, resolve: Resolve) -> type:
+    try:  # imported only here: the Cyclone DDS binding is optional (the dds extra)
         from cyclonedds.idl import make_idl_struct
     except ImportError:
         raise AnodizeError("the DDS class of a ROS 2 message type needs the Cyclone DDS binding: "
                            "pip install cyclonedds") from None
-    from .messages import ros_type
-
-    definition = ros._store.fielddefs[ros.name][1]  # rosbags' Typestore: anodize.ros's own
-    fields = {attr_name(field_name): _member(ros, field_name, description, ros_type)
-              for field_name, description in definition}
+    fields = {attr_name(field_name): _member(ros, field_name, description, resolve)
+              for field_name, description in ros.field_descriptions()}
     return make_idl_struct(ros.dds_name.rpartition("::")[2], ros.dds_name, fields)
 
 
-def _member(ros: RosType, field_name: str, description: tuple[Any, Any],
-            resolve: Callable[[str, str], RosType]) -> Any:
-    from cyclonedds.idl import types
+def _member(ros: IdlSource, field_name: str, description: tuple[Any, Any], resolve: Resolve) -> Any:
+    from cyclonedds.idl import types  # optional binding, present once _build got here
 
     # The binding's generics are classes with __class_getitem__, which mypy does not index.
     array: Any = types.array
@@ -71,17 +90,17 @@ def _member(ros: RosType, field_name: str, description: tuple[Any, Any],
     if node == _BASE:
         return _primitive(ros, field_name, *detail)
     if node == _NAME:
-        return idl_class(resolve(detail, ros.distro))
+        return idl_class(resolve(detail, ros.distro), resolve)
     (item_node, item_detail), count = detail
-    item = (idl_class(resolve(item_detail, ros.distro)) if item_node == _NAME
+    item = (idl_class(resolve(item_detail, ros.distro), resolve) if item_node == _NAME
             else _primitive(ros, field_name, *item_detail))
     if node == _ARRAY:
         return array[item, count]
     return sequence[item, count] if count else sequence[item]
 
 
-def _primitive(ros: RosType, field_name: str, kind: str, bound: int) -> Any:
-    from cyclonedds.idl import types
+def _primitive(ros: IdlSource, field_name: str, kind: str, bound: int) -> Any:
+    from cyclonedds.idl import types  # optional binding, present once _build got here
 
     bounded_str: Any = types.bounded_str
     if kind == "string":

@@ -18,10 +18,12 @@ from typing import Any
 
 from ..errors import AnodizeError
 from .checks import Compiled, compile_message, failure_text
+from .idl import idl_class
 
 __all__ = ["DEFAULT_DISTRO", "RosType", "ros_type", "RosDecodeError", "RosEncodeError"]
 
 DEFAULT_DISTRO = "jazzy"
+_STORES_MODULE = "rosbags.typesys.stores"  # rosbags' modules of message classes, one per typestore
 
 
 class RosDecodeError(AnodizeError):
@@ -146,11 +148,14 @@ class RosType:
         text: str = self._store.generate_msgdef(self.name, ros_version=2)[0]
         return text
 
+    def field_descriptions(self) -> list[tuple[str, Any]]:
+        """rosbags' definition of the fields: ``(field name, (node type, detail))`` in order."""
+        fields: list[tuple[str, Any]] = self._store.fielddefs[self.name][1]
+        return fields
+
     def idl_class(self) -> type:
         """The Cyclone DDS ``IdlStruct`` of this type (see :func:`anodize.ros.idl.idl_class`)."""
-        from .idl import idl_class
-
-        return idl_class(self)
+        return idl_class(self, ros_type)
 
 
 _LOCK = threading.RLock()  # resolving a type resolves the types of its fields, under the same lock
@@ -190,8 +195,27 @@ def _typestore(distro: str) -> Any:
         known = sorted(s.value.removeprefix("ros2_") for s in Stores if s.value.startswith("ros2_"))
         if distro not in known:
             raise AnodizeError(f"unknown ROS 2 distribution {distro!r}; rosbags knows {', '.join(known)}")
-        store = _STORES[distro] = get_typestore(Stores(f"ros2_{distro}"))
+        store = _STORES[distro] = get_typestore(Stores(_store_name(distro)))
     return store
+
+
+def _store_name(distro: str) -> str:
+    """rosbags' name of the typestore of ROS 2 ``distro`` (``ros2_jazzy``)."""
+    return f"ros2_{distro}"
+
+
+def rosbags_class(name: str, distro: str | None = None) -> tuple[str, str]:
+    """Where rosbags defines the class of message ``name``: ``(module, class name)``.
+
+    What :attr:`RosType.cls` is, spelled for an import (``rosbags.typesys.stores.ros2_jazzy``,
+    ``geometry_msgs__msg__Twist``) without importing rosbags: generated code names it.
+
+    Args:
+        name: ``pkg/msg/Name``, with or without the ``ros:`` of a sort's binding.
+        distro: the distribution (default :data:`DEFAULT_DISTRO`).
+    """
+    package, kind, message = name.removeprefix("ros:").split("/")
+    return f"{_STORES_MODULE}.{_store_name((distro or DEFAULT_DISTRO).lower())}", f"{package}__{kind}__{message}"
 
 
 def _resolve(name: str, distro: str) -> RosType:

@@ -22,10 +22,10 @@ from typing import TYPE_CHECKING, NoReturn, TextIO
 
 import sessiontypes
 from sessiontypes import ProtocolError, ProtocolModule
-from sessiontypes.codegen import GeneratedModule, generate_modules
 from sessiontypes.printer import PrintTooLongError, print_local
 
 from ..errors import AnodizeError
+from .codegen import GeneratedModule, generate_modules
 
 if TYPE_CHECKING:
     from ..live.server import LiveView

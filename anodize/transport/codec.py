@@ -21,7 +21,7 @@ the payload in a small tagged format:
   data; the unpickler then loads that class and no other. The class's own
   ``__new__``, ``__init__`` (through ``__reduce__``), ``__setstate__`` and container
   methods still run in the receiver: that is the risk a protocol takes by naming a
-  class that is not a dataclass (docs/decisions.md, "Pickle on the wire").
+  class that is not a dataclass (docs/decisions/0006-pickle-on-the-wire.md).
 
 Anything else is refused when it is sent, with a message saying why. Decoding
 never executes code from the wire: a malformed frame raises :class:`DecodeError`.

@@ -331,10 +331,10 @@ def test_protocol_errors_are_not_wrapped(system_dir: Path) -> None:
         build_system(build(system_dir, TWO_GROUPS))
 
 
-def test_the_example_in_the_readme_is_a_valid_system_file(tmp_path: Path) -> None:
-    readme = (REPO / "README.md").read_text(encoding="utf-8")
-    example = readme.partition("## System files")[2].partition("```toml\n")[2].partition("```")[0]
-    assert example, "README.md has a 'System files' section with a TOML example"
+def test_the_example_in_the_guide_is_a_valid_system_file(tmp_path: Path) -> None:
+    guide = (REPO / "docs" / "guide" / "system-files.md").read_text(encoding="utf-8")
+    example = guide.partition("```toml\n")[2].partition("```")[0]
+    assert example, "docs/guide/system-files.md opens with a TOML example"
     config = load_config(write(tmp_path, example))
     assert (config.global_name, list(config.groups)) == ("Pipeline", ["control", "logging"])
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from hypothesis import strategies as st
 
 from sessiontypes import global_types as g
-from sessiontypes.sorts import BUILTIN_SORTS, Field, Message, Sort, builtin_sort, record_sort
+from sessiontypes.sorts import BUILTIN_SORTS, Field, Interaction, Sort, builtin_sort, record_sort
 
 __all__ = ["GeneratedGlobal", "global_protocols", "protocol_texts", "mutated_texts",
            "ROLE_POOL", "LABELS", "SORT_SPELLINGS"]
@@ -120,13 +120,13 @@ class _Generator:
         self.nodes_left = max_nodes
 
     # ---- small draws ----
-    def message(self, label: str) -> Message:
+    def message(self, label: str) -> Interaction:
         if self.draw(st.integers(0, 7)) == 0:  # now and then named payloads
             names = self.draw(st.lists(st.sampled_from(FIELD_NAMES), min_size=1, max_size=3, unique=True))
-            return Message(label, record_sort(tuple(
+            return Interaction(label, record_sort(tuple(
                 Field(name, builtin_sort(self.draw(st.sampled_from(SORT_SPELLINGS)))) for name in names)))
         spelling = self.draw(st.none() | st.sampled_from(SORT_SPELLINGS))
-        return Message(label, builtin_sort(spelling) if spelling else None)
+        return Interaction(label, builtin_sort(spelling) if spelling else None)
 
     def labels(self, count: int) -> list[str]:
         pool = LABELS + (SORT_LABELS if self.draw(st.integers(0, 5)) == 0 else ())
@@ -228,7 +228,7 @@ class _Generator:
             for r in order:
                 for sender, receiver, step_labels, key in common[r]:
                     prefix.append((sender, receiver, [
-                        Message(step_label, builtin_sort(self.draw(st.sampled_from(_SPELLINGS_BY_KEY[key]))))
+                        Interaction(step_label, builtin_sort(self.draw(st.sampled_from(_SPELLINGS_BY_KEY[key]))))
                         for step_label in step_labels]))
                 prefix.append((informed[r], r, [message if r == echo else self.message(notices[r][index])]))
             if loop is not None:
@@ -263,7 +263,7 @@ class _Generator:
             receivers[1] = next(q for q in targets[p] if q != receivers[0])
         labels = self.labels(count)
         relay_ok = scope.exit in (None, "end")
-        told: dict[str, list[tuple[str, Message]]] = {}   # role -> per branch (notifier, notice)
+        told: dict[str, list[tuple[str, Interaction]]] = {}   # role -> per branch (notifier, notice)
         away: set[str] = set()                            # relayed or left out: not in the branches' rest
         for role in sorted(scope.roles - {p}):
             mine = {labels[i] for i in range(count) if receivers[i] == role}
@@ -283,7 +283,7 @@ class _Generator:
             free = [label for label in LABELS if label not in mine]
             notes = self.draw(st.lists(st.sampled_from(free), min_size=len(needed), max_size=len(needed),
                                        unique=True))
-            per_branch: list[tuple[str, Message]] = []
+            per_branch: list[tuple[str, Interaction]] = []
             for i, note in zip(needed, notes, strict=True):
                 notifier = p
                 if way == "relay":
@@ -456,7 +456,7 @@ class _Writer:
     def chance(self, one_in: int) -> bool:
         return self.fancy and self.rng.randrange(one_in) == 0
 
-    def message(self, message: Message) -> str:
+    def message(self, message: Interaction) -> str:
         label = message.label
         if message.sort is None:
             if label in BUILTIN_SORTS:

@@ -78,3 +78,14 @@ def test_cli_check_prints_the_located_error_and_fails(tmp_path: Path,
         "    global P = A -> B : \ufffd\n"
         "                        ^\n"
     )
+
+
+def test_the_old_name_message_still_imports_with_a_deprecation_warning() -> None:
+    with pytest.warns(DeprecationWarning, match="renamed sessiontypes.Interaction"):
+        from sessiontypes import Message  # type: ignore[attr-defined]
+    assert Message is sessiontypes.Interaction
+    with pytest.warns(DeprecationWarning, match="anodize.Message is a received message"):
+        assert sessiontypes.Message is sessiontypes.Interaction  # type: ignore[attr-defined]
+    with pytest.raises(AttributeError, match="no attribute 'Mesage'"):
+        sessiontypes.Mesage  # type: ignore[attr-defined]  # noqa: B018
+    assert "Message" not in sessiontypes.__all__ and "Interaction" in sessiontypes.__all__

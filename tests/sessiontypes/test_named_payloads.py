@@ -8,10 +8,10 @@ import sessiontypes
 from sessiontypes import Location, ProtocolCheckError, ProtocolError
 from sessiontypes import global_types as g
 from sessiontypes.printer import print_global, print_message
-from sessiontypes.sorts import Field, Message, builtin_sort, record_sort
+from sessiontypes.sorts import Field, Interaction, builtin_sort, record_sort
 
 
-def message_of(text: str) -> Message:
+def message_of(text: str) -> Interaction:
     body = sessiontypes.loads(text, "q.proto").globals["P"].body
     assert isinstance(body, g.Choice)
     return body.branches[0].message

@@ -14,7 +14,7 @@ from sessiontypes import global_types as g
 from sessiontypes import local_types as lt
 from sessiontypes import syntax as s
 from sessiontypes.parse import parse_file
-from sessiontypes.sorts import Message, Sort
+from sessiontypes.sorts import Interaction, Sort
 
 
 def body(text: str, name: str = "P") -> g.GlobalTerm:
@@ -22,7 +22,7 @@ def body(text: str, name: str = "P") -> g.GlobalTerm:
     return sessiontypes.loads(text).globals[name].body
 
 
-def local(text: str, name: str = "L") -> lt.LocalType:
+def local(text: str, name: str = "L") -> sessiontypes.LocalType:
     return sessiontypes.loads(text).locals[name]
 
 
@@ -31,7 +31,7 @@ def projections(text: str, name: str = "P") -> dict[str, str]:
     return {role: str(global_type.project(role)) for role in global_type.roles}
 
 
-def only_message(term: g.GlobalTerm) -> Message:
+def only_message(term: g.GlobalTerm) -> Interaction:
     assert isinstance(term, g.Choice) and len(term.branches) == 1
     return term.branches[0].message
 
@@ -171,7 +171,7 @@ def test_declarations_in_any_order_each_optionally_ended_by_semicolon() -> None:
 def test_type_declaration_targets(target: str) -> None:
     module = sessiontypes.loads(f'type Twist = "{target}"\nglobal P = A -> B : Twist')
     assert module.sorts["Twist"].target == target
-    assert only_message(module.globals["P"].body) == Message("Twist", Sort("Twist", "Twist", target))
+    assert only_message(module.globals["P"].body) == Interaction("Twist", Sort("Twist", "Twist", target))
 
 
 @pytest.mark.parametrize(("spelling", "key"), [
@@ -228,10 +228,10 @@ def test_equivalent_global_spellings(short: str, long: str) -> None:
 def test_interaction_sequence_and_choice_structure() -> None:
     term = body("global P = A -> B : x(int). B -> A : { y(str). end, z }")
     assert term == g.Choice("A", "B", (g.Branch(
-        Message("x", Sort("int", "int")),
+        Interaction("x", Sort("int", "int")),
         g.Choice("B", "A", (
-            g.Branch(Message("y", Sort("str", "str")), g.End()),
-            g.Branch(Message("z"), g.End()),
+            g.Branch(Interaction("y", Sort("str", "str")), g.End()),
+            g.Branch(Interaction("z"), g.End()),
         )),
     ),))
 
@@ -239,8 +239,8 @@ def test_interaction_sequence_and_choice_structure() -> None:
 def test_recursion_and_variable() -> None:
     term = body("global P = mu t. A -> B : { more. t, stop }")
     assert term == g.Rec("t", g.Choice("A", "B", (
-        g.Branch(Message("more"), g.Var("t")),
-        g.Branch(Message("stop"), g.End()),
+        g.Branch(Interaction("more"), g.Var("t")),
+        g.Branch(Interaction("stop"), g.End()),
     )))
 
 
@@ -264,7 +264,7 @@ def test_parallel_composition(parts: int) -> None:
     term = body(text)
     assert isinstance(term, g.Parallel)
     assert term.branches == tuple(
-        g.Choice(p, q, (g.Branch(Message(f"m{i}"), g.End()),)) for i, (p, q) in enumerate(pairs))
+        g.Choice(p, q, (g.Branch(Interaction(f"m{i}"), g.End()),)) for i, (p, q) in enumerate(pairs))
 
 
 def test_parallel_projection_keeps_roles_that_take_part_in_several_branches() -> None:
@@ -298,18 +298,18 @@ def test_parallel_has_no_continuation() -> None:
 # ---- abbreviation rule ---------------------------------------------------------------
 
 @pytest.mark.parametrize(("msg", "message"), [
-    ("int", Message("int", Sort("int", "int"))),
-    ("Int", Message("Int", Sort("int", "Int"))),
-    ("Twist", Message("Twist", Sort("Twist", "Twist", "m:Twist"))),
-    ("ping", Message("ping")),
-    ("ping()", Message("ping")),
-    ("ping(int)", Message("ping", Sort("int", "int"))),
-    ("ping(Twist)", Message("ping", Sort("Twist", "Twist", "m:Twist"))),
-    ("int()", Message("int")),
-    ("Twist()", Message("Twist")),
-    ("int(Twist)", Message("int", Sort("Twist", "Twist", "m:Twist"))),
+    ("int", Interaction("int", Sort("int", "int"))),
+    ("Int", Interaction("Int", Sort("int", "Int"))),
+    ("Twist", Interaction("Twist", Sort("Twist", "Twist", "m:Twist"))),
+    ("ping", Interaction("ping")),
+    ("ping()", Interaction("ping")),
+    ("ping(int)", Interaction("ping", Sort("int", "int"))),
+    ("ping(Twist)", Interaction("ping", Sort("Twist", "Twist", "m:Twist"))),
+    ("int()", Interaction("int")),
+    ("Twist()", Interaction("Twist")),
+    ("int(Twist)", Interaction("int", Sort("Twist", "Twist", "m:Twist"))),
 ])
-def test_abbreviation_rule(msg: str, message: Message) -> None:
+def test_abbreviation_rule(msg: str, message: Interaction) -> None:
     text = f'type Twist = "m:Twist"\nglobal P = A -> B : {msg}. A -> B : done(Twist)'
     assert only_message(body(text)) == message
 
@@ -318,20 +318,20 @@ def test_a_bare_name_is_a_sort_only_where_a_sort_is_declared() -> None:
     with_type = 'type Pose = "m:Pose"\nglobal P = A -> B : Pose'
     without = "global P = A -> B : Pose"
     assert only_message(body(with_type)).sort is not None
-    assert only_message(body(without)) == Message("Pose")
+    assert only_message(body(without)) == Interaction("Pose")
 
 
 def test_label_only_branch_carries_nothing_even_for_a_sort_name() -> None:
     term = body("global P = A -> B : { int: end, ok: end }")
     assert isinstance(term, g.Choice)
-    assert [b.message for b in term.branches] == [Message("int"), Message("ok")]
+    assert [b.message for b in term.branches] == [Interaction("int"), Interaction("ok")]
 
 
 def test_abbreviation_rule_in_local_types() -> None:
     assert local("local L = !B(int). ?B(ping). !B(ping()). ?B(l(Int))").body == lt.Send(
-        "B", Message("int", Sort("int", "int")), lt.Recv(
-            "B", Message("ping"), lt.Send(
-                "B", Message("ping"), lt.Recv("B", Message("l", Sort("int", "Int")), lt.End()))))
+        "B", Interaction("int", Sort("int", "int")), lt.Recv(
+            "B", Interaction("ping"), lt.Send(
+                "B", Interaction("ping"), lt.Recv("B", Interaction("l", Sort("int", "Int")), lt.End()))))
 
 
 # ---- 4. local types -------------------------------------------------------------------
@@ -360,11 +360,12 @@ def test_local_constructs_parse_and_print(text: str, printed: str) -> None:
 
 def test_local_term_structure() -> None:
     assert local("local L at A = mu t. +B{x(int). t, y}").body == lt.Rec("t", lt.Select("B", (
-        lt.Branch(Message("x", Sort("int", "int")), lt.Var("t")),
-        lt.Branch(Message("y"), lt.End()),
+        lt.Branch(Interaction("x", Sort("int", "int")), lt.Var("t")),
+        lt.Branch(Interaction("y"), lt.End()),
     )))
     assert local("local L = ?Int. !bool").body == lt.Recv(
-        None, Message("Int", Sort("int", "Int")), lt.Send(None, Message("bool", Sort("bool", "bool")), lt.End()))
+        None, Interaction("Int", Sort("int", "Int")),
+        lt.Send(None, Interaction("bool", Sort("bool", "bool")), lt.End()))
 
 
 def test_a_local_choice_with_one_branch_is_a_send_or_receive() -> None:
@@ -402,9 +403,9 @@ def test_figure_2_with_the_papers_symbols() -> None:
 
 def test_figure_2_fragment_structure() -> None:
     atm = sessiontypes.loads("local ATM = ?Int. +{ok: ATM, err: end}").locals["ATM"].body
-    assert atm == lt.Rec("ATM", lt.Recv(None, Message("Int", Sort("int", "Int")), lt.Select(None, (
-        lt.Branch(Message("ok"), lt.Var("ATM")),
-        lt.Branch(Message("err"), lt.End()),
+    assert atm == lt.Rec("ATM", lt.Recv(None, Interaction("Int", Sort("int", "Int")), lt.Select(None, (
+        lt.Branch(Interaction("ok"), lt.Var("ATM")),
+        lt.Branch(Interaction("err"), lt.End()),
     )), ))
 
 

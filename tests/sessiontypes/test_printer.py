@@ -7,21 +7,21 @@ import pytest
 import sessiontypes
 from sessiontypes import local_types as lt
 from sessiontypes.printer import print_global, print_message
-from sessiontypes.sorts import Message, Sort, builtin_sort
+from sessiontypes.sorts import Interaction, Sort, builtin_sort
 
 
 @pytest.mark.parametrize(("message", "printed"), [
-    (Message("Int", builtin_sort("Int")), "Int"),
-    (Message("int", builtin_sort("int")), "int"),
-    (Message("ok", builtin_sort("Int")), "ok(Int)"),
-    (Message("Int", builtin_sort("int")), "Int(int)"),
-    (Message("quit"), "quit"),
-    (Message("Pose", Sort("Pose", "Pose", "m:Pose")), "Pose"),
+    (Interaction("Int", builtin_sort("Int")), "Int"),
+    (Interaction("int", builtin_sort("int")), "int"),
+    (Interaction("ok", builtin_sort("Int")), "ok(Int)"),
+    (Interaction("Int", builtin_sort("int")), "Int(int)"),
+    (Interaction("quit"), "quit"),
+    (Interaction("Pose", Sort("Pose", "Pose", "m:Pose")), "Pose"),
     # a payload-less label spelled like a builtin sort keeps its parentheses,
     # or it would read back as a label carrying that sort
-    (Message("int"), "int()"),
+    (Interaction("int"), "int()"),
 ])
-def test_message_forms(message: Message, printed: str) -> None:
+def test_message_forms(message: Interaction, printed: str) -> None:
     assert print_message(message) == printed
 
 
@@ -34,11 +34,11 @@ def test_sorts_print_as_spelled_but_compare_equal() -> None:
 
 def test_sequence_choice_recursion_and_parallel() -> None:
     term = lt.Rec("t", lt.Select("B", (
-        lt.Branch(Message("more", builtin_sort("nat")), lt.Recv("B", Message("ack"), lt.Var("t"))),
-        lt.Branch(Message("stop"), lt.End()),
+        lt.Branch(Interaction("more", builtin_sort("nat")), lt.Recv("B", Interaction("ack"), lt.Var("t"))),
+        lt.Branch(Interaction("stop"), lt.End()),
     )))
     assert str(term) == "mu t.+B{more(nat).?B(ack).t, stop}"
-    assert str(lt.Parallel((lt.Send("A", Message("x"), lt.End()), lt.Var("s")))) == "(!A(x) || s)"
+    assert str(lt.Parallel((lt.Send("A", Interaction("x"), lt.End()), lt.Var("s")))) == "(!A(x) || s)"
     assert str(lt.End()) == "end"
 
 

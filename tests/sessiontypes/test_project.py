@@ -11,7 +11,7 @@ import sessiontypes
 from sessiontypes import ProjectionError, ProtocolCheckError, UnknownRoleError
 from sessiontypes import local_types as lt
 from sessiontypes.project import MergeError, merge, substitute, unfold
-from sessiontypes.sorts import Message, builtin_sort
+from sessiontypes.sorts import Interaction, builtin_sort
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -115,8 +115,8 @@ def test_two_spellings_of_one_loop_merge_instead_of_looping() -> None:
 
 
 def test_merge_rejects_different_sends() -> None:
-    send = lt.Send("A", Message("x"), lt.End())
-    other = lt.Send("A", Message("y"), lt.End())
+    send = lt.Send("A", Interaction("x"), lt.End())
+    other = lt.Send("A", Interaction("y"), lt.End())
     with pytest.raises(MergeError, match=r"^it sends 'x' in one and 'y' in the other$"):
         merge(send, other)
 
@@ -230,8 +230,9 @@ def test_send_merge_failure_deep_inside_names_the_outer_branches() -> None:
 
 def test_merge_of_offers_is_their_union_in_order() -> None:
     int_ = builtin_sort("int")
-    left = lt.offer("P", (lt.Branch(Message("a", int_), lt.End()), lt.Branch(Message("b"), lt.End())))
-    right = lt.offer("P", (lt.Branch(Message("c"), lt.End()), lt.Branch(Message("a", builtin_sort("Int")), lt.End())))
+    left = lt.offer("P", (lt.Branch(Interaction("a", int_), lt.End()), lt.Branch(Interaction("b"), lt.End())))
+    right = lt.offer("P", (lt.Branch(Interaction("c"), lt.End()),
+                           lt.Branch(Interaction("a", builtin_sort("Int")), lt.End())))
     assert str(merge(left, right)) == "&P{a(int), b, c}"
 
 
@@ -268,10 +269,10 @@ def test_unknown_role_is_a_clear_error() -> None:
 
 
 def test_unfold_and_capture_avoiding_substitution() -> None:
-    loop = lt.Rec("t", lt.Recv("A", Message("x"), lt.Var("t")))
+    loop = lt.Rec("t", lt.Recv("A", Interaction("x"), lt.Var("t")))
     assert str(unfold(loop)) == "?A(x).mu t.?A(x).t"
     # substituting a term with free 's' under a binder 's' renames the binder
-    inner = lt.Rec("s", lt.Send("B", Message("y"), lt.Var("t")))
+    inner = lt.Rec("s", lt.Send("B", Interaction("y"), lt.Var("t")))
     replaced = substitute(inner, "t", lt.Var("s"))
     assert str(replaced) == "mu s'.!B(y).s"
 
@@ -295,10 +296,10 @@ def test_sending_loops_merge_however_they_are_spelled(second: str) -> None:
 def test_equivalence_is_up_to_unfolding_and_renaming() -> None:
     from sessiontypes.recursion import equivalent
 
-    send = lambda cont: lt.Send("B", Message("x"), cont)  # noqa: E731
+    send = lambda cont: lt.Send("B", Interaction("x"), cont)  # noqa: E731
     once = lt.Rec("t", send(lt.Var("t")))
     twice = lt.Rec("u", send(send(lt.Var("u"))))
     assert equivalent(once, twice) and equivalent(twice, once)
     assert equivalent(once, send(once))
     assert not equivalent(once, send(lt.End()))
-    assert not equivalent(once, lt.Rec("t", lt.Send("B", Message("y"), lt.Var("t"))))
+    assert not equivalent(once, lt.Rec("t", lt.Send("B", Interaction("y"), lt.Var("t"))))

@@ -29,7 +29,7 @@ import sessiontypes  # noqa: E402
 from sessiontypes import GlobalType, ProjectionError, ProtocolError, StateMachine  # noqa: E402
 from sessiontypes import global_types as g  # noqa: E402
 from sessiontypes.printer import print_global  # noqa: E402
-from sessiontypes.sorts import Message  # noqa: E402
+from sessiontypes.sorts import Interaction  # noqa: E402
 
 # Example counts keep the whole file under about 45 s; the thorough profile multiplies them
 # (`pytest --hypothesis-profile=thorough`, see tests/conftest.py).
@@ -42,7 +42,7 @@ def _load_global(text: str) -> GlobalType:
 
 
 def _choice(sender: str, receiver: str, *branches: tuple[str, g.GlobalTerm]) -> g.GlobalTerm:
-    return g.Choice(sender, receiver, tuple(g.Branch(Message(label), rest) for label, rest in branches))
+    return g.Choice(sender, receiver, tuple(g.Branch(Interaction(label), rest) for label, rest in branches))
 
 
 # ---- minimal reproducers of bugs these properties found -----------------------------------

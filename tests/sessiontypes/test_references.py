@@ -18,7 +18,6 @@ from hypothesis import strategies as st
 
 import sessiontypes
 from sessiontypes import ProtocolError
-from sessiontypes.fsm import build_state_machine
 from sessiontypes.parse import parse_file
 from sessiontypes.printer import PrintTooLongError, print_global, print_local
 from sessiontypes.resolve import Reporter, SortTable, global_walk, resolve_global
@@ -177,7 +176,7 @@ def test_a_reference_dag_is_shared_not_written_out() -> None:
     projected = g0.project("B").body
     assert projected.branches[0].continuation is projected.branches[1].continuation  # type: ignore[union-attr]
     # The state machine has one state per shared node, not per written-out place.
-    assert len(build_state_machine(g0.project("A")).table) == 62
+    assert len(g0.project("A").fsm().table) == 62
 
 
 def test_mutual_recursion_in_a_cycle_is_resolved_per_context() -> None:
@@ -195,7 +194,7 @@ def test_prints_of_shared_types_are_bounded(tmp_path, capsys) -> None:
     g0 = sessiontypes.loads(dag(60), "dag.proto").globals["G0"]
     with pytest.raises(PrintTooLongError):
         print_local(g0.project("A").body, limit=10_000)
-    machine = build_state_machine(g0.project("A"))
+    machine = g0.project("A").fsm()
     assert machine.describe(0) == "+B{l..., r...} (longer than 4000 characters written out)"
     assert machine.describe(60) == "!B(done)"
     # written out but short enough: the same print as the inlined text gives

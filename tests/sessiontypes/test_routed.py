@@ -17,7 +17,7 @@ from sessiontypes import global_types as g
 from sessiontypes import local_types as lt
 from sessiontypes.printer import print_global
 from sessiontypes.recursion import equivalent
-from sessiontypes.sorts import Message
+from sessiontypes.sorts import Interaction
 
 
 def load(text: str) -> sessiontypes.ProtocolModule:
@@ -180,8 +180,8 @@ def test_merge_of_choices_among_peers_pair_by_pair() -> None:
 
 
 def test_equivalence_ignores_the_order_of_branches() -> None:
-    m = Message("m")
-    n = Message("n")
+    m = Interaction("m")
+    n = Interaction("n")
     left = lt.OfferAmong((lt.Recv("A", m, lt.End()), lt.Recv("C", n, lt.End())))
     right = lt.OfferAmong((lt.Recv("C", n, lt.End()), lt.Recv("A", m, lt.End())))
     assert equivalent(left, right)

@@ -39,13 +39,11 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 
-from . import local_types as lt
-from .check import ProtocolModule
-from .errors import Diagnostic, ProtocolError
-from .fsm import StateMachine, Transition
-from .global_types import GlobalType
-from .location import Location
-from .sorts import Sort
+from sessiontypes import Diagnostic, GlobalType, Location, ProtocolError, ProtocolModule, Sort, StateMachine, Transition
+from sessiontypes import local_types as lt
+
+from ..ros import DEFAULT_DISTRO, rosbags_class
+from ..session import State
 
 __all__ = [
     "GENERATOR_VERSION", "GeneratedModule", "CodegenError", "generate_modules",
@@ -58,10 +56,9 @@ GENERATOR_VERSION = "anodize-codegen 2"
 
 _BUILTIN_TYPES = {"int": "int", "nat": "int", "bool": "bool", "str": "str", "float": "float",
                   "bytes": "bytes"}
-# A "ros:pkg/msg/Name" sort is typed with rosbags' class of the message in this distribution
-# (anodize.ros.DEFAULT_DISTRO: the runtime checks payloads against the same one). The module
-# path is text: sessiontypes imports neither anodize nor rosbags.
-_ROS_MESSAGES_MODULE = "rosbags.typesys.stores.ros2_jazzy"
+# Generated modules import State from the package users import (anodize), not from where it is
+# defined: that path is private and may move.
+_STATE_IMPORT = f"from {__name__.partition('.')[0]} import {State.__name__} as _State"
 # Names the generated text uses itself; nothing generated or imported may take them.
 _RESERVED = frozenset({
     "annotations", "TYPE_CHECKING", "Any", "final", "dataclass", "Endpoint", "Message",
@@ -331,7 +328,7 @@ class _Writer:
             "from dataclasses import dataclass",
             f"from typing import {', '.join(typing_names)}",
             "",
-            "from anodize import State as _State",
+            _STATE_IMPORT,
         ]
         by_module: dict[str, list[str]] = {}
         for (module, name), local in sorted(self.imports.items()):
@@ -380,11 +377,13 @@ class _Writer:
         if sort.target is None:
             return _BUILTIN_TYPES[sort.key]
         if sort.target.startswith("ros:"):
-            package, kind, message = sort.target[4:].split("/")
+            _, kind, message = sort.target[4:].split("/")
             if kind != "msg":  # a service or an action: no message class to name
                 self.uses_any = True
                 return "Any"
-            return self.imported(_ROS_MESSAGES_MODULE, f"{package}__msg__{message}", message)
+            # rosbags' class of the message in the distribution the runtime checks payloads against.
+            module, cls = rosbags_class(sort.target, DEFAULT_DISTRO)
+            return self.imported(module, cls, message)
         module, qualified = sort.target.split(":")
         bad = [w for w in f"{module}.{qualified}".split(".") if keyword.iskeyword(w)]
         if bad:

@@ -1,4 +1,4 @@
-"""Typed endpoint modules (sessiontypes.codegen) and ``anodize project -o DIR [--check]``.
+"""Typed endpoint modules (anodize.tools.codegen) and ``anodize project -o DIR [--check]``.
 
 Generated modules are imported from a temporary directory and driven with a
 scripted fake endpoint (linearity, offer, fork), run on anodize's runtime, and
@@ -24,7 +24,7 @@ import anodize
 import sessiontypes
 from anodize import LinearityError, Message
 from anodize.tools.cli import main
-from sessiontypes.codegen import (
+from anodize.tools.codegen import (
     GENERATOR_VERSION,
     CodegenError,
     GeneratedModule,
@@ -528,3 +528,25 @@ def test_docstrings_cut_a_long_remaining_type() -> None:
     assert first.group(1) == "State 0 of role A: ``" + ".".join(
         f"!B(m{i}(int))" for i in range(300))[:400] + " ...``."
     assert last.group(1) == "State 299 of role A: ``!B(m299(int))``."
+
+
+def test_generated_imports_resolve_to_the_runtime_s_own_objects() -> None:
+    """The import lines are derived from the objects the runtime uses, and name them."""
+    import importlib
+
+    for module in generate(FEATURES):
+        (state_line,) = [line for line in module.text.splitlines() if line.endswith(" as _State")]
+        _, package, _, name, _, _ = state_line.split()
+        assert getattr(importlib.import_module(package), name) is anodize.State
+    pytest.importorskip("rosbags.typesys", reason="ROS sorts need the ros extra")
+    from anodize.ros import ros_type
+
+    lines = [line.strip() for m in generate(ROS) for line in m.text.splitlines()
+             if line.strip().startswith("from rosbags.")]
+    assert lines
+    for line in lines:
+        module_name, _, names = line.removeprefix("from ").partition(" import ")
+        classes = importlib.import_module(module_name)
+        for class_name in [name.split(" as ")[0] for name in names.split(", ")]:
+            package, kind, message = class_name.split("__")
+            assert getattr(classes, class_name) is ros_type(f"{package}/{kind}/{message}").cls
