@@ -33,7 +33,19 @@ from .recording.reader import RecordingError
 from .recording.replay_network import ReplayDivergenceError
 from .ros.messages import RosDecodeError, RosEncodeError
 from .session import Endpoint, EndpointStatistics, Message, State
-from .supervision import Group, GroupReport, GroupStatus, RoleReport, RunReport, System
+from .supervision import (
+    Dds,
+    Group,
+    GroupReport,
+    GroupStatus,
+    Inproc,
+    Processes,
+    RoleReport,
+    RosBridge,
+    RunReport,
+    System,
+)
+from .taps import ChannelTap
 from .tools.config import ConfigError, SystemConfig, build_system, load_config
 from .tools.named import Finished, NamedSystem, Prepared
 from .transport.codec import DecodeError, EncodeError
@@ -47,6 +59,7 @@ __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
     "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
+    "Inproc", "Processes", "Dds", "RosBridge", "ChannelTap",
     "EndpointStatistics",
     # System files and named systems (`anodize run FILE`, `anodize run NAME`), as TinMan uses them.
     "SystemConfig", "load_config", "build_system", "NamedSystem", "Prepared", "Finished",

@@ -3,7 +3,7 @@
 
 Each measure is taken three ways, interleaved in every repetition (so drift hits all):
 
-  anodize dds      two groups, ``anodize.System(..., transport="dds")`` on a DDS domain
+  anodize dds      two groups, ``anodize.System(..., transport=Dds(...))`` on a DDS domain
                    derived from this process's pid, a fresh run id per run.
   raw Cyclone      two spawned processes, a writer/reader pair per direction on topics
                    of type ``anodize.transport.dds.Frame``, written with
@@ -11,7 +11,7 @@ Each measure is taken three ways, interleaved in every repetition (so drift hits
                    builds them (``cdr_sample``), taken with ``ddspy_take`` after a WaitSet wait;
                    the transport's QoS (reliable, keep-all, reader resource limits ``READER_SAMPLES``,
                    automatic liveliness 1 s) and discovery lease; no monitors, no codec.
-  anodize process  the same anodize system with ``transport="process"`` (pipes, and
+  anodize process  the same anodize system with ``transport=Processes()`` (pipes, and
                    shared memory for large arrays).
   raw, unbounded   (streams only) raw Cyclone with its default reader, which holds whatever
                    arrives: no back pressure, memory grows with the backlog. Shown for
@@ -71,7 +71,7 @@ import numpy as np  # noqa: E402
 from runs import LoadWatch, bench_env, print_table, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
-from anodize import System  # noqa: E402
+from anodize import Dds, Inproc, Processes, System  # noqa: E402
 
 DEFAULT_JSON = BENCH / "results" / "dds.json"
 DOMAIN = 1 + os.getpid() % 232  # DDS domain ids are 0..232; 0 is everyone's default
@@ -95,11 +95,12 @@ def run_anodize(transport: str, global_name: str, groups: dict[str, tuple[str, C
                 timeout: float, monitors: bool = True) -> None:
     """Run a two-group system; raise if it did not end well."""
     run_id = f"bench{os.getpid()}_{next(_runs)}"
-    system = (System(GLOBALS[global_name], transport="dds", monitors=monitors, domain=DOMAIN, run_id=run_id)
-              if transport == "dds" else System(GLOBALS[global_name], transport=transport, monitors=monitors))
+    carrier = (Dds(domain=DOMAIN, run_id=run_id, wait=20) if transport == "dds"
+               else Processes() if transport == "process" else Inproc())
+    system = System(GLOBALS[global_name], transport=carrier, monitors=monitors)
     for name, (role, function) in groups.items():
         system.group(name).role(role, function)
-    report = system.run(timeout=timeout, wait=20) if transport == "dds" else system.run(timeout=timeout)
+    report = system.run(timeout=timeout)
     if not report.ok:
         raise RuntimeError(f"anodize ({transport}) run failed:\n{report.summary()}")
 

@@ -9,7 +9,7 @@ Four workloads, every candidate of a workload run in each repetition, interleave
                            ``queue.SimpleQueue`` (``bench/monitor_overhead.py``'s stream);
                            pyzmq ``inproc://`` PAIR sockets (8-byte ints). Time: from the
                            first send to the last receipt, taken in the threads.
-  stream, two processes    the same stream between two groups of ``transport="process"``,
+  stream, two processes    the same stream between two groups of ``transport=Processes()``,
                            monitored and unmonitored (``bench/dds.py``'s stream roles);
                            pyzmq ``ipc://`` PAIR; ``multiprocessing.Pipe`` and
                            ``multiprocessing.Queue`` (pickled ints); raw Cyclone DDS

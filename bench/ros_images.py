@@ -2,17 +2,17 @@
 """Images per second of 640x480 rgb8 ``sensor_msgs/msg/Image`` on the ROS 2 topic ``/camera/color/image_raw``.
 
 Each image is a rosbags ``sensor_msgs__msg__Image`` (Jazzy), encoding "rgb8", step 1920, its data a
-1-D uint8 array of 921,600 bytes. With ``transport="dds"`` the channel is a real ROS 2 topic: DDS topic
+1-D uint8 array of 921,600 bytes. With ``transport=Dds(...)`` the channel is a real ROS 2 topic: DDS topic
 ``rt/camera/color/image_raw``, type ``sensor_msgs::msg::dds_::Image_``, plain CDR. The ways, interleaved
 in every repetition (so drift hits all):
 
-  anodize -> anodize, ROS topic   two groups on this host, ``anodize.System(..., transport="dds",
-                   ros_topics={"C->V:color": "/camera/color/image_raw"})`` on the ROS domain (a fresh run
+  anodize -> anodize, ROS topic   two groups on this host, ``anodize.System(..., transport=Dds(...),
+                   ros=RosBridge(topics={"C->V:color": "/camera/color/image_raw"}))`` on the ROS domain (a fresh run
                    id per run). Protocol ``mu t. C -> V : {more. C -> V : color(Image). t, stop}``: the
                    images go on the ROS topic, the tiny ``more`` before each (and ``stop``) on anodize's
                    own topic of the channel. The viewer checks every image's number and layout.
   anodize -> Fast DDS             the same image stream into an external role V (protocol
-                   ``mu t. C -> V : color(Image). t``, ``external=("V",)``, ``ros_topics={"C->V": ...}``)
+                   ``mu t. C -> V : color(Image). t``, ``RosBridge(external={"V"}, topics={"C->V": ...})``)
                    played by ``ros_peer listen-image`` (``tests/anodize/ros_peer/main.cpp``), an
                    independent ROS 2 node on eProsima Fast DDS 2.x with ROS 2's default QoS (reliable,
                    volatile, keep-last 10). Twice: with a 4 MiB UDP receive buffer (``--rcvbuf 4194304``)
@@ -23,7 +23,7 @@ in every repetition (so drift hits all):
                    timeout stops it ("stopped" is the expected end: the protocol never ends). The peer
                    prints each image's size and byte sum: every image must arrive, whole, in order (the
                    sums are checked against the images sent).
-  anodize process                 the first way's system with ``transport="process"`` (no ROS topics;
+  anodize process                 the first way's system with ``transport=Processes()`` (no ROS topics;
                    large arrays go through shared memory), for reference.
 
 Time: images per second from the first image's receipt to the last's, ``(N - 1) / seconds``: the Fast
@@ -78,7 +78,7 @@ from ros_peer import finish_peer, ros_peer_binary, start_peer  # noqa: E402
 from runs import LoadWatch, bench_env, print_table, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
-from anodize import System  # noqa: E402
+from anodize import Dds, Inproc, Processes, RosBridge, System  # noqa: E402
 from anodize.supervision.report import RoleStatus  # noqa: E402
 
 DEFAULT_JSON = BENCH / "results" / "ros_images.json"
@@ -114,13 +114,13 @@ def anodize_to_anodize(transport: str, n: int, timeout: float) -> dict[str, Any]
     """Ways 1 and 3: two groups; the viewer's first and last receipt, and the producer's start."""
     with bench_env(roles.ENV, images=n) as (_, found):
         if transport == "dds":
-            system = System(GLOBALS["internal"], transport="dds", run_id=f"rosimg{os.getpid()}_{next(_runs)}",
-                            ros_topics=roles.CAMERA_TOPICS)
+            system = System(GLOBALS["internal"], transport=Dds(run_id=f"rosimg{os.getpid()}_{next(_runs)}", wait=WAIT),
+                            ros=RosBridge(topics=roles.CAMERA_TOPICS))
         else:
-            system = System(GLOBALS["internal"], transport=transport)
+            system = System(GLOBALS["internal"], transport=Processes() if transport == "process" else Inproc())
         system.group("camera").role("C", roles.camera)
         system.group("viewer").role("V", roles.viewer)
-        report = system.run(timeout=timeout, wait=WAIT) if transport == "dds" else system.run(timeout=timeout)
+        report = system.run(timeout=timeout)
         if not report.ok:
             raise RuntimeError(f"anodize ({transport}) run failed:\n{report.summary()}")
         start, end = found("start")["start"], found("end")
@@ -168,10 +168,10 @@ def anodize_to_fastdds(n: int, rcvbuf: int) -> dict[str, Any]:
         peer = start_peer("listen-image", topic=DDS_TOPIC, domain=DOMAIN, count=n, timeout=peer_timeout,
                           rcvbuf=rcvbuf)
         try:
-            system = System(GLOBALS["external"], transport="dds", run_id=f"rosimg{os.getpid()}_{next(_runs)}",
-                            ros_topics=roles.CAMERA_EXTERNAL_TOPICS, external=("V",))
+            system = System(GLOBALS["external"], transport=Dds(run_id=f"rosimg{os.getpid()}_{next(_runs)}", wait=WAIT),
+                            ros=RosBridge(topics=roles.CAMERA_EXTERNAL_TOPICS, external=frozenset({"V"})))
             system.group("camera").role("C", roles.camera_to_ros)
-            report = system.run(timeout=run_timeout, wait=WAIT)
+            report = system.run(timeout=run_timeout)
         finally:
             code, out, err = finish_peer(peer, peer_timeout + 10)  # bounded: killed if it outlives that
         lines = [json.loads(line) for line in out.splitlines() if line.startswith("{")]

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""What crossing a process boundary costs with ``transport="process"``, against multiprocessing.
+"""What crossing a process boundary costs with ``transport=Processes()``, against multiprocessing.
 
-(``transport="dds"`` is measured by ``bench/dds.py``, side by side with this transport and
+(``transport=Dds()`` is measured by ``bench/dds.py``, side by side with this transport and
 with raw Cyclone DDS, its own baseline, in one run: the same three workloads, small
 messages, round trip and frames.)
 
@@ -85,7 +85,7 @@ import transport_roles as roles  # noqa: E402
 from runs import LoadWatch, bench_env, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
-from anodize import RunReport, System  # noqa: E402
+from anodize import Processes, RunReport, System  # noqa: E402
 
 DEFAULT_JSON = BENCH / "results" / "transport.json"
 CPUS = os.cpu_count() or 1
@@ -111,7 +111,7 @@ GLOBALS = _protocols()
 
 def run_system(global_name: str, groups: dict[str, tuple[int | None, dict[str, Callable[..., None]]]],
                timeout: float, monitors: bool = True) -> RunReport:
-    system = System(GLOBALS[global_name], transport="process", monitors=monitors)
+    system = System(GLOBALS[global_name], transport=Processes(), monitors=monitors)
     for name, (priority, placed) in groups.items():
         group = system.group(name, priority=priority)
         for role, function in placed.items():

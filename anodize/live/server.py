@@ -1,6 +1,7 @@
 """The live view in the supervisor: a Foxglove WebSocket server fed by the groups' taps.
 
-:func:`open_live_view` starts the server; ``System.run(live=...)`` then advertises
+:func:`open_live_view` starts the server, a channel tap (:mod:`anodize.taps`);
+``System.run(taps=[view])`` then advertises
 every label of every channel on it (ROS 2 schemas: ``ros2msg`` definitions, CDR
 messages, so Foxglove's image, pose, path and plot panels read them), forwards
 what the groups tap (:mod:`.tap`), publishes each group's state, rate and memory
@@ -27,8 +28,9 @@ from .._extras import import_extra
 from ..errors import AnodizeError
 from ..recording.encoding import SortCodec, codec_for_sort
 from ..session.payloads import validator_for
-from .plan import STATUS_TOPIC, LiveLabel, LivePlan
-from .tap import LARGE_RATE
+from ..taps import TapRun
+from .plan import STATUS_TOPIC, LiveLabel, LivePlan, live_plan
+from .tap import LARGE_RATE, GroupLiveView
 from .wire import HELLO, INPUT, MESSAGE, STATS, read_frame, send_frame
 
 __all__ = ["LiveView", "open_live_view", "DEFAULT_PORT"]
@@ -129,12 +131,16 @@ class LiveView:
         return f"ws://{self.host}:{self.port}"
 
     # ---- a run -----------------------------------------------------------------------------
-    def begin(self, plan: LivePlan) -> None:
-        """Advertise the run's channels and take the groups' taps (``System.run`` calls it)."""
+    def begin(self, run: TapRun) -> GroupLiveView:
+        """Advertise the run's channels and take the groups' taps (``System.run`` calls it).
+
+        Returns what each group opens: its :class:`~.tap.LiveTap`.
+        """
         import foxglove
 
         if self.plan is not None:
             raise AnodizeError("a live view serves one run: open another for the next")
+        plan = live_plan(self.socket_path, run.machines, run.group_of, run.topics)
         by_topic: dict[tuple[str, str], Any] = {}
         for x in plan.labels:
             codec = codec_for_sort(x.sort)
@@ -153,6 +159,7 @@ class LiveView:
                                    data=json.dumps(_STATUS_SCHEMA).encode()))
         self.plan = plan
         threading.Thread(target=self._accept_loop, name="anodize-live-accept", daemon=True).start()
+        return GroupLiveView(plan)
 
     def status(self, statuses: Mapping[str, Any]) -> None:
         """Publish the groups' :class:`~anodize.supervision.report.GroupStatus` on the status channel."""

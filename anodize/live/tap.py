@@ -20,21 +20,34 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 from ..isolation.sched import lower_thread_priority
 from ..recording.encoding import SortCodec, codec_for_sort
 from ..recording.tap import TappedChannel
 from ..session.channel import Channel
+from ..taps import TapGroup
 from .inputs import ClientInput, register_input, unregister_input
 from .plan import LivePlan
 from .wire import HELLO, INPUT, MESSAGE, STATS, read_frame, send_frame
 
-__all__ = ["LiveTap", "LiveChannel", "LARGE", "LARGE_RATE", "QUEUE"]
+__all__ = ["GroupLiveView", "LiveTap", "LiveChannel", "LARGE", "LARGE_RATE", "QUEUE"]
 
 LARGE = 4096       # bytes: a message above this is thinned, and waits in its label's one slot
 LARGE_RATE = 10.0  # messages per second a large label is shown at, at most
 QUEUE = 4096       # small messages waiting to be forwarded, at most (<= 16 MiB)
 _SEND_EVERY = 0.02  # seconds: how often the forwarding thread looks when nothing woke it
+
+
+@dataclass(frozen=True)
+class GroupLiveView:
+    """The live view's :class:`~anodize.taps.GroupTapPlan`: each group opens a :class:`LiveTap`."""
+
+    plan: LivePlan
+
+    def open(self, group: TapGroup) -> LiveTap:
+        """The group's tap, connected to the supervisor's socket."""
+        return LiveTap(self.plan, group.name, group.machines)
 
 
 class LiveTap:

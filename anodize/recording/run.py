@@ -1,4 +1,4 @@
-"""A recorded run, seen from the supervisor: the plan it hands the groups, and the merge at the end."""
+"""A recorded run, seen from the supervisor: the tap that plans it, and the merge at the end."""
 
 from __future__ import annotations
 
@@ -6,34 +6,55 @@ import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
-from sessiontypes import GlobalType
-
+from ..errors import AnodizeError
+from ..taps import TapRun
 from .merge import merge_parts
-from .plan import RecordPlan
+from .plan import RecordPlan, record_plan
+from .tap import GroupRecording
 
-__all__ = ["RecordedRun"]
+__all__ = ["Recording"]
 
 
-class RecordedRun:
-    """The recording ``target`` of one run, made by the groups following ``plan``."""
+class Recording:
+    """A channel tap (:mod:`anodize.taps`) that records every message between groups to ``target``.
 
-    def __init__(self, target: str | os.PathLike[str], plan: RecordPlan) -> None:
+    ``System.run(taps=[Recording("run.mcap")])``: an MCAP file if ``target`` ends in
+    ``.mcap``, else a rosbag2 folder (docs/recording.md). Each group writes its part
+    beside the target; when the run ends the parts are merged and the report's notes
+    say what was recorded. A recording records one run.
+    """
+
+    def __init__(self, target: str | os.PathLike[str]) -> None:
         self.target = Path(target)
-        self.plan = plan
+        self.plan: RecordPlan | None = None
+        self._run: TapRun | None = None
 
-    def finish(self, global_type: GlobalType, transport: str, functions: Mapping[str, str]) -> list[str]:
-        """Merge the groups' parts into the recording; returns notes for the run's report.
+    def begin(self, run: TapRun) -> GroupRecording:
+        """Plan which channels each group records, under which topics."""
+        if self._run is not None:
+            raise AnodizeError(f"recording {self.target} records one run: make another for the next")
+        # The parts are written beside the target, so the merge is a rename away on the same file system.
+        parts = self.target.with_name(f".{self.target.name}.parts-{os.getpid()}")
+        self.plan = record_plan(str(parts), run.machines, run.group_of, run.topics)
+        self._run = run
+        return GroupRecording(self.plan)
 
-        ``functions`` (role -> ``module:function``) goes into the recording for ``anodize replay``.
-        """
-        location = global_type.location
-        info = {"protocol_file": location.path, "protocol_source": "\n".join(global_type.source_lines),
-                "global": global_type.name, "transport": transport, "anodize_version": _version(),
-                "recorded_channels": " ".join(sorted(f"{s}->{r}" for s, r in
-                                                     self.plan.at_sender | self.plan.at_receiver)),
-                "role_functions": json.dumps(dict(functions)), "group_of": json.dumps(dict(self.plan.group_of))}
-        result = merge_parts(Path(self.plan.parts), self.target, info)
+    def status(self, statuses: Mapping[str, Any]) -> None:
+        """Nothing: a recording is of messages, not of statuses."""
+
+    def end(self) -> list[str]:
+        """Merge the groups' parts into the recording; returns notes for the run's report."""
+        run, plan = self._run, self.plan
+        if run is None or plan is None:
+            return []
+        location = run.global_type.location
+        info = {"protocol_file": location.path, "protocol_source": "\n".join(run.global_type.source_lines),
+                "global": run.global_type.name, "transport": run.transport, "anodize_version": _version(),
+                "recorded_channels": " ".join(sorted(f"{s}->{r}" for s, r in plan.at_sender | plan.at_receiver)),
+                "role_functions": json.dumps(dict(run.functions)), "group_of": json.dumps(dict(plan.group_of))}
+        result = merge_parts(Path(plan.parts), self.target, info)
         size = f"{result.bytes / 2**20:.1f} MiB"
         notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels between groups to "
                  + str(self.target)]

@@ -19,6 +19,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,11 +29,12 @@ from .._extras import import_extra
 from ..isolation.sched import lower_thread_priority
 from ..session.channel import Channel
 from ..session.endpoint import put_each
+from ..taps import TapGroup
 from .encoding import SortCodec, codec_for_sort
 from .plan import META, PROFILE, ChannelLabel, RecordPlan
 
-__all__ = ["Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG", "channel_metadata",
-           "QOS_PROFILES"]
+__all__ = ["GroupRecording", "Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG",
+           "channel_metadata", "QOS_PROFILES"]
 
 FEATURE = "recording a run (--record)"
 BACKLOG = 64 * 2**20  # bytes a group's recorder may hold before its senders wait
@@ -68,6 +70,17 @@ def channel_metadata(item: ChannelLabel, codec: SortCodec, protocol: str,
         f"{META}.sender_group": group_of.get(item.sender, "external"),
         f"{META}.receiver_group": group_of.get(item.receiver, "external"),
     }
+
+
+@dataclass(frozen=True)
+class GroupRecording:
+    """A recording's :class:`~anodize.taps.GroupTapPlan`: each group opens a :class:`Recorder`."""
+
+    plan: RecordPlan
+
+    def open(self, group: TapGroup) -> Recorder:
+        """The group's recorder (it writes the group's part of the recording)."""
+        return Recorder(self.plan, group.name, group.incarnation, group.protocol, group.machines, group.memory)
 
 
 class Recorder:

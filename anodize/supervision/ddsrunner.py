@@ -1,4 +1,4 @@
-"""The runner of ``transport="dds"``: the groups of this host as processes, joined to the rest by DDS.
+"""The runner of ``Dds``: the groups of this host as processes, joined to the rest by DDS.
 
 It is the process runner (:mod:`.processes`: isolation, memory bounds, priorities,
 liveness of the local groups) without pipes: each group's process joins the
@@ -11,17 +11,17 @@ them as running elsewhere.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
-
-from sessiontypes import StateMachine
 
 from ..transport.dds import DdsSettings
 from . import processes
-from .group import Group, reference_of
+from .group import reference_of
 from .groupproc import GroupSpec, group_main
 from .hostlink import HostLink
+from .plan import RunPlan
 from .processes import ProcessRunner, _Incarnation, _sys_path
+from .supervisor import Elsewhere, Scope
 
 __all__ = ["DdsRunner"]
 
@@ -30,22 +30,28 @@ class DdsRunner(ProcessRunner):
     """Starts this host's groups; see the module docstring.
 
     Args:
+        plan: the run; its groups are every group of the system.
         settings: the run's DDS settings (``host`` is this host).
         elsewhere: the groups of the system that run on other hosts, by name -> host.
+        liveness: seconds a local group may send no heartbeat before it is failed.
     """
 
     transport = "dds"
 
-    def __init__(self, protocol: str, machines: dict[str, StateMachine], channels: Sequence[tuple[str, str]],
-                 groups: dict[str, Group], monitors: bool, settings: DdsSettings, elsewhere: dict[str, str],
-                 liveness: float = 2.0, capacities: dict[tuple[str, str], int] | None = None) -> None:
-        super().__init__(protocol, machines, channels, groups, monitors, liveness, capacities)
+    def __init__(self, plan: RunPlan, settings: DdsSettings, elsewhere: Mapping[str, str],
+                 liveness: float = 2.0) -> None:
+        everyone = dict(plan.groups)
+        local = {name: g for name, g in everyone.items() if name not in elsewhere}
+        super().__init__(replace(plan, groups=local), liveness)
         self.settings = settings
-        self.elsewhere = elsewhere
+        self.elsewhere = dict(elsewhere)
         # The supervisors of the other hosts: policies that reach beyond a group act there too.
         self.link = HostLink(settings, set(settings.host_of.values())) if elsewhere else None
         # The start barrier may wait for other hosts: the start-up deadline allows for it.
         self.start_timeout = processes._START_TIMEOUT + settings.wait
+        roles = self.scope.roles  # this host's (external roles are in no group)
+        self.scope = Scope(local, roles, tuple((a, b) for a, b in self.channels if a in roles and b in roles),
+                           Elsewhere(self.link, everyone, self.channels) if self.link is not None else None)
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         """Start ``groups`` (of a batch that may span hosts); their channels to the other groups
@@ -65,10 +71,8 @@ class DdsRunner(ProcessRunner):
                 machines={role: self.machines[role] for role in group.roles},
                 channels=self.channels, dead=dead, monitors=self.monitors,
                 priority=group.priority, cpus=group.cpus, memory=group.memory,
-                sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
-                extra={"dds": replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)),
-                       **({} if self.record is None else {"record": self.record}),
-                       **({} if self.live is None else {"live": self.live})})
+                sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities, taps=self.plan.taps,
+                dds=replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)))
             parent_end, child_end = self.context.Pipe()
             process = self.context.Process(target=group_main, args=(spec, child_end, {}),
                                            name=f"anodize:{name}", daemon=True)

@@ -135,7 +135,7 @@ class Group:
     cpus: frozenset[int] | None = None
     on_failure: FailurePolicy = FailurePolicy.STOP
     max_restarts: int = 3
-    host: str | None = None  # transport="dds": the host it runs on (None: wherever the run is started)
+    host: str | None = None  # on Dds: the host it runs on (None: wherever the run is started)
     roles: dict[str, Callable[..., Any] | str] = field(default_factory=dict)
     _system: Any = field(default=None, repr=False)
 

@@ -33,7 +33,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from queue import Empty, SimpleQueue
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sessiontypes import Sort, StateMachine
 
@@ -41,11 +41,10 @@ from ..errors import MemoryBoundError, error_to_data
 from ..isolation.memory import data_size, limit_data
 from ..isolation.sched import apply_thread_scheduling
 from ..isolation.tree import become_subreaper, kill_tree
-from ..live.tap import LiveTap
-from ..recording.tap import Recorder
 from ..ros import RosType, ros_type
 from ..session.endpoint import Endpoint
 from ..session.payloads import resolve_class, with_field_classes
+from ..taps import GroupTap, GroupTapPlan, TapGroup
 from ..transport.codec import MAX_FRAME, Codec, DecodeError
 from ..transport.process import ProcessNetwork, make_codec
 from ..transport.shm import ArrayRing, RingReader
@@ -68,6 +67,9 @@ from .control import (
 from .group import resolve_function
 from .report import RoleReport, RoleStatus
 from .roles import describe_error, run_role
+
+if TYPE_CHECKING:
+    from ..transport.dds import DdsSettings  # only a DDS run loads Cyclone DDS
 
 __all__ = ["GroupSpec", "group_main", "EXIT_MEMORY", "HEARTBEAT"]
 
@@ -94,8 +96,9 @@ class GroupSpec:
     cpus: frozenset[int] | None = None
     memory: int | None = None
     sys_path: tuple[str, ...] = ()
-    extra: dict[str, Any] = field(default_factory=dict)
     capacities: dict[tuple[str, str], int] = field(default_factory=dict)  # channels that hold at most so many
+    taps: tuple[GroupTapPlan, ...] = ()    # what the group opens to tap its channels (recording, live view)
+    dds: DdsSettings | None = None         # transport Dds: how the group joins the run's domain (else pipes)
 
 
 def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
@@ -150,8 +153,7 @@ class _GroupProcess:
         functions = {role: resolve_function(ref) for role, ref in spec.roles.items()}
         threading.excepthook = self._thread_failed
         network = self.network = self._network()
-        self.recorder = _recorder(spec, network.queues)  # before the endpoints take their channels
-        self.live = _live_tap(spec, network.queues)
+        self.taps = _open_taps(spec, network.queues)  # before the endpoints take their channels
         endpoints = {role: Endpoint(role, spec.protocol, spec.machines[role], network, spec.monitors)
                      for role in spec.roles}
         threads = [threading.Thread(target=self._role_thread, name=f"anodize:{spec.name}/{role}",
@@ -173,7 +175,7 @@ class _GroupProcess:
         ros_types = _payload_ros_types(spec.machines.values())
         local = set(spec.roles)
         doorbell_roles = [r for r, m in spec.machines.items() if m.forks or m.waits_on_several()]
-        dds = spec.extra.get("dds")
+        dds = spec.dds
         if dds is not None:  # every channel between groups is a DDS topic; arrays travel in the frames
             from ..transport.dds import DdsNetwork
 
@@ -257,10 +259,8 @@ class _GroupProcess:
                                  where=report.where, traceback=report.traceback, detail=report.detail))
             if report.status is RoleStatus.FAILED:
                 self.network.fail(report.name, describe_error(report.error))
-        if self.recorder is not None:  # every role has ended: nothing more will be sent
-            self.recorder.close()
-        if self.live is not None:
-            self.live.close()
+        for tap in self.taps:  # every role has ended: nothing more will be sent
+            tap.close()
         self._heartbeat(final=True)
         close = getattr(self.network, "close", None)
         if close is not None:  # a DDS network: what was written reaches its readers before we exit
@@ -335,21 +335,12 @@ def _payload_sorts(machines: Iterable[StateMachine]) -> list[Sort]:
             for sort in t.sort.components()]
 
 
-def _recorder(spec: GroupSpec, queues: dict[tuple[str, str], Any]) -> Recorder | None:
-    """The group's recorder, wrapping the channels it records, if the run is recorded."""
-    plan = spec.extra.get("record")
-    if plan is None:
-        return None
-    recorder = Recorder(plan, spec.name, spec.incarnation, spec.protocol, spec.machines, spec.memory)
-    recorder.attach(queues)
-    return recorder
-
-
-def _live_tap(spec: GroupSpec, queues: dict[tuple[str, str], Any]) -> LiveTap | None:
-    """The group's live-view tap, wrapping the channels it shows, if the run is shown live."""
-    plan = spec.extra.get("live")
-    if plan is None:
-        return None
-    tap = LiveTap(plan, spec.name, spec.roles)
-    tap.attach(queues)
-    return tap
+def _open_taps(spec: GroupSpec, queues: dict[tuple[str, str], Any]) -> list[GroupTap]:
+    """The group's taps (a recording, the live view), each wrapping the channels it watches."""
+    group = TapGroup(spec.name, spec.incarnation, spec.protocol, spec.machines, spec.memory)
+    opened = []
+    for plan in spec.taps:
+        tap = plan.open(group)
+        tap.attach(queues)
+        opened.append(tap)
+    return opened

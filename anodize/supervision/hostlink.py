@@ -12,7 +12,7 @@ that reach beyond a group need the others:
   incarnation, and says so; every host restarts its members of the set as that
   incarnation. The new incarnations meet at a start barrier that accepts only
   writers of that incarnation, and a channel to a group outside the set is gone to
-  them, as with ``transport="process"``.
+  them, as with ``Processes``.
 
 Words travel on one DDS topic per run, ``anodize/<run id>/supervisors``, reliable
 and in order per host, JSON in an ``anodize::Frame``. A word is taken only from a

@@ -1,4 +1,4 @@
-"""The runner of ``transport="process"``: one OS process per group.
+"""The runner of ``Processes``: one OS process per group.
 
 It spawns one process per group (:mod:`.groupproc`), wires a pipe for every
 channel between roles of different groups, and then only listens: to each
@@ -21,22 +21,19 @@ from collections.abc import Sequence
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from sessiontypes import StateMachine
-
 from ..errors import MemoryBoundError, RoleError, error_from_data
 from ..isolation.memory import CGROUP_SLACK, Cgroup, make_cgroup, peak_rss, remove_stale_cgroups, rss
 from ..isolation.tree import descendants, kill_tree
 from ..isolation.watchdog import Watchdog, rt_throttling
-from ..live.plan import LivePlan
-from ..recording.plan import RecordPlan
 from ..transport.codec import DecodeError
 from ..transport.shm import remove_run_segments, remove_stale_segments
 from . import control
 from .group import Group, reference_of
 from .groupproc import EXIT_MEMORY, GroupSpec, group_main
 from .liveness import Frozen, HoldingGil
+from .plan import RunPlan
 from .report import RoleReport, RoleStatus
-from .supervisor import Counts, Event, GroupExited, GroupFailed, Note, Ready, RoleEnded
+from .supervisor import Counts, Event, GroupExited, GroupFailed, Note, Ready, RoleEnded, Scope
 from .watching import LivenessWatch
 
 __all__ = ["ProcessRunner", "WATCHDOG_LIMIT"]
@@ -74,19 +71,17 @@ class ProcessRunner:
 
     transport = "process"
 
-    def __init__(self, protocol: str, machines: dict[str, StateMachine], channels: Sequence[tuple[str, str]],
-                 groups: dict[str, Group], monitors: bool, liveness: float = 2.0,
-                 capacities: dict[tuple[str, str], int] | None = None) -> None:
-        self.protocol = protocol
+    def __init__(self, plan: RunPlan, liveness: float = 2.0) -> None:
+        self.plan = plan
+        self.protocol = plan.protocol
         self.liveness = liveness
-        self.capacities = dict(capacities or {})
-        self.record: RecordPlan | None = None  # set by System.run for a recorded run
-        self.live: LivePlan | None = None      # set by System.run for a run shown live
-        self.machines = machines
-        self.channels = tuple(channels)
-        self.groups = groups
-        self.monitors = monitors
-        self.group_of = {role: g.name for g in groups.values() for role in g.roles}
+        self.capacities = dict(plan.capacities or {})
+        self.machines = dict(plan.machines)
+        self.channels = tuple(plan.channels)
+        self.groups = dict(plan.groups)
+        self.monitors = plan.monitors
+        self.group_of = {role: g.name for g in self.groups.values() for role in g.roles}
+        self.scope = Scope(self.groups, tuple(r for r in plan.global_type.roles if r in self.group_of), self.channels)
         self.run_id = f"{os.getpid()}-{secrets.token_hex(3)}"
         self.context = multiprocessing.get_context("spawn")  # a fresh interpreter: nothing shared
         self.current: dict[str, _Incarnation] = {}
@@ -120,8 +115,7 @@ class ProcessRunner:
                 channels=self.channels, dead=dead, monitors=self.monitors,
                 priority=group.priority, cpus=group.cpus, memory=group.memory,
                 sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
-                extra={**({} if self.record is None else {"record": self.record}),
-                       **({} if self.live is None else {"live": self.live})})
+                taps=self.plan.taps)
             parent_end, child_end = self.context.Pipe()
             process = self.context.Process(target=group_main, args=(spec, child_end, pipes[name]),
                                            name=f"anodize:{name}", daemon=True)

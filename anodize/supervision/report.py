@@ -83,7 +83,7 @@ class GroupReport:
         rate_hz: messages sent per second, the median over the whole one-second windows
             in which every role of the group was running.
         rate_min_hz: the lowest such window (the rate the group never fell below).
-        pid: the group's process, for ``transport="process"``.
+        pid: the group's process, on Processes and Dds.
     """
 
     name: str

@@ -33,7 +33,7 @@ from .report import GroupReport, GroupState, GroupStatus, RoleReport, RoleStatus
 from .roles import describe_error
 
 __all__ = ["Supervisor", "Runner", "RunState", "Event", "Ready", "Counts", "RoleEnded", "GroupFailed",
-           "GroupExited", "Note", "window_rates", "Link", "Elsewhere", "StopWord", "RestartWord", "Word"]
+           "GroupExited", "Note", "window_rates", "Link", "Elsewhere", "Scope", "StopWord", "RestartWord", "Word"]
 
 TICK = 0.1           # seconds between two looks at the clock when nothing happens
 STATUS_EVERY = 0.5   # seconds between two on_status calls
@@ -117,7 +117,7 @@ class Note:
 Event = Ready | Counts | RoleEnded | GroupFailed | GroupExited | Note
 
 
-# ---- what supervisors on other hosts say (transport="dds", anodize run --host) ----------------
+# ---- what supervisors on other hosts say (Dds, anodize run --host) ---------------------------
 @dataclass(frozen=True)
 class StopWord:
     """Every group of the run stops."""
@@ -175,10 +175,28 @@ class _Remote:
     restarts: int = 0
 
 
+@dataclass(frozen=True)
+class Scope:
+    """The part of a system one runner runs: every group, but on DDS only this host's.
+
+    Attributes:
+        groups: the groups this runner starts, by name.
+        roles: their roles, in the global type's order.
+        channels: the channels between those roles.
+        elsewhere: the whole system, when some of its groups run on other hosts.
+    """
+
+    groups: dict[str, Group]
+    roles: tuple[str, ...]
+    channels: tuple[tuple[str, str], ...]
+    elsewhere: Elsewhere | None = None
+
+
 class Runner(Protocol):
-    """What a transport does for the supervisor."""
+    """What a transport does for the supervisor (a transport value builds it from a run's plan)."""
 
     transport: str
+    scope: Scope
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         """Start ``groups`` together on fresh channels among them; roles of any other group

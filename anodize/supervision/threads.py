@@ -1,4 +1,4 @@
-"""The runner of ``transport="inproc"``: every role is a thread of this process.
+"""The runner of ``Inproc``: every role is a thread of this process.
 
 Groups started together share one :class:`~anodize.transport.inproc.InprocNetwork`;
 a group restarted later gets a fresh network with the groups restarted with it,
@@ -16,18 +16,14 @@ from collections.abc import Callable, Sequence
 from queue import Empty, SimpleQueue
 from typing import Any
 
-from sessiontypes import GlobalType, StateMachine
-
-from ..live.plan import LivePlan
-from ..live.tap import LiveTap
-from ..recording.plan import RecordPlan
-from ..recording.tap import Recorder
 from ..session.endpoint import Endpoint
+from ..taps import GroupTap
 from ..transport.inproc import InprocNetwork
 from .group import Group, resolve_function
+from .plan import RunPlan
 from .report import RoleReport, RoleStatus
 from .roles import describe_error, run_role
-from .supervisor import Counts, Event, GroupExited, Ready, RoleEnded
+from .supervisor import Counts, Event, GroupExited, Ready, RoleEnded, Scope
 
 __all__ = ["ThreadRunner"]
 
@@ -54,22 +50,19 @@ class ThreadRunner:
 
     transport = "inproc"
 
-    def __init__(self, global_type: GlobalType, machines: dict[str, StateMachine],
-                 channels: Sequence[tuple[str, str]], groups: dict[str, Group], monitors: bool,
-                 capacities: dict[tuple[str, str], int] | None = None) -> None:
-        self.global_type = global_type
-        self.capacities = dict(capacities or {})
-        self.machines = machines
-        self.channels = tuple(channels)
-        self.groups = groups
-        self.monitors = monitors
-        self.group_of = {role: g.name for g in groups.values() for role in g.roles}
+    def __init__(self, plan: RunPlan) -> None:
+        self.plan = plan
+        self.protocol = plan.protocol
+        self.capacities = dict(plan.capacities or {})
+        self.machines = dict(plan.machines)
+        self.channels = tuple(plan.channels)
+        self.groups = dict(plan.groups)
+        self.monitors = plan.monitors
+        self.group_of = {role: g.name for g in self.groups.values() for role in g.roles}
+        self.scope = Scope(self.groups, tuple(r for r in plan.global_type.roles if r in self.group_of), self.channels)
         self.current: dict[str, _Incarnation] = {}
         self.inbox: SimpleQueue[Event] = SimpleQueue()
-        self.record: RecordPlan | None = None  # set by System.run for a recorded run
-        self.recorders: list[Recorder] = []
-        self.live: LivePlan | None = None  # set by System.run for a run shown live
-        self.taps: list[LiveTap] = []
+        self.taps: list[GroupTap] = []  # every group's taps, closed at the end of the run
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         batch = set(groups)
@@ -82,16 +75,11 @@ class ThreadRunner:
         network = InprocNetwork(channels, doorbells, dead, self.capacities)
         for name in groups:
             group = self.groups[name]
-            if self.record is not None:  # before the endpoints take their channels
-                recorder = Recorder(self.record, name, incarnation, self.global_type.name,
-                                    {role: self.machines[role] for role in group.roles}, group.memory)
-                recorder.attach(network.queues)
-                self.recorders.append(recorder)
-            if self.live is not None:
-                tap = LiveTap(self.live, name, group.roles)
+            for tap_plan in self.plan.taps:  # before the endpoints take their channels
+                tap = tap_plan.open(self.plan.tap_group(group, incarnation))
                 tap.attach(network.queues)
                 self.taps.append(tap)
-            endpoints = {role: Endpoint(role, self.global_type.name, self.machines[role], network, self.monitors)
+            endpoints = {role: Endpoint(role, self.protocol, self.machines[role], network, self.monitors)
                          for role in group.roles}
             inc = self.current[name] = _Incarnation(group, incarnation, network, endpoints)
             for role, function in group.roles.items():
@@ -173,7 +161,5 @@ class ThreadRunner:
     def close(self) -> None:
         for name in self.current:
             self.kill(name)
-        for recorder in self.recorders:
-            recorder.close()
         for tap in self.taps:
             tap.close()

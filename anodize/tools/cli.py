@@ -30,6 +30,7 @@ from .codegen import GeneratedModule, generate_modules
 if TYPE_CHECKING:
     from ..live.server import LiveView
     from ..supervision.report import GroupStatus
+    from ..taps import ChannelTap
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -143,9 +144,11 @@ def _parser() -> argparse.ArgumentParser:
                             help="run on this transport instead of the file's (e.g. dds, to try a system across "
                                  "hosts on one)")
     run_system.add_argument("--host", metavar="NAME",
-                            help='transport = "dds": run only the groups placed on host NAME (default: every group)')
-    run_system.add_argument("--wait", type=float, metavar="S", default=30.0,
-                            help='transport = "dds": how long the groups wait for their peers to appear (default 30)')
+                            help='transport kind "dds": run only the groups placed on host NAME (default: every '
+                                 "group; the file's transport.host)")
+    run_system.add_argument("--wait", type=float, metavar="S",
+                            help='transport kind "dds": how long the groups wait for their peers to appear '
+                                 "(default: the file's transport.wait, else 30)")
     run_system.add_argument("--record", metavar="PATH",
                             help="record every message between groups: PATH.mcap is an MCAP file, any other PATH "
                                  "a rosbag2 folder (see 'anodize verify' and 'anodize replay')")
@@ -399,22 +402,26 @@ def _lint_target(given: str) -> Path:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from ..supervision.transports import Dds
     from .config import build_system, load_config
 
     if args.timeout is not None and not args.timeout > 0:
         raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
-    if not args.wait > 0:
+    if args.wait is not None and not args.wait > 0:
         raise UsageError(f"--wait {args.wait}: expected a number of seconds > 0")
     config = load_config(_system_file(args.file, named=True))
     if args.transport is not None:
-        config = dataclasses.replace(config, transport=args.transport)
-    if args.host is not None and config.transport != "dds":
-        raise UsageError(f"--host needs transport = \"dds\"; {config.path} uses {config.transport!r}")
+        config = config.on_transport(args.transport)
+    if args.host is not None and not isinstance(config.transport, Dds):
+        raise UsageError(f"--host needs transport kind \"dds\"; {config.path} uses {config.transport.kind!r}")
+    if isinstance(config.transport, Dds) and (args.host is not None or args.wait is not None):
+        config = dataclasses.replace(config, transport=dataclasses.replace(
+            config.transport, host=args.host if args.host is not None else config.transport.host,
+            wait=args.wait if args.wait is not None else config.transport.wait))
     system = build_system(config)
     timeout = args.timeout if args.timeout is not None else config.timeout
-    with _live_view(args.foxglove) as live:
-        report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout),
-                            host=args.host, wait=args.wait, record=args.record, live=live)
+    with _taps(args.record, args.foxglove) as taps:
+        report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout), taps=taps)
     print(report.summary())
     if args.json:
         out = Path(args.json)
@@ -458,6 +465,21 @@ def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
                         help="serve every channel and each group's status live to the Foxglove app on "
                              "ws://127.0.0.1:PORT (default 8765; 0: any free port); a client publishing on a "
                              "channel's topic (e.g. /joy) reaches the role that sends it")
+
+
+@contextlib.contextmanager
+def _taps(record: str | os.PathLike[str] | None, foxglove: int | None) -> Iterator[list[ChannelTap]]:
+    """The run's channel taps: ``--record`` (first: it wraps the channels first, as it always has),
+    then ``--foxglove``."""
+    taps: list[ChannelTap] = []
+    if record is not None:
+        from ..recording import Recording
+
+        taps.append(Recording(record))
+    with _live_view(foxglove) as live:
+        if live is not None:
+            taps.append(live)
+        yield taps
 
 
 @contextlib.contextmanager
@@ -540,9 +562,9 @@ def _run_named(name: str, rest: list[str]) -> int:
     prepared = named.prepare(args, lambda line: print(line, flush=True))
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
     try:
-        with _live_view(args.foxglove) as live:
+        with _taps(prepared.record, args.foxglove) as taps:
             report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
-                                         record=prepared.record, live=live)
+                                         taps=taps)
     finally:
         if progress is not None:
             progress.close()

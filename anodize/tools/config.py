@@ -1,13 +1,25 @@
 """System files: a protocol, a global type, a transport and the groups that run its roles.
 
-A system file is TOML. Paths in it are relative to the file itself::
+A system file is TOML. Paths in it are relative to the file itself. It maps one to
+one onto the values a Python program builds (``System(g, transport=Dds(...),
+ros=RosBridge(...))``; docs/guide/transports.md)::
 
     protocol = "../protocols/stream.proto"   # the .proto file (required)
     global = "Pipeline"                      # the global type's name in it (required)
-    transport = "process"                    # "process" (default), "inproc" or "dds"
     timeout = 10.0                           # seconds; roles still running then are stopped
     monitors = true                          # run-time protocol checks (default true)
     pythonpath = ["."]                       # dirs prepended to sys.path (default: the file's dir)
+
+    [transport]                              # the transport value (default: kind = "process")
+    kind = "process"                         # "inproc" (Inproc), "process" (Processes) or "dds" (Dds)
+    liveness = 2.0                           # its fields: process: liveness; dds: domain, run_id,
+                                             # host, wait, liveness; inproc: none
+
+    [ros]                                    # RosBridge: topics, external, distro, domain
+    topics = { "Move->Gazebo" = "/cmd_vel" }
+
+    [channels."A->B"]                        # capacities
+    capacity = 8
 
     [groups.control]                         # one table per group (at least one)
     priority = 90                            # 1..99
@@ -15,9 +27,12 @@ A system file is TOML. Paths in it are relative to the file itself::
     cpus = [0]                               # the CPUs the group may run on
     on_failure = "stop"                      # "stop" (default), "restart" or "stop-system"
     max_restarts = 3                         # with on_failure = "restart" (default 3)
+    host = "robot"                           # kind = "dds": the host it runs on
     roles = { Source = "memory_hog:source", Sink = "memory_hog:sink" }   # role -> "module:function"
 
 Only ``protocol``, ``global``, ``groups`` and each group's ``roles`` are required.
+Files of the earlier form (``transport = "dds"`` as a string, with ``domain`` and
+``run_id`` at the top level) are still read, as the same values.
 :func:`load_config` reads and checks a file without importing anything;
 :func:`build_system` loads the protocol, imports the role functions and returns
 an :class:`anodize.System` ready to ``run``.
@@ -29,7 +44,7 @@ import os
 import re
 import sys
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +52,9 @@ import sessiontypes
 
 from ..errors import AnodizeError, ConfigurationError
 from ..supervision.group import FailurePolicy, parse_memory
-from ..supervision.system import TRANSPORTS, System
+from ..supervision.rosbridge import RosBridge
+from ..supervision.system import System
+from ..supervision.transports import KINDS, Dds, Transport
 
 __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
            "add_pythonpath"]
@@ -46,6 +63,8 @@ _TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpa
              "ros", "channels")
 _CHANNEL_KEYS = ("capacity",)
 _ROS_KEYS = ("topics", "external", "distro", "domain")
+_OLD_DDS_KEYS = ("domain", "run_id")  # top-level keys of the earlier form, now fields of [transport]
+_RUN_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 _GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host")
 _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
 _TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
@@ -118,39 +137,50 @@ class SystemConfig:
         path: the system file, as given.
         protocol: the ``.proto`` file (relative paths are taken from the system file's dir).
         global_name: the global type's name.
-        transport: ``"process"``, ``"inproc"`` or ``"dds"``.
+        transport: the transport value (``[transport]``, or the earlier ``transport = "..."``).
         timeout: seconds after which running roles are stopped, or None.
         monitors: whether endpoints check the protocol at run time.
         pythonpath: absolute dirs to put in front of ``sys.path``.
         groups: group name -> its configuration, in file order.
-        domain: ``transport = "dds"``: the DDS domain id.
-        run_id: ``transport = "dds"``: the run id every host of the run uses ("" = the global's name).
-        ros_topics: ``[ros.topics]``: ``"Sender->Receiver[:label]"`` -> ROS topic name.
-        external: ``[ros] external``: roles that ROS 2 nodes play.
-        ros_distro: ``[ros] distro``: the ROS 2 distribution of the message definitions.
-        ros_domain: ``[ros] domain``: the ROS domain when ``ROS_DOMAIN_ID`` is not set.
+        ros: ``[ros]``: the ROS 2 bridge (topics, external roles, distro, domain), or None.
         capacities: ``[channels."A->B"] capacity``: channels that hold at most so many messages.
     """
 
     path: Path
     protocol: Path
     global_name: str
-    transport: str
+    transport: Transport
     timeout: float | None
     monitors: bool
     pythonpath: tuple[Path, ...]
     groups: dict[str, GroupConfig]
-    domain: int = 0
-    run_id: str = ""
-    ros_topics: dict[str, str] = field(default_factory=dict)
-    external: tuple[str, ...] = ()
-    ros_distro: str = ""
-    ros_domain: int | None = None
+    ros: RosBridge | None = None
     capacities: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def external(self) -> frozenset[str]:
+        """The roles ROS 2 nodes play (``[ros] external``)."""
+        return self.ros.external if self.ros is not None else frozenset()
 
     def group_of(self, role: str) -> str | None:
         """The group that runs ``role``, or None."""
         return next((g.name for g in self.groups.values() if role in g.roles), None)
+
+    def on_transport(self, kind: str) -> SystemConfig:
+        """The same system on the transport ``kind`` (``anodize run --transport``): the file's
+        transport fields that ``kind`` also has are kept, the others take their defaults.
+
+        Raises:
+            ConfigError: not a transport kind.
+        """
+        if kind not in KINDS:
+            raise ConfigError(str(self.path), "transport", f"expected one of {', '.join(map(_show, KINDS))}, "
+                                                           f"got {_show(kind)}")
+        if kind == self.transport.kind:
+            return self
+        kept = {f.name: getattr(self.transport, f.name) for f in fields(self.transport)}
+        cls = KINDS[kind]
+        return replace(self, transport=cls(**{f.name: kept[f.name] for f in fields(cls) if f.name in kept}))
 
 
 def load_config(path: str | Path) -> SystemConfig:
@@ -203,10 +233,6 @@ class _Reader:
         self.known_keys(data, _TOP_KEYS, None)
         protocol = self.required_string(data, "protocol")
         global_name = self.required_string(data, "global")
-        transport = self.string(data, "transport") or "process"
-        if transport not in TRANSPORTS:
-            raise self.error("transport", f"expected {' or '.join(map(_show, TRANSPORTS))}, "
-                                          f"got {_show(transport)}")
         timeout = data.get("timeout")
         if timeout is not None and (isinstance(timeout, bool) or not isinstance(timeout, int | float)
                                     or not timeout > 0):
@@ -214,20 +240,61 @@ class _Reader:
         monitors = data.get("monitors", True)
         if not isinstance(monitors, bool):
             raise self.error("monitors", f"expected true or false, got {_show(monitors)}")
-        domain = data.get("domain", 0)
-        if not _is_int(domain) or not 0 <= domain <= 232:
-            raise self.error("domain", f"expected a DDS domain id 0..232, got {_show(domain)}")
-        run_id = self.string(data, "run_id") or ""
-        if run_id and not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", run_id):
-            raise self.error("run_id", f"expected up to 64 letters, digits, '_', '.' or '-', got {_show(run_id)}")
-        ros = self.ros(data.get("ros", {}))
         return SystemConfig(
             path=Path(self.shown), protocol=Path(os.path.normpath(self.directory / protocol)),
-            global_name=global_name, transport=transport,
+            global_name=global_name, transport=self.transport(data),
             timeout=None if timeout is None else float(timeout), monitors=monitors,
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
-            groups=self.groups(data.get("groups")), domain=domain, run_id=run_id,
-            capacities=self.capacities(data.get("channels", {})), **ros)
+            groups=self.groups(data.get("groups")), ros=self.ros(data.get("ros")),
+            capacities=self.capacities(data.get("channels", {})))
+
+    def transport(self, data: dict[str, Any]) -> Transport:
+        """``[transport]`` (kind and fields), or the earlier form: ``transport = "kind"`` with
+        ``domain`` and ``run_id`` at the top level."""
+        given = data.get("transport", "process")
+        if isinstance(given, dict):
+            stray = [key for key in _OLD_DDS_KEYS if key in data]
+            if stray:
+                raise self.error(stray[0], f"with a [transport] table, {stray[0]} is one of its keys: "
+                                           f"write transport.{stray[0]} (in [transport])")
+            kind = given.get("kind")
+            if not isinstance(kind, str) or kind not in KINDS:
+                raise self.error("transport.kind", f"expected {' or '.join(map(_show, KINDS))}, got "
+                                                   f"{_show(kind) if 'kind' in given else 'nothing (it is required)'}")
+            table, prefix = {k: v for k, v in given.items() if k != "kind"}, "transport"
+            allowed = tuple(f.name for f in fields(KINDS[kind]))
+            for key in table:
+                if key not in allowed:
+                    raise self.error(f"transport.{key}", f"unknown key for kind = {_show(kind)}; expected "
+                                     f"{'one of ' + ', '.join(sorted(('kind', *allowed)))}")
+        elif isinstance(given, str) and given in KINDS:
+            kind, prefix = given, None  # the earlier form: its DDS keys are at the top level, checked on any kind
+            table = {key: data[key] for key in _OLD_DDS_KEYS if key in data}
+        else:
+            raise self.error("transport", f"expected {' or '.join(map(_show, KINDS))}, or a table [transport] "
+                                          f"with kind = ..., got {_show(given)}")
+        checked = {key: self.transport_field(key, value, prefix) for key, value in table.items()}
+        if kind != "dds":
+            return KINDS[kind](**{k: v for k, v in checked.items() if k not in _OLD_DDS_KEYS})
+        try:
+            return Dds(**checked)
+        except ConfigurationError as error:
+            raise self.error(prefix or "transport", str(error)) from None
+
+    def transport_field(self, key: str, value: Any, prefix: str | None) -> Any:
+        """One field of a transport, checked and converted (seconds become floats)."""
+        dotted = f"{prefix}.{key}" if prefix else key
+        if key == "domain" and (not _is_int(value) or not 0 <= value <= 232):
+            raise self.error(dotted, f"expected a DDS domain id 0..232, got {_show(value)}")
+        if key == "run_id" and (not isinstance(value, str) or not _RUN_ID.fullmatch(value)):
+            raise self.error(dotted, f"expected up to 64 letters, digits, '_', '.' or '-', got {_show(value)}")
+        if key == "host" and (not isinstance(value, str) or not value.isidentifier()):
+            raise self.error(dotted, f"expected a name such as \"robot\", got {_show(value)}")
+        if key in ("wait", "liveness"):
+            if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+                raise self.error(dotted, f"expected a number of seconds > 0, got {_show(value)}")
+            return float(value)
+        return value
 
     def capacities(self, table: Any) -> dict[str, int]:
         """``[channels."A->B"] capacity = n``: the shape here; the channels when the system is built."""
@@ -245,9 +312,11 @@ class _Reader:
             found[channel] = capacity
         return found
 
-    def ros(self, table: Any) -> dict[str, Any]:
+    def ros(self, table: Any) -> RosBridge | None:
         """The ``[ros]`` table: what is checked here is its shape; the topics against the protocol
         are checked when the system is built."""
+        if table is None:
+            return None
         if not isinstance(table, dict):
             raise self.error("ros", f"expected a table [ros], got {_show(table)}")
         self.known_keys(table, _ROS_KEYS, "ros")
@@ -264,7 +333,7 @@ class _Reader:
         domain = table.get("domain")
         if domain is not None and (not _is_int(domain) or not 0 <= domain <= 232):
             raise self.error("ros.domain", f"expected a DDS domain id 0..232, got {_show(domain)}")
-        return {"ros_topics": dict(topics), "external": tuple(external), "ros_distro": distro, "ros_domain": domain}
+        return RosBridge(topics=dict(topics), external=frozenset(external), distro=distro, domain=domain)
 
     def known_keys(self, table: dict[str, Any], allowed: tuple[str, ...], prefix: str | None) -> None:
         for key in table:
@@ -412,9 +481,8 @@ def build_system(config: SystemConfig) -> System:
     global_type = module.globals[config.global_name]
     add_pythonpath(config)
     try:
-        system = System(global_type, transport=config.transport, monitors=config.monitors, domain=config.domain,
-                        run_id=config.run_id, ros_topics=config.ros_topics, external=config.external,
-                        ros_distro=config.ros_distro, ros_domain=config.ros_domain, capacities=config.capacities)
+        system = System(global_type, transport=config.transport, monitors=config.monitors, ros=config.ros,
+                        capacities=config.capacities)
         system.ros_settings()  # the topics against the protocol, now rather than when the run starts
     except ConfigurationError as error:
         key = "channels" if str(error).startswith("capacity of") else "ros"

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import sys
+import tomllib
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from anodize import Dds, Inproc, Processes, RosBridge
 from anodize.errors import ConfigurationError
 from anodize.supervision.group import parse_memory
 from anodize.tools.config import ConfigError, GroupConfig, SystemConfig, build_system, load_config
@@ -36,7 +38,7 @@ STREAM = "global Stream(P, C) = mu t. P -> C : { data(int). t, stop. end }\n"
 GOOD = '''\
 protocol = "protocols/stream.proto"
 global = "Stream"
-transport = "inproc"
+transport = { kind = "inproc" }
 timeout = 5
 monitors = false
 pythonpath = ["code", "."]
@@ -78,7 +80,7 @@ def test_a_good_file(system_dir: Path) -> None:
     config = load_config(path)
     assert config == SystemConfig(
         path=path, protocol=system_dir / "protocols" / "stream.proto", global_name="Stream",
-        transport="inproc", timeout=5.0, monitors=False,
+        transport=Inproc(), timeout=5.0, monitors=False,
         pythonpath=(system_dir / "code", system_dir),
         groups={
             "control": GroupConfig("control", 90, 64 * 2**20, (0,), "restart", 2,
@@ -96,7 +98,7 @@ def test_defaults_and_paths_relative_to_the_file(tmp_path: Path) -> None:
                                        '[groups.g]\nroles = { A = "m:f" }\n')
     config = load_config(path)
     assert (config.protocol, config.transport, config.timeout, config.monitors, config.pythonpath) == (
-        tmp_path / "p.proto", "process", None, True, (tmp_path / "systems",))
+        tmp_path / "p.proto", Processes(), None, True, (tmp_path / "systems",))
 
 
 MINIMAL = 'protocol = "p.proto"\nglobal = "G"\n'
@@ -149,7 +151,26 @@ BAD = {
     "empty_global": ('protocol = "p.proto"\nglobal = ""\n' + GROUP,
                      'global: expected a non-empty string, got ""'),
     "transport": (MINIMAL + 'transport = "tcp"\n' + GROUP,
-                  'transport: expected "inproc" or "process" or "dds", got "tcp"'),
+                  ('transport: expected "inproc" or "process" or "dds", or a table [transport] with kind = ..., '
+                   'got "tcp"')),
+    "transport_kind": (MINIMAL + '[transport]\nkind = "tcp"\n' + GROUP,
+                       'transport.kind: expected "inproc" or "process" or "dds", got "tcp"'),
+    "transport_no_kind": (MINIMAL + '[transport]\nliveness = 3\n' + GROUP,
+                          'transport.kind: expected "inproc" or "process" or "dds", got nothing (it is required)'),
+    "transport_key_of_another_kind": (
+        MINIMAL + '[transport]\nkind = "process"\ndomain = 3\n' + GROUP,
+        'transport.domain: unknown key for kind = "process"; expected one of kind, liveness'),
+    "transport_liveness": (MINIMAL + '[transport]\nkind = "process"\nliveness = 0\n' + GROUP,
+                           "transport.liveness: expected a number of seconds > 0, got 0"),
+    "transport_wait": (MINIMAL + '[transport]\nkind = "dds"\nwait = "long"\n' + GROUP,
+                       'transport.wait: expected a number of seconds > 0, got "long"'),
+    "transport_host": (MINIMAL + '[transport]\nkind = "dds"\nhost = "a b"\n' + GROUP,
+                       'transport.host: expected a name such as "robot", got "a b"'),
+    "transport_domain": (MINIMAL + '[transport]\nkind = "dds"\ndomain = 300\n' + GROUP,
+                         "transport.domain: expected a DDS domain id 0..232, got 300"),
+    "old_keys_beside_a_table": (
+        MINIMAL + 'domain = 3\n[transport]\nkind = "dds"\n' + GROUP,
+        "domain: with a [transport] table, domain is one of its keys: write transport.domain (in [transport])"),
     "domain": (MINIMAL + "domain = 300\n" + GROUP, "domain: expected a DDS domain id 0..232, got 300"),
     "run_id": (MINIMAL + 'run_id = "a b"\n' + GROUP,
                "run_id: expected up to 64 letters, digits, '_', '.' or '-', got \"a b\""),
@@ -238,7 +259,7 @@ TWO_GROUPS = ('[groups.a]\nroles = { P = "cfg_roles:producer" }\n'
 def test_build_system_runs_an_inproc_system(system_dir: Path) -> None:
     config = build(system_dir, TWO_GROUPS)
     system = build_system(config)
-    assert (system.transport, list(system.groups)) == ("inproc", ["a", "b"])
+    assert (system.transport, list(system.groups)) == (Inproc(), ["a", "b"])
     assert system.groups["a"].roles == {"P": "cfg_roles:producer"}
     report = system.run(timeout=config.timeout)
     assert report.ok, report.summary()
@@ -334,3 +355,66 @@ def test_memory_sizes_are_exact(text: str | int, size: int) -> None:
 def test_a_memory_size_no_kernel_can_enforce_is_refused(text: str | int) -> None:
     with pytest.raises(ConfigurationError, match="larger than any limit the kernel can enforce"):
         parse_memory(text)
+
+
+# ---- the transport table and the earlier form ----------------------------------------
+
+DDS_NEW = MINIMAL + """
+[transport]
+kind = "dds"
+domain = 42
+run_id = "teleop"
+host = "A"
+wait = 60
+liveness = 3
+
+[ros]
+topics = { "A->B" = "/ab" }
+external = ["J"]
+distro = "humble"
+domain = 7
+""" + GROUP
+DDS_OLD = MINIMAL + """
+transport = "dds"
+domain = 42
+run_id = "teleop"
+[ros]
+topics = { "A->B" = "/ab" }
+""" + GROUP
+
+
+def test_the_transport_table_maps_onto_the_values_one_to_one(tmp_path: Path) -> None:
+    config = load_config(write(tmp_path, DDS_NEW))
+    assert config.transport == Dds(domain=42, run_id="teleop", host="A", wait=60.0, liveness=3.0)
+    assert config.ros == RosBridge(topics={"A->B": "/ab"}, external=frozenset({"J"}), distro="humble", domain=7)
+    assert config.external == {"J"}
+
+
+def test_a_file_of_the_earlier_form_reads_as_the_same_values(tmp_path: Path) -> None:
+    config = load_config(write(tmp_path, DDS_OLD))
+    assert config.transport == Dds(domain=42, run_id="teleop")
+    assert config.ros == RosBridge(topics={"A->B": "/ab"})
+    # The earlier form allowed (and checked) domain and run_id on any transport; they meant nothing there.
+    old_process = load_config(write(tmp_path, MINIMAL + 'transport = "process"\ndomain = 3\n' + GROUP))
+    assert (old_process.transport, old_process.ros) == (Processes(), None)
+
+
+@pytest.mark.parametrize(("kind", "expected"), [("inproc", Inproc()), ("process", Processes(liveness=3.0)),
+                                                ("dds", Dds(liveness=3.0))])
+def test_another_transport_keeps_the_fields_it_has(tmp_path: Path, kind: str, expected: object) -> None:
+    config = load_config(write(tmp_path, MINIMAL + '[transport]\nkind = "process"\nliveness = 3\n' + GROUP))
+    assert config.on_transport(kind).transport == expected
+
+
+def test_another_transport_must_be_one(tmp_path: Path) -> None:
+    config = load_config(write(tmp_path, MINIMAL + GROUP))
+    with pytest.raises(ConfigError, match='transport: expected one of "inproc", "process", "dds", got "tcp"'):
+        config.on_transport("tcp")
+
+
+@pytest.mark.parametrize("path", sorted(p.relative_to(REPO).as_posix() for p in [
+    *REPO.glob("examples/*/*.toml"), REPO / "tinman" / "tinman.toml"]))
+def test_the_repository_s_system_files_are_of_the_current_form(path: str) -> None:
+    data = tomllib.loads((REPO / path).read_text(encoding="utf-8"))
+    assert isinstance(data.get("transport"), dict) and not {"domain", "run_id"} & set(data), path
+    load_config(REPO / path)

@@ -1,4 +1,4 @@
-"""transport="dds" on one host (loopback): the protocol runs, nothing is lost, duplicated or
+"""Dds on one host (loopback): the protocol runs, nothing is lost, duplicated or
 reordered, a killed peer is reported, a forged writer is rejected. The same across two network
 namespaces, over a lossy link, is in test_dds_hosts.py."""
 
@@ -27,7 +27,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def stream_system(producer: object, consumer: object, run_id: str) -> anodize.System:
-    system = anodize.System(STREAM, transport="dds", domain=domain(), run_id=run_id)
+    system = anodize.System(STREAM, transport=anodize.Dds(domain=domain(), run_id=run_id, wait=20))
     system.group("producing").role("P", producer)
     system.group("consuming").role("C", consumer)
     return system
@@ -35,7 +35,7 @@ def stream_system(producer: object, consumer: object, run_id: str) -> anodize.Sy
 
 def test_a_protocol_with_choices_and_recursion_completes(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DDS_TEST_COUNT", "2000")
-    report = stream_system(dds_roles.producer, dds_roles.consumer, "choices").run(timeout=60, wait=20)
+    report = stream_system(dds_roles.producer, dds_roles.consumer, "choices").run(timeout=60)
     assert report.ok, report.summary()
     assert report.groups["consuming"].received == 2001
 
@@ -54,7 +54,7 @@ def test_a_slow_receiver_holds_the_sender_back(tmp_path: Path, monkeypatch: pyte
     progress = tmp_path / "consumed"
     progress.write_text("0")
     monkeypatch.setenv("DDS_TEST_PROGRESS", str(progress))
-    report = stream_system(dds_roles.eager_producer, dds_roles.slow_consumer, "backpressure").run(timeout=60, wait=20)
+    report = stream_system(dds_roles.eager_producer, dds_roles.slow_consumer, "backpressure").run(timeout=60)
     assert report.ok, report.summary()
     # The sender is at most the credit window (224) ahead of what the consumer has had:
     # memory stays bounded (without flow control it ran ahead by all 1000).
@@ -69,8 +69,7 @@ def test_a_slow_receiver_of_frames_holds_the_sender_to_a_few_megabytes(
     progress = tmp_path / "consumed"
     progress.write_text("0")
     monkeypatch.setenv("DDS_TEST_PROGRESS", str(progress))
-    report = stream_system(dds_roles.eager_producer, dds_roles.slow_consumer, "backpressure_frames").run(
-        timeout=60, wait=20)
+    report = stream_system(dds_roles.eager_producer, dds_roles.slow_consumer, "backpressure_frames").run(timeout=60)
     assert report.ok, report.summary()
     # Frames of 900 KiB: the byte window (16 MiB, ~18 frames) binds long before the sample
     # window (224) does; it covers what the receiver has taken but not handed on too.
@@ -81,10 +80,10 @@ def test_a_slow_receiver_of_frames_holds_the_sender_to_a_few_megabytes(
 @pytest.mark.slow
 def test_100000_messages_and_1000_frames_cross_in_order(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DDS_TEST_COUNT", "100000")
-    report = stream_system(dds_roles.producer, dds_roles.consumer, "many").run(timeout=300, wait=20)
+    report = stream_system(dds_roles.producer, dds_roles.consumer, "many").run(timeout=300)
     assert report.ok, report.summary()
     monkeypatch.setenv("DDS_TEST_COUNT", "1000")
-    report = stream_system(dds_roles.frame_producer, dds_roles.frame_consumer, "frames").run(timeout=300, wait=20)
+    report = stream_system(dds_roles.frame_producer, dds_roles.frame_consumer, "frames").run(timeout=300)
     assert report.ok, report.summary()
 
 
@@ -155,7 +154,7 @@ def test_a_forged_writer_is_rejected_and_reported(tmp_path: Path, monkeypatch: p
     forger = subprocess.Popen([sys.executable, "-c", FORGER, str(domain()), "forged"])
     try:
         system = stream_system(dds_roles.slow_producer_of_count, dds_roles.consumer, "forged")
-        report = system.run(timeout=60, wait=20)
+        report = system.run(timeout=60)
     finally:
         forger.kill()
         forger.wait()

@@ -21,6 +21,7 @@ from anodize import (
     Finished,
     GroupStatus,
     Prepared,
+    RosBridge,
     RunReport,
     SystemConfig,
     build_system,
@@ -91,7 +92,7 @@ class TinMan:
         if args.paper:
             config = dataclasses.replace(config, global_name=PAPER_GLOBAL)
         if getattr(args, "transport", None) is not None:
-            config = dataclasses.replace(config, transport=args.transport)
+            config = config.on_transport(args.transport)
         if args.external:
             config = _external(config, args.external)
         groups = {role: group.name for group in config.groups.values() for role in group.roles}
@@ -195,7 +196,7 @@ def _external(config: SystemConfig, roles: list[str]) -> SystemConfig:
     Raises:
         TinManError: not on DDS, or not a role of TinMan.
     """
-    if config.transport != "dds":
+    if config.transport.kind != "dds":
         raise TinManError("--external needs --transport dds: a ROS 2 node plays the role on TinMan's ROS topics")
     every = [role for group in config.groups.values() for role in group.roles]
     unknown = [role for role in roles if role not in every]
@@ -203,8 +204,8 @@ def _external(config: SystemConfig, roles: list[str]) -> SystemConfig:
         raise TinManError(f"--external {unknown[0]}: TinMan has no role {unknown[0]}; its roles are {', '.join(every)}")
     groups = {name: dataclasses.replace(group, roles={r: f for r, f in group.roles.items() if r not in roles})
               for name, group in config.groups.items()}
-    return dataclasses.replace(config, groups={name: g for name, g in groups.items() if g.roles},
-                               external=tuple(dict.fromkeys(roles)))
+    ros = dataclasses.replace(config.ros or RosBridge(), external=frozenset(roles))
+    return dataclasses.replace(config, groups={name: g for name, g in groups.items() if g.roles}, ros=ros)
 
 
 def _check_terminal() -> None:
