@@ -413,7 +413,7 @@ def test_another_transport_must_be_one(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("path", sorted(p.relative_to(REPO).as_posix() for p in [
-    *REPO.glob("examples/*/*.toml"), REPO / "tinman" / "tinman.toml"]))
+    *REPO.glob("examples/*/*.toml"), REPO / "tinman" / "src" / "tinman" / "tinman.toml"]))
 def test_the_repository_s_system_files_are_of_the_current_form(path: str) -> None:
     data = tomllib.loads((REPO / path).read_text(encoding="utf-8"))
     assert isinstance(data.get("transport"), dict) and not {"domain", "run_id"} & set(data), path

@@ -22,6 +22,7 @@ import sessiontypes
 from anodize.tools import chains, inversion
 from anodize.tools.chains import Chains, ChainSearch
 from anodize.tools.cli import main
+from anodize import Dds, Processes, RosBridge
 from anodize.tools.config import GroupConfig, SystemConfig
 from anodize.tools.inversion import Inversion, InversionReport, Preemption, analyse_inversions
 from anodize.tools.lint import LintReport
@@ -43,8 +44,10 @@ def system(groups: Groups, external: tuple[str, ...] = (), capacities: dict[str,
     table = {name: GroupConfig(name, priority, None, cpus, "stop", 3, dict.fromkeys(roles, "m:f"),
                                f"system.toml: groups.{name}", (hosts or {}).get(name))
              for name, (priority, roles, cpus) in groups.items()}
-    return SystemConfig(Path("system.toml"), Path("p.proto"), "G", "dds" if external or hosts else "process",
-                        None, True, (), table, external=external, capacities=capacities or {})
+    transport = Dds() if external or hosts else Processes()
+    return SystemConfig(Path("system.toml"), Path("p.proto"), "G", transport, None, True, (), table,
+                        ros=RosBridge(external=frozenset(external)) if external else None,
+                        capacities=capacities or {})
 
 
 def analyse(protocol: str, config: SystemConfig) -> InversionReport:
