@@ -46,8 +46,9 @@ from ..recording.tap import Recorder
 from ..ros import RosType, ros_type
 from ..session.endpoint import Endpoint
 from ..session.payloads import resolve_class, with_field_classes
-from ..transport.codec import MAX_FRAME, Codec, DecodeError
-from ..transport.process import ProcessNetwork, make_codec
+from ..transport.codec import MAX_FRAME, Codec, DecodeError, make_codec
+from ..transport.network import GroupNetwork
+from ..transport.process import PipeLinks
 from ..transport.shm import ArrayRing, RingReader
 from .control import (
     Beat,
@@ -167,7 +168,7 @@ class _GroupProcess:
                          memory_note=memory_note))
         self._supervise(len(threads))
 
-    def _network(self) -> ProcessNetwork:
+    def _network(self) -> GroupNetwork:
         spec = self.spec
         classes = _payload_classes(spec.machines.values())
         ros_types = _payload_ros_types(spec.machines.values())
@@ -197,7 +198,8 @@ class _GroupProcess:
             return make_codec(classes, ring, None, ros_types)
 
         fds = {pair: conn.fileno() for pair, conn in self.pipes.items()}
-        return ProcessNetwork(spec.roles, spec.channels, fds, spec.dead, codec_for, doorbell_roles, spec.capacities)
+        return GroupNetwork(spec.roles, spec.channels, PipeLinks(fds), spec.dead, codec_for, doorbell_roles,
+                            spec.capacities)
 
     def _gone(self, receiver: str) -> str | None:
         network = self.network

@@ -45,8 +45,10 @@ from .pickle_guard import PICKLE_PROTOCOL, PickleRefusedError, scan_pickle, trav
 
 if TYPE_CHECKING:
     from ..ros import RosType
+    from .shm import ArrayRing
 
-__all__ = ["Codec", "DecodeError", "EncodeError", "INLINE_ARRAY_LIMIT", "MAX_FRAME", "HEADER", "FrameKind", "Tag"]
+__all__ = ["Codec", "make_codec", "DecodeError", "EncodeError", "INLINE_ARRAY_LIMIT", "MAX_FRAME", "HEADER",
+           "FrameKind", "Tag"]
 
 HEADER = struct.Struct("<I")  # frame length, not counting these 4 bytes
 INLINE_ARRAY_LIMIT = 64 * 1024  # bytes: larger arrays travel through shared memory
@@ -520,3 +522,9 @@ _BLOB_DECODERS: dict[int, Callable[[bytes], Any]] = {
 
 def _name_of(cls: type) -> str:
     return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def make_codec(classes: Iterable[type], ring: ArrayRing | None,
+               read_array: Callable[..., object] | None, ros_types: Iterable[RosType] = ()) -> Codec:
+    """A channel's codec: arrays go to ``ring`` when sending, come from ``read_array`` when receiving."""
+    return Codec(classes, ring, read_array, ros_types)
