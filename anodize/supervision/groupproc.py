@@ -176,12 +176,13 @@ class _GroupProcess:
         doorbell_roles = [r for r, m in spec.machines.items() if m.forks or m.waits_on_several()]
         dds = spec.extra.get("dds")
         if dds is not None:  # every channel between groups is a DDS topic; arrays travel in the frames
-            from ..transport.dds import DdsNetwork
+            from ..transport.dds.links import DdsLinks
 
-            network = DdsNetwork(dds, spec.name, spec.incarnation, spec.roles, spec.channels, spec.dead,
-                                 lambda pair: make_codec(classes, None, None, ros_types), doorbell_roles,
-                                 report=lambda line: self._send(Notice(text=line)), capacities=spec.capacities)
-            network.wait_for_peers()  # the start barrier: "ready" means every peer has appeared
+            links = DdsLinks(dds, spec.name, spec.incarnation, report=lambda line: self._send(Notice(text=line)))
+            network = GroupNetwork(spec.roles, spec.channels, links, spec.dead,
+                                   lambda pair: make_codec(classes, None, None, ros_types), doorbell_roles,
+                                   spec.capacities)
+            links.wait_for_peers()  # the start barrier: "ready" means every peer has appeared
             return network
 
         def codec_for(pair: tuple[str, str]) -> Codec:
