@@ -45,7 +45,6 @@ from .pickle_guard import PICKLE_PROTOCOL, PickleRefusedError, scan_pickle, trav
 
 if TYPE_CHECKING:
     from ..ros import RosType
-    from .shm import ArrayRing
 
 __all__ = ["Codec", "make_codec", "DecodeError", "EncodeError", "INLINE_ARRAY_LIMIT", "MAX_FRAME", "HEADER",
            "FrameKind", "Tag"]
@@ -524,7 +523,8 @@ def _name_of(cls: type) -> str:
     return f"{cls.__module__}:{cls.__qualname__}"
 
 
-def make_codec(classes: Iterable[type], ring: ArrayRing | None,
+def make_codec(classes: Iterable[type], ring: Any,
                read_array: Callable[..., object] | None, ros_types: Iterable[RosType] = ()) -> Codec:
-    """A channel's codec: arrays go to ``ring`` when sending, come from ``read_array`` when receiving."""
+    """A channel's codec: arrays go to ``ring`` (an :class:`~anodize.transport.shm.ArrayRing`, or None) when
+    sending, come from ``read_array`` when receiving."""
     return Codec(classes, ring, read_array, ros_types)
