@@ -77,15 +77,15 @@ class DdsReceiver:
         self.frames: InLane | None = None
         if not self.external:
             self.frames = InLane(DataReader(endpoints.participant, endpoints.topic((sender, receiver)),
-                                             qos=endpoints.reader_qos), None, None, "")
+                                            qos=endpoints.reader_qos), None, None, "")
         self.ros: dict[str, InLane] = {}  # ROS topic name -> its lane
         self.plan: LanePlan | None = None
         if settings.ros is not None:
             for label, topic in settings.ros.channel_topics(sender, receiver).items():
                 dds_topic, kind = endpoints.ros_topic(topic)
                 self.ros[topic.name] = InLane(DataReader(endpoints.participant, dds_topic,
-                                                          qos=endpoints.ros_qos(kind, writer=False)),
-                                               label, kind, topic.name)
+                                                         qos=endpoints.ros_qos(kind, writer=False)),
+                                              label, kind, topic.name)
             self.plan = settings.ros.plans.get((sender, receiver))
         self.lanes = [lane for lane in (self.frames, *self.ros.values()) if lane is not None]
         for lane in self.lanes:
@@ -130,7 +130,7 @@ class DdsReceiver:
             elif not lane.accepted:
                 channel = f"{self.sender}->{self.receiver}" + (f" ({lane.topic})" if lane.kind is not None else "")
                 handle, lane.accepted_guid = find_peer(self.endpoints, self.sender, channel, matched,
-                                                        lane.reader.get_matched_publication_data)
+                                                       lane.reader.get_matched_publication_data)
                 if handle is not None:
                     lane.accepted.add(handle)
                 found = found and handle is not None

@@ -71,13 +71,13 @@ class DdsSender:
         self.frames: OutLane | None = None
         if not self.external:
             self.frames = OutLane(DataWriter(endpoints.participant, endpoints.topic((sender, receiver)),
-                                              qos=endpoints.writer_qos), None, "")
+                                             qos=endpoints.writer_qos), None, "")
         self.ros: dict[str, OutLane] = {}  # label -> its ROS topic's writer
         if settings.ros is not None:
             for label, topic in settings.ros.channel_topics(sender, receiver).items():
                 dds_topic, kind = endpoints.ros_topic(topic)
                 self.ros[label] = OutLane(DataWriter(endpoints.participant, dds_topic,
-                                                      qos=endpoints.ros_qos(kind, writer=True)), kind, topic.name)
+                                                     qos=endpoints.ros_qos(kind, writer=True)), kind, topic.name)
         self.lanes = [lane for lane in (self.frames, *self.ros.values()) if lane is not None]
         self.credits: DataReader[Frame] | None = None
         self.credit_writer: int | None = None  # the publication handle of the receiver's credit writer
@@ -227,12 +227,12 @@ class DdsSender:
                 found = found and bool(matched)
             elif lane.accepted is None:
                 lane.accepted = find_peer(self.endpoints, self.receiver, channel, matched,
-                                           lane.writer.get_matched_subscription_data)[0]
+                                          lane.writer.get_matched_subscription_data)[0]
                 found = found and lane.accepted is not None
         if self.credits is not None and self.credit_writer is None:
             self.credit_writer = find_peer(self.endpoints, self.receiver, f"{self.sender}->{self.receiver} (credits)",
-                                            self.credits.get_matched_publications(),
-                                            self.credits.get_matched_publication_data)[0]
+                                           self.credits.get_matched_publications(),
+                                           self.credits.get_matched_publication_data)[0]
         return found and (self.credits is None or self.credit_writer is not None)
 
     def put_failure(self, cause: str) -> None:
