@@ -63,7 +63,7 @@ class InLane:
 class DdsReceiver:
     """The reading end of a channel from a role in another group, or from an external role (one
     reading thread). A channel whose labels go on several topics is read lane by lane, each message
-    from the topic its plan (:mod:`.ros_lanes`) says comes next."""
+    from the topic its plan (:mod:`anodize.transport.ros_lanes`) says comes next."""
 
     def __init__(self, endpoints: Endpoints, codec: Codec, network: LinkNetwork, sender: str, receiver: str) -> None:
         self.codec = codec
