@@ -66,11 +66,14 @@ class GroupNetwork:
         self._stop_events: dict[str, threading.Event] = {}
         self._cause_arrived = threading.Condition()
         self.bridges: list[threading.Thread] = []
+        self._linked_in: set[tuple[str, str]] = set()  # the links our roles read
         for sender, receiver in links.pairs(local, channels, dead):
             codec = codec_for((sender, receiver))
             if sender in local:
                 self.queues[(sender, receiver)] = links.writer((sender, receiver), codec, self)
-            elif receiver in self.doorbells:
+                continue
+            self._linked_in.add((sender, receiver))
+            if receiver in self.doorbells:
                 reader = links.reader((sender, receiver), codec, self)
                 self.queues[(sender, receiver)], thread = bridge(reader, sender, receiver, self.ring)
                 self.bridges.append(thread)
@@ -119,7 +122,7 @@ class GroupNetwork:
             self.failed[role] = cause
             self.alarm = True
         for (sender, receiver), channel in self.queues.items():
-            if receiver == role and sender not in self.local_roles:
+            if receiver == role and (sender, receiver) in self._linked_in:
                 self.links.silence((sender, receiver))
             if sender != role:
                 continue
