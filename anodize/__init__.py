@@ -49,7 +49,7 @@ from .taps import ChannelTap
 from .tools.config import ConfigError, SystemConfig, build_system, load_config
 from .tools.named import Finished, NamedSystem, Prepared
 from .transport.codec import DecodeError, EncodeError
-from .transport.process import PayloadError
+from .transport.links import PayloadError
 from .transport.shm import RingAllocationError, RingFullError
 
 if TYPE_CHECKING:

@@ -4,7 +4,7 @@ It is the process runner (:mod:`.processes`: isolation, memory bounds, prioritie
 liveness of the local groups) without pipes: each group's process joins the
 run's DDS domain, opens a topic per channel it has with another group, and
 reports ready only once every peer has appeared (the start barrier,
-:meth:`anodize.transport.dds.DdsNetwork.wait_for_peers`). Groups placed on other
+:meth:`anodize.transport.dds.links.DdsLinks.wait_for_peers`). Groups placed on other
 hosts are started there, by ``anodize run ... --host``; this host's report names
 them as running elsewhere.
 """

@@ -45,8 +45,9 @@ from ..ros import RosType, ros_type
 from ..session.endpoint import Endpoint
 from ..session.payloads import resolve_class, with_field_classes
 from ..taps import GroupTap, GroupTapPlan, TapGroup
-from ..transport.codec import MAX_FRAME, Codec, DecodeError
-from ..transport.process import ProcessNetwork, make_codec
+from ..transport.codec import MAX_FRAME, Codec, DecodeError, make_codec
+from ..transport.network import GroupNetwork
+from ..transport.process import PipeLinks
 from ..transport.shm import ArrayRing, RingReader
 from .control import (
     Beat,
@@ -169,7 +170,7 @@ class _GroupProcess:
                          memory_note=memory_note))
         self._supervise(len(threads))
 
-    def _network(self) -> ProcessNetwork:
+    def _network(self) -> GroupNetwork:
         spec = self.spec
         classes = _payload_classes(spec.machines.values())
         ros_types = _payload_ros_types(spec.machines.values())
@@ -177,12 +178,13 @@ class _GroupProcess:
         doorbell_roles = [r for r, m in spec.machines.items() if m.forks or m.waits_on_several()]
         dds = spec.dds
         if dds is not None:  # every channel between groups is a DDS topic; arrays travel in the frames
-            from ..transport.dds import DdsNetwork
+            from ..transport.dds.links import DdsLinks
 
-            network = DdsNetwork(dds, spec.name, spec.incarnation, spec.roles, spec.channels, spec.dead,
-                                 lambda pair: make_codec(classes, None, None, ros_types), doorbell_roles,
-                                 report=lambda line: self._send(Notice(text=line)), capacities=spec.capacities)
-            network.wait_for_peers()  # the start barrier: "ready" means every peer has appeared
+            links = DdsLinks(dds, spec.name, spec.incarnation, report=lambda line: self._send(Notice(text=line)))
+            network = GroupNetwork(spec.roles, spec.channels, links, spec.dead,
+                                   lambda pair: make_codec(classes, None, None, ros_types), doorbell_roles,
+                                   spec.capacities)
+            links.wait_for_peers()  # the start barrier: "ready" means every peer has appeared
             return network
 
         def codec_for(pair: tuple[str, str]) -> Codec:
@@ -199,7 +201,8 @@ class _GroupProcess:
             return make_codec(classes, ring, None, ros_types)
 
         fds = {pair: conn.fileno() for pair, conn in self.pipes.items()}
-        return ProcessNetwork(spec.roles, spec.channels, fds, spec.dead, codec_for, doorbell_roles, spec.capacities)
+        return GroupNetwork(spec.roles, spec.channels, PipeLinks(fds), spec.dead, codec_for, doorbell_roles,
+                            spec.capacities)
 
     def _gone(self, receiver: str) -> str | None:
         network = self.network

@@ -27,24 +27,23 @@ import json
 import os
 from collections.abc import Collection
 
-from cyclonedds._clayer import ddspy_take, ddspy_write
-from cyclonedds.core import Policy, Qos
-from cyclonedds.domain import DomainParticipant
-from cyclonedds.pub import DataWriter
-from cyclonedds.sub import DataReader
-from cyclonedds.topic import Topic
-from cyclonedds.util import duration
-
-from ..transport.dds import (
+from ..transport.dds import DdsSettings, instance_handle, participant_config, topic_name
+from ..transport.dds.binding import (
     ANY_SAMPLE,
-    DdsSettings,
-    Frame,
-    cdr_sample,
-    instance_handle,
-    participant_config,
-    topic_name,
+    DataReader,
+    DataWriter,
+    DomainParticipant,
+    Policy,
+    Qos,
+    Topic,
+    delete,
+    duration,
+    ref_of,
+    take,
     userdata_of,
+    write,
 )
+from ..transport.dds.frame import Frame, cdr_sample
 from .supervisor import RestartWord, StopWord, Word
 
 __all__ = ["HostLink"]
@@ -85,11 +84,11 @@ class HostLink:
             self.batches[word.incarnation] = self.batches.get(word.incarnation, frozenset()) | set(word.groups)
         fields = {"kind": "stop" if isinstance(word, StopWord) else "restart", **word.__dict__}
         body = json.dumps(fields).encode()
-        ddspy_write(self.writer._ref, cdr_sample(len(body).to_bytes(4, "little") + body))
+        write(ref_of(self.writer), cdr_sample(len(body).to_bytes(4, "little") + body))
 
     def words(self) -> list[Word]:
         """What the other hosts said since the last call, in the order each said it."""
-        taken = ddspy_take(self.reader._ref, ANY_SAMPLE, 64)
+        taken = take(ref_of(self.reader), ANY_SAMPLE, 64)
         if isinstance(taken, int):
             return []
         words: list[Word] = []
@@ -129,7 +128,7 @@ class HostLink:
         try:
             self.writer.wait_for_acks(duration(seconds=1))
         finally:
-            self.participant.__del__()
+            delete(self.participant)
 
 
 def _parse(body: bytes, host: str) -> Word | None:

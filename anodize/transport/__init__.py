@@ -1,9 +1,13 @@
 """How messages travel between roles.
 
 - :mod:`.inproc`: one queue per channel, between threads of one process;
-- :mod:`.process`: OS pipes between group processes, framed by :mod:`.codec`
-  (no pickle for known sorts), with large numpy arrays in the shared-memory
-  rings of :mod:`.shm`.
+- :mod:`.network`: the channels of one group's process, composed of local queues and
+  one transport's links (:mod:`.links` says what a transport provides):
+  - :mod:`.process`: OS pipes between group processes, framed by :mod:`.codec`
+    (no pickle for known sorts; :mod:`.pickle_guard` for the classes that do travel
+    pickled), with large numpy arrays in the shared-memory rings of :mod:`.shm`;
+  - :mod:`.dds`: DDS topics on Cyclone DDS, the binding reached only through
+    :mod:`.dds.binding`.
 
 Each gives one FIFO channel per ordered pair of roles the global type connects,
 and carries a peer's failure or a stop after everything sent before it.

@@ -17,6 +17,7 @@ import time
 from collections import deque
 from collections.abc import Iterable, Mapping
 from queue import Empty, SimpleQueue
+from typing import Protocol
 
 from ..errors import PeerFailedError, RoleStopped
 from ..session.channel import STOP, Channel, Doorbell, PeerFailure
@@ -26,12 +27,20 @@ __all__ = ["InprocNetwork", "BoundedQueue"]
 _LOOK = 0.05  # seconds between a waiting sender's looks at stops and failures
 
 
+class _Watched(Protocol):
+    """What a waiting sender looks at: whether the run, or its own role, stops, and who failed."""
+
+    stopping: bool
+    stopped: set[str]
+    failed: dict[str, str]
+
+
 class BoundedQueue:
     """A channel between threads that holds at most ``capacity`` messages: a sender waits while
     it is full (back pressure, bounded memory), and stops waiting when the run stops or its
     receiver fails. Signals (a failure, STOP) never wait and do not count."""
 
-    def __init__(self, capacity: int, network: InprocNetwork, sender: str, receiver: str) -> None:
+    def __init__(self, capacity: int, network: _Watched, sender: str, receiver: str) -> None:
         self.capacity = capacity
         self._network = network
         self._sender = sender

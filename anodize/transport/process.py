@@ -1,8 +1,7 @@
-"""Channels of a group process: in-process queues inside the group, OS pipes between groups.
+"""The process transport's links: OS pipes between group processes.
 
-A group's process sees the same interface as the inproc transport
-(:class:`~anodize.transport.inproc.InprocNetwork`): a channel per ordered pair
-with ``put``/``get``. Channels to roles of other groups are pipes carrying
+A group's :class:`~anodize.transport.network.GroupNetwork` links its channels to
+roles of other groups with :class:`PipeLinks`: each is a pipe carrying
 frames (:mod:`anodize.transport.codec`); large arrays go through shared-memory rings
 (:mod:`anodize.transport.shm`). Only the sending group holds a pipe's write end, so when
 that group's process dies the receiver reads end-of-file: a crashed peer is
@@ -18,48 +17,75 @@ import select
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Mapping
-from queue import Empty, SimpleQueue
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from collections.abc import Collection, Iterable, Mapping
+from queue import Empty
+from typing import Any
 
 from ..errors import AnodizeError, PeerFailedError, RoleStopped
-from ..session.channel import STOP, Channel, Corrupt, PeerFailure
+from ..session.channel import STOP, Corrupt, PeerFailure
 from .codec import HEADER, MAX_FRAME, Codec, DecodeError, EncodeError, FrameKind
 from .frames import SmallFrameWriter
-from .inproc import InprocNetwork
-from .shm import ArrayRing
+from .links import LinkNetwork, PayloadError
 
-if TYPE_CHECKING:
-    from ..ros import RosType
-
-__all__ = ["PipeSender", "PipeReceiver", "ProcessNetwork", "PayloadError", "BridgeQueue", "FailureWriter"]
+__all__ = ["PipeLinks", "PipeSender", "PipeReceiver"]
 
 # Reads of at most 64 KiB: larger ones make malloc mmap and munmap a buffer on every call.
 _READ_SIZE = 64 * 1024
 _PIPE_SIZE = 1 << 20  # ask the kernel for 1 MiB pipes: fewer blocked senders when streaming
-BRIDGE_MESSAGES = 256  # a bridged channel's queue holds at most this many messages...
-BRIDGE_BYTES = 4 * 2**20  # ...and this many bytes of frames: then the pipe fills and its sender blocks
 # A failure frame stays within PIPE_BUF (4096 bytes; 4 UTF-8 bytes a character at most): one
 # write, which a reader sees whole even when the writer dies right after it.
 _CAUSE_CHARS = (select.PIPE_BUF - 16) // 4
-_EOF_CAUSE_WAIT = 2.0  # seconds to wait for the supervisor's word on why a peer's process ended
 
 
-@runtime_checkable
-class FailureWriter(Protocol):
-    """The sending end of a channel to another process: it can say, from any thread, that its role failed."""
+class PipeLinks:
+    """The links of a group's channels to other groups' processes: one pipe each.
 
-    def put_failure(self, cause: str) -> None: ...
+    Args:
+        fds: for each pair with one end here and the other in another group, the
+            pipe's file descriptor (the write end for our senders, the read end for
+            our receivers).
+    """
 
+    def __init__(self, fds: Mapping[tuple[str, str], int]) -> None:
+        self.fds = dict(fds)
+        # Rung when the run stops: every pipe reader polls it (never drained: stop is final).
+        self.wake_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+        self._failure_listeners: dict[str, list[int]] = {}  # sender -> its readers' notice eventfds
+        self._incoming: dict[tuple[str, str], int] = {}
 
-class PayloadError(AnodizeError):
-    """A payload that cannot cross to another group's process (nothing was sent)."""
+    def pairs(self, local_roles: Collection[str], channels: Iterable[tuple[str, str]],
+              dead: Mapping[str, str]) -> list[tuple[str, str]]:
+        """The pairs we were given a pipe for."""
+        return list(self.fds)
+
+    def writer(self, pair: tuple[str, str], codec: Codec, network: LinkNetwork) -> PipeSender:
+        return PipeSender(self.fds[pair], codec, network, *pair)
+
+    def reader(self, pair: tuple[str, str], codec: Codec, network: LinkNetwork) -> PipeReceiver:
+        receiver = PipeReceiver(self.fds[pair], codec, network, pair[0], self.wake_fd)
+        self._incoming[pair] = self.fds[pair]
+        self._failure_listeners.setdefault(pair[0], []).append(receiver.notice_fd)
+        return receiver
+
+    def silence(self, pair: tuple[str, str]) -> None:
+        if pair in self._incoming:
+            _silence(self._incoming[pair])  # its blocked senders get EPIPE
+
+    def noted_failed(self, role: str) -> None:
+        for fd in self._failure_listeners.get(role, ()):
+            os.eventfd_write(fd, 1)
+
+    def wake(self) -> None:
+        os.eventfd_write(self.wake_fd, 1)
+
+    def close(self, linger: float) -> None:
+        """Nothing to flush: what was written is in the pipe."""
 
 
 class PipeSender:
     """The write end of a channel to a role in another process."""
 
-    def __init__(self, fd: int, codec: Codec, network: ProcessNetwork, sender: str, receiver: str) -> None:
+    def __init__(self, fd: int, codec: Codec, network: LinkNetwork, sender: str, receiver: str) -> None:
         self.fd = fd
         self.codec = codec
         self.network = network
@@ -222,7 +248,7 @@ class PipeSender:
 class PipeReceiver:
     """The read end of a channel from a role in another process (one reading thread)."""
 
-    def __init__(self, fd: int, codec: Codec, network: ProcessNetwork, sender: str) -> None:
+    def __init__(self, fd: int, codec: Codec, network: LinkNetwork, sender: str, wake_fd: int) -> None:
         self.fd = fd
         self.codec = codec
         self.network = network
@@ -238,9 +264,8 @@ class PipeReceiver:
         # group may keep the pipe's write end open, so end-of-file alone cannot be waited for.
         self.notice_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self._poll.register(fd, select.POLLIN)
-        self._poll.register(network.wake_fd, select.POLLIN)
+        self._poll.register(wake_fd, select.POLLIN)
         self._poll.register(self.notice_fd, select.POLLIN)
-        network.listen_for_failure(sender, self.notice_fd)
 
     def put(self, item: object) -> None:
         """Put back a sentinel (a failure or STOP) for the next receive."""
@@ -375,170 +400,6 @@ class PipeReceiver:
         return True
 
 
-class ProcessNetwork(InprocNetwork):
-    """The channels of one group's process.
-
-    Args:
-        local_roles: the roles running in this process.
-        channels: every ordered pair the global type connects.
-        pipes: for each pair with one end here and the other in another group, the
-            pipe's file descriptor (the write end for our senders, the read end for
-            our receivers); a subclass's own link (see ``_writer`` / ``_reader``).
-        dead: pairs whose other end cannot be reached (its group did not start with
-            this one), with the reason; sending or receiving there fails at once.
-        codec_for: builds the codec of a channel (its payload classes and rings).
-        doorbell_roles: local roles with parallel branches (their cross-process
-            channels are bridged into local queues so ``recv_any`` can wait on all).
-    """
-
-    def __init__(self, local_roles: Iterable[str], channels: Iterable[tuple[str, str]],
-                 pipes: Mapping[tuple[str, str], Any], dead: dict[str, str],
-                 codec_for: Callable[[tuple[str, str]], Codec], doorbell_roles: Iterable[str] = (),
-                 capacities: Mapping[tuple[str, str], int] | None = None) -> None:
-        self.local_roles = frozenset(local_roles)
-        self.capacities = dict(capacities or {})
-        local_pairs = [(a, b) for a, b in channels if a in self.local_roles and b in self.local_roles]
-        super().__init__(local_pairs, [r for r in doorbell_roles if r in self.local_roles],
-                         capacities={pair: n for pair, n in self.capacities.items() if pair in local_pairs})
-        self.wake_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
-        self._cause_arrived = threading.Condition()
-        self._failure_listeners: dict[str, list[int]] = {}
-        self.bridges: list[threading.Thread] = []
-        self.incoming_fds = {pair: fd for pair, fd in pipes.items() if pair[1] in self.local_roles}
-        for role, cause in dead.items():
-            self.failed[role] = cause
-            self.alarm = True
-        for (sender, receiver), link in pipes.items():
-            codec = codec_for((sender, receiver))
-            if sender in self.local_roles:
-                self.queues[(sender, receiver)] = self._writer(link, codec, sender, receiver)
-            elif receiver in self.doorbells:
-                self.queues[(sender, receiver)] = self._bridge(self._reader(link, codec, sender, receiver),
-                                                               sender, receiver)
-            else:
-                self.queues[(sender, receiver)] = self._reader(link, codec, sender, receiver)
-        for sender, receiver in channels:  # channels to or from a peer that is not there
-            if (sender, receiver) not in self.queues and receiver in self.local_roles:
-                gone: SimpleQueue[object] = SimpleQueue()
-                gone.put(PeerFailure(sender, dead.get(sender, "not running")))
-                self.queues[(sender, receiver)] = gone
-
-    # The two ends of a channel between processes; another transport gives its own.
-    def _writer(self, link: Any, codec: Codec, sender: str, receiver: str) -> Channel:
-        return PipeSender(link, codec, self, sender, receiver)
-
-    def _reader(self, link: Any, codec: Codec, sender: str, receiver: str) -> Channel:
-        return PipeReceiver(link, codec, self, sender)
-
-    def _silence(self, pair: tuple[str, str]) -> None:
-        """Our receiver of ``pair`` failed: its blocked senders in other processes must notice."""
-        if pair in self.incoming_fds:
-            _silence(self.incoming_fds[pair])  # its blocked senders get EPIPE
-
-    def _bridge(self, source: Any, sender: str, receiver: str) -> BridgeQueue:
-        """A thread moving frames from a pipe into a local queue, ringing the doorbell.
-
-        The queue is bounded: when the role falls behind, the thread stops reading, the
-        pipe fills and the sender blocks (back pressure), as on a channel without a bridge.
-        """
-        target = BridgeQueue()
-
-        def pump() -> None:
-            while True:
-                try:
-                    item = source.get()
-                except MemoryError:
-                    raise  # our group's own bound, not the sender's fault: the thread hook reports it
-                except Exception as error:  # never die silently: the receiver must hear of it
-                    item = Corrupt(f"{type(error).__name__}: {error}")
-                    target.put(item)
-                    self.ring(receiver, sender)
-                    return
-                if type(item) is tuple or isinstance(item, Corrupt):
-                    target.put_message(item, source.frame_size)  # waits while the queue is full
-                else:
-                    target.put(item)  # a failure or STOP: never waits
-                self.ring(receiver, sender)
-                if type(item) is not tuple and not isinstance(item, Corrupt):
-                    return  # a failure or STOP ends the channel
-
-        thread = threading.Thread(target=pump, name=f"anodize-bridge:{sender}->{receiver}", daemon=True)
-        self.bridges.append(thread)
-        return target
-
-    def start(self) -> None:
-        for thread in self.bridges:
-            thread.start()
-
-    # ---- failure and stop ------------------------------------------------------------------
-    def fail(self, role: str, cause: str) -> None:
-        """``role`` failed: tell its receivers (a local role), or just record it (a remote one)."""
-        if role not in self.local_roles:
-            self.note_failed(role, cause)
-            return
-        with self._lock:
-            if role in self.failed:
-                return
-            self.failed[role] = cause
-            self.alarm = True
-        for (sender, receiver), channel in self.queues.items():
-            if receiver == role:
-                self._silence((sender, receiver))
-            if sender != role:
-                continue
-            if isinstance(channel, FailureWriter):
-                channel.put_failure(cause)
-            else:
-                channel.put(PeerFailure(role, cause))
-                self.ring(receiver, sender)
-
-    def note_failed(self, role: str, cause: str) -> None:
-        """Record why a remote role failed (from its failure frame or the supervisor), and wake
-        its receivers here."""
-        with self._cause_arrived:
-            self.failed.setdefault(role, cause)
-            self.alarm = True
-            self._cause_arrived.notify_all()
-        for fd in self._failure_listeners.get(role, ()):
-            os.eventfd_write(fd, 1)
-
-    def listen_for_failure(self, sender: str, fd: int) -> None:
-        """Have ``fd`` (an eventfd) written when ``sender`` is noted failed."""
-        self._failure_listeners.setdefault(sender, []).append(fd)
-
-    def wait_for_cause(self, role: str, default: str) -> str | None:
-        """Why ``role`` failed; wait briefly for the supervisor to say, when its process died.
-
-        Returns:
-            The cause (``default`` if none arrived in time), or None when the run is
-            stopping and ``role`` did not fail: its process ended with the run.
-        """
-        with self._cause_arrived:
-            self._cause_arrived.wait_for(lambda: role in self.failed or self.stopping, timeout=_EOF_CAUSE_WAIT)
-            # Read here, not by the caller: ``stopping`` changes from other threads, and
-            # the caller has already seen it False before waiting.
-            if self.stopping and role not in self.failed:
-                return None
-            return self.failed.get(role, default)
-
-    def stop(self) -> None:
-        """Wake every receiver of this process with STOP."""
-        with self._cause_arrived:  # a receiver waiting to learn why a peer's process ended: the stop
-            self.stopping = True
-            self.alarm = True
-            self._cause_arrived.notify_all()
-        for role in self.local_roles:
-            self.stop_event_for(role).set()
-        os.eventfd_write(self.wake_fd, 1)  # wakes pipe readers; never drained: stop is final
-        local = self.local_roles
-        for (sender, receiver), channel in self.queues.items():
-            # Channels inside this process, whatever wraps them (a bounded queue, a tap), and the
-            # queues standing for peers that are not there; pipe ends are woken by wake_fd.
-            if (sender in local and receiver in local) or isinstance(channel, SimpleQueue):
-                channel.put(STOP)
-                self.ring(receiver, sender)
-
-
 def _fitted(cause: str) -> str:
     """``cause`` shortened, visibly, to fit a failure frame in one write."""
     if len(cause) <= _CAUSE_CHARS:
@@ -569,77 +430,3 @@ def _grow_pipe(fd: int) -> None:
     # Refused or not on this system: the default size works, only with more blocking.
     with contextlib.suppress(OSError, AttributeError):
         fcntl.fcntl(fd, fcntl.F_SETPIPE_SZ, _PIPE_SIZE)
-
-
-def make_codec(classes: Iterable[type], ring: ArrayRing | None,
-               read_array: Callable[..., object] | None, ros_types: Iterable[RosType] = ()) -> Codec:
-    """A channel's codec: arrays go to ``ring`` when sending, come from ``read_array`` when receiving."""
-    return Codec(classes, ring, read_array, ros_types)
-
-
-class BridgeQueue:
-    """A bridged channel's local queue, bounded by message count and frame bytes.
-
-    The bridge thread waits in :meth:`put_message` while the queue is full; signals
-    (a failure, STOP, a corrupt frame) and what a receiver puts back go in with
-    :meth:`put`, which never waits, so they always get through.
-
-    Args:
-        messages: at most this many messages wait...
-        budget: ...holding at most this many bytes of frames (one bigger message may
-            still wait alone).
-    """
-
-    def __init__(self, messages: int = BRIDGE_MESSAGES, budget: int = BRIDGE_BYTES) -> None:
-        self._items: deque[tuple[object, int]] = deque()
-        self._bytes = 0
-        self._messages = messages
-        self._budget = budget
-        self._lock = threading.Lock()
-        self._not_empty = threading.Condition(self._lock)
-        self._not_full = threading.Condition(self._lock)
-
-    def put_message(self, item: object, size: int) -> None:
-        """Queue a message of ``size`` frame bytes, waiting for room."""
-        with self._not_full:
-            while self._items and (len(self._items) >= self._messages or self._bytes + size > self._budget):
-                self._not_full.wait()
-            self._items.append((item, size))
-            self._bytes += size
-            self._not_empty.notify()
-
-    def put(self, item: object) -> None:
-        """Queue a signal (or put one back): never waits."""
-        with self._lock:
-            self._items.append((item, 0))
-            self._not_empty.notify()
-
-    def get(self, *, timeout: float | None = None) -> object:
-        """The next item, waiting up to ``timeout`` seconds (None: for ever).
-
-        Raises:
-            queue.Empty: nothing arrived in time.
-        """
-        with self._not_empty:
-            if not self._not_empty.wait_for(lambda: self._items, timeout):
-                raise Empty
-            item, size = self._items.popleft()
-            self._bytes -= size
-            self._not_full.notify()
-            return item
-
-    def get_nowait(self) -> object:
-        """The next item, without waiting.
-
-        Raises:
-            queue.Empty: nothing is waiting.
-        """
-        return self.get(timeout=0)
-
-    def empty(self) -> bool:
-        """Whether nothing is waiting."""
-        return not self._items
-
-    def qsize(self) -> int:
-        """How many items wait."""
-        return len(self._items)

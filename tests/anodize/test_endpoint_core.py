@@ -37,7 +37,8 @@ from anodize.session.channel import STOP, Corrupt, PeerFailure  # noqa: E402
 from anodize.session.endpoint import COMPILED_CORE, Endpoint  # noqa: E402
 from anodize.transport.codec import Codec  # noqa: E402
 from anodize.transport.inproc import InprocNetwork  # noqa: E402
-from anodize.transport.process import ProcessNetwork  # noqa: E402
+from anodize.transport.network import GroupNetwork  # noqa: E402
+from anodize.transport.process import PipeLinks  # noqa: E402
 
 needs_compiled = pytest.mark.skipif(COMPILED_CORE is None, reason="anodize was installed without a C compiler "
                                     "or Python's headers, so the compiled core was not built")
@@ -218,8 +219,8 @@ def _pipe_setup(generated: GeneratedGlobal, role: str, peer: str) -> tuple[Endpo
     global_type = load_global(generated.text)
     read, write = os.pipe()
     channels = [(a, b) for a in global_type.roles for b in global_type.roles if a != b]
-    receiving = ProcessNetwork([role], channels, {(peer, role): read}, {}, lambda pair: Codec())
-    sending = ProcessNetwork([peer], channels, {(peer, role): write}, {}, lambda pair: Codec())
+    receiving = GroupNetwork([role], channels, PipeLinks({(peer, role): read}), {}, lambda pair: Codec())
+    sending = GroupNetwork([peer], channels, PipeLinks({(peer, role): write}), {}, lambda pair: Codec())
     endpoint = Endpoint(role, "G", machines_of(global_type)[role], receiving, True)
     sending.queues = {(peer, role): sending.queues[(peer, role)]}
     return endpoint, sending

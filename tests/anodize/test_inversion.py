@@ -19,10 +19,10 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import sessiontypes
+from anodize import Dds, Processes, RosBridge
 from anodize.tools import chains, inversion
 from anodize.tools.chains import Chains, ChainSearch
 from anodize.tools.cli import main
-from anodize import Dds, Processes, RosBridge
 from anodize.tools.config import GroupConfig, SystemConfig
 from anodize.tools.inversion import Inversion, InversionReport, Preemption, analyse_inversions
 from anodize.tools.lint import LintReport

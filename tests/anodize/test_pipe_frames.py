@@ -18,13 +18,14 @@ import pytest
 
 from anodize.session.channel import Corrupt, PeerFailure
 from anodize.transport.codec import Codec
-from anodize.transport.process import PipeReceiver, PipeSender, ProcessNetwork
+from anodize.transport.network import GroupNetwork
+from anodize.transport.process import PipeLinks, PipeReceiver, PipeSender
 
 
 def _ends() -> tuple[PipeSender, PipeReceiver]:
     read, write = os.pipe()
-    sending = ProcessNetwork(["A"], [("A", "B")], {("A", "B"): write}, {}, lambda pair: Codec())
-    receiving = ProcessNetwork(["B"], [("A", "B")], {("A", "B"): read}, {}, lambda pair: Codec())
+    sending = GroupNetwork(["A"], [("A", "B")], PipeLinks({("A", "B"): write}), {}, lambda pair: Codec())
+    receiving = GroupNetwork(["B"], [("A", "B")], PipeLinks({("A", "B"): read}), {}, lambda pair: Codec())
     sender, receiver = sending.queues[("A", "B")], receiving.queues[("A", "B")]
     assert isinstance(sender, PipeSender) and isinstance(receiver, PipeReceiver)
     return sender, receiver

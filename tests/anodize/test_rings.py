@@ -22,8 +22,8 @@ import ring_roles as roles
 import anodize
 import sessiontypes
 from anodize import MemoryBoundError
+from anodize.transport.bridge import BridgeQueue
 from anodize.transport.codec import Codec
-from anodize.transport.process import BridgeQueue
 from anodize.transport.segments import Inbox, hand_over
 from anodize.transport.shm import ArrayRing, RingAllocationError, RingFullError, RingReader
 

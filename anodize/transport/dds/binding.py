@@ -1,0 +1,86 @@
+"""The seam to the Cyclone DDS binding: the one module that imports ``cyclonedds`` or touches its privates.
+
+The rest of anodize uses the binding only through the names declared here (pyzmq's
+``zmq/backend/select.py`` is the model: one place says which calls the rest may use).
+Most are the binding's public API, re-exported; the few that reach past it are
+functions here, so that a new binding release that moves them breaks this module only:
+
+- :func:`write` and :func:`take` are the binding's C calls (``cyclonedds._clayer``)
+  that write and take raw CDR bytes, skipping its element-by-element encoding (a
+  900 KB array costs one copy). They take an entity's :func:`ref_of`, looked up once
+  when a lane is built, never per message.
+- :func:`delete` deletes an entity now (the binding deletes on garbage collection,
+  too late for a reader whose writer must see it unmatched).
+
+``cyclonedds`` is imported when this module is, through :func:`anodize._extras.import_extra`:
+only a DDS run, the ROS wire or a supervisor of several hosts imports it, and
+without the ``anodize[dds]`` extra that import raises
+:class:`~anodize.errors.MissingExtraError`. The test ``test_binding_seam.py`` fails if
+any other module under ``anodize/`` names the binding's private API.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from ..._extras import import_extra
+
+if TYPE_CHECKING:  # the same names, for the type checker (which has the binding installed)
+    from cyclonedds._clayer import ddspy_take as take
+    from cyclonedds._clayer import ddspy_write as write
+    from cyclonedds.core import DDSException, InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.idl import IdlStruct
+    from cyclonedds.idl import types as idl_types
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+    from cyclonedds.util import duration
+else:
+    _FEATURE = "the DDS transport"
+    _clayer = import_extra("cyclonedds._clayer", "dds", _FEATURE)
+    _core = import_extra("cyclonedds.core", "dds", _FEATURE)
+    _idl = import_extra("cyclonedds.idl", "dds", _FEATURE)
+    write = _clayer.ddspy_write
+    take = _clayer.ddspy_take
+    DDSException, InstanceState, Policy, Qos = _core.DDSException, _core.InstanceState, _core.Policy, _core.Qos
+    ReadCondition, SampleState, ViewState, WaitSet = (_core.ReadCondition, _core.SampleState, _core.ViewState,
+                                                      _core.WaitSet)
+    DomainParticipant = import_extra("cyclonedds.domain", "dds", _FEATURE).DomainParticipant
+    IdlStruct, idl_types = _idl.IdlStruct, _idl.types
+    DataWriter = import_extra("cyclonedds.pub", "dds", _FEATURE).DataWriter
+    DataReader = import_extra("cyclonedds.sub", "dds", _FEATURE).DataReader
+    Topic = import_extra("cyclonedds.topic", "dds", _FEATURE).Topic
+    duration = import_extra("cyclonedds.util", "dds", _FEATURE).duration
+
+__all__ = ["write", "take", "ref_of", "delete", "userdata_of", "ANY_SAMPLE", "RETCODE_TIMEOUT", "XCDR1",
+           "DDSException", "Policy", "Qos", "ReadCondition", "WaitSet", "DomainParticipant", "IdlStruct",
+           "idl_types", "DataWriter", "DataReader", "Topic", "duration"]
+
+RETCODE_TIMEOUT = -10  # DDS_RETCODE_TIMEOUT, from write: no room within the writer's blocking time
+ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any  # what take() takes: every sample
+# ROS 2 publishes plain CDR (XCDR1): its readers do not accept a writer that offers only XCDR2.
+XCDR1 = (Policy.DataRepresentation(use_cdrv0_representation=True),)
+
+
+def ref_of(entity: DataWriter[Any] | DataReader[Any]) -> int:
+    """The C handle of a writer or reader, for :func:`write` and :func:`take` (look it up once)."""
+    ref: int = entity._ref
+    return ref
+
+
+def delete(entity: DataWriter[Any] | DataReader[Any] | DomainParticipant) -> None:
+    """Delete ``entity`` now: its peers see it unmatched at once, not when Python collects it."""
+    entity.__del__()
+
+
+def userdata_of(qos: Qos | None) -> bytes:
+    """The USER_DATA an endpoint's QoS carries (empty if none)."""
+    if qos is None:
+        return b""
+    try:
+        policy = qos[Policy.Userdata]
+    except (KeyError, TypeError):
+        return b""
+    data = getattr(policy, "data", b"")
+    return data if isinstance(data, bytes) else b""

@@ -1,0 +1,42 @@
+"""Which matched endpoint is the peer a channel expects: the one that claims its group of our run and incarnation."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from .binding import userdata_of
+from .identity import instance_handle, parse_identity
+from .qos import Endpoints
+from .settings import StartBarrierError
+
+__all__ = ["find_peer"]
+
+
+def find_peer(endpoints: Endpoints, role: str, channel: str, handles: Iterable[int],
+              data_of: Callable[[int], Any]) -> tuple[int | None, str]:
+    """The handle and GUID of the one matched endpoint that says it is ``role``'s group of
+    our run and incarnation, or (None, "") while there is none.
+
+    Raises:
+        StartBarrierError: several claim it (never guess which one is genuine).
+    """
+    settings = endpoints.settings
+    expected = settings.group_of[role]
+    claims = []
+    for handle in handles:
+        data = data_of(handle)
+        identity = parse_identity(userdata_of(data.qos)) if data is not None else None
+        # A restart starts its batch of groups as one incarnation: an endpoint of an older
+        # one is the session we left, not a peer of this one.
+        if identity is not None and identity[:3] == (settings.run_id, expected, endpoints.incarnation):
+            claims.append((instance_handle(handle), str(data.key), identity))
+    if len(claims) > 1:
+        raise StartBarrierError(
+            f"{len(claims)} DDS endpoints on {channel} claim to be {settings.where(role)}: "
+            + ", ".join(f"{guid} (pid {identity[4]} on {identity[3]})" for _, guid, identity in claims)
+            + "; is the same run started twice, or is someone forging it?")
+    if claims:
+        handle, guid, _ = claims[0]
+        return handle, guid
+    return None, ""

@@ -1,0 +1,71 @@
+"""What a group's process needs to join its run on DDS, and the names and configuration derived from it."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from ...errors import AnodizeError
+from ..ros_lanes import RosSettings
+
+__all__ = ["DdsSettings", "DOMAIN_ENV", "StartBarrierError", "topic_name", "participant_config"]
+
+DOMAIN_ENV = "ANODIZE_DDS_DOMAIN"  # overrides the system file's domain
+
+
+class StartBarrierError(AnodizeError):
+    """Peers of a group did not appear on the DDS domain in time."""
+
+
+@dataclass(frozen=True)
+class DdsSettings:
+    """What a group's process needs to join its run on DDS (picklable, in the group's spec).
+
+    Attributes:
+        domain: the DDS domain id.
+        run_id: keeps two runs of the same system apart (part of every topic name).
+        host: the host this group runs on (for messages and identities).
+        group_of: role -> group, for every role of the system.
+        host_of: group -> host, for every group of the system.
+        lease: seconds of liveliness lease (a silent peer is failed after about this).
+        wait: seconds the start barrier waits for every peer.
+        ros: the channels' labels that are ROS 2 topics, and the roles ROS 2 nodes play.
+    """
+
+    domain: int
+    run_id: str
+    host: str
+    group_of: Mapping[str, str]
+    host_of: Mapping[str, str]
+    lease: float = 1.0
+    wait: float = 30.0
+    extra_config: str = field(default="")
+    ros: RosSettings | None = None
+
+    def where(self, role: str) -> str:
+        """Where ``role`` runs, for messages."""
+        if self.is_external(role):
+            return f"external role {role} (a ROS 2 node)"
+        group = self.group_of[role]
+        return f"group {group} on host {self.host_of.get(group, '?')}"
+
+    def is_external(self, role: str) -> bool:
+        """Whether ``role`` is played by a ROS 2 node, not by anodize."""
+        return self.ros is not None and role in self.ros.external
+
+
+def topic_name(run_id: str, sender: str, receiver: str) -> str:
+    """The channel's topic: DDS names allow letters, digits, ``_`` and ``/``."""
+    return "anodize/" + "/".join(_safe(part) for part in (run_id, sender, receiver))
+
+
+def _safe(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_]", lambda m: f"_{ord(m.group()):x}_", text)
+
+
+def participant_config(lease: float) -> str:
+    """Cyclone configuration for a group: a discovery lease of ``lease`` seconds, so a vanished
+    participant (process killed, host cut off) is dropped, and its endpoints unmatched, that fast."""
+    return (f"<CycloneDDS><Domain id=\"any\"><Discovery><LeaseDuration>{lease:g}s</LeaseDuration>"
+            "</Discovery></Domain></CycloneDDS>")
