@@ -15,6 +15,29 @@ other module under ``anodize`` is private, whatever its name (tests/test_exports
 
 from typing import TYPE_CHECKING, Any
 
+from ._isolation.sched import lower_thread_priority
+from ._live.inputs import ClientInput, client_input
+from ._recording.reader import RecordingError
+from ._recording.replay_network import ReplayDivergenceError
+from ._ros.messages import RosDecodeError, RosEncodeError
+from ._session import Endpoint, EndpointStatistics, Message, State
+from ._supervision import (
+    Dds,
+    Group,
+    GroupReport,
+    GroupStatus,
+    Inproc,
+    Processes,
+    RoleReport,
+    RosBridge,
+    RunReport,
+    System,
+)
+from ._tools.config import ConfigError, SystemConfig, build_system, load_config
+from ._tools.named import Finished, NamedSystem, Prepared
+from ._transport.codec import DecodeError, EncodeError
+from ._transport.links import PayloadError
+from ._transport.shm import RingAllocationError, RingFullError
 from .errors import (
     Action,
     AnodizeError,
@@ -27,33 +50,10 @@ from .errors import (
     RoleError,
     RoleStopped,
 )
-from .isolation.sched import lower_thread_priority
-from .live.inputs import ClientInput, client_input
-from .recording.reader import RecordingError
-from .recording.replay_network import ReplayDivergenceError
-from .ros.messages import RosDecodeError, RosEncodeError
-from .session import Endpoint, EndpointStatistics, Message, State
-from .supervision import (
-    Dds,
-    Group,
-    GroupReport,
-    GroupStatus,
-    Inproc,
-    Processes,
-    RoleReport,
-    RosBridge,
-    RunReport,
-    System,
-)
 from .taps import ChannelTap
-from .tools.config import ConfigError, SystemConfig, build_system, load_config
-from .tools.named import Finished, NamedSystem, Prepared
-from .transport.codec import DecodeError, EncodeError
-from .transport.links import PayloadError
-from .transport.shm import RingAllocationError, RingFullError
 
 if TYPE_CHECKING:
-    from .transport.dds import StartBarrierError as StartBarrierError
+    from ._transport.dds import StartBarrierError as StartBarrierError
 
 __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",

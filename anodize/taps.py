@@ -10,7 +10,7 @@ once every role of the group has ended. When the run is over the supervisor's ha
 says what it did, as notes for the report.
 
 This module sits below supervision: supervision knows taps only by this protocol,
-so it imports neither :mod:`anodize.recording` nor :mod:`anodize.live`.
+so it imports neither :mod:`anodize._recording` nor :mod:`anodize._live`.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Any, Protocol
 
 from sessiontypes import GlobalType, StateMachine
 
-from .session.channel import Channel
+from ._session.channel import Channel
 
 __all__ = ["ChannelTap", "GroupTapPlan", "GroupTap", "TapRun", "TapGroup"]
 

@@ -6,7 +6,7 @@ Each measure is taken three ways, interleaved in every repetition (so drift hits
   anodize dds      two groups, ``anodize.System(..., transport=Dds(...))`` on a DDS domain
                    derived from this process's pid, a fresh run id per run.
   raw Cyclone      two spawned processes, a writer/reader pair per direction on topics
-                   of type ``anodize.transport.dds.Frame``, written with
+                   of type ``anodize._transport.dds.Frame``, written with
                    ``cyclonedds._clayer.ddspy_write`` as CDR bytes built as the transport
                    builds them (``cdr_sample``), taken with ``ddspy_take`` after a WaitSet wait;
                    the transport's QoS (reliable, keep-all, reader resource limits ``READER_SAMPLES``,

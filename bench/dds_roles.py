@@ -11,7 +11,7 @@ Clocks: ``time.monotonic()`` is CLOCK_MONOTONIC on Linux, one clock for the whol
 machine, so a start taken in the producer and an end taken in the consumer can be
 subtracted. Round trips are timed by the client alone (``time.perf_counter``).
 
-The raw baseline (:class:`RawPeer`) uses what ``anodize.transport.dds`` uses: the
+The raw baseline (:class:`RawPeer`) uses what ``anodize._transport.dds`` uses: the
 topic type ``anodize::Frame``, samples written as CDR bytes with
 ``cyclonedds._clayer.ddspy_write`` (retrying in short sleeps while the reader is
 full), taken as raw CDR with ``ddspy_take`` after a ``WaitSet`` wait, and the same
@@ -39,7 +39,7 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from anodize import Endpoint
-from anodize.transport.dds import READER_SAMPLES, Frame, cdr_sample, participant_config
+from anodize._transport.dds import READER_SAMPLES, Frame, cdr_sample, participant_config
 
 ENV = "ANODIZE_BENCH_DDS"
 HEIGHT, WIDTH, CHANNELS = 480, 640, 3

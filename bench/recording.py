@@ -34,7 +34,7 @@ ROOT = HERE.parent
 
 def run_tinman(out: Path, duration: float, record: bool) -> dict[str, Any]:
     """One TinMan run: its report, and with ``record`` the recording's size and verify's speed."""
-    command = [sys.executable, "-m", "anodize.tools.cli", "run", "tinman", "--quiet", "--world", "easy",
+    command = [sys.executable, "-m", "anodize._tools.cli", "run", "tinman", "--quiet", "--world", "easy",
                "--duration", str(duration), "--out", str(out)]
     if record:
         command.append("--record")
@@ -52,9 +52,9 @@ def run_tinman(out: Path, duration: float, record: bool) -> dict[str, Any]:
 
 
 def verify_speed(path: Path, recorded_in: float) -> dict[str, Any]:
-    from anodize.recording.reader import open_recording
-    from anodize.recording.verify import verify
-    from anodize.tools.recordings import protocol_of
+    from anodize._recording.reader import open_recording
+    from anodize._recording.verify import verify
+    from anodize._tools.recordings import protocol_of
 
     with open_recording(path) as recording:
         global_type = protocol_of(recording, None, None)

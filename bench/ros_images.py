@@ -79,7 +79,7 @@ from runs import LoadWatch, bench_env, print_table, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import Dds, Inproc, Processes, RosBridge, System  # noqa: E402
-from anodize.supervision.report import RoleStatus  # noqa: E402
+from anodize._supervision.report import RoleStatus  # noqa: E402
 
 DEFAULT_JSON = BENCH / "results" / "ros_images.json"
 DDS_BENCH_JSON = BENCH / "results" / "dds.json"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from anodize.tools.cli import main
+from anodize._tools.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -36,7 +36,7 @@ from pathlib import Path
 import pytest
 
 import sessiontypes
-from anodize.tools import cli
+from anodize._tools import cli
 from sessiontypes import ProtocolError
 
 REPO = Path(__file__).resolve().parents[1]

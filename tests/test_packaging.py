@@ -338,8 +338,8 @@ def test_wheel_installs_and_runs_outside_the_checkout(installed: Installed) -> N
         " | {'pytest': importlib.util.find_spec('pytest') is not None}))")], work))
     assert located.pop("pytest") is False
     # The compiled hot path was built into the wheel wherever the checkout's could be built.
-    compiled = _ok([python, "-c", "from anodize.transport import frames; print(frames.COMPILED)"], work)
-    assert compiled.strip() == str(importlib.util.find_spec("anodize.transport._frames") is not None)
+    compiled = _ok([python, "-c", "from anodize._transport import frames; print(frames.COMPILED)"], work)
+    assert compiled.strip() == str(importlib.util.find_spec("anodize._transport._frames") is not None)
     assert located == {package: str(installed.site_packages / package / "__init__.py") for package in PACKAGES}
 
     anodize = installed.command("anodize")

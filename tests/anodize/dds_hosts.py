@@ -49,7 +49,7 @@ def start_host(system: Path, host: str, report: Path, env: dict[str, str] | None
                namespace: str | None = None) -> subprocess.Popen[str]:
     """``anodize run SYSTEM --host HOST`` (in network namespace ``namespace``, if given)."""
     prefix = ["ip", "netns", "exec", namespace] if namespace else []
-    return subprocess.Popen([*prefix, sys.executable, "-m", "anodize.tools.cli", "run", "--quiet", str(system),
+    return subprocess.Popen([*prefix, sys.executable, "-m", "anodize._tools.cli", "run", "--quiet", str(system),
                              "--host", host, "--wait", "30", "--json", str(report)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             env={**os.environ, **(env or {})})

@@ -11,7 +11,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 
 from anodize import Endpoint
-from anodize.supervision import control
+from anodize._supervision import control
 
 
 def server(ep: Endpoint) -> None:

@@ -1,7 +1,7 @@
 """Roles for the live view tests (module level: group processes import them by name).
 
 ``P`` sends a joystick state and a camera image 50 times a second; once a Foxglove
-client's Joy has reached it (:func:`anodize.live.client_input`) it sends that Joy
+client's Joy has reached it (:func:`anodize._live.client_input`) it sends that Joy
 instead, three times, then stops the run (telling ``L``, which tells ``R``). ``R`` writes
 the axes of every Joy it got to ``$LIVE_TEST_OUT/robot.json``; ``R -> L`` is a channel
 inside a group.
@@ -20,7 +20,7 @@ from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Joy as Joy
 from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
 
 from anodize import Endpoint
-from anodize.live import client_input
+from anodize._live import client_input
 
 PROTOCOL = """
 type Joy = "ros:sensor_msgs/msg/Joy"

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from anodize import Endpoint
-from anodize.ros import ros_type
+from anodize._ros import ros_type
 
 Time = ros_type("builtin_interfaces/msg/Time").cls
 Header = ros_type("std_msgs/msg/Header").cls

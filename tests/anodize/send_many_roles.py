@@ -73,7 +73,7 @@ def string_receiver(ep: Endpoint) -> None:
 
 def frames_receiver(ep: Endpoint) -> None:
     """As ``counting_receiver``, noting also which decoder this process uses (compiled or not)."""
-    from anodize.transport import frames
+    from anodize._transport import frames
 
     got = []
     while (message := ep.recv("A")).label == "num":

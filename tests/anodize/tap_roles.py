@@ -8,8 +8,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from anodize.recording.tap import TappedChannel
-from anodize.session.channel import Channel
+from anodize._recording.tap import TappedChannel
+from anodize._session.channel import Channel
 from anodize.taps import TapGroup, TapRun
 
 

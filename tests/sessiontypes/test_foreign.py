@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 import sessiontypes
-from anodize.tools.cli import main
+from anodize._tools.cli import main
 from sessiontypes import Location, ProtocolCheckError, ProtocolError, ProtocolSyntaxError
 from sessiontypes.foreign import UnsupportedConstructError
 

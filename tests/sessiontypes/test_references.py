@@ -189,7 +189,7 @@ def test_mutual_recursion_in_a_cycle_is_resolved_per_context() -> None:
 
 
 def test_prints_of_shared_types_are_bounded(tmp_path, capsys) -> None:
-    from anodize.tools.cli import main
+    from anodize._tools.cli import main
 
     g0 = sessiontypes.loads(dag(60), "dag.proto").globals["G0"]
     with pytest.raises(PrintTooLongError):

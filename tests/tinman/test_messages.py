@@ -224,7 +224,7 @@ def test_messages_survive_a_round_trip_through_ros2_cdr(message: Any) -> None:
 
 @pytest.mark.parametrize("message", messages(), ids=lambda m: type(m).__msgtype__)
 def test_messages_fit_their_ros_definitions_as_anodize_checks_them(message: Any) -> None:
-    ros = pytest.importorskip("anodize.ros")
+    ros = pytest.importorskip("anodize._ros")
     kind = ros.ros_type(type(message).__msgtype__)
     assert kind.cls is type(message)
     assert kind.check(message) is None

@@ -8,8 +8,8 @@ import re
 import pytest
 
 from anodize import GroupStatus
-from anodize.supervision.report import GroupState
-from anodize.tools.cli import ProgressLine
+from anodize._supervision.report import GroupState
+from anodize._tools.cli import ProgressLine
 from tinman.app import TinMan
 from tinman.progress import FrameProgress
 from tinman.settings import Settings

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from anodize.tools import cli
+from anodize._tools import cli
 from tinman.sequences import generate
 from tinman.settings import ENVIRONMENT_VARIABLE
 

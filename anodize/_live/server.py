@@ -1,0 +1,308 @@
+"""The live view in the supervisor: a Foxglove WebSocket server fed by the groups' taps.
+
+:func:`open_live_view` starts the server, a channel tap (:mod:`anodize.taps`);
+``System.run(taps=[view])`` then advertises
+every label of every channel on it (ROS 2 schemas: ``ros2msg`` definitions, CDR
+messages, so Foxglove's image, pose, path and plot panels read them), forwards
+what the groups tap (:mod:`.tap`), publishes each group's state, rate and memory
+on :data:`~.plan.STATUS_TOPIC` (JSON), and hands what clients publish on a
+channel's topic to the role that sends on it (:mod:`.inputs`), once it is checked
+against the label's type: a message that is not is rejected, counted and logged.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import shutil
+import socket
+import tempfile
+import threading
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from .._extras import import_extra
+from .._recording.encoding import SortCodec, codec_for_sort
+from .._session.payloads import validator_for
+from ..errors import AnodizeError
+from ..taps import TapRun
+from .plan import STATUS_TOPIC, LiveLabel, LivePlan, live_plan
+from .tap import LARGE_RATE, GroupLiveView
+from .wire import HELLO, INPUT, MESSAGE, STATS, read_frame, send_frame
+
+__all__ = ["LiveView", "open_live_view", "DEFAULT_PORT"]
+
+DEFAULT_PORT = 8765  # Foxglove's default for a WebSocket connection
+_log = logging.getLogger("anodize.live")
+
+_STATUS_SCHEMA = {
+    "type": "object",
+    "properties": {"groups": {"type": "object", "additionalProperties": {
+        "type": "object",
+        "properties": {"state": {"type": "string"}, "pid": {"type": ["integer", "null"]},
+                       "memory_mib": {"type": ["number", "null"]}, "messages": {"type": "integer"},
+                       "received": {"type": "integer"}, "rate_hz": {"type": ["number", "null"]},
+                       "restarts": {"type": "integer"}, "note": {"type": "string"}}}}},
+}
+
+FEATURE = "the live view in Foxglove (--foxglove)"
+
+
+def open_live_view(port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> LiveView:
+    """Start a Foxglove WebSocket server on ``host:port`` (0: any free port; see ``LiveView.port``).
+
+    Raises:
+        MissingExtraError: foxglove-sdk is not installed (``anodize[live]``).
+        AnodizeError: the port cannot be had.
+    """
+    import_extra("foxglove.websocket", "live", FEATURE)
+    import foxglove
+    from foxglove.websocket import Capability, ServerListener
+
+    view = LiveView()
+
+    class Listener(ServerListener):
+        """Client channels and messages, to the view (the SDK's defaults for the rest)."""
+
+        def on_client_advertise(self, client: Any, channel: Any) -> None:
+            view.client_advertised(client.id, channel.id, channel.topic, channel.encoding, channel.schema_name or "")
+
+        def on_client_unadvertise(self, client: Any, client_channel_id: int) -> None:
+            view.client_unadvertised(client.id, client_channel_id)
+
+        def on_message_data(self, client: Any, client_channel_id: int, data: bytes) -> None:
+            view.client_message(client.id, client_channel_id, data)
+
+    try:
+        view.server = foxglove.start_server(
+            name="anodize", host=host, port=port, context=view.context, server_listener=Listener(),
+            capabilities=[Capability.ClientPublish], supported_encodings=["cdr"])
+    except Exception as error:  # the SDK's own error type: e.g. the port is taken
+        view.close()
+        raise AnodizeError(f"the live view cannot serve on {host}:{port}: {error}") from None
+    view.host = host
+    return view
+
+
+class LiveView:
+    """A running Foxglove server for one run (:func:`open_live_view`; :meth:`close` it).
+
+    Attributes:
+        port: the port it serves on.
+        url: ``ws://host:port``, what the Foxglove app opens.
+    """
+
+    def __init__(self) -> None:
+        foxglove = import_extra("foxglove", "live", FEATURE)
+
+        self.context = foxglove.Context()
+        self.server: Any = None
+        self.host = "127.0.0.1"
+        self._folder = tempfile.mkdtemp(prefix="anodize-live-")
+        self.socket_path = str(Path(self._folder) / "taps")
+        self._listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self._listener.bind(self.socket_path)
+        self._listener.listen()
+        self._lock = threading.Lock()
+        self.plan: LivePlan | None = None
+        self._channels: list[Any] = []            # per label index: its Foxglove channel
+        self._codecs: list[SortCodec] = []
+        self._status: Any = None
+        self._groups: dict[str, tuple[socket.socket, threading.Lock]] = {}
+        self._connected: set[str] = set()
+        self._stats: list[dict[str, Any]] = []
+        self._reading = threading.Condition(self._lock)
+        self._readers = 0  # groups' sockets still open
+        self.forwarded = 0
+        self.client_messages: dict[str, int] = {}  # topic -> delivered to its group
+        self.rejected: dict[str, list[int | str]] = {}  # topic -> [count, first reason]
+        self._client_channels: dict[tuple[int, int], tuple[str, str, str]] = {}
+        self._closed = False
+
+    @property
+    def port(self) -> int:
+        return int(self.server.port) if self.server is not None else 0
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+    # ---- a run -----------------------------------------------------------------------------
+    def begin(self, run: TapRun) -> GroupLiveView:
+        """Advertise the run's channels and take the groups' taps (``System.run`` calls it).
+
+        Returns what each group opens: its :class:`~.tap.LiveTap`.
+        """
+        import foxglove
+
+        if self.plan is not None:
+            raise AnodizeError("a live view serves one run: open another for the next")
+        plan = live_plan(self.socket_path, run.machines, run.group_of, run.topics)
+        by_topic: dict[tuple[str, str], Any] = {}
+        for x in plan.labels:
+            codec = codec_for_sort(x.sort)
+            channel = by_topic.get((x.topic, codec.type_name))
+            if channel is None:
+                schema = foxglove.Schema(name=codec.type_name, encoding="ros2msg",
+                                         data=codec.ros.message_definition().encode())
+                channel = by_topic[(x.topic, codec.type_name)] = foxglove.Channel(
+                    x.topic, schema=schema, message_encoding="cdr", context=self.context,
+                    metadata=_metadata(x, codec, plan))
+            self._channels.append(channel)
+            self._codecs.append(codec)
+        self._status = foxglove.Channel(
+            STATUS_TOPIC, message_encoding="json", context=self.context,
+            schema=foxglove.Schema(name="anodize.GroupStatuses", encoding="jsonschema",
+                                   data=json.dumps(_STATUS_SCHEMA).encode()))
+        self.plan = plan
+        threading.Thread(target=self._accept_loop, name="anodize-live-accept", daemon=True).start()
+        return GroupLiveView(plan)
+
+    def status(self, statuses: Mapping[str, Any]) -> None:
+        """Publish the groups' :class:`~anodize._supervision.report.GroupStatus` on the status channel."""
+        if self._status is None:
+            return
+        groups = {name: {"state": str(s.state), "pid": s.pid,
+                         "memory_mib": None if s.memory is None else round(max(0, s.memory) / 2**20, 2),
+                         "messages": s.messages, "received": s.received, "rate_hz": s.rate_hz,
+                         "restarts": s.restarts, "note": s.note}
+                  for name, s in statuses.items()}
+        self._status.log({"groups": groups}, log_time=time.time_ns())
+
+    def end(self, wait: float = 1.0) -> list[str]:
+        """Notes for the run's report: what was shown, thinned, and taken from clients."""
+        plan = self.plan
+        if plan is None:
+            return []
+        with self._reading:  # the groups have ended: their last frames are on their way
+            self._reading.wait_for(lambda: self._readers == 0, timeout=wait)
+        thinned = sum(int(s.get("thinned", 0)) for s in self._stats)
+        dropped = sum(int(s.get("dropped", 0)) for s in self._stats)
+        notes = [f"foxglove: showed {self.forwarded} messages live on {len(set(self._channels))} topics at "
+                 f"{self.url}" + (f"; {thinned + dropped} not shown (the live view shows large messages at "
+                                  f"most {LARGE_RATE:g} times a second per topic; recordings keep every one)"
+                                  if thinned + dropped else "")]
+        groups = set(plan.group_of.values())
+        missing = sorted(groups - self._connected)
+        if missing:
+            notes.append(f"foxglove: groups {', '.join(missing)} did not reach the live view's socket "
+                         f"(another host?): their channels were not shown")
+        for topic, count in sorted(self.client_messages.items()):
+            notes.append(f"foxglove: {count} client messages on {topic} handed to their role")
+        for topic, (rejected, reason) in sorted(self.rejected.items()):
+            notes.append(f"foxglove: {rejected} client messages on {topic} rejected; the first: {reason}")
+        return notes
+
+    def close(self) -> None:
+        """Stop the server and remove its socket."""
+        if self._closed:
+            return
+        self._closed = True
+        with contextlib.suppress(OSError):
+            self._listener.shutdown(socket.SHUT_RDWR)
+        self._listener.close()
+        with self._lock:
+            for sock, _ in self._groups.values():
+                with contextlib.suppress(OSError):
+                    sock.shutdown(socket.SHUT_RDWR)
+        if self.server is not None:
+            self.server.stop()
+        shutil.rmtree(self._folder, ignore_errors=True)
+
+    # ---- the groups' taps -------------------------------------------------------------------
+    def _accept_loop(self) -> None:
+        while True:
+            try:
+                sock, _ = self._listener.accept()
+            except OSError:  # closed
+                return
+            with self._lock:
+                self._readers += 1
+            threading.Thread(target=self._read_group, args=(sock,), name="anodize-live-group",
+                             daemon=True).start()
+
+    def _read_group(self, sock: socket.socket) -> None:
+        group = None
+        # A frame the SDK refuses (a bad stamp) or stats that are not JSON end this group's feed,
+        # never the count of readers that end() waits for.
+        with contextlib.suppress(OSError, ValueError, OverflowError, TypeError), sock:
+            while (frame := read_frame(sock)) is not None:
+                kind, index, stamp, data = frame
+                if kind == MESSAGE and 0 <= index < len(self._channels):
+                    self._channels[index].log(data, log_time=stamp)
+                    self.forwarded += 1
+                elif kind == HELLO:
+                    group = data.decode(errors="replace")
+                    with self._lock:
+                        self._groups[group] = (sock, threading.Lock())  # a restarted group replaces it
+                        self._connected.add(group)
+                elif kind == STATS:
+                    self._stats.append(json.loads(data))
+        with self._reading:
+            if group is not None and self._groups.get(group, (None,))[0] is sock:
+                del self._groups[group]
+            self._readers -= 1
+            self._reading.notify_all()
+
+    # ---- clients ---------------------------------------------------------------------------
+    def client_advertised(self, client: int, channel: int, topic: str, encoding: str, schema_name: str) -> None:
+        self._client_channels[(client, channel)] = (topic, encoding, schema_name)
+
+    def client_unadvertised(self, client: int, channel: int) -> None:
+        self._client_channels.pop((client, channel), None)
+
+    def client_message(self, client: int, channel: int, data: bytes) -> None:
+        """A client's message: checked against each label on its topic, then handed to the
+        label's sender's group."""
+        advertised = self._client_channels.get((client, channel))
+        plan = self.plan
+        if advertised is None or plan is None:
+            return
+        topic, encoding, schema_name = advertised
+        targets = [(i, x) for i, x in enumerate(plan.labels) if x.topic == topic and x.sender in plan.group_of]
+        if not targets:
+            self._reject(topic, "no role of the run sends on this topic")
+            return
+        for index, x in targets:
+            reason = self._check(index, x, encoding, schema_name, data)
+            if reason is not None:
+                self._reject(topic, reason)
+                continue
+            with self._lock:
+                found = self._groups.get(plan.group_of[x.sender])
+            if found is None:
+                continue  # its group is not running (yet, or any more)
+            sock, lock = found
+            with lock, contextlib.suppress(OSError):
+                send_frame(sock, INPUT, index, time.time_ns(), data)
+                self.client_messages[topic] = self.client_messages.get(topic, 0) + 1
+
+    def _check(self, index: int, x: LiveLabel, encoding: str, schema_name: str, data: bytes) -> str | None:
+        codec = self._codecs[index]
+        if encoding != "cdr":
+            return f"expected encoding cdr, got {encoding!r}"
+        if schema_name and schema_name != codec.type_name:
+            return f"expected {codec.type_name}, got {schema_name}"
+        try:
+            payload = codec.decode(data)
+        except Exception as error:  # a client's bytes: anything may be wrong with them
+            return f"{type(error).__name__}: {error}"
+        reason = validator_for(x.sort)(payload)
+        return None if reason is None else f"not a {x.sort.spelling if x.sort else 'message'}: {reason}"
+
+    def _reject(self, topic: str, reason: str) -> None:
+        first = self.rejected.setdefault(topic, [0, reason])
+        if first[0] == 0:
+            _log.warning("live view: a client message on %s rejected: %s", topic, reason)
+        first[0] = int(first[0]) + 1
+
+
+def _metadata(x: LiveLabel, codec: SortCodec, plan: LivePlan) -> dict[str, str]:
+    return {"anodize.sender": x.sender, "anodize.receiver": x.receiver, "anodize.label": x.label,
+            "anodize.sort": x.sort.key if x.sort is not None else "",
+            "anodize.encoding": "json" if codec.json else "cdr",
+            "anodize.sender_group": plan.group_of.get(x.sender, "external"),
+            "anodize.receiver_group": plan.group_of.get(x.receiver, "external")}

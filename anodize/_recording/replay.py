@@ -1,0 +1,288 @@
+"""``anodize replay``: run one role's code against a recording, at a desk.
+
+The role's function runs alone, on a monitored endpoint whose channels come from the
+recording (:mod:`.replay_network`): what it receives is what its peers sent in the
+recorded run, in the same order; what it sends is compared, message by message, with
+what it sent then (:mod:`.compare` says how payloads are compared), and its monitor
+checks every action against the protocol as in a live run. A failure seen on the robot
+is then the same failure here, with a debugger at hand.
+
+What a replay cannot reproduce: time (``Endpoint.sleep`` returns at once; ``time.sleep``
+in the role's code still sleeps; a ``recv(..., timeout=...)`` that timed out in the run
+gets the next recorded message instead), and the channels a recording leaves out (both
+ends in one group): messages the role sends there are counted, not compared, and a
+receive there ends the replay, saying that the role cannot be replayed alone from there.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import traceback
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from sessiontypes import GlobalType
+
+from .._session.endpoint import Endpoint, peers_of
+from .._session.typed import argument_for
+from ..errors import ConfigurationError, ProtocolViolationError, RoleStopped
+from .compare import TopicCodecs, payload_difference
+from .plan import META
+from .reader import Recording
+from .replay_network import (
+    DIVERGED,
+    FINISHED,
+    NOT_RECORDED,
+    TIMED_OUT,
+    Divergence,
+    RecordedItem,
+    ReplayDivergenceError,
+    ReplayNetwork,
+)
+
+__all__ = ["replay", "ReplayReport"]
+
+_FAILED = "failed"
+
+
+@dataclass
+class ReplayReport:
+    """How a replay went.
+
+    Attributes:
+        outcome: how it ended: ``finished``, ``recording ends``, ``not recorded`` (a receive on
+            a channel the recording leaves out), ``sleeps for ever``, ``diverged``, ``failed``
+            (the role raised, a protocol violation included), ``timed out``.
+        detail: the same in a sentence.
+        divergence: the first message the role did not send as recorded, if any.
+        error: what the role raised (a ``ProtocolViolationError``, or its own exception).
+        received: per channel into the role, (messages delivered, messages recorded).
+        compared: per channel out of the role, (messages compared, messages recorded).
+        uncompared: per channel out of the role that the recording leaves out, messages sent.
+        slept: seconds of ``Endpoint.sleep`` that the replay skipped.
+        notes: what else the reader should know (a recording cut short, ...).
+    """
+
+    recording: str
+    protocol: str
+    role: str
+    function: str
+    outcome: str = ""
+    detail: str = ""
+    divergence: Divergence | None = None
+    error: BaseException | None = None
+    traceback: str = ""
+    received: dict[str, tuple[int, int]] = field(default_factory=dict)
+    compared: dict[str, tuple[int, int]] = field(default_factory=dict)
+    uncompared: dict[str, int] = field(default_factory=dict)
+    slept: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """The role sent what the recording says, followed the protocol, and did not fail."""
+        return self.divergence is None and self.error is None and self.outcome not in (TIMED_OUT, _FAILED)
+
+    def text(self) -> str:
+        verdict = ("matches the recording and follows the protocol, as far as the role can be replayed alone "
+                   "(INCOMPLETE: see 'ended')" if self.ok and self.outcome == NOT_RECORDED else
+                   "matches the recording and follows the protocol" if self.ok else
+                   "DIVERGES from the recording" if self.divergence is not None else
+                   "VIOLATES the protocol" if isinstance(self.error, ProtocolViolationError) else
+                   "FAILED")
+        head = f"replay of role {self.role} ({self.function}) from {self.recording}, global {self.protocol}"
+        lines = [f"{head}: {verdict}", f"  ended: {self.detail}"]
+        lines.extend(f"  received on {channel}: {done} delivered of {total} recorded"
+                     for channel, (done, total) in self.received.items())
+        lines.extend(f"  sent on {channel}: {done} compared of {total} recorded"
+                     for channel, (done, total) in self.compared.items())
+        lines.extend(f"  sent on {channel}: {_messages(sent)}, not compared (the recording does not have "
+                     "this channel)" for channel, sent in self.uncompared.items())
+        if self.slept:
+            lines.append(f"  Endpoint.sleep: {self.slept:g} s of sleeping skipped")
+        if self.divergence is not None:
+            lines.append(f"divergence: {self.divergence}")
+        if self.error is not None:
+            kind = "violation" if isinstance(self.error, ProtocolViolationError) else "error"
+            lines.append(f"{kind}: {type(self.error).__name__}: {self.error}")
+            if kind == "error" and self.traceback:
+                lines.append(self.traceback.rstrip())
+        lines.extend(f"note: {note}" for note in self.notes)
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"recording": self.recording, "protocol": self.protocol, "role": self.role,
+                "function": self.function, "ok": self.ok, "outcome": self.outcome, "detail": self.detail,
+                "divergence": None if self.divergence is None else self.divergence.__dict__,
+                "error": None if self.error is None else f"{type(self.error).__name__}: {self.error}",
+                "received": self.received, "compared": self.compared, "uncompared": self.uncompared,
+                "slept": self.slept, "notes": self.notes}
+
+
+def _messages(count: int) -> str:
+    return f"{count} message{'' if count == 1 else 's'}"
+
+
+def replay(recording: Recording, global_type: GlobalType, role: str, function: Callable[..., Any],
+           topics: Mapping[str, tuple[str, str, str]] | None = None, timeout: float = 60.0) -> ReplayReport:
+    """Run ``function`` as ``role`` against ``recording`` (see the module docstring).
+
+    Args:
+        function: the role's function (taking an ``Endpoint`` or the typed initial state).
+        topics: topic -> ``(sender, receiver, label)`` for topics without anodize's metadata.
+        timeout: seconds the role may run; a role still running then is stopped at its
+            next action, and the replay does not pass.
+
+    Raises:
+        ConfigurationError: ``role`` is not a role of ``global_type``.
+        RecordingError: the recording cannot be read.
+    """
+    if role not in global_type.roles:
+        raise ConfigurationError(f"global {global_type.name} has no role {role}; expected one of "
+                                 f"{', '.join(global_type.roles)}")
+    name = f"{getattr(function, '__module__', '?')}:{getattr(function, '__qualname__', repr(function))}"
+    report = ReplayReport(str(recording.path), global_type.name, role, name)
+    machine = global_type.project(role).fsm()
+    sends_to, receives_from = peers_of(machine)
+    streams = _streams(recording, role, topics or {}, report.notes)
+    recorded = _recorded_pairs(recording, streams)
+    why = _why_unrecorded(recording.info)
+    codecs = TopicCodecs()
+
+    def decode(item: RecordedItem) -> object:
+        return codecs.codec(item.topic).decode(item.data)
+
+    def difference(item: RecordedItem, payload: object) -> str:
+        return payload_difference(codecs.codec(item.topic), item.data, payload)
+
+    network = ReplayNetwork(
+        role,
+        feeds={p: streams.get((p, role), []) for p in sorted(receives_from) if (p, role) in recorded},
+        expected={p: streams.get((role, p), []) for p in sorted(sends_to) if (role, p) in recorded},
+        unrecorded_in={p: why(p, role) for p in sorted(receives_from) if (p, role) not in recorded},
+        unrecorded_out=[p for p in sorted(sends_to) if (role, p) not in recorded],
+        decode=decode, difference=difference)
+    endpoint = network.endpoint = Endpoint(role, global_type.name, machine, network)
+    _run(function, endpoint, network, timeout, report)
+    _account(network, report)
+    return report
+
+
+def _run(function: Callable[..., Any], endpoint: Endpoint, network: ReplayNetwork, timeout: float,
+         report: ReplayReport) -> None:
+    """Run the role on a thread of its own (so that a role that never ends cannot hang the replay)."""
+    raised: list[BaseException] = []
+
+    def body() -> None:
+        try:
+            function(argument_for(function, endpoint))
+            unfinished = endpoint.unfinished()
+            if unfinished and network.ending is None:
+                raise unfinished[0].end_violation()
+        except BaseException as error:  # reported, never swallowed
+            raised.append(error)
+
+    thread = threading.Thread(target=body, name=f"replay:{endpoint.role}", daemon=True)
+    thread.start()
+    thread.join(timeout)
+    if thread.is_alive():
+        network.stop(TIMED_OUT, f"{endpoint.role} did not end within {timeout:g} s (it computes, or waits "
+                                "outside its endpoint, e.g. in time.sleep); it was stopped at its next action")
+        thread.join(2.0)
+    error = raised[0] if raised else None
+    if network.ending is not None:
+        report.outcome, report.detail = network.ending
+        if report.outcome == DIVERGED:
+            report.detail = f"{endpoint.role} was stopped at its first divergence"
+    elif error is None:
+        report.outcome, report.detail = FINISHED, f"{endpoint.role} returned at the end of its local type"
+    if isinstance(error, (RoleStopped, ReplayDivergenceError)):
+        return
+    if error is not None:
+        report.error = error
+        if network.ending is None:
+            report.outcome = _FAILED
+            report.detail = f"{endpoint.role} raised {type(error).__name__} in state {endpoint.state}"
+        if not isinstance(error, ProtocolViolationError):
+            report.traceback = "".join(traceback.format_exception(error))
+
+
+def _account(network: ReplayNetwork, report: ReplayReport) -> None:
+    """Fill in the counts, and the divergence of a role that stopped sending before the recording did."""
+    role = network.role
+    report.received = {f"{peer}->{role}": (feed.delivered, feed.recorded)
+                       for peer, feed in network.feeds.items() if feed.unrecorded is None}
+    report.compared = {f"{role}->{peer}": (check.sent, check.sent + len(network.unsent(peer)))
+                       for peer, check in network.checks.items() if check.recorded}
+    report.uncompared = {f"{role}->{peer}": check.sent for peer, check in network.checks.items()
+                         if not check.recorded}
+    report.slept = network.clock.skipped
+    report.divergence = network.divergence
+    # Ended where the recorded role could not have sent more? Then what it did not send, it should have.
+    if report.divergence is not None or report.error is not None or report.outcome in (NOT_RECORDED, TIMED_OUT):
+        return
+    for peer in network.checks:
+        unsent = network.unsent(peer) if network.checks[peer].recorded else []
+        if unsent:
+            first = unsent[0]
+            report.divergence = Divergence(role, f"{role}->{peer}", first.index, network.recorded_text(first),
+                                           f"nothing more ({report.detail})",
+                                           f"the recording has {len(unsent)} more message(s) there", first.log_time)
+            return
+
+
+def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, str, str]],
+             notes: list[str]) -> dict[tuple[str, str], list[RecordedItem]]:
+    """The recorded messages of the channels into and out of ``role``, per channel, in order.
+
+    A channel's messages are taken up to the first break in their numbering (a message lost,
+    or the sender's group started again): what follows is not the same run of the role.
+    """
+    keys: dict[int, tuple[str, str, str]] = {}
+    for topic in recording.topics:
+        meta = topic.metadata
+        key = ((meta[f"{META}.sender"], meta.get(f"{META}.receiver", ""), meta.get(f"{META}.label", ""))
+               if f"{META}.sender" in meta else topics.get(topic.topic))
+        if key is not None and role in key[:2]:
+            keys[topic.id] = key
+    streams: dict[tuple[str, str], list[RecordedItem]] = {}
+    broken: set[tuple[str, str]] = set()
+    for message in recording.messages():
+        key = keys.get(message.topic.id)
+        if key is None or key[:2] in broken:
+            continue
+        items = streams.setdefault(key[:2], [])
+        if message.sequence and message.sequence != len(items) + 1:
+            broken.add(key[:2])
+            restart = message.sequence == 1
+            notes.append(f"{key[0]}->{key[1]}: replayed up to message {len(items) - 1}; the next one is numbered "
+                         f"{message.sequence} ({'its sender started again' if restart else 'messages are missing'})")
+            continue
+        items.append(RecordedItem(len(items), key[2], message.log_time, bytes(message.data), message.topic))
+    return streams
+
+
+def _recorded_pairs(recording: Recording, streams: Mapping[tuple[str, str], object]) -> set[tuple[str, str]]:
+    """The channels the recording holds (an anodize recording lists them; else those with messages)."""
+    listed = recording.info.get("recorded_channels")
+    if listed is None:
+        return set(streams)
+    return {(s, r) for s, _, r in (item.partition("->") for item in listed.split())}
+
+
+def _why_unrecorded(info: Mapping[str, str]) -> Callable[[str, str], str]:
+    try:
+        group_of = json.loads(info.get("group_of", "{}"))
+    except ValueError:
+        group_of = {}
+
+    def why(sender: str, receiver: str) -> str:
+        group = group_of.get(sender)
+        if group is not None and group == group_of.get(receiver):
+            return f"{sender} and {receiver} are both in group {group}, and only channels between groups are recorded"
+        return "no message of it was recorded"
+
+    return why
+

@@ -1,0 +1,354 @@
+"""The network a replayed role runs on: its inputs come from a recording, its outputs are compared.
+
+One role runs alone, with a real (monitored) :class:`~anodize._session.endpoint.Endpoint`
+on a :class:`ReplayNetwork`:
+
+- a recorded channel *into* the role holds that channel's recorded messages, in order,
+  all there from the start (nobody sends them: a replay never waits for a peer); the
+  role's doorbell rings for them in the order they were recorded, so ``recv_any`` takes
+  them in the recorded interleaving;
+- a recorded channel *out of* the role compares each message put into it with the
+  recording's next one on that channel (:mod:`.compare`), and raises
+  :class:`ReplayDivergenceError` at the first that differs;
+- a channel the recording does not have (both ends in one group) takes the role's
+  messages and counts them, but cannot compare them; receiving on one cannot be fed.
+
+Nothing waits: a receive beyond the recording's end, a receive on a channel that is not
+recorded, and ``Endpoint.sleep(math.inf)`` end the replay (``RoleStopped`` in the role,
+the reason in :attr:`ReplayNetwork.ending`); other ``Endpoint.sleep`` calls return at
+once, their seconds counted in :attr:`ReplayClock.skipped`.
+"""
+
+from __future__ import annotations
+
+import datetime
+import queue
+import threading
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from .._session.channel import Channel, Corrupt, Doorbell
+from ..errors import AnodizeError, RoleStopped
+
+if TYPE_CHECKING:
+    from .._session.endpoint import Endpoint
+    from .reader import RecordedTopic
+
+__all__ = ["RecordedItem", "Divergence", "ReplayDivergenceError", "ReplayNetwork", "ReplayClock",
+           "FINISHED", "RECORDING_ENDS", "NOT_RECORDED", "SLEEPS_FOR_EVER", "DIVERGED", "TIMED_OUT"]
+
+# How a replay ended (ReplayNetwork.ending[0], ReplayReport.outcome).
+FINISHED = "finished"
+RECORDING_ENDS = "recording ends"
+NOT_RECORDED = "not recorded"
+SLEEPS_FOR_EVER = "sleeps for ever"
+DIVERGED = "diverged"
+TIMED_OUT = "timed out"
+
+
+@dataclass(frozen=True)
+class RecordedItem:
+    """One recorded message of one channel.
+
+    Attributes:
+        index: its position on the channel, from 0.
+        label: its label.
+        log_time: when it was recorded, ns since the epoch.
+        data: the recorded bytes.
+        topic: the recording's topic it is on.
+    """
+
+    index: int
+    label: str
+    log_time: int
+    data: bytes
+    topic: RecordedTopic
+
+
+@dataclass(frozen=True)
+class Divergence:
+    """The first message where the replayed role did not do what the recording says it did.
+
+    Attributes:
+        role: the replayed role.
+        channel: ``"Role->Peer"``.
+        index: the message's position on the channel, from 0.
+        expected: the recorded message (``label(payload)``), or what the recording has
+            when the role sent more.
+        actual: what the role sent, or did instead.
+        reason: how they differ, when the labels are the same.
+        log_time: the recorded message's log time (0 when there is none).
+    """
+
+    role: str
+    channel: str
+    index: int
+    expected: str
+    actual: str
+    reason: str = ""
+    log_time: int = 0
+
+    def __str__(self) -> str:
+        when = ""
+        if self.log_time:
+            moment = datetime.datetime.fromtimestamp(self.log_time / 1e9, tz=datetime.UTC)
+            when = f" (recorded at {moment:%Y-%m-%d %H:%M:%S.%f} UTC)"
+        why = f": {self.reason}" if self.reason else ""
+        return (f"role {self.role} diverges from the recording on {self.channel}, message {self.index}"
+                f"{when}: expected {self.expected}, got {self.actual}{why}")
+
+
+class ReplayDivergenceError(AnodizeError):
+    """Raised in a replayed role at the first message it sends that is not the recorded one.
+
+    Attributes:
+        divergence: where and how (:class:`Divergence`).
+    """
+
+    def __init__(self, divergence: Divergence) -> None:
+        self.divergence = divergence
+        super().__init__(str(divergence))
+
+
+class ReplayClock(threading.Event):
+    """The replayed role's stop event, which ``Endpoint.sleep`` waits on: a finite sleep
+    returns at once (the seconds are added to :attr:`skipped`); a sleep for ever ends the
+    replay."""
+
+    def __init__(self, network: ReplayNetwork) -> None:
+        super().__init__()
+        self._network = network
+        self.skipped = 0.0
+
+    def wait(self, timeout: float | None = None) -> bool:
+        if self.is_set():
+            return True
+        if timeout is None:
+            self._network.stop(SLEEPS_FOR_EVER, f"{self._network.role} sleeps until the run stops "
+                                                "(Endpoint.sleep(math.inf))")
+            return True
+        self.skipped += timeout
+        return False
+
+
+class ReplayNetwork:
+    """The channels of ``role`` (see the module docstring).
+
+    Args:
+        role: the replayed role.
+        feeds: per peer the role receives from on a recorded channel, its recorded messages.
+        expected: per peer the role sends to on a recorded channel, its recorded messages.
+        unrecorded_in: per peer the role receives from on a channel the recording does not
+            have, why it does not.
+        unrecorded_out: peers the role sends to on a channel the recording does not have.
+        decode: the payload of a recorded message (raises ``ValueError`` and others when
+            the recorded bytes do not decode).
+        difference: why a sent payload is not the recorded one ("" when it is).
+    """
+
+    def __init__(self, role: str, feeds: Mapping[str, Sequence[RecordedItem]],
+                 expected: Mapping[str, Sequence[RecordedItem]], unrecorded_in: Mapping[str, str],
+                 unrecorded_out: Sequence[str], decode: Callable[[RecordedItem], object],
+                 difference: Callable[[RecordedItem, object], str]) -> None:
+        self.role = role
+        self._decode = decode
+        self._difference = difference
+        self._expected = {peer: list(items) for peer, items in expected.items()}
+        self.feeds = {peer: _Feed(self, peer, items) for peer, items in feeds.items()}
+        self.feeds.update({peer: _Feed(self, peer, (), why) for peer, why in unrecorded_in.items()})
+        self.checks = {peer: _Check(self, peer) for peer in expected}
+        self.checks.update({peer: _Check(self, peer, recorded=False) for peer in unrecorded_out})
+        self.queues: dict[tuple[str, str], Channel] = {(peer, role): feed for peer, feed in self.feeds.items()}
+        self.queues.update({(role, peer): check for peer, check in self.checks.items()})
+        order = sorted(((item.log_time, peer, item.index) for peer, items in feeds.items() for item in items))
+        self.doorbells: dict[str, Doorbell] = {role: _Rings(self, [peer for _, peer, _ in order])}
+        self.failed: dict[str, str] = {}
+        self.alarm = False
+        self.clock = ReplayClock(self)
+        self.ending: tuple[str, str] | None = None  # (outcome, detail), the first reason to end
+        self.divergence: Divergence | None = None
+        self.endpoint: Endpoint | None = None  # set once made: its state goes into the messages
+        self._lock = threading.RLock()
+
+    # ---- the Network protocol -------------------------------------------------------------
+    def stop_event_for(self, role: str) -> threading.Event:
+        return self.clock
+
+    def ring(self, receiver: str, sender: str) -> None:
+        """Nobody sends to the replayed role: its rings are the recording's."""
+
+    # ---- ending ---------------------------------------------------------------------------
+    def stop(self, outcome: str, detail: str) -> None:
+        """End the replay (the first reason given is kept): the role's next action raises ``RoleStopped``."""
+        with self._lock:
+            if self.ending is None:
+                self.ending = (outcome, detail)
+            self.alarm = True
+        self.clock.set()
+
+    def end(self, outcome: str, detail: str) -> RoleStopped:
+        """End the replay; returns the ``RoleStopped`` for the calling role thread to raise."""
+        self.stop(outcome, detail)
+        return RoleStopped(self.detail())
+
+    def detail(self) -> str:
+        return self.ending[1] if self.ending is not None else ""
+
+    def state(self) -> str:
+        return "" if self.endpoint is None else f" in state {self.endpoint.state}"
+
+    # ---- what the role sends ----------------------------------------------------------------
+    def delivered(self, peer: str, label: str, payload: object) -> None:
+        """Compare a message the role sent to ``peer`` with the recording's next one there.
+
+        Raises:
+            ReplayDivergenceError: it is another message.
+            RoleStopped: the recording holds no more on that channel (the replay ends).
+        """
+        with self._lock:
+            if self.ending is not None:
+                raise RoleStopped(self.detail())
+            items = self._expected[peer]
+            check = self.checks[peer]
+            channel = f"{self.role}->{peer}"
+            if check.sent >= len(items):
+                raise self.end(RECORDING_ENDS, f"the recording ends here: {self.role} sends "
+                                         f"{_message(label, payload)} on {channel}, but the recording has "
+                                         f"only the {len(items)} message(s) before it there")
+            item = items[check.sent]
+            check.sent += 1
+            reason = "another label" if item.label != label else self._difference(item, payload)
+            if not reason:
+                return
+            divergence = Divergence(self.role, channel, item.index, self.recorded_text(item),
+                                    _message(label, payload), "" if item.label != label else reason,
+                                    item.log_time)
+            self.divergence = self.divergence or divergence
+            self.stop(DIVERGED, str(divergence))
+        raise ReplayDivergenceError(divergence)
+
+    def recorded_text(self, item: RecordedItem) -> str:
+        try:
+            return _message(item.label, self._decode(item))
+        except Exception as error:  # the recording's bytes do not decode: say so, do not fail here
+            return f"{item.label}(<does not decode: {error}>)"
+
+    def unsent(self, peer: str) -> list[RecordedItem]:
+        """The recorded messages to ``peer`` the role has not sent (yet)."""
+        return self._expected.get(peer, [])[self.checks[peer].sent:]
+
+    def payload_of(self, item: RecordedItem) -> object:
+        """A recorded message as a channel delivers it: ``(label, payload)``, or ``Corrupt``."""
+        try:
+            return (item.label, self._decode(item))
+        except Exception as error:  # bytes that do not decode: the sender is to blame, as live
+            return Corrupt(f"recorded message {item.index} on {item.topic.topic}: {type(error).__name__}: {error}")
+
+
+def _message(label: str, payload: object) -> str:
+    from .compare import short
+
+    return label if payload is None else f"{label}({short(payload)})"
+
+
+class _Feed:
+    """A channel into the replayed role: the recording's messages on it, then the end."""
+
+    def __init__(self, network: ReplayNetwork, peer: str, items: Sequence[RecordedItem],
+                 unrecorded: str | None = None) -> None:
+        self._network = network
+        self._peer = peer
+        self._items: deque[object] = deque(items)
+        self.recorded = len(self._items)
+        self.delivered = 0
+        self.unrecorded = unrecorded
+
+    def put(self, item: object) -> None:  # a signal the endpoint puts back
+        self._items.append(item)
+
+    def get(self, *, timeout: float | None = None) -> object:
+        network = self._network
+        if network.ending is not None:
+            raise RoleStopped(network.detail())
+        channel = f"{self._peer}->{network.role}"
+        if self.unrecorded is not None:
+            raise network.end(NOT_RECORDED, f"{network.role}{network.state()} receives from {self._peer} on {channel}, "
+                                      f"which the recording does not have ({self.unrecorded}): "
+                                      f"{network.role} cannot be replayed alone from here")
+        if not self._items:
+            raise network.end(RECORDING_ENDS, f"the recording ends here: {network.role}{network.state()} waits for a "
+                                        f"message from {self._peer}, and all {self.recorded} recorded on "
+                                        f"{channel} have been delivered")
+        item = self._items.popleft()
+        if not isinstance(item, RecordedItem):
+            return item
+        self.delivered += 1
+        return network.payload_of(item)
+
+    def get_nowait(self) -> object:
+        return self.get()
+
+    def empty(self) -> bool:
+        return not self._items
+
+
+class _Check:
+    """A channel out of the replayed role: compares (recorded) or counts (not recorded)."""
+
+    def __init__(self, network: ReplayNetwork, peer: str, recorded: bool = True) -> None:
+        self._network = network
+        self._peer = peer
+        self.recorded = recorded
+        self.sent = 0
+
+    def put(self, item: object) -> None:
+        if type(item) is not tuple:  # a signal: nobody reads it
+            return
+        if self.recorded:
+            self._network.delivered(self._peer, item[0], item[1])
+        else:
+            self.sent += 1
+
+    def get(self, *, timeout: float | None = None) -> object:
+        raise queue.Empty  # only the replayed role's peers would read it, and they are not here
+
+    def get_nowait(self) -> object:
+        raise queue.Empty
+
+    def empty(self) -> bool:
+        return True
+
+
+class _Rings:
+    """The replayed role's doorbell: one ring per recorded input, in recorded order."""
+
+    def __init__(self, network: ReplayNetwork, order: list[str]) -> None:
+        self._network = network
+        self._order = deque(order)
+
+    def put(self, sender: str) -> None:
+        self._order.append(sender)
+
+    def get(self, *, timeout: float | None = None) -> str:
+        network = self._network
+        with network._lock:  # branch threads may wait together
+            if network.ending is not None:
+                raise RoleStopped(network.detail())
+            if self._order:
+                return self._order.popleft()
+        unrecorded = sorted(f"{peer}->{network.role}" for peer, feed in network.feeds.items()
+                            if feed.unrecorded is not None)
+        also = f" ({', '.join(unrecorded)} not recorded)" if unrecorded else ""
+        raise network.end(RECORDING_ENDS, f"the recording ends here: {network.role}{network.state()} waits for a "
+                                    f"message from any peer, and every recorded one has been delivered{also}")
+
+    def get_nowait(self) -> str:
+        with self._network._lock:
+            if not self._order:
+                raise queue.Empty
+            return self._order.popleft()
+
+    def qsize(self) -> int:
+        return 0  # the endpoint never drains these rings: each stands for one recorded message

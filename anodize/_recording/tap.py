@@ -1,0 +1,338 @@
+"""Recording inside a group: the channels it records, and the thread that writes its part.
+
+Each recorded channel is wrapped (:class:`RecordingChannel`): a message is encoded
+(:mod:`.encoding`) in the sending thread, as it leaves, so what is recorded is what was
+sent, even if the sender changes the payload afterwards; a thread of the group writes
+it to the group's part file (an MCAP file without chunks, flushed every 0.1 s, so a
+group that is killed loses at most its last tenth of a second). That thread runs at
+ordinary priority, below every real-time role of the group, so recording does not
+delay the control loop; when it falls behind by more than :data:`BACKLOG` bytes (an
+eighth of the group's memory bound, if that is less) the senders wait for it (bounded
+memory; nothing is dropped). The supervisor merges the
+parts when the run ends (:mod:`.merge`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sessiontypes import StateMachine
+
+from .._extras import import_extra
+from .._isolation.sched import lower_thread_priority
+from .._session.channel import Channel
+from .._session.endpoint import put_each
+from ..taps import TapGroup
+from .encoding import SortCodec, codec_for_sort
+from .plan import META, PROFILE, ChannelLabel, RecordPlan
+
+__all__ = ["GroupRecording", "Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG",
+           "channel_metadata", "QOS_PROFILES"]
+
+FEATURE = "recording a run (--record)"
+BACKLOG = 64 * 2**20  # bytes a group's recorder may hold before its senders wait
+SEQUENCE_WRAP = 2**32 - 1  # the largest MCAP sequence number
+_FLUSH_EVERY = 0.1    # seconds
+
+# What anodize's channels offer, as rosbag2 writes it (metadata version 9): reliable, keep all, volatile.
+QOS_PROFILES = """- history: keep_all
+  depth: 0
+  reliability: reliable
+  durability: volatile
+  deadline: {sec: 9223372036, nsec: 854775807}
+  lifespan: {sec: 9223372036, nsec: 854775807}
+  liveliness: automatic
+  liveliness_lease_duration: {sec: 9223372036, nsec: 854775807}
+  avoid_ros_namespace_conventions: false"""
+
+
+def channel_metadata(item: ChannelLabel, codec: SortCodec, protocol: str,
+                     group_of: Mapping[str, str]) -> dict[str, str]:
+    """The metadata of a recorded label's MCAP channel: rosbag2's keys, then anodize's."""
+    sort = item.sort
+    return {
+        "offered_qos_profiles": QOS_PROFILES,
+        "topic_type_hash": codec.ros.type_hash,
+        f"{META}.protocol": protocol,
+        f"{META}.sender": item.sender,
+        f"{META}.receiver": item.receiver,
+        f"{META}.label": item.label,
+        f"{META}.sort": sort.key if sort is not None else "",
+        f"{META}.sort_target": (sort.target or "") if sort is not None else "",
+        f"{META}.encoding": "json" if codec.json else "cdr",
+        f"{META}.sender_group": group_of.get(item.sender, "external"),
+        f"{META}.receiver_group": group_of.get(item.receiver, "external"),
+    }
+
+
+@dataclass(frozen=True)
+class GroupRecording:
+    """A recording's :class:`~anodize.taps.GroupTapPlan`: each group opens a :class:`Recorder`."""
+
+    plan: RecordPlan
+
+    def open(self, group: TapGroup) -> Recorder:
+        """The group's recorder (it writes the group's part of the recording)."""
+        return Recorder(self.plan, group.name, group.incarnation, group.protocol, group.machines, group.memory)
+
+
+class Recorder:
+    """One group's recorder; :meth:`attach` it to the group's network, :meth:`close` at the end."""
+
+    def __init__(self, plan: RecordPlan, group: str, incarnation: int, protocol: str,
+                 machines: Mapping[str, StateMachine], memory: int | None = None) -> None:
+        import_extra("mcap.writer", "record", FEATURE)
+        from mcap.writer import CompressionType, Writer
+
+        self.plan = plan
+        self.protocol = protocol
+        self.recorded = plan.recorded_here(machines)
+        self._labels = _local_labels(machines, self.recorded)
+        Path(plan.parts).mkdir(parents=True, exist_ok=True)
+        self.path = Path(plan.parts) / f"{group}-{incarnation}.mcap"
+        self._file = self.path.open("wb")
+        self._writer = Writer(self._file, use_chunking=False, compression=CompressionType.NONE,
+                              enable_crcs=False)
+        self._writer.start(profile=PROFILE, library="anodize")
+        self._channels: dict[tuple[str, str, str], tuple[int, SortCodec]] = {}
+        self._schemas: dict[str, int] = {}
+        self._pending: deque[tuple[int, int, int, bytes]] = deque()
+        self._pending_bytes = 0
+        # A group with a memory bound spends at most an eighth of it on a backlog.
+        self.backlog = BACKLOG if memory is None else max(2**20, min(BACKLOG, memory // 8))
+        self._sequence: dict[tuple[str, str], int] = dict.fromkeys(self.recorded, 0)
+        self._lock = threading.Condition()
+        self._closing = False
+        self.written = 0
+        self.unrecorded: dict[str, list[int | str]] = {}  # "A->B:label" -> [count, first reason]
+        self.broken = ""  # why the writer stopped, if it did
+        self._io = threading.Lock()  # the part file's writer: one thread at a time
+        self._pair_of: dict[int, tuple[str, str]] = {}  # MCAP channel -> its channel
+        self._writing: list[tuple[int, int, int, bytes]] = []  # the batch being written
+        self._thread = threading.Thread(target=self._write_loop, name=f"anodize-record:{group}", daemon=True)
+        self._thread.start()
+
+    def attach(self, queues: dict[tuple[str, str], Channel]) -> None:
+        """Wrap the recorded channels among ``queues`` (in place)."""
+        for pair, end in self.recorded.items():
+            if pair in queues:
+                queues[pair] = RecordingChannel(queues[pair], self, pair, at_sender=(end == "send"))
+
+    def encode(self, pair: tuple[str, str], label: str, payload: object) -> tuple[int, int, bytes] | None:
+        """A message of channel ``pair`` as it will be recorded: (MCAP channel, time, bytes).
+
+        A payload that cannot be encoded (possible only without monitors) is counted, with the
+        first reason, in the part's ``anodize.unrecorded`` metadata: the run goes on.
+        """
+        stamp = time.time_ns()
+        try:
+            channel_id, codec = self._channel(pair, label)
+            return channel_id, stamp, codec.encode(payload)
+        except Exception as error:  # the recording's problem, not the role's: say so at the end
+            self._count_unrecorded(pair, label, f"{type(error).__name__}: {error}")
+            return None
+
+    def _count_unrecorded(self, pair: tuple[str, str], label: str, reason: str) -> None:
+        key = f"{pair[0]}->{pair[1]}" + (f":{label}" if label else "")
+        first = self.unrecorded.setdefault(key, [0, reason])
+        first[0] = int(first[0]) + 1
+
+    def queue(self, pair: tuple[str, str], encoded: tuple[int, int, bytes]) -> None:
+        """Hand an encoded message to the writer (waiting while the writer is far behind)."""
+        channel_id, stamp, data = encoded
+        with self._lock:
+            while self._pending_bytes > self.backlog and not self._closing:
+                self._lock.wait(0.1)
+            if self.broken:  # the writer failed (e.g. a full disk): counted, never waited for
+                self._count_unrecorded(pair, "", self.broken)
+                return
+            # MCAP's sequence is 32 bits: after 2**32 - 1 it wraps to 1 (verify knows).
+            sequence = self._sequence[pair] = self._sequence[pair] % SEQUENCE_WRAP + 1
+            self._pending.append((channel_id, stamp, sequence, data))
+            self._pending_bytes += len(data)
+            self._lock.notify_all()
+
+    def _channel(self, pair: tuple[str, str], label: str) -> tuple[int, SortCodec]:
+        key = (*pair, label)
+        found = self._channels.get(key)
+        if found is None:
+            with self._lock:
+                found = self._channels.get(key) or self._register(key)
+        return found
+
+    def _register(self, key: tuple[str, str, str]) -> tuple[int, SortCodec]:
+        item = self._labels.get(key) or ChannelLabel(*key, None)
+        codec = codec_for_sort(item.sort)
+        schema = self._schemas.get(codec.type_name)
+        if schema is None:
+            with self._io:
+                schema = self._schemas[codec.type_name] = self._writer.register_schema(
+                    codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+        topic = self.plan.topics.get(key) or f"/anodize/{key[0]}/{key[1]}/{key[2]}"
+        metadata = channel_metadata(item, codec, self.protocol, self.plan.group_of)
+        with self._io:  # the writer thread may be writing messages to the same file
+            channel_id = self._writer.register_channel(topic, "cdr", schema, metadata)
+        self._pair_of[channel_id] = (key[0], key[1])
+        found = self._channels[key] = (channel_id, codec)
+        return found
+
+    def _write_loop(self) -> None:
+        lower_thread_priority()  # it inherited the group's real-time priority
+        try:
+            self._write_until_closed()
+        except Exception as error:  # a full disk, say: the run goes on, unrecorded, and says so
+            with self._lock:
+                self.broken = f"the recording's writer failed: {type(error).__name__}: {error}"
+                for channel_id, *_ in [*self._writing, *self._pending]:
+                    self._count_unrecorded(self._pair_of.get(channel_id, ("?", "?")), "", self.broken)
+                self._writing = []
+                self._pending.clear()
+                self._pending_bytes = 0
+                self._lock.notify_all()
+
+    def _write_until_closed(self) -> None:
+        last_flush = time.monotonic()
+        while True:
+            with self._lock:
+                while not self._pending and not self._closing:
+                    self._lock.wait(_FLUSH_EVERY)
+                    if time.monotonic() - last_flush >= _FLUSH_EVERY:
+                        break
+                batch = self._writing = list(self._pending)  # kept until written: a failure counts it
+                self._pending.clear()
+                closing = self._closing
+            with self._io:
+                for channel_id, stamp, sequence, data in batch:
+                    self._writer.add_message(channel_id, stamp, data, stamp, sequence)
+            self.written += len(batch)
+            self._writing = []
+            with self._lock:
+                self._pending_bytes -= sum(len(item[3]) for item in batch)
+                self._lock.notify_all()
+            if time.monotonic() - last_flush >= _FLUSH_EVERY or closing:
+                self._file.flush()
+                last_flush = time.monotonic()
+            if closing and not batch:
+                return
+
+    def close(self) -> None:
+        """Write what is queued, end the part file properly, and stop the writer."""
+        with self._lock:
+            self._closing = True
+            self._lock.notify_all()
+        self._thread.join()
+        with contextlib.suppress(Exception):  # best effort: a broken writer fails again (the merge notes it)
+            if self.unrecorded:
+                self._writer.add_metadata(f"{META}.unrecorded", {
+                    key: f"{count} messages not recorded; the first: {reason}"
+                    for key, (count, reason) in self.unrecorded.items()})
+            self._writer.finish()  # type: ignore[no-untyped-call]
+            self._file.close()
+
+
+class TappedChannel:
+    """A channel whose messages something else also sees (a recording, the live view):
+    as they are put, at the sending end, or as they are taken, at the receiving end (the
+    channels of an external sender). Subclasses say what to do with a message before it
+    leaves (:meth:`leaving`, whose result :meth:`left` gets once it has gone)."""
+
+    def __init__(self, inner: Channel, pair: tuple[str, str], at_sender: bool) -> None:
+        self._inner = inner
+        self._pair = pair
+        self._at_sender = at_sender
+
+    def leaving(self, label: str, payload: object) -> object:
+        """A message is about to go (or has just arrived); returns what :meth:`left` gets."""
+        raise NotImplementedError
+
+    def left(self, token: object) -> None:
+        """The message :meth:`leaving` saw has gone."""
+
+    def put(self, item: object) -> None:
+        if not (self._at_sender and type(item) is tuple):  # messages are plain tuples, signals are not
+            self._inner.put(item)
+            return
+        token = self.leaving(item[0], item[1])
+        self._inner.put(item)
+        self.left(token)
+
+    def put_many(self, items: list[tuple[str, object]]) -> None:
+        """Several messages (``Endpoint.send_many``): each seen, the batch handed on at once."""
+        tokens = [self.leaving(label, payload) for label, payload in items] if self._at_sender else []
+        put_many = getattr(self._inner, "put_many", None)
+        try:
+            if put_many is not None:
+                put_many(items)
+            else:
+                put_each(self._inner, items)
+        except BaseException as error:  # those that went out are recorded all the same
+            tokens = tokens[:getattr(error, "sent_in_batch", 0)]
+            raise
+        finally:
+            for token in tokens:
+                self.left(token)
+
+    def take_ready(self, limit: int) -> list[tuple[str, object]]:
+        """Messages already arrived (``Endpoint.recv_many``): at the receiving end each is
+        seen as it is taken, so none is taken in a batch here."""
+        take = getattr(self._inner, "take_ready", None)
+        return take(limit) if take is not None and self._at_sender else []
+
+    def give_back(self, items: list[tuple[str, object]]) -> None:
+        self._inner.give_back(items)  # type: ignore[attr-defined]
+
+    def get(self, *, timeout: float | None = None) -> object:
+        return self._taken(self._inner.get(timeout=timeout))
+
+    def get_nowait(self) -> object:
+        return self._taken(self._inner.get_nowait())
+
+    def _taken(self, item: object) -> object:
+        if not self._at_sender and type(item) is tuple:
+            self.left(self.leaving(item[0], item[1]))
+        return item
+
+    def empty(self) -> bool:
+        return self._inner.empty()
+
+    def __getattr__(self, name: str) -> Any:  # qsize, buffer, ... of the transport's channel
+        return getattr(self._inner, name)
+
+
+class RecordingChannel(TappedChannel):
+    """A channel whose messages are also recorded. A message is encoded before it leaves:
+    once put, an array in a shared slot is the receiver's."""
+
+    def __init__(self, inner: Channel, recorder: Recorder, pair: tuple[str, str], at_sender: bool) -> None:
+        super().__init__(inner, pair, at_sender)
+        self._recorder = recorder
+
+    def leaving(self, label: str, payload: object) -> object:
+        return self._recorder.encode(self._pair, label, payload)
+
+    def left(self, token: object) -> None:
+        if token is not None:
+            self._recorder.queue(self._pair, token)  # type: ignore[arg-type]
+
+
+def _local_labels(machines: Mapping[str, StateMachine],
+                  recorded: Mapping[tuple[str, str], str]) -> dict[tuple[str, str, str], ChannelLabel]:
+    """The labels (with sorts) of the recorded channels, from the local roles' machines."""
+    found: dict[tuple[str, str, str], ChannelLabel] = {}
+    for role, machine in machines.items():
+        for t in machine.all_transitions():
+            if t.peer is None:
+                continue
+            pair = (role, t.peer) if t.action == "send" else (t.peer, role)
+            if pair in recorded:
+                found.setdefault((*pair, t.label), ChannelLabel(*pair, t.label, t.sort))
+    return found
+
+

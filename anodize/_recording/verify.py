@@ -1,0 +1,335 @@
+"""``anodize verify``: does a recording follow the protocol, and if not, who broke it where.
+
+Each channel of the protocol (an ordered pair of roles) is checked on its own: its
+messages, in the recording's order, must be a sequence of labels the sender's local
+type may send on it and the receiver's may receive on it (every other action erased:
+:mod:`.channel_view`), each with a payload of the label's sort. The first message that
+breaks this is the channel's violation, and the sender is blamed, as a live monitor
+would blame it. How channels interleave is not checked (docs/recording.md says why).
+
+A recording made by anodize numbers each channel's messages: a number skipped or out
+of order means the recording itself lost or reordered a message, and is reported as
+such, blaming no role; numbering that starts again at 1 is a restarted group (the
+channel starts again from the protocol's beginning).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from sessiontypes import GlobalType, Sort, StateMachine, Transition
+
+from .._ros import ros_type
+from .._session.payloads import Validator, validator_for
+from ..errors import AnodizeError
+from .channel_view import ChannelView, Node, sort_key
+from .encoding import JSON_TYPE, SortCodec, UnknownObject, codec_for_sort
+from .plan import META, channel_labels
+from .reader import RecordedMessage, RecordedTopic, Recording
+from .tap import SEQUENCE_WRAP
+
+__all__ = ["Violation", "ChannelResult", "VerifyReport", "verify", "RECORDING_FAULT"]
+
+RECORDING_FAULT = "the recording (no role: a message was lost or reordered after it was sent)"
+
+
+@dataclass(frozen=True)
+class Violation:
+    """The first message of a channel that breaks the protocol.
+
+    Attributes:
+        channel: ``"Sender->Receiver"``.
+        index: the message's position on the channel, from 0.
+        log_time: its log time in the recording, ns since the epoch.
+        topic: the recording's topic it is on.
+        blamed: the role at fault (or :data:`RECORDING_FAULT`).
+        role: the role whose local type it breaks.
+        state: where that role was on this channel.
+        expected: what the channel allowed next.
+        actual: what was recorded.
+        location: the ``.proto`` location of the interaction concerned.
+        reason: what is wrong with the payload, or the recording, when that is the fault.
+    """
+
+    channel: str
+    index: int
+    log_time: int
+    topic: str
+    blamed: str
+    role: str
+    state: str
+    expected: tuple[str, ...]
+    actual: str
+    location: str
+    reason: str = ""
+
+    def __str__(self) -> str:
+        expected = ", ".join(self.expected) or "nothing more"
+        where = f"log time {_clock(self.log_time)}, topic {self.topic}"
+        lines = [f"channel {self.channel}, message {self.index} ({where}):",
+                 f"  {self.actual}, but {self.role} in state {self.state} expected {expected}"]
+        if self.reason:
+            lines.append(f"  {self.reason}")
+        lines.append(f"  blamed: {self.blamed}" + (f"; see {self.location}" if self.location else ""))
+        return "\n".join(lines)
+
+
+@dataclass
+class ChannelResult:
+    channel: str
+    messages: int = 0
+    violation: Violation | None = None
+
+
+@dataclass
+class VerifyReport:
+    """What ``verify`` found.
+
+    Attributes:
+        channels: per channel of the protocol that the recording has, its result.
+        unknown: recorded channels the protocol does not have (a violation).
+        unmapped: recorded topics that are no channel's (not checked).
+        missing: channels of the protocol with no message in the recording.
+        inside: channels an anodize recording leaves out by design (both ends in one group).
+    """
+
+    recording: str
+    protocol: str
+    channels: dict[str, ChannelResult] = field(default_factory=dict)
+    unknown: list[str] = field(default_factory=list)
+    unmapped: list[str] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)
+    inside: list[str] = field(default_factory=list)
+    messages: int = 0
+    bytes: int = 0
+    seconds: float = 0.0
+
+    @property
+    def conforms(self) -> bool:
+        return not self.unknown and all(r.violation is None for r in self.channels.values())
+
+    def text(self) -> str:
+        checked = sum(r.messages for r in self.channels.values())
+        verdict = "conforms to" if self.conforms else "does NOT conform to"
+        read = f"{self.messages} read, {self.bytes / 2**20:.1f} MiB in {self.seconds:.2f} s"
+        head = f"{self.recording} {verdict} {self.protocol}"
+        lines = [f"{head}: {checked} messages on {len(self.channels)} channels checked ({read})"]
+        lines.extend(f"violation: {r.violation}" for r in self.channels.values() if r.violation is not None)
+        lines.extend(f"unknown channel: {text}" for text in self.unknown)
+        lines.extend(f"not checked: topic {text} is no channel of the protocol (give it in --topics)"
+                     for text in self.unmapped)
+        lines.extend(f"missing: no message on channel {channel}" for channel in self.missing)
+        if self.inside:
+            lines.append(f"not recorded (both ends in one group): {', '.join(self.inside)}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"recording": self.recording, "protocol": self.protocol, "conforms": self.conforms,
+                "channels": {name: {"messages": r.messages,
+                                    "violation": None if r.violation is None else r.violation.__dict__}
+                             for name, r in self.channels.items()},
+                "unknown": self.unknown, "unmapped": self.unmapped, "missing": self.missing, "inside": self.inside,
+                "messages": self.messages, "bytes": self.bytes, "seconds": self.seconds}
+
+
+class _ChannelCheck:
+    """The state of one channel's check."""
+
+    def __init__(self, sender: str, receiver: str, machines: Mapping[str, StateMachine]) -> None:
+        self.sender, self.receiver = sender, receiver
+        self.name = f"{sender}->{receiver}"
+        self.views = (ChannelView(machines[sender], "send", receiver), ChannelView(machines[receiver], "recv", sender))
+        self.reset()
+        self.result = ChannelResult(self.name)
+        self.sequence = 0
+
+    def reset(self) -> None:
+        self.states: list[frozenset[Node]] = [view.start for view in self.views]
+
+    def check(self, message: RecordedMessage, label: str, codecs: _Codecs) -> None:
+        if self.result.violation is not None:
+            return
+        index = self.result.messages
+        self.result.messages += 1
+        problem = self._numbering(message.sequence)
+        if problem:
+            self._fail(message, index, label, 0, RECORDING_FAULT, problem)
+            return
+        # The label's sorts that the payload fits: a label may carry different sorts on different paths.
+        taken = self.views[0].taken(self.states[0], label)
+        if not taken:
+            self._fail(message, index, label, 0, self.sender)
+            return
+        fits, reason = _fitting_sorts(message, taken, codecs)
+        if not fits:
+            self._fail(message, index, label, 0, self.sender, reason)
+            return
+        for side, view in enumerate(self.views):
+            after = view.step(self.states[side], label, fits)
+            if not after:
+                self._fail(message, index, label, side, self.sender)
+                return
+            self.states[side] = after
+
+    def _numbering(self, sequence: int) -> str:
+        if sequence == 0:  # not numbered (not recorded by anodize)
+            return ""
+        previous, self.sequence = self.sequence, sequence
+        if sequence == previous + 1:
+            return ""
+        if sequence == 1 and previous == SEQUENCE_WRAP:  # 32 bits of numbering ran out: they wrap
+            return ""
+        if sequence == 1:  # the sender's group started again: so does the channel
+            self.reset()
+            return ""
+        if sequence > previous + 1:
+            return (f"the sender numbered it {sequence} after {previous}: "
+                    f"{sequence - previous - 1} message(s) before it are missing from the recording")
+        return f"the sender numbered it {sequence} after {previous}: the recording has it out of order"
+
+    def _fail(self, message: RecordedMessage, index: int, label: str, side: int, blamed: str,
+              reason: str = "") -> None:
+        view = self.views[side]
+        nodes = self.states[side]
+        allowed = view.allowed(nodes)
+        taken = view.taken(nodes, label)
+        concerned = taken[0] if taken else (allowed[0] if allowed else None)
+        role = self.sender if side == 0 else self.receiver
+        self.result.violation = Violation(
+            self.name, index, message.log_time, message.topic.topic, blamed, role, view.describe(nodes),
+            tuple(str(t) for t in allowed), _actual(side, self, label, message.topic),
+            str(concerned.location) if concerned is not None else "", reason)
+
+
+def _actual(side: int, check: _ChannelCheck, label: str, topic: RecordedTopic) -> str:
+    arrow = f"!{check.receiver}" if side == 0 else f"?{check.sender}"
+    return f"{arrow}({label}) carrying a {topic.type_name}"
+
+
+class _Codecs:
+    """Decoders of the recorded types, made once each."""
+
+    def __init__(self) -> None:
+        self._found: dict[tuple[str, bool], SortCodec] = {}
+
+    def decode(self, topic: RecordedTopic, data: bytes | memoryview) -> object:
+        as_json = topic.type_name == JSON_TYPE and topic.metadata.get(f"{META}.encoding") == "json"
+        key = (topic.type_name, as_json)
+        codec = self._found.get(key)
+        if codec is None:
+            ros = ros_type(topic.type_name)
+            codec = self._found[key] = SortCodec(None, ros, json=as_json)
+        return codec.decode(data)
+
+
+def _fitting_sorts(message: RecordedMessage, taken: list[Transition], codecs: _Codecs
+                   ) -> tuple[frozenset[str | None], str]:
+    """The sorts (keys) among ``taken``'s that the message's payload is of, and if none, why not.
+
+    The payload is decoded once, whatever the number of sorts its label may carry.
+    """
+    reasons: list[str] = []
+    candidates: list[tuple[Sort | None, Validator | str]] = []
+    for sort in {sort_key(t): t.sort for t in taken}.values():
+        recorded = message.topic.type_name
+        if recorded != codec_for_sort(sort).type_name:
+            reasons.append(f"payload of the wrong sort: recorded a {recorded}, the label carries {_sort_text(sort)}")
+            continue
+        try:  # before decoding: it imports the class a declared sort names (the protocol's, not the recording's)
+            candidates.append((sort, validator_for(sort)))
+        except AnodizeError as error:  # the sort's class cannot be imported here
+            candidates.append((sort, f"cannot check the payload: {error}"))
+    if not candidates:
+        return frozenset(), "; ".join(reasons)
+    try:
+        payload = codecs.decode(message.topic, message.data)
+    except (AnodizeError, ValueError, KeyError, TypeError) as error:
+        expected = " or ".join(_sort_text(sort) for sort, _ in candidates)
+        return frozenset(), "; ".join([*reasons, f"the payload does not decode as {expected}: {error}"])
+    fits: set[str | None] = set()
+    for sort, check in candidates:
+        reason = _payload_problem(payload, sort, check)
+        if reason:
+            reasons.append(reason)
+        else:
+            fits.add(sort.key if sort is not None else None)
+    return frozenset(fits), "; ".join(reasons)
+
+
+def _payload_problem(payload: object, sort: Sort | None, check: Validator | str) -> str:
+    """Why a decoded payload is not of ``sort`` ("" if it is); ``check`` is the sort's validator,
+    or why there is none."""
+    if isinstance(payload, UnknownObject):
+        target = sort.target if sort is not None else None
+        return "" if payload.class_name == target else (
+            f"payload of the wrong sort: a recorded {payload.class_name}, the label carries {_sort_text(sort)}")
+    if isinstance(check, str):
+        return check
+    reason = check(payload)
+    return f"payload of the wrong sort: {reason}" if reason else ""
+
+
+def _sort_text(sort: Sort | None) -> str:
+    if sort is None:
+        return "no payload"
+    return f"{sort.spelling} ({sort.target})" if sort.target else sort.spelling
+
+
+def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, tuple[str, str, str]] | None = None
+           ) -> VerifyReport:
+    """Check ``recording`` against ``global_type``.
+
+    Args:
+        topics: topic -> ``(sender, receiver, label)`` for topics without anodize's metadata
+            (a recording made by another tool).
+    """
+    began = time.perf_counter()
+    machines = {role: global_type.project(role).fsm() for role in global_type.roles}
+    labels = channel_labels(machines)
+    pairs = {(s, r) for s, r, _ in labels}
+    report = VerifyReport(str(recording.path), global_type.name)
+    keys: dict[int, tuple[str, str, str]] = {}
+    for topic in recording.topics:
+        key = _key_of(topic, topics or {})
+        if key is None:
+            report.unmapped.append(f"{topic.topic} ({topic.type_name})")
+        elif key[:2] not in pairs:
+            report.unknown.append(f"{key[0]}->{key[1]} (topic {topic.topic}): global {global_type.name} "
+                                  "has no such channel")
+        else:
+            keys[topic.id] = key
+    checks = {pair: _ChannelCheck(*pair, machines) for pair in sorted({k[:2] for k in keys.values()})}
+    codecs = _Codecs()
+    for message in recording.messages():
+        report.messages += 1
+        report.bytes += len(message.data)
+        key = keys.get(message.topic.id)
+        if key is not None:
+            checks[key[:2]].check(message, key[2], codecs)
+    report.channels = {check.name: check.result for check in checks.values()}
+    recorded = recording.info.get("recorded_channels")
+    # An anodize recording says which channels it records: those inside one group it does not.
+    expected = sorted(pairs) if recorded is None else sorted(
+        pair for pair in pairs if f"{pair[0]}->{pair[1]}" in recorded.split())
+    report.missing = [f"{s}->{r}" for s, r in expected
+                      if f"{s}->{r}" not in report.channels or not report.channels[f"{s}->{r}"].messages]
+    report.inside = [f"{s}->{r}" for s, r in sorted(pairs) if (s, r) not in expected]
+    report.seconds = time.perf_counter() - began
+    return report
+
+
+def _key_of(topic: RecordedTopic, topics: Mapping[str, tuple[str, str, str]]) -> tuple[str, str, str] | None:
+    meta = topic.metadata
+    if f"{META}.sender" in meta:
+        return meta[f"{META}.sender"], meta.get(f"{META}.receiver", ""), meta.get(f"{META}.label", "")
+    return topics.get(topic.topic)
+
+
+def _clock(stamp: int) -> str:
+    import datetime
+
+    moment = datetime.datetime.fromtimestamp(stamp / 1e9, tz=datetime.UTC)
+    return f"{stamp / 1e9:.6f} s ({moment:%Y-%m-%d %H:%M:%S.%f} UTC)"

@@ -1,0 +1,578 @@
+/* The compiled hot path of anodize._session.endpoint: Endpoint.send and Endpoint.recv.
+ *
+ * EndpointCore is the base class of Endpoint when this module was built (endpoint.py falls
+ * back to its pure-Python core otherwise, or when ANODIZE_PURE_PYTHON is set). It holds the
+ * attributes the two calls read on every message, and does what the Python core does for
+ * the commonest case only: a role without parallel branches, positional arguments, a message
+ * its monitor allows at once (one look-up and an exact payload type), no failure or stop in
+ * the network, and for recv no timeout and no doorbell. Anything else goes to the Python
+ * core's send or recv (_send_python / _recv_python) before anything has happened, or, after
+ * the monitor has stepped, to the same Python helpers the Python core calls at that point,
+ * so both cores raise the same errors at the same moments. tests/anodize/test_endpoint_core.py
+ * runs the endpoint tests on both.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <structmember.h>
+
+typedef struct {
+    PyObject_HEAD
+    PyObject *role;
+    PyObject *plain;     /* True: no parallel composition (bool) */
+    PyObject *monitor;   /* a Monitor, or None */
+    PyObject *network;
+    PyObject *out;       /* peer -> (channel, doorbell) */
+    PyObject *in;        /* peer -> channel */
+    PyObject *sent;      /* peer -> count */
+    PyObject *received;  /* peer -> count */
+    PyObject *waiting;   /* peer -> qsize, for channels that can tell */
+    PyObject *high_water;
+    PyObject *doorbell;  /* this role's doorbell, or None */
+    /* The monitor's tables (never changed after it is built), read from `cached` once. */
+    PyObject *cached;
+    PyObject *sends;
+    PyObject *recvs;
+    PyObject *recv_peers;
+    Py_ssize_t state_offset; /* where the monitor's `state` slot lies in it, or -1: use getattr */
+    /* The last step taken each way, with the state, peer and label objects it was looked up
+     * for: a stream repeats them, and the tables never change, so it is taken again without a
+     * look-up. Strong references, so the identities compared cannot be reused meanwhile. */
+    Py_ssize_t send_state, recv_state;
+    PyObject *send_peer, *send_label, *send_step;
+    PyObject *recv_peer, *recv_label, *recv_step;
+} Core;
+
+static PyObject *str_state, *str_sends, *str_recvs, *str_recv_peers, *str_alarm, *str_put, *str_get,
+    *str_send, *str_recv, *str_send_python, *str_recv_python, *str_refuse_if_down, *str_no_channel,
+    *str_accept, *kw_timeout;
+static PyTypeObject *message_type; /* anodize._session.endpoint.Message, set by configure() */
+static PyObject *one;
+
+/* The monitor's tables, cached; -1 with an exception set if they are not what they should be. */
+static int cache_tables(Core *self)
+{
+    if (self->cached == self->monitor) {
+        return 0;
+    }
+    PyObject *sends = PyObject_GetAttr(self->monitor, str_sends);
+    PyObject *recvs = sends ? PyObject_GetAttr(self->monitor, str_recvs) : NULL;
+    PyObject *peers = recvs ? PyObject_GetAttr(self->monitor, str_recv_peers) : NULL;
+    if (peers == NULL || !PyList_CheckExact(sends) || !PyList_CheckExact(recvs) || !PyList_CheckExact(peers)) {
+        if (peers != NULL) {
+            PyErr_SetString(PyExc_TypeError, "EndpointCore: the monitor's tables must be lists");
+        }
+        Py_XDECREF(sends);
+        Py_XDECREF(recvs);
+        Py_XDECREF(peers);
+        return -1;
+    }
+    Py_XSETREF(self->sends, sends);
+    Py_XSETREF(self->recvs, recvs);
+    Py_XSETREF(self->recv_peers, peers);
+    Py_XSETREF(self->cached, Py_NewRef(self->monitor));
+    Py_CLEAR(self->send_peer);
+    Py_CLEAR(self->send_label);
+    Py_CLEAR(self->send_step);
+    Py_CLEAR(self->recv_peer);
+    Py_CLEAR(self->recv_label);
+    Py_CLEAR(self->recv_step);
+    /* Monitor declares __slots__: its `state` is then a member descriptor holding an object at
+     * a fixed offset, read and written there as the descriptor itself does. */
+    self->state_offset = -1;
+    PyObject *descriptor = _PyType_Lookup(Py_TYPE(self->monitor), str_state); /* borrowed */
+    if (descriptor != NULL && Py_IS_TYPE(descriptor, &PyMemberDescr_Type)
+            && PyObject_TypeCheck(self->monitor, ((PyDescrObject *)descriptor)->d_type)) {
+        PyMemberDef *member = ((PyMemberDescrObject *)descriptor)->d_member;
+        if (member->type == T_OBJECT_EX && !(member->flags & READONLY)) {
+            self->state_offset = member->offset;
+        }
+    }
+    return 0;
+}
+
+/* The monitor's state object (a new reference), or NULL with an exception set. */
+static PyObject *get_state(Core *self)
+{
+    if (self->state_offset >= 0 && self->cached == self->monitor) { /* the offset is this monitor's */
+        PyObject *state = *(PyObject **)((char *)self->monitor + self->state_offset);
+        if (state != NULL) {
+            return Py_NewRef(state);
+        }
+    }
+    return PyObject_GetAttr(self->monitor, str_state); /* raises as Python would, if unset */
+}
+
+static int set_state(Core *self, PyObject *state)
+{
+    if (self->state_offset < 0 || self->cached != self->monitor) {
+        return PyObject_SetAttr(self->monitor, str_state, state);
+    }
+    PyObject **slot = (PyObject **)((char *)self->monitor + self->state_offset);
+    Py_XSETREF(*slot, Py_NewRef(state));
+    return 0;
+}
+
+/* The monitor's state, checked to index `table`; -1 with an exception set otherwise. */
+static Py_ssize_t current_state(Core *self, PyObject *table)
+{
+    PyObject *state = get_state(self);
+    if (state == NULL) {
+        return -1;
+    }
+    Py_ssize_t index = PyLong_AsSsize_t(state);
+    Py_DECREF(state);
+    if (index == -1 && PyErr_Occurred()) {
+        return -1;
+    }
+    if (index < 0 || index >= PyList_GET_SIZE(table)) {
+        PyErr_Format(PyExc_IndexError, "EndpointCore: monitor state %zd out of range", index);
+        return -1;
+    }
+    return index;
+}
+
+static int try_step_in(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
+                       Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step);
+
+/* The step the monitor takes on (peer, label) with `payload`, in `tables` (sends or recvs, with
+ * the last step taken that way in *last_*), taken at once if allowed with an exact payload type:
+ * 1 taken, 0 not found or needs the full check, -1 error. */
+static int try_step(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
+                    Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step)
+{
+    if (!PyUnicode_CheckExact(peer) || !PyUnicode_CheckExact(label)) {
+        return 0; /* a str subclass may run code as a key: the full check, in Python */
+    }
+    Py_INCREF(tables); /* a payload type's metaclass may run code and replace it */
+    int result = try_step_in(self, tables, peer, label, payload, last_state, last_peer, last_label, last_step);
+    Py_DECREF(tables);
+    return result;
+}
+
+static int try_step_in(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
+                       Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step)
+{
+    Py_ssize_t state = current_state(self, tables);
+    if (state < 0) {
+        return -1;
+    }
+    PyObject *step = *last_step; /* borrowed */
+    if (step == NULL || state != *last_state || peer != *last_peer || label != *last_label) {
+        PyObject *table = PyList_GET_ITEM(tables, state);
+        if (!PyDict_CheckExact(table)) {
+            PyErr_SetString(PyExc_TypeError, "EndpointCore: a monitor table must be a dict");
+            return -1;
+        }
+        PyObject *key = PyTuple_Pack(2, peer, label);
+        if (key == NULL) {
+            return -1;
+        }
+        step = PyDict_GetItemWithError(table, key); /* borrowed */
+        Py_DECREF(key);
+        if (step == NULL) {
+            return PyErr_Occurred() ? -1 : 0;
+        }
+        if (!PyTuple_CheckExact(step) || PyTuple_GET_SIZE(step) < 2
+                || !PyAnySet_Check(PyTuple_GET_ITEM(step, 1))) {
+            return 0;
+        }
+        *last_state = state;
+        Py_XSETREF(*last_peer, Py_NewRef(peer));
+        Py_XSETREF(*last_label, Py_NewRef(label));
+        Py_XSETREF(*last_step, Py_NewRef(step));
+    }
+    Py_INCREF(step);
+    int exact = PySet_Contains(PyTuple_GET_ITEM(step, 1), (PyObject *)Py_TYPE(payload));
+    if (exact > 0) {
+        exact = set_state(self, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
+    }
+    Py_DECREF(step);
+    return exact;
+}
+
+/* counts[peer] += 1 */
+static int count_one(PyObject *counts, PyObject *peer)
+{
+    if (counts == NULL || !PyDict_Check(counts)) { /* deleted or replaced while a put or get ran */
+        PyErr_SetString(PyExc_AttributeError, "EndpointCore: the endpoint's counts are gone");
+        return -1;
+    }
+    PyObject *count = PyDict_GetItemWithError(counts, peer);
+    if (count == NULL) {
+        if (!PyErr_Occurred()) {
+            PyErr_SetObject(PyExc_KeyError, peer);
+        }
+        return -1;
+    }
+    PyObject *more = PyNumber_Add(count, one);
+    if (more == NULL) {
+        return -1;
+    }
+    int result = PyDict_SetItem(counts, peer, more);
+    Py_DECREF(more);
+    return result;
+}
+
+/* Call self.<name>(*args, **kwargs) as given (the Python core's own path). */
+static PyObject *pass_on(Core *self, PyObject *name, PyObject *const *args, size_t nargsf, PyObject *kwnames)
+{
+    PyObject *method = PyObject_GetAttr((PyObject *)self, name);
+    if (method == NULL) {
+        return NULL;
+    }
+    PyObject *result = PyObject_Vectorcall(method, args, nargsf, kwnames);
+    Py_DECREF(method);
+    return result;
+}
+
+/* obj.<name>(a[, b[, c]]): n arguments. The slot before obj is spare, so the call may borrow it. */
+static PyObject *call_method(PyObject *obj, PyObject *name, PyObject *a, PyObject *b, PyObject *c, Py_ssize_t n)
+{
+    PyObject *args[5] = {NULL, obj, a, b, c};
+    return PyObject_VectorcallMethod(name, args + 1, (size_t)(n + 1) | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+}
+
+static PyObject *core_send(Core *self, PyObject *const *args, Py_ssize_t nargsf, PyObject *kwnames)
+{
+    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
+    /* Role names of exact type str: no code of theirs runs in the look-ups below. */
+    if (kwnames != NULL || nargs < 2 || nargs > 3 || !PyUnicode_CheckExact(args[0]) || self->plain != Py_True
+            || self->out == NULL
+            || self->sent == NULL || self->waiting == NULL || self->high_water == NULL || self->network == NULL) {
+        return pass_on(self, str_send_python, args, (size_t)nargsf, kwnames);
+    }
+    PyObject *to = args[0], *label = args[1], *payload = nargs == 3 ? args[2] : Py_None;
+    if (self->monitor != NULL && self->monitor != Py_None) { /* first: a forbidden send is a violation */
+        if (cache_tables(self) < 0) {
+            return NULL;
+        }
+        int stepped = try_step(self, self->sends, to, label, payload, &self->send_state, &self->send_peer,
+                               &self->send_label, &self->send_step);
+        if (stepped < 0) {
+            return NULL;
+        }
+        if (stepped == 0) { /* the full check, which raises or steps */
+            PyObject *done = call_method(self->monitor, str_send, to, label, payload, 3);
+            if (done == NULL) {
+                return NULL;
+            }
+            Py_DECREF(done);
+        }
+    }
+    PyObject *alarm = PyObject_GetAttr(self->network, str_alarm);
+    if (alarm == NULL) {
+        return NULL;
+    }
+    int raised = PyObject_IsTrue(alarm);
+    Py_DECREF(alarm);
+    if (raised < 0) {
+        return NULL;
+    }
+    if (raised) {
+        PyObject *done = call_method((PyObject *)self, str_refuse_if_down, to, label, NULL, 2);
+        if (done == NULL) {
+            return NULL;
+        }
+        Py_DECREF(done);
+    }
+    PyObject *route = PyDict_GetItemWithError(self->out, to); /* borrowed: (channel, doorbell) */
+    if (route == NULL || !PyTuple_CheckExact(route) || PyTuple_GET_SIZE(route) != 2) {
+        return PyErr_Occurred() ? NULL : call_method((PyObject *)self, str_no_channel, to, NULL, NULL, 1);
+    }
+    PyObject *channel = PyTuple_GET_ITEM(route, 0), *doorbell = PyTuple_GET_ITEM(route, 1);
+    Py_INCREF(channel);
+    Py_INCREF(doorbell);
+    PyObject *item = PyTuple_Pack(2, label, payload);
+    PyObject *put = item ? call_method(channel, str_put, item, NULL, NULL, 1) : NULL;
+    Py_XDECREF(item);
+    Py_DECREF(channel);
+    if (put == NULL) {
+        Py_DECREF(doorbell);
+        return NULL;
+    }
+    Py_DECREF(put);
+    if (count_one(self->sent, to) < 0) {
+        Py_DECREF(doorbell);
+        return NULL;
+    }
+    if (self->waiting == NULL || self->high_water == NULL) { /* deleted while the put ran */
+        Py_DECREF(doorbell);
+        PyErr_SetString(PyExc_AttributeError, "EndpointCore: the endpoint's high-water marks are gone");
+        return NULL;
+    }
+    PyObject *size_of = PyDict_GetItemWithError(self->waiting, to); /* borrowed */
+    if (size_of != NULL) { /* the channel's high-water mark */
+        Py_INCREF(size_of);
+        PyObject *size = PyObject_CallNoArgs(size_of);
+        Py_DECREF(size_of);
+        PyObject *mark = size && self->high_water != NULL ? PyDict_GetItemWithError(self->high_water, to) : NULL;
+        int higher = mark ? PyObject_RichCompareBool(size, mark, Py_GT) : -1;
+        if (higher > 0) {
+            higher = PyDict_SetItem(self->high_water, to, size);
+        }
+        Py_XDECREF(size);
+        if (higher < 0) {
+            if (!PyErr_Occurred()) {
+                PyErr_SetObject(PyExc_KeyError, to);
+            }
+            Py_DECREF(doorbell);
+            return NULL;
+        }
+    } else if (PyErr_Occurred()) {
+        Py_DECREF(doorbell);
+        return NULL;
+    }
+    if (doorbell != Py_None) {
+        PyObject *rung = call_method(doorbell, str_put, self->role, NULL, NULL, 1);
+        Py_DECREF(doorbell);
+        if (rung == NULL) {
+            return NULL;
+        }
+        Py_DECREF(rung);
+    } else {
+        Py_DECREF(doorbell);
+    }
+    Py_RETURN_NONE;
+}
+
+static PyObject *as_message(PyObject *item)
+{
+    PyObject *message = message_type->tp_alloc(message_type, 2);
+    if (message == NULL) {
+        return NULL;
+    }
+    PyTuple_SET_ITEM(message, 0, Py_NewRef(PyTuple_GET_ITEM(item, 0)));
+    PyTuple_SET_ITEM(message, 1, Py_NewRef(PyTuple_GET_ITEM(item, 1)));
+    return message;
+}
+
+static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf, PyObject *kwnames)
+{
+    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
+    if (kwnames != NULL || nargs < 1 || nargs > 2 || (nargs == 2 && args[1] != Py_None) || message_type == NULL
+            || !PyUnicode_CheckExact(args[0])
+            || self->plain != Py_True || self->doorbell != Py_None || self->in == NULL || self->received == NULL) {
+        return pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
+    }
+    PyObject *frm = args[0];
+    int monitored = self->monitor != NULL && self->monitor != Py_None;
+    PyObject *monitor = NULL; /* the monitor read before get(), as the Python core reads it */
+    if (monitored) {
+        if (cache_tables(self) < 0) {
+            return NULL;
+        }
+        PyObject *table = Py_NewRef(self->recv_peers); /* what reading the state may run cannot free it */
+        Py_ssize_t state = current_state(self, table);
+        PyObject *peers = state < 0 ? NULL : Py_NewRef(PyList_GET_ITEM(table, state)); /* nor frm's __eq__ */
+        Py_DECREF(table);
+        if (peers == NULL) {
+            return NULL;
+        }
+        int allowed = PySequence_Contains(peers, frm);
+        Py_DECREF(peers);
+        if (allowed <= 0) { /* not now: the Python core raises the violation */
+            return allowed < 0 ? NULL : pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
+        }
+        monitor = Py_NewRef(self->monitor);
+    }
+    PyObject *channel = PyDict_GetItemWithError(self->in, frm); /* borrowed */
+    if (channel == NULL) {
+        Py_XDECREF(monitor);
+        return PyErr_Occurred() ? NULL : pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
+    }
+    Py_INCREF(channel);
+    PyObject *get_args[3] = {NULL, channel, Py_None}; /* channel.get(timeout=None) */
+    PyObject *item = PyObject_VectorcallMethod(str_get, get_args + 1, 1 | PY_VECTORCALL_ARGUMENTS_OFFSET, kw_timeout);
+    if (item == NULL) {
+        Py_DECREF(channel);
+        Py_XDECREF(monitor);
+        return NULL;
+    }
+    if (!PyTuple_CheckExact(item) || PyTuple_GET_SIZE(item) != 2) { /* a signal, or not a message */
+        Py_XDECREF(monitor);
+        PyObject *accepted = call_method((PyObject *)self, str_accept, frm, item, channel, 3);
+        Py_DECREF(item);
+        Py_DECREF(channel);
+        return accepted;
+    }
+    Py_DECREF(channel);
+    PyObject *label = PyTuple_GET_ITEM(item, 0), *payload = PyTuple_GET_ITEM(item, 1);
+    if (monitored && (self->monitor != monitor || self->cached != monitor)) {
+        /* The monitor was replaced while get() ran (any code can run there): the full check on
+         * the one read before, as the Python core does. */
+        PyObject *done = call_method(monitor, str_recv, frm, label, payload, 3);
+        Py_DECREF(monitor);
+        if (done == NULL) {
+            Py_DECREF(item);
+            return NULL;
+        }
+        Py_DECREF(done);
+        monitored = 0;
+    } else if (monitored) {
+        Py_DECREF(monitor);
+    }
+    if (monitored) {
+        int stepped = try_step(self, self->recvs, frm, label, payload, &self->recv_state, &self->recv_peer,
+                               &self->recv_label, &self->recv_step);
+        if (stepped == 0) { /* the full check, which raises (blaming the sender) or steps */
+            PyObject *done = call_method(self->monitor, str_recv, frm, label, payload, 3);
+            stepped = done == NULL ? -1 : 1;
+            Py_XDECREF(done);
+        }
+        if (stepped < 0) {
+            Py_DECREF(item);
+            return NULL;
+        }
+    }
+    if (count_one(self->received, frm) < 0) {
+        Py_DECREF(item);
+        return NULL;
+    }
+    PyObject *message = as_message(item);
+    Py_DECREF(item);
+    return message;
+}
+
+/* Every object field of Core, once: what traverse visits and clear clears. */
+#define CORE_OBJECTS(X) \
+    X(role) X(plain) X(monitor) X(network) X(out) X(in) X(sent) X(received) X(waiting) \
+    X(high_water) X(doorbell) X(cached) X(sends) X(recvs) X(recv_peers) \
+    X(send_peer) X(send_label) X(send_step) X(recv_peer) X(recv_label) X(recv_step)
+
+static int core_traverse(Core *self, visitproc visit, void *arg)
+{
+    Py_VISIT(Py_TYPE(self));
+#define VISIT_FIELD(field) Py_VISIT(self->field);
+    CORE_OBJECTS(VISIT_FIELD)
+#undef VISIT_FIELD
+    return 0;
+}
+
+static int core_clear(Core *self)
+{
+#define CLEAR_FIELD(field) Py_CLEAR(self->field);
+    CORE_OBJECTS(CLEAR_FIELD)
+#undef CLEAR_FIELD
+    return 0;
+}
+
+static void core_dealloc(Core *self)
+{
+    PyTypeObject *type = Py_TYPE(self);
+    PyObject_GC_UnTrack(self);
+    core_clear(self);
+    type->tp_free((PyObject *)self);
+    Py_DECREF(type); /* a heap type's instances hold a reference to it */
+}
+
+static PyObject *core_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
+{
+    (void)args;
+    (void)kwargs;
+    Core *self = (Core *)type->tp_alloc(type, 0);
+    if (self != NULL) {
+        self->plain = Py_NewRef(Py_False);
+        self->doorbell = Py_NewRef(Py_None);
+        self->monitor = Py_NewRef(Py_None);
+        self->state_offset = -1;
+    }
+    return (PyObject *)self;
+}
+
+#define MEMBER(name, field) {name, T_OBJECT_EX, offsetof(Core, field), 0, NULL}
+static PyMemberDef core_members[] = {
+    MEMBER("role", role), MEMBER("_plain", plain), MEMBER("_monitor", monitor),
+    MEMBER("_network", network), MEMBER("_out", out), MEMBER("_in", in), MEMBER("sent", sent),
+    MEMBER("received", received), MEMBER("_waiting", waiting), MEMBER("high_water", high_water),
+    MEMBER("_doorbell", doorbell), {NULL, 0, 0, 0, NULL},
+};
+
+static PyMethodDef core_methods[] = {
+    {"send", (PyCFunction)(void (*)(void))core_send, METH_FASTCALL | METH_KEYWORDS,
+     "send($self, to, label, payload=None)\n--\n\n"
+     "Send label (with payload) to role to.\n\n"
+     "Raises ProtocolViolationError if the local type does not allow it now (nothing is sent),\n"
+     "PeerFailedError if to has failed. The compiled core; Endpoint._send_python is the reference."},
+    {"recv", (PyCFunction)(void (*)(void))core_recv, METH_FASTCALL | METH_KEYWORDS,
+     "recv($self, frm, timeout=None)\n--\n\n"
+     "Receive the next message from role frm, as a Message (label, payload).\n\n"
+     "Raises ProtocolViolationError if this role may not receive from frm now (blame: this role)\n"
+     "or the message is not allowed (blame: frm), PeerFailedError if frm failed before sending,\n"
+     "TimeoutError if nothing arrived within timeout seconds. The compiled core;\n"
+     "Endpoint._recv_python is the reference."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyType_Slot core_slots[] = {
+    {Py_tp_doc, "The compiled core of Endpoint: its send and recv on the commonest path."},
+    {Py_tp_new, core_new},
+    {Py_tp_dealloc, core_dealloc},
+    {Py_tp_traverse, core_traverse},
+    {Py_tp_clear, core_clear},
+    {Py_tp_members, core_members},
+    {Py_tp_methods, core_methods},
+    {0, NULL},
+};
+
+static PyType_Spec core_spec = {
+    "anodize._session._endpoint_core.EndpointCore", sizeof(Core), 0,
+    Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC, core_slots,
+};
+
+/* configure(Message): the tuple subclass recv returns. */
+static PyObject *configure(PyObject *module, PyObject *type)
+{
+    (void)module;
+    if (!PyType_Check(type) || !PyType_IsSubtype((PyTypeObject *)type, &PyTuple_Type)) {
+        PyErr_SetString(PyExc_TypeError, "configure(): the message type must be a tuple subclass");
+        return NULL;
+    }
+    Py_XSETREF(message_type, (PyTypeObject *)Py_NewRef(type));
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef module_methods[] = {
+    {"configure", configure, METH_O, "configure(Message): the tuple subclass that recv returns."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef core_module = {
+    PyModuleDef_HEAD_INIT, "_endpoint_core",
+    "The compiled hot path of anodize._session.endpoint (a pure-Python core stays).", -1, module_methods,
+    NULL, NULL, NULL, NULL,
+};
+
+#define INTERN(var, text) \
+    if ((var = PyUnicode_InternFromString(text)) == NULL) return NULL
+
+PyMODINIT_FUNC PyInit__endpoint_core(void)
+{
+    INTERN(str_state, "state");
+    INTERN(str_sends, "sends");
+    INTERN(str_recvs, "recvs");
+    INTERN(str_recv_peers, "recv_peers");
+    INTERN(str_alarm, "alarm");
+    INTERN(str_put, "put");
+    INTERN(str_get, "get");
+    INTERN(str_send, "send");
+    INTERN(str_recv, "recv");
+    INTERN(str_send_python, "_send_python");
+    INTERN(str_recv_python, "_recv_python");
+    INTERN(str_refuse_if_down, "_refuse_if_down");
+    INTERN(str_no_channel, "_no_channel");
+    INTERN(str_accept, "_accept");
+    if ((one = PyLong_FromLong(1)) == NULL || (kw_timeout = Py_BuildValue("(s)", "timeout")) == NULL) {
+        return NULL;
+    }
+    PyObject *module = PyModule_Create(&core_module);
+    if (module == NULL) {
+        return NULL;
+    }
+    PyObject *core_type = PyType_FromSpec(&core_spec);
+    if (core_type == NULL || PyModule_AddObject(module, "EndpointCore", core_type) < 0) {
+        Py_XDECREF(core_type);
+        Py_DECREF(module);
+        return NULL;
+    }
+    return module;
+}

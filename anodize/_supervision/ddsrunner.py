@@ -1,0 +1,107 @@
+"""The runner of ``Dds``: the groups of this host as processes, joined to the rest by DDS.
+
+It is the process runner (:mod:`.processes`: isolation, memory bounds, priorities,
+liveness of the local groups) without pipes: each group's process joins the
+run's DDS domain, opens a topic per channel it has with another group, and
+reports ready only once every peer has appeared (the start barrier,
+:meth:`anodize._transport.dds.links.DdsLinks.wait_for_peers`). Groups placed on other
+hosts are started there, by ``anodize run ... --host``; this host's report names
+them as running elsewhere.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+
+from .._transport.dds import DdsSettings
+from . import processes
+from .group import reference_of
+from .groupproc import GroupSpec, group_main
+from .hostlink import HostLink
+from .plan import RunPlan
+from .processes import ProcessRunner, _Incarnation, _sys_path
+from .supervisor import Elsewhere, Scope
+
+__all__ = ["DdsRunner"]
+
+
+class DdsRunner(ProcessRunner):
+    """Starts this host's groups; see the module docstring.
+
+    Args:
+        plan: the run; its groups are every group of the system.
+        settings: the run's DDS settings (``host`` is this host).
+        elsewhere: the groups of the system that run on other hosts, by name -> host.
+        liveness: seconds a local group may send no heartbeat before it is failed.
+    """
+
+    transport = "dds"
+
+    def __init__(self, plan: RunPlan, settings: DdsSettings, elsewhere: Mapping[str, str],
+                 liveness: float = 2.0) -> None:
+        everyone = dict(plan.groups)
+        local = {name: g for name, g in everyone.items() if name not in elsewhere}
+        super().__init__(replace(plan, groups=local), liveness)
+        self.settings = settings
+        self.elsewhere = dict(elsewhere)
+        # The supervisors of the other hosts: policies that reach beyond a group act there too.
+        self.link = HostLink(settings, set(settings.host_of.values())) if elsewhere else None
+        # The start barrier may wait for other hosts: the start-up deadline allows for it.
+        self.start_timeout = processes._START_TIMEOUT + settings.wait
+        roles = self.scope.roles  # this host's (external roles are in no group)
+        self.scope = Scope(local, roles, tuple((a, b) for a, b in self.channels if a in roles and b in roles),
+                           Elsewhere(self.link, everyone, self.channels) if self.link is not None else None)
+
+    def start(self, groups: Sequence[str], incarnation: int) -> None:
+        """Start ``groups`` (of a batch that may span hosts); their channels to the other groups
+        of the batch are DDS topics, to groups outside it gone (as with pipes)."""
+        if self.link is not None and incarnation in self.link.batches:
+            batch = self.link.batches[incarnation]
+        else:  # every group starts as incarnation 0; with every group here, a restart's batch is ours
+            batch = frozenset(self.settings.host_of) if incarnation == 0 else frozenset(groups)
+        group_of = self.settings.group_of
+        for name in groups:
+            group = self.groups[name]
+            dead = {role: f"group {group_of[role]} did not start again with group {name}"
+                    for role in self.machines if role in group_of and group_of[role] not in batch}
+            spec = GroupSpec(
+                run_id=self.run_id, name=name, incarnation=incarnation, protocol=self.protocol,
+                roles={role: reference_of(fn) for role, fn in group.roles.items()},
+                machines={role: self.machines[role] for role in group.roles},
+                channels=self.channels, dead=dead, monitors=self.monitors,
+                priority=group.priority, cpus=group.cpus, memory=group.memory,
+                sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities, taps=self.plan.taps,
+                dds=replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)))
+            parent_end, child_end = self.context.Pipe()
+            process = self.context.Process(target=group_main, args=(spec, child_end, {}),
+                                           name=f"anodize:{name}", daemon=True)
+            process.start()
+            child_end.close()
+            self.current[name] = _Incarnation(group, incarnation, process, parent_end)
+
+    def notes(self) -> list[str]:
+        notes = super().notes()
+        settings = self.settings
+        notes.append(f"DDS domain {settings.domain}, run {settings.run_id}, host {settings.host}; "
+                     f"liveliness lease {settings.lease:g} s; start barrier waits {settings.wait:g} s")
+        if settings.ros is not None:
+            ros = settings.ros
+            notes.append(f"ROS 2 topics on domain {ros.domain}: " + (", ".join(
+                f"{topic.name} ({sender}->{receiver}: {label}, {topic.type_name})"
+                for (sender, receiver, label), topic in sorted(ros.topics.items())) or "none"))
+            if ros.external:
+                notes.append("external roles, played by ROS 2 nodes: " + ", ".join(sorted(ros.external)))
+        if self.elsewhere:
+            notes.append("groups running elsewhere: " + ", ".join(
+                f"{name} on host {host}" for name, host in sorted(self.elsewhere.items())))
+        if self.link is not None:
+            notes.extend(self.link.notes)
+        return notes
+
+    def close(self) -> None:
+        try:
+            super().close()
+        finally:
+            if self.link is not None:
+                self.link.close()

@@ -1,0 +1,78 @@
+"""The ROS 2 side of a system: which channels are ROS 2 topics, and which roles ROS 2 nodes play."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+from sessiontypes import StateMachine
+
+from .._transport.ros_lanes import RosSettings, ros_settings
+from ..errors import ConfigurationError
+
+__all__ = ["RosBridge"]
+
+
+@dataclass(frozen=True)
+class RosBridge:
+    """A system's channels named as ROS 2 topics: ``System(g, transport=Dds(...), ros=RosBridge(...))``.
+
+    On :class:`~anodize.Dds` the named labels *are* those ROS 2 topics, on the ROS
+    domain, and external roles are ROS 2 nodes. On every transport a recording and
+    the live view name those labels' channels by their topics.
+
+    Args:
+        topics: ``{"Move->Gazebo": "/cmd_vel", "Camera->VisOdom:color": "/camera/color/image_raw"}``
+            (a channel with one label may leave the label out).
+        external: roles that ROS 2 nodes play (they need :class:`~anodize.Dds`); anodize
+            runs no code for them, and every message to or from them must be on a topic.
+        distro: the ROS 2 distribution whose message definitions are used ("" for Jazzy).
+        domain: the ROS domain when ``ROS_DOMAIN_ID`` is not set (None: 0, as for every node).
+
+    Raises:
+        ConfigurationError: a field of the wrong type or range, naming what was expected.
+    """
+
+    topics: Mapping[str, str] = field(default_factory=dict)
+    external: frozenset[str] = frozenset()
+    distro: str = ""
+    domain: int | None = None
+
+    def __post_init__(self) -> None:
+        topics = self.topics
+        if not isinstance(topics, Mapping) or not all(
+                isinstance(k, str) and isinstance(v, str) for k, v in topics.items()):
+            raise ConfigurationError(f'RosBridge topics: expected a mapping such as {{"Move->Gazebo": "/cmd_vel"}}, '
+                                     f"got {topics!r}")
+        external: object = self.external  # given as any iterable of names, kept as a frozenset
+        if isinstance(external, str) or not isinstance(external, Iterable) or not all(
+                isinstance(r, str) and r for r in external):
+            raise ConfigurationError(f'RosBridge external: expected role names such as ("Joy",), got {external!r}')
+        if not isinstance(self.distro, str):
+            raise ConfigurationError(f'RosBridge distro: expected a ROS 2 distribution such as "jazzy", '
+                                     f"got {self.distro!r}")
+        domain = self.domain
+        if domain is not None and (isinstance(domain, bool) or not isinstance(domain, int)
+                                   or not 0 <= domain <= 232):
+            raise ConfigurationError(f"RosBridge domain: expected a DDS domain id 0..232 or None, got {domain!r}")
+        # A copy: the caller's dict changing later must not change the value.
+        object.__setattr__(self, "topics", dict(topics))
+        object.__setattr__(self, "external", frozenset(external))
+
+    def __hash__(self) -> int:
+        return hash((tuple(sorted(self.topics.items())), self.external, self.distro, self.domain))
+
+    def settings(self, machines: Mapping[str, StateMachine], channels: Iterable[tuple[str, str]]) -> RosSettings:
+        """The bridge checked against a protocol, with its lanes worked out.
+
+        Raises:
+            ConfigurationError: a topic entry that cannot be, naming it.
+        """
+        return ros_settings(machines, channels, self.topics, self.external, self.distro, self.domain)
+
+    def topic_names(self, machines: Mapping[str, StateMachine],
+                    channels: Iterable[tuple[str, str]]) -> dict[tuple[str, str, str], str]:
+        """``(sender, receiver, label) -> ROS topic`` of the labels the bridge names."""
+        if not self.topics:
+            return {}
+        return {key: topic.name for key, topic in self.settings(machines, channels).topics.items()}

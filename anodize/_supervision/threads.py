@@ -1,0 +1,165 @@
+"""The runner of ``Inproc``: every role is a thread of this process.
+
+Groups started together share one :class:`~anodize._transport.inproc.InprocNetwork`;
+a group restarted later gets a fresh network with the groups restarted with it,
+where roles of the others are dead. Threads cannot be killed: a group the
+supervisor ends is told to stop, and a role that does not reach its endpoint
+within the grace period is abandoned (its thread runs on as a daemon, and the
+report says so).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Sequence
+from queue import Empty, SimpleQueue
+from typing import Any
+
+from .._session.endpoint import Endpoint
+from .._transport.inproc import InprocNetwork
+from ..taps import GroupTap
+from .group import Group, resolve_function
+from .plan import RunPlan
+from .report import RoleReport, RoleStatus
+from .roles import describe_error, run_role
+from .supervisor import Counts, Event, GroupExited, Ready, RoleEnded, Scope
+
+__all__ = ["ThreadRunner"]
+
+_ABANDONED = ("did not stop within the grace period; its thread was abandoned (a thread cannot be "
+              "killed: it may be busy outside its endpoint, e.g. in a C call)")
+
+
+class _Incarnation:
+    """One start of one group: its endpoints, threads and what they reported."""
+
+    def __init__(self, group: Group, number: int, network: InprocNetwork,
+                 endpoints: dict[str, Endpoint]) -> None:
+        self.group = group
+        self.number = number
+        self.network = network
+        self.endpoints = endpoints
+        self.gate = threading.Event()
+        self.reported: set[str] = set()
+        self.over = False
+
+
+class ThreadRunner:
+    """Starts groups as threads; see the module docstring."""
+
+    transport = "inproc"
+
+    def __init__(self, plan: RunPlan) -> None:
+        self.plan = plan
+        self.protocol = plan.protocol
+        self.capacities = dict(plan.capacities or {})
+        self.machines = dict(plan.machines)
+        self.channels = tuple(plan.channels)
+        self.groups = dict(plan.groups)
+        self.monitors = plan.monitors
+        self.group_of = {role: g.name for g in self.groups.values() for role in g.roles}
+        self.scope = Scope(self.groups, tuple(r for r in plan.global_type.roles if r in self.group_of), self.channels)
+        self.current: dict[str, _Incarnation] = {}
+        self.inbox: SimpleQueue[Event] = SimpleQueue()
+        self.taps: list[GroupTap] = []  # every group's taps, closed at the end of the run
+
+    def start(self, groups: Sequence[str], incarnation: int) -> None:
+        batch = set(groups)
+        roles = {role for name in batch for role in self.groups[name].roles}
+        channels = [(a, b) for a, b in self.channels if a in roles or b in roles]
+        dead = {role: f"group {self.group_of[role]} did not start again with group(s) {', '.join(sorted(batch))}"
+                for pair in channels for role in pair if role not in roles}
+        # A doorbell for each role that may wait on several peers at once (recv_any).
+        doorbells = [r for r in roles if self.machines[r].forks or self.machines[r].waits_on_several()]
+        network = InprocNetwork(channels, doorbells, dead, self.capacities)
+        for name in groups:
+            group = self.groups[name]
+            for tap_plan in self.plan.taps:  # before the endpoints take their channels
+                tap = tap_plan.open(self.plan.tap_group(group, incarnation))
+                tap.attach(network.queues)
+                self.taps.append(tap)
+            endpoints = {role: Endpoint(role, self.protocol, self.machines[role], network, self.monitors)
+                         for role in group.roles}
+            inc = self.current[name] = _Incarnation(group, incarnation, network, endpoints)
+            for role, function in group.roles.items():
+                target = resolve_function(function) if isinstance(function, str) else function
+                threading.Thread(target=self._role_thread, name=f"anodize:{name}/{role}", daemon=True,
+                                 args=(inc, role, target)).start()
+            self.inbox.put(Ready(group=name, incarnation=incarnation))
+
+    def _role_thread(self, inc: _Incarnation, role: str, function: Callable[..., Any]) -> None:
+        inc.gate.wait()
+        group = inc.group
+
+        def report(role_report: RoleReport) -> None:
+            # The supervisor hears of a failure before the peers do: the root cause, not the
+            # peers' PeerFailedErrors, is then what its policy acts on.
+            self.inbox.put(RoleEnded(group=group.name, incarnation=inc.number, report=role_report))
+            if role_report.status is RoleStatus.FAILED:
+                inc.network.fail(role, describe_error(role_report.error))
+
+        run_role(group.name, group.priority, group.cpus, role, function, inc.endpoints[role], report)
+
+    def go(self, group: str) -> None:
+        self.current[group].gate.set()
+
+    def events(self, timeout: float) -> list[Event]:
+        found: list[Event] = []
+        try:
+            found.append(self.inbox.get(timeout=timeout))
+            while True:
+                found.append(self.inbox.get_nowait())
+        except Empty:
+            pass
+        for event in found:
+            if isinstance(event, RoleEnded):
+                inc = self.current[event.group]
+                if inc.number == event.incarnation:
+                    inc.reported.add(event.report.name)
+        found.extend(self._counts())
+        for name, inc in self.current.items():
+            if not inc.over and len(inc.reported) == len(inc.group.roles):
+                inc.over = True
+                found.append(GroupExited(group=name, incarnation=inc.number))
+        return found
+
+    def _counts(self) -> list[Event]:
+        counts: list[Event] = []
+        for name, inc in self.current.items():
+            if inc.over:
+                continue
+            statistics = {role: ep.statistics() for role, ep in inc.endpoints.items()}
+            sent = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.sent.items()}
+            received = {f"{peer}->{role}": n for role, st in statistics.items() for peer, n in st.received.items()}
+            waiting = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.high_water.items()}
+            counts.append(Counts(group=name, incarnation=inc.number, at=time.monotonic(), sent=sent,
+                                 received=received, waiting=waiting))
+        return counts
+
+    def tell_failed(self, group: str, role: str, cause: str) -> None:
+        self.current[group].network.fail(role, cause)
+
+    def stop(self, group: str) -> None:
+        inc = self.current[group]
+        inc.gate.set()  # a group stopped before "go" must still end
+        inc.network.stop_roles(inc.group.roles)
+
+    def kill(self, group: str) -> None:
+        """Stop the group's roles; those that do not report are abandoned, not waited for."""
+        inc = self.current[group]
+        if inc.over:
+            return
+        self.stop(group)
+        inc.over = True
+        self.inbox.put(GroupExited(group=group, incarnation=inc.number,
+                                   unreported="" if len(inc.reported) == len(inc.group.roles) else _ABANDONED))
+
+    def notes(self) -> list[str]:
+        return []
+
+    def close(self) -> None:
+        for name in self.current:
+            self.kill(name)
+        for tap in self.taps:
+            tap.close()

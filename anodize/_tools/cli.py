@@ -1,0 +1,676 @@
+"""The ``anodize`` command: check, project, fsm, graph, lint, run, verify, replay.
+
+The only module that prints or exits. Exit status: 0 success, 1 the input
+has errors (printed as ``path:line:col: error: ...``), 2 usage errors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import json
+import os
+import shlex
+import shutil
+import signal
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn, TextIO
+
+import sessiontypes
+from sessiontypes import ProtocolError, ProtocolModule
+from sessiontypes.printer import PrintTooLongError, print_local
+
+from ..errors import AnodizeError
+from .codegen import GeneratedModule, generate_modules
+
+if TYPE_CHECKING:
+    from .._live.server import LiveView
+    from .._supervision.report import GroupStatus
+    from ..taps import ChannelTap
+
+EXIT_OK, EXIT_ERRORS, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+class UsageError(Exception):
+    """A command line that names something that is not there (exit 2)."""
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = _parser()
+    try:
+        if _is_named_run(argv):  # 'anodize run NAME ...': the named system parses the rest
+            args = argparse.Namespace(command="run", run=lambda _: _run_named(argv[1], argv[2:]))
+        else:
+            args = parser.parse_args(argv)
+    except SystemExit as exit_:  # argparse has printed the usage message
+        return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
+    try:
+        return int(args.run(args))
+    except BrokenPipeError:  # the reader went away (e.g. '| head'): stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_ERRORS
+    except UsageError as error:
+        print(f"anodize {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_USAGE
+    except ProtocolError as error:
+        print(error, file=sys.stderr)
+        return EXIT_ERRORS
+    except OSError as error:
+        print(f"error: {error.filename or ''}: {error.strerror or error}", file=sys.stderr)
+        return EXIT_ERRORS
+    except AnodizeError as error:  # e.g. a system file's ConfigError: 'path: key: ...'
+        print(f"error: {error}", file=sys.stderr)
+        return EXIT_ERRORS
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+    except Exception as error:  # a bug: one line, not a traceback, unless debugging
+        if os.environ.get("ANODIZE_DEBUG"):
+            raise
+        print(f"anodize: internal error: {type(error).__name__}: {error} "
+              "(set ANODIZE_DEBUG=1 for a traceback, and please report it)", file=sys.stderr)
+        return 70
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="anodize", description=(
+        "Multiparty session types for mixed-criticality systems: check protocols, "
+        "project them onto roles, and run them."))
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    check = commands.add_parser("check", help="check .proto files for well-formedness")
+    check.add_argument("files", nargs="+", metavar="FILE")
+    check.set_defaults(run=_check)
+
+    project = commands.add_parser(
+        "project", help="print the local type of every role, or generate typed endpoint modules")
+    project.add_argument("file", metavar="FILE")
+    project.add_argument("--global", dest="global_name", metavar="G", help="only this global type")
+    project.add_argument("--role", metavar="R", help="only this role")
+    project.add_argument("-o", "--output", dest="output_dir", metavar="DIR",
+                         help="write one typed module <global>_<role>.py per role into DIR")
+    project.add_argument("--check", action="store_true",
+                         help="with -o: write nothing; exit 1 if a module in DIR is stale or missing")
+    project.set_defaults(run=_project)
+
+    fsm = commands.add_parser("fsm", help="print a role's state machine (DOT or JSON)")
+    fsm.add_argument("file", metavar="FILE")
+    fsm.add_argument("--global", dest="global_name", metavar="G",
+                     help="the global type (optional when the file has one)")
+    fsm.add_argument("--role", metavar="R", help="the role to project onto")
+    fsm.add_argument("--local", dest="local_name", metavar="L",
+                     help="a 'local' declaration instead of a projection")
+    fsm.add_argument("--format", choices=("dot", "json"), default="dot")
+    fsm.set_defaults(run=_fsm)
+
+    graph = commands.add_parser("graph", help="draw the communication graph of a global type")
+    graph.add_argument("file", metavar="FILE")
+    graph.add_argument("--global", dest="global_name", metavar="G")
+    graph.add_argument("-o", "--output", required=True, metavar="OUT",
+                       help="OUT.dot, OUT.png or OUT.svg")
+    graph.set_defaults(run=_graph)
+
+    lint = commands.add_parser(
+        "lint", help="warn about state a system's groups share outside the protocol, and priority inversions",
+        description="Read a system's role code for state its groups share outside the protocol, and its "
+                    "protocol and groups for every place where a higher-priority role can wait on a "
+                    "lower-priority one. Exit 1 when there is an isolation finding; inversions are "
+                    "warnings (exit 0) unless --strict, which also fails on an unbounded one.",
+        epilog=f"named systems: {', '.join(_named_systems()) or '(none installed)'}")
+    lint.add_argument("file", metavar="SYSTEM.toml|NAME")
+    lint.add_argument("--json", metavar="FILE", help="also write the findings and inversions as JSON to FILE")
+    lint.add_argument("--strict", action="store_true",
+                      help="exit 1 on an unbounded priority inversion too (while priority inheritance "
+                           "is not applied, most are)")
+    lint.set_defaults(run=_lint)
+
+    run_system = commands.add_parser(
+        "run", help="run a system file (or a named system) and print the run report",
+        description="Run a system file, or a system an installed package registers by name "
+                    "('anodize run NAME --help' lists its options).",
+        epilog=f"named systems: {', '.join(_named_systems()) or '(none installed)'}")
+    run_system.add_argument("file", metavar="SYSTEM.toml|NAME")
+    run_system.add_argument("--timeout", type=float, metavar="S",
+                            help="stop roles still running after S seconds (default: the file's timeout)")
+    run_system.add_argument("--json", metavar="FILE", help="also write the run report as JSON to FILE")
+    run_system.add_argument("--quiet", action="store_true", help="no live status lines")
+    run_system.add_argument("--transport", choices=("inproc", "process", "dds"),
+                            help="run on this transport instead of the file's (e.g. dds, to try a system across "
+                                 "hosts on one)")
+    run_system.add_argument("--host", metavar="NAME",
+                            help='transport kind "dds": run only the groups placed on host NAME (default: every '
+                                 "group; the file's transport.host)")
+    run_system.add_argument("--wait", type=float, metavar="S",
+                            help='transport kind "dds": how long the groups wait for their peers to appear '
+                                 "(default: the file's transport.wait, else 30)")
+    run_system.add_argument("--record", metavar="PATH",
+                            help="record every message between groups: PATH.mcap is an MCAP file, any other PATH "
+                                 "a rosbag2 folder (see 'anodize verify' and 'anodize replay')")
+    _add_foxglove_argument(run_system)
+    run_system.set_defaults(run=_run)
+
+    verify = commands.add_parser(
+        "verify", help="check a recording (MCAP file or rosbag2 folder) against a protocol",
+        description="Replay each channel of a recording through the monitors of both its ends and report the "
+                    "first violation on each, with the role to blame. Exit 0 when it conforms, 1 otherwise.")
+    _add_recording_arguments(verify)
+    verify.set_defaults(run=_verify)
+
+    replay = commands.add_parser(
+        "replay", help="run one role's code against a recording: its inputs from the recording, its outputs "
+                       "compared with it",
+        description="Run role R's function alone, fed the messages its peers sent in the recorded run; each "
+                    "message it sends is compared with the recorded one, and its monitor checks the protocol. "
+                    "Exit 0 when its outputs match the recording and follow the protocol, 1 otherwise.")
+    _add_recording_arguments(replay)
+    replay.add_argument("--role", required=True, metavar="R", help="the role to replay")
+    replay.add_argument("--function", metavar="MODULE:FUNCTION",
+                        help="the role's function (default: the one the recording names)")
+    replay.add_argument("--pythonpath", action="append", default=[], metavar="DIR",
+                        help="import role functions from DIR too (repeatable; the current directory always)")
+    replay.add_argument("--timeout", type=float, default=60.0, metavar="S",
+                        help="stop the role if it has not ended after S seconds (default 60)")
+    replay.set_defaults(run=_replay)
+    return parser
+
+
+def _load(path: str) -> ProtocolModule:
+    module = sessiontypes.load(path)
+    for warning in module.warnings:
+        print(warning, file=sys.stderr)
+    return module
+
+
+def _check(args: argparse.Namespace) -> int:
+    status = EXIT_OK
+    for path in args.files:
+        try:
+            module = _load(path)
+        except ProtocolError as error:
+            print(error, file=sys.stderr)
+            status = EXIT_ERRORS
+        except OSError as error:
+            print(f"error: {path}: {error.strerror or error}", file=sys.stderr)
+            status = EXIT_ERRORS
+        else:
+            print(f"{path}: ok ({_count(len(module.globals), 'global')}, "
+                  f"{_count(len(module.locals), 'local')})")
+    return status
+
+
+def _count(number: int, noun: str) -> str:
+    return f"{number} {noun}{'' if number == 1 else 's'}"
+
+
+def _pick_globals(module: ProtocolModule, name: str | None) -> list[sessiontypes.GlobalType]:
+    if name is None:
+        return list(module.globals.values())
+    if name not in module.globals:
+        raise UsageError(f"no global {name} in {module.path}; expected one of "
+                         f"{', '.join(module.globals) or '(none)'}")
+    return [module.globals[name]]
+
+
+def _one_global(module: ProtocolModule, name: str | None) -> sessiontypes.GlobalType:
+    if name is None:
+        if not module.globals:
+            raise UsageError(f"{module.path} declares no global type")
+        if len(module.globals) > 1:
+            raise UsageError(f"{module.path} has {_count(len(module.globals), 'global')}; "
+                             f"choose one with --global ({', '.join(module.globals)})")
+    (chosen,) = _pick_globals(module, name)
+    return chosen
+
+
+def _project(args: argparse.Namespace) -> int:
+    if args.check and args.output_dir is None:
+        raise UsageError("--check compares generated modules with DIR: give -o DIR")
+    # sessiontypes.load, with the text kept: generated modules carry its digest.
+    text = sessiontypes.read_source(args.file)
+    module = sessiontypes.loads(text, args.file)
+    for warning in module.warnings:
+        print(warning, file=sys.stderr)
+    chosen = _pick_globals(module, args.global_name)
+    if args.role:
+        if not any(args.role in gt.roles for gt in chosen):
+            roles = dict.fromkeys(r for gt in chosen for r in gt.roles)
+            raise UsageError(f"no role {args.role} in {_names(chosen)}; expected one of "
+                             f"{', '.join(roles)}")
+        chosen = [gt for gt in chosen if args.role in gt.roles]
+    if args.output_dir is not None:
+        targets = [(gt, role) for gt in chosen for role in gt.roles
+                   if args.role is None or role == args.role]
+        return _generate(args, generate_modules(module, text, targets))
+    lines: list[str] = []
+    for gt in chosen:
+        if len(chosen) > 1:
+            lines.append(f"# {gt.name}")
+        lines.extend(f"{role} = {_printed(gt, role)}" for role in gt.roles if args.role is None or role == args.role)
+    if lines:
+        print("\n".join(lines))
+    return EXIT_OK
+
+
+# A projection prints every use of a declaration in full: a file of n declarations
+# each using the next twice prints 2**n interactions. Refuse rather than run for ever.
+PRINT_LIMIT = 64 * 2**20
+
+
+def _printed(global_type: sessiontypes.GlobalType, role: str) -> str:
+    try:
+        return print_local(global_type.project(role).body, PRINT_LIMIT)
+    except PrintTooLongError:
+        raise AnodizeError(f"{global_type.name} projected onto {role} is longer than {PRINT_LIMIT} "
+                           "characters written out (declarations used in many places print in full at "
+                           "every use); 'anodize fsm' shows it as a state machine") from None
+
+
+def _generate(args: argparse.Namespace, modules: list[GeneratedModule]) -> int:
+    directory = Path(args.output_dir)
+    if not args.check:
+        directory.mkdir(parents=True, exist_ok=True)
+        for generated in modules:
+            path = directory / generated.filename
+            path.write_bytes(generated.text.encode("utf-8"))  # '\n' on every platform
+            print(f"wrote {path}")
+        return EXIT_OK
+    outdated = []
+    for generated in modules:
+        path = directory / generated.filename
+        try:
+            current = path.read_bytes()
+        except FileNotFoundError:
+            outdated.append(f"{path}: missing")
+            continue
+        if current != generated.text.encode("utf-8"):
+            outdated.append(f"{path}: stale (differs from what {args.file} generates now)")
+    if not outdated:
+        print(f"{directory}: {_count(len(modules), 'generated module')} up to date")
+        return EXIT_OK
+    for line in outdated:
+        print(line, file=sys.stderr)
+    command = ["anodize", "project", args.file, "-o", args.output_dir]
+    command += ["--global", args.global_name] if args.global_name else []
+    command += ["--role", args.role] if args.role else []
+    print(f"{_count(len(outdated), 'module')} out of date; regenerate with: "
+          f"{shlex.join(command)}", file=sys.stderr)
+    return EXIT_ERRORS
+
+
+def _names(globals_: list[sessiontypes.GlobalType]) -> str:
+    return ", ".join(f"global {g.name}" for g in globals_) or "the file (it has no global)"
+
+
+def _fsm(args: argparse.Namespace) -> int:
+    module = _load(args.file)
+    if args.local_name:
+        if args.local_name not in module.locals:
+            raise UsageError(f"no local {args.local_name} in {args.file}; expected one of "
+                             f"{', '.join(module.locals) or '(none)'}")
+        machine = module.locals[args.local_name].fsm()
+    else:
+        gt = _one_global(module, args.global_name)
+        if args.role is None:
+            raise UsageError(f"choose a role with --role ({', '.join(gt.roles)})")
+        if args.role not in gt.roles:
+            raise UsageError(f"no role {args.role} in global {gt.name}; expected one of "
+                             f"{', '.join(gt.roles)}")
+        machine = gt.project(args.role).fsm()
+    print(machine.to_json() if args.format == "json" else machine.to_dot())
+    return EXIT_OK
+
+
+def _graph(args: argparse.Namespace) -> int:
+    from sessiontypes.graph import communication_graph, graph_to_dot
+
+    module = _load(args.file)
+    gt = _one_global(module, args.global_name)
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    if suffix not in {".dot", ".png", ".svg"}:
+        raise UsageError(f"cannot write {out}: expected a name ending in .dot, .png or .svg")
+    graph = communication_graph(gt)
+    if suffix == ".dot":
+        out.write_text(graph_to_dot(graph) + "\n", encoding="utf-8")
+    else:
+        from .drawing import draw_communication_graph
+
+        draw_communication_graph(graph, out)
+    print(f"wrote {out}")
+    return EXIT_OK
+
+
+def _system_file(path: str, named: bool = False) -> Path:
+    file = Path(path)
+    if file.is_dir():
+        raise UsageError(f"{path} is a directory; expected a system file (.toml)")
+    if not file.exists():
+        names = _named_systems() if named and file.suffix != ".toml" else []
+        known = f" or named system (named systems: {', '.join(names)})" if names else ""
+        raise UsageError(f"no such system file{known}: {path}")
+    if file.suffix != ".toml":
+        raise UsageError(f"{path}: expected a system file ending in .toml")
+    return file
+
+
+def _lint(args: argparse.Namespace) -> int:
+    from .config import load_config
+    from .inversion import inversion_report
+    from .lint import lint_report
+
+    config = load_config(_lint_target(args.file))
+    report = lint_report(config)
+    for finding in report.findings:
+        print(finding)
+    modules = _count(len(report.modules), "module")
+    if report.findings:
+        print(f"{_count(len(report.findings), 'finding')} in {modules}")
+    else:
+        print(f"no isolation problems found in {modules}")
+    inversions = inversion_report(config)
+    lines = inversions.lines()
+    if inversions.inversions:
+        print()
+    for line in lines:
+        print(line)
+    if args.json:
+        _write_json(Path(args.json), {"findings": [dataclasses.asdict(f) for f in report.findings],
+                                      "modules": list(report.modules), **inversions.to_dict()})
+    # Shared state fails the lint. Inversions are warnings: priority inheritance, which bounds
+    # most of them, is not applied yet, so failing on them would fail every realistic system;
+    # --strict fails on an unbounded one for those who want it as a gate.
+    return EXIT_ERRORS if report.findings or (args.strict and inversions.unbounded) else EXIT_OK
+
+
+def _lint_target(given: str) -> Path:
+    """The system file to lint: a path, or the file a named system declares as ``system_file``."""
+    if not Path(given).is_file() and given in _named_systems():  # as for run: a name beats a folder
+        from .named import find_named
+
+        named = find_named(given)
+        system_file = getattr(named, "system_file", None)
+        if not isinstance(system_file, Path):
+            raise UsageError(f"named system {given} has no system file to lint (it declares no system_file)")
+        return system_file
+    return _system_file(given, named=True)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from .._supervision.transports import Dds
+    from .config import build_system, load_config
+
+    if args.timeout is not None and not args.timeout > 0:
+        raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
+    if args.wait is not None and not args.wait > 0:
+        raise UsageError(f"--wait {args.wait}: expected a number of seconds > 0")
+    config = load_config(_system_file(args.file, named=True))
+    if args.transport is not None:
+        config = config.on_transport(args.transport)
+    if args.host is not None and not isinstance(config.transport, Dds):
+        raise UsageError(f"--host needs transport kind \"dds\"; {config.path} uses {config.transport.kind!r}")
+    if isinstance(config.transport, Dds) and (args.host is not None or args.wait is not None):
+        config = dataclasses.replace(config, transport=dataclasses.replace(
+            config.transport, host=args.host if args.host is not None else config.transport.host,
+            wait=args.wait if args.wait is not None else config.transport.wait))
+    system = build_system(config)
+    timeout = args.timeout if args.timeout is not None else config.timeout
+    with _taps(args.record, args.foxglove) as taps:
+        report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout), taps=taps)
+    print(report.summary())
+    if args.json:
+        out = Path(args.json)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(report.to_json() + "\n", encoding="utf-8")
+        print(f"wrote {out}")
+    return _exit_status(report.ok, report.interrupted)
+
+
+def _verify(args: argparse.Namespace) -> int:
+    from .._recording.reader import open_recording
+    from .._recording.verify import verify
+    from .recordings import protocol_of, topic_map
+
+    with open_recording(args.recording) as recording:
+        global_type = protocol_of(recording, args.protocol, args.global_name)
+        topics = topic_map(args.topics, global_type) if args.topics else None
+        report = verify(recording, global_type, topics)
+    print(report.text())
+    if args.json:
+        _write_json(Path(args.json), report.to_dict())
+    return EXIT_OK if report.conforms else EXIT_ERRORS
+
+
+def _add_recording_arguments(parser: argparse.ArgumentParser) -> None:
+    """What verify and replay share: the recording, its protocol and topic map, JSON out."""
+    parser.add_argument("recording", metavar="RECORDING")
+    parser.add_argument("--protocol", metavar="FILE.proto",
+                        help="the protocol (default: the one an anodize recording carries)")
+    parser.add_argument("--global", dest="global_name", metavar="G",
+                        help="the global type (default: the recording's, or the file's only one)")
+    parser.add_argument("--topics", metavar="MAP",
+                        help="a TOML file mapping \"Sender->Receiver:label\" to topics (a system file's "
+                             "[ros.topics], or the same entries at its top level), for recordings made by "
+                             "other tools")
+    parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
+
+
+def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--foxglove", nargs="?", type=int, const=8765, default=None, metavar="PORT",
+                        help="serve every channel and each group's status live to the Foxglove app on "
+                             "ws://127.0.0.1:PORT (default 8765; 0: any free port); a client publishing on a "
+                             "channel's topic (e.g. /joy) reaches the role that sends it")
+
+
+@contextlib.contextmanager
+def _taps(record: str | os.PathLike[str] | None, foxglove: int | None) -> Iterator[list[ChannelTap]]:
+    """The run's channel taps: ``--record`` (first: it wraps the channels first, as it always has),
+    then ``--foxglove``."""
+    taps: list[ChannelTap] = []
+    if record is not None:
+        from .._recording import Recording
+
+        taps.append(Recording(record))
+    with _live_view(foxglove) as live:
+        if live is not None:
+            taps.append(live)
+        yield taps
+
+
+@contextlib.contextmanager
+def _live_view(port: int | None) -> Iterator[LiveView | None]:
+    """The run's live view in Foxglove (``--foxglove``), announced before the run starts."""
+    if port is None:
+        yield None
+        return
+    if not 0 <= port <= 65535:
+        raise UsageError(f"--foxglove {port}: expected a port number 0..65535")
+    from .._live import open_live_view
+
+    live = open_live_view(port)
+    print(f"foxglove: serving the run live at {live.url} (Foxglove app: Open connection > Foxglove WebSocket)",
+          flush=True)
+    try:
+        yield live
+    finally:
+        live.close()
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from .._recording.reader import open_recording
+    from .._recording.replay import replay
+    from .recordings import protocol_of, role_function, topic_map
+
+    if not args.timeout > 0:
+        raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
+    with open_recording(args.recording) as recording:
+        global_type = protocol_of(recording, args.protocol, args.global_name)
+        if args.role not in global_type.roles:
+            raise UsageError(f"no role {args.role} in global {global_type.name}; expected one of "
+                             f"{', '.join(global_type.roles)}")
+        topics = topic_map(args.topics, global_type) if args.topics else None
+        function = role_function(recording, args.role, args.function, [".", *args.pythonpath])
+        report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout)
+    print(report.text())
+    if args.json:
+        _write_json(Path(args.json), report.to_dict())
+    return EXIT_OK if report.ok else EXIT_ERRORS
+
+
+def _write_json(out: Path, data: object) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    print(f"wrote {out}")
+
+
+def _exit_status(ok: bool, interrupted: bool) -> int:
+    """0 for a run that went to the end, 130 after Ctrl-C (as shells do), else 1."""
+    if interrupted:
+        return EXIT_INTERRUPTED
+    return EXIT_OK if ok else EXIT_ERRORS
+
+
+def _named_systems() -> list[str]:
+    from .named import named_systems
+
+    return named_systems()
+
+
+def _is_named_run(argv: list[str]) -> bool:
+    return (len(argv) >= 2 and argv[0] == "run" and not argv[1].startswith("-")
+            and not Path(argv[1]).is_file() and argv[1] in _named_systems())
+
+
+def _run_named(name: str, rest: list[str]) -> int:
+    from .named import find_named
+
+    named = find_named(name)
+    assert named is not None  # _is_named_run saw it registered
+    parser = argparse.ArgumentParser(prog=f"anodize run {name}", description=named.summary)
+    parser.add_argument("--quiet", action="store_true", help="no live progress line")
+    _add_foxglove_argument(parser)
+    named.add_arguments(parser)
+    try:
+        args = parser.parse_args(rest)
+    except SystemExit as exit_:
+        return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
+    prepared = named.prepare(args, lambda line: print(line, flush=True))
+    progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
+    try:
+        with _taps(prepared.record, args.foxglove) as taps:
+            report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
+                                         taps=taps)
+    finally:
+        if progress is not None:
+            progress.close()
+    print(report.summary())
+    finished = named.finish(report, args)
+    for line in finished.lines:
+        print(line)
+    return _exit_status(finished.ok, report.interrupted)
+
+
+class ProgressLine:
+    """``on_status`` for a named system: its one-line account of the run so far.
+
+    On a terminal the line is redrawn in place, no wider than the terminal: the named
+    system is expected to make it fit (``shutil.get_terminal_size``), and a longer line is
+    cut, naming the groups that failed at its end. In a log, one line every 5 s, whole.
+    """
+
+    LOG_EVERY = 5.0  # seconds
+
+    def __init__(self, stream: TextIO, describe: Callable[[dict[str, GroupStatus], float], str]) -> None:
+        self.stream = stream
+        self.describe = describe
+        self.tty = stream.isatty()
+        self.started = time.monotonic()
+        self.logged = 0.0  # elapsed time of the last line written to a log
+
+    def __call__(self, statuses: dict[str, GroupStatus]) -> None:
+        elapsed = time.monotonic() - self.started
+        line = self.describe(statuses, elapsed)
+        if self.tty:
+            failed = [status.name for status in statuses.values() if status.state == "failed"]
+            line = self.fit(line, self.width(), self.stream, failed)
+            self.stream.write(f"\r\x1b[2K{line}")
+        elif elapsed - self.logged >= self.LOG_EVERY:
+            self.logged = elapsed
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+    @staticmethod
+    def width() -> int:
+        """Columns a live line may take: the terminal's (80 when unknown) but the last, which
+        the cursor takes (a character there makes some terminals wrap)."""
+        return max(1, shutil.get_terminal_size().columns - 1)
+
+    @staticmethod
+    def fit(line: str, width: int, stream: TextIO, failed: Sequence[str] = ()) -> str:
+        """``line`` in at most ``width`` characters: cut, the cut marked by an ellipsis (``...``
+        where ``stream`` cannot write one), and then the groups in ``failed`` named, so that a
+        failure never goes out of sight."""
+        if len(line) <= width:
+            return line
+        encoding = (getattr(stream, "encoding", None) or "utf-8").lower().replace("-", "")
+        ellipsis = "\u2026" if encoding == "utf8" else "..."
+        tail = f" FAILED {','.join(failed)}" if failed else ""
+        keep = max(0, width - len(ellipsis) - len(tail))
+        return (line[:keep] + ellipsis + tail)[:width]
+
+
+class LiveStatus:
+    """``on_status`` for ``anodize run``: one line per group.
+
+    On a terminal the lines are redrawn in place, each cut to the terminal's width
+    (a line the terminal wrapped would throw the redrawing off; the group's name and
+    state come first, so they stay); otherwise (a log, a pipe) a group's line is
+    printed whole, and only when its state changed, so logs stay short.
+    """
+
+    def __init__(self, stream: TextIO) -> None:
+        self.stream = stream
+        self.tty = stream.isatty()
+        self.drawn = 0                       # lines drawn last time (terminal)
+        self.states: dict[str, str] = {}     # state last printed per group (log)
+
+    def __call__(self, statuses: dict[str, GroupStatus]) -> None:
+        if self.tty:
+            up = f"\x1b[{self.drawn}F" if self.drawn else ""
+            width = ProgressLine.width()
+            lines = "".join(f"\x1b[2K{ProgressLine.fit(status.line(), width, self.stream)}\n"
+                            for status in statuses.values())
+            self.stream.write(f"{up}{lines}\x1b[J")  # [J: clear what a longer frame left below
+            self.drawn = len(statuses)
+        else:
+            for name, status in statuses.items():
+                if self.states.get(name) != status.state:
+                    self.states[name] = status.state
+                    self.stream.write(status.line() + "\n")
+        self.stream.flush()
+
+
+def run() -> NoReturn:
+    """Console-script entry point."""
+    # SIGTERM (a service manager, a container stop) ends a run as Ctrl-C does: the groups
+    # are stopped, cgroups and rings removed, and the report still printed and written.
+    signal.signal(signal.SIGTERM, _terminated)
+    sys.exit(main())
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+if __name__ == "__main__":
+    run()

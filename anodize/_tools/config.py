@@ -1,0 +1,505 @@
+"""System files: a protocol, a global type, a transport and the groups that run its roles.
+
+A system file is TOML. Paths in it are relative to the file itself. It maps one to
+one onto the values a Python program builds (``System(g, transport=Dds(...),
+ros=RosBridge(...))``; docs/guide/transports.md)::
+
+    protocol = "../protocols/stream.proto"   # the .proto file (required)
+    global = "Pipeline"                      # the global type's name in it (required)
+    timeout = 10.0                           # seconds; roles still running then are stopped
+    monitors = true                          # run-time protocol checks (default true)
+    pythonpath = ["."]                       # dirs prepended to sys.path (default: the file's dir)
+
+    [transport]                              # the transport value (default: kind = "process")
+    kind = "process"                         # "inproc" (Inproc), "process" (Processes) or "dds" (Dds)
+    liveness = 2.0                           # its fields: process: liveness; dds: domain, run_id,
+                                             # host, wait, liveness; inproc: none
+
+    [ros]                                    # RosBridge: topics, external, distro, domain
+    topics = { "Move->Gazebo" = "/cmd_vel" }
+
+    [channels."A->B"]                        # capacities
+    capacity = 8
+
+    [groups.control]                         # one table per group (at least one)
+    priority = 90                            # 1..99
+    memory = "64MiB"                         # a bound: bytes, or a size such as "512KiB", "1GB"
+    cpus = [0]                               # the CPUs the group may run on
+    on_failure = "stop"                      # "stop" (default), "restart" or "stop-system"
+    max_restarts = 3                         # with on_failure = "restart" (default 3)
+    host = "robot"                           # kind = "dds": the host it runs on
+    roles = { Source = "memory_hog:source", Sink = "memory_hog:sink" }   # role -> "module:function"
+
+Only ``protocol``, ``global``, ``groups`` and each group's ``roles`` are required.
+Files of the earlier form (``transport = "dds"`` as a string, with ``domain`` and
+``run_id`` at the top level) are still read, as the same values.
+:func:`load_config` reads and checks a file without importing anything;
+:func:`build_system` loads the protocol, imports the role functions and returns
+an :class:`anodize.System` ready to ``run``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import sessiontypes
+
+from .._supervision.group import FailurePolicy, parse_memory
+from .._supervision.rosbridge import RosBridge
+from .._supervision.system import System
+from .._supervision.transports import KINDS, Dds, Transport
+from ..errors import AnodizeError, ConfigurationError
+
+__all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
+           "add_pythonpath"]
+
+_TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id",
+             "ros", "channels")
+_CHANNEL_KEYS = ("capacity",)
+_ROS_KEYS = ("topics", "external", "distro", "domain")
+_OLD_DDS_KEYS = ("domain", "run_id")  # top-level keys of the earlier form, now fields of [transport]
+_RUN_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
+_GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host")
+_REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
+_TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
+
+
+class ConfigError(ConfigurationError):
+    """Raised for a system file that cannot be read, parsed, or turned into a system.
+
+    Attributes:
+        path: the system file, as given.
+        key: the dotted key at fault (``groups.control.priority``), or None.
+        problem: what is wrong, e.g. ``expected an int 1..99, got 120``.
+        line: for TOML syntax errors, the 1-based line (else None).
+        column: for TOML syntax errors, the 1-based column (else None).
+        source_line: for TOML syntax errors, the text of that line.
+    """
+
+    def __init__(self, path: str, key: str | None, problem: str, line: int | None = None,
+                 column: int | None = None, source_line: str = "") -> None:
+        self.path = path
+        self.key = key
+        self.problem = problem
+        self.line = line
+        self.column = column
+        self.source_line = source_line
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        if self.line is not None:
+            caret = " " * ((self.column or 1) - 1) + "^"
+            context = f"\n    {self.source_line}\n    {caret}" if self.source_line.strip() else ""
+            return f"{self.path}:{self.line}:{self.column}: {self.problem}{context}"
+        if self.key is None:
+            return f"{self.path}: {self.problem}"
+        return f"{self.path}: {self.key}: {self.problem}"
+
+
+@dataclass(frozen=True)
+class GroupConfig:
+    """One ``[groups.NAME]`` table.
+
+    Attributes:
+        name: the group's name.
+        priority: 1..99, or None.
+        memory: the memory bound in bytes, or None.
+        cpus: the CPUs the group may use, sorted, or None.
+        on_failure: ``"stop"``, ``"restart"`` or ``"stop-system"``.
+        max_restarts: how often ``on_failure = "restart"`` restarts the group.
+        roles: role name -> ``"module:function"``, in file order.
+        location: where the group is written, for messages: ``"path: groups.NAME"``.
+        host: ``transport = "dds"``: the host the group runs on, or None.
+    """
+
+    name: str
+    priority: int | None
+    memory: int | None
+    cpus: tuple[int, ...] | None
+    on_failure: str
+    max_restarts: int
+    roles: dict[str, str]
+    location: str
+    host: str | None = None
+
+
+@dataclass(frozen=True)
+class SystemConfig:
+    """A checked system file.
+
+    Attributes:
+        path: the system file, as given.
+        protocol: the ``.proto`` file (relative paths are taken from the system file's dir).
+        global_name: the global type's name.
+        transport: the transport value (``[transport]``, or the earlier ``transport = "..."``).
+        timeout: seconds after which running roles are stopped, or None.
+        monitors: whether endpoints check the protocol at run time.
+        pythonpath: absolute dirs to put in front of ``sys.path``.
+        groups: group name -> its configuration, in file order.
+        ros: ``[ros]``: the ROS 2 bridge (topics, external roles, distro, domain), or None.
+        capacities: ``[channels."A->B"] capacity``: channels that hold at most so many messages.
+    """
+
+    path: Path
+    protocol: Path
+    global_name: str
+    transport: Transport
+    timeout: float | None
+    monitors: bool
+    pythonpath: tuple[Path, ...]
+    groups: dict[str, GroupConfig]
+    ros: RosBridge | None = None
+    capacities: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def external(self) -> frozenset[str]:
+        """The roles ROS 2 nodes play (``[ros] external``)."""
+        return self.ros.external if self.ros is not None else frozenset()
+
+    def group_of(self, role: str) -> str | None:
+        """The group that runs ``role``, or None."""
+        return next((g.name for g in self.groups.values() if role in g.roles), None)
+
+    def on_transport(self, kind: str) -> SystemConfig:
+        """The same system on the transport ``kind`` (``anodize run --transport``): the file's
+        transport fields that ``kind`` also has are kept, the others take their defaults.
+
+        Raises:
+            ConfigError: not a transport kind.
+        """
+        if kind not in KINDS:
+            raise ConfigError(str(self.path), "transport", f"expected one of {', '.join(map(_show, KINDS))}, "
+                                                           f"got {_show(kind)}")
+        if kind == self.transport.kind:
+            return self
+        kept = {f.name: getattr(self.transport, f.name) for f in fields(self.transport)}
+        cls = KINDS[kind]
+        return replace(self, transport=cls(**{f.name: kept[f.name] for f in fields(cls) if f.name in kept}))
+
+
+def load_config(path: str | Path) -> SystemConfig:
+    """Read and check a system file; nothing is imported or loaded yet.
+
+    Raises:
+        ConfigError: the file cannot be read, is not TOML (``path:line:col: ...``),
+            has an unknown or missing key, or a value of the wrong type or range
+            (``path: key: expected ..., got ...``).
+    """
+    path = Path(path)
+    shown = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(shown, None, "expected UTF-8 text") from None
+    except OSError as error:
+        raise ConfigError(shown, None, f"cannot read: {error.strerror or error}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise _syntax_error(shown, text, str(error)) from None
+    return _Reader(shown, path).system(data)
+
+
+def _syntax_error(shown: str, text: str, message: str) -> ConfigError:
+    match = _TOML_POSITION.match(message)
+    problem = match.group(1) if match else message
+    problem = problem[:1].lower() + problem[1:]
+    lines = text.split("\n")
+    if match and match.group(2):
+        line, column = int(match.group(2)), int(match.group(3))
+    else:  # "at end of document"
+        line, column = len(lines), len(lines[-1]) + 1
+    source = lines[line - 1] if 0 < line <= len(lines) else ""
+    return ConfigError(shown, None, problem, line, column, source)
+
+
+class _Reader:
+    """Checks the parsed TOML of one file, key by key."""
+
+    def __init__(self, shown: str, path: Path) -> None:
+        self.shown = shown
+        self.directory = path.parent
+
+    def error(self, key: str | None, problem: str) -> ConfigError:
+        return ConfigError(self.shown, key, problem)
+
+    def system(self, data: dict[str, Any]) -> SystemConfig:
+        self.known_keys(data, _TOP_KEYS, None)
+        protocol = self.required_string(data, "protocol")
+        global_name = self.required_string(data, "global")
+        timeout = data.get("timeout")
+        if timeout is not None and (isinstance(timeout, bool) or not isinstance(timeout, int | float)
+                                    or not timeout > 0):
+            raise self.error("timeout", f"expected a number of seconds > 0, got {_show(timeout)}")
+        monitors = data.get("monitors", True)
+        if not isinstance(monitors, bool):
+            raise self.error("monitors", f"expected true or false, got {_show(monitors)}")
+        return SystemConfig(
+            path=Path(self.shown), protocol=Path(os.path.normpath(self.directory / protocol)),
+            global_name=global_name, transport=self.transport(data),
+            timeout=None if timeout is None else float(timeout), monitors=monitors,
+            pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
+            groups=self.groups(data.get("groups")), ros=self.ros(data.get("ros")),
+            capacities=self.capacities(data.get("channels", {})))
+
+    def transport(self, data: dict[str, Any]) -> Transport:
+        """``[transport]`` (kind and fields), or the earlier form: ``transport = "kind"`` with
+        ``domain`` and ``run_id`` at the top level."""
+        given = data.get("transport", "process")
+        if isinstance(given, dict):
+            stray = [key for key in _OLD_DDS_KEYS if key in data]
+            if stray:
+                raise self.error(stray[0], f"with a [transport] table, {stray[0]} is one of its keys: "
+                                           f"write transport.{stray[0]} (in [transport])")
+            kind = given.get("kind")
+            if not isinstance(kind, str) or kind not in KINDS:
+                raise self.error("transport.kind", f"expected {' or '.join(map(_show, KINDS))}, got "
+                                                   f"{_show(kind) if 'kind' in given else 'nothing (it is required)'}")
+            table, prefix = {k: v for k, v in given.items() if k != "kind"}, "transport"
+            allowed = tuple(f.name for f in fields(KINDS[kind]))
+            for key in table:
+                if key not in allowed:
+                    raise self.error(f"transport.{key}", f"unknown key for kind = {_show(kind)}; expected "
+                                     f"{'one of ' + ', '.join(sorted(('kind', *allowed)))}")
+        elif isinstance(given, str) and given in KINDS:
+            kind, prefix = given, None  # the earlier form: its DDS keys are at the top level, checked on any kind
+            table = {key: data[key] for key in _OLD_DDS_KEYS if key in data}
+        else:
+            raise self.error("transport", f"expected {' or '.join(map(_show, KINDS))}, or a table [transport] "
+                                          f"with kind = ..., got {_show(given)}")
+        checked = {key: self.transport_field(key, value, prefix) for key, value in table.items()}
+        if kind != "dds":
+            return KINDS[kind](**{k: v for k, v in checked.items() if k not in _OLD_DDS_KEYS})
+        try:
+            return Dds(**checked)
+        except ConfigurationError as error:
+            raise self.error(prefix or "transport", str(error)) from None
+
+    def transport_field(self, key: str, value: Any, prefix: str | None) -> Any:
+        """One field of a transport, checked and converted (seconds become floats)."""
+        dotted = f"{prefix}.{key}" if prefix else key
+        if key == "domain" and (not _is_int(value) or not 0 <= value <= 232):
+            raise self.error(dotted, f"expected a DDS domain id 0..232, got {_show(value)}")
+        if key == "run_id" and (not isinstance(value, str) or not _RUN_ID.fullmatch(value)):
+            raise self.error(dotted, f"expected up to 64 letters, digits, '_', '.' or '-', got {_show(value)}")
+        if key == "host" and (not isinstance(value, str) or not value.isidentifier()):
+            raise self.error(dotted, f"expected a name such as \"robot\", got {_show(value)}")
+        if key in ("wait", "liveness"):
+            if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+                raise self.error(dotted, f"expected a number of seconds > 0, got {_show(value)}")
+            return float(value)
+        return value
+
+    def capacities(self, table: Any) -> dict[str, int]:
+        """``[channels."A->B"] capacity = n``: the shape here; the channels when the system is built."""
+        if not isinstance(table, dict):
+            raise self.error("channels", f'expected tables such as [channels."A->B"], got {_show(table)}')
+        found: dict[str, int] = {}
+        for channel, settings in table.items():
+            key = f"channels.{channel}"
+            if not isinstance(settings, dict):
+                raise self.error(key, f"expected a table such as {{ capacity = 8 }}, got {_show(settings)}")
+            self.known_keys(settings, _CHANNEL_KEYS, key)
+            capacity: Any = settings.get("capacity")
+            if not _is_int(capacity) or capacity < 1:
+                raise self.error(f"{key}.capacity", f"expected a whole number of messages >= 1, got {_show(capacity)}")
+            found[channel] = capacity
+        return found
+
+    def ros(self, table: Any) -> RosBridge | None:
+        """The ``[ros]`` table: what is checked here is its shape; the topics against the protocol
+        are checked when the system is built."""
+        if table is None:
+            return None
+        if not isinstance(table, dict):
+            raise self.error("ros", f"expected a table [ros], got {_show(table)}")
+        self.known_keys(table, _ROS_KEYS, "ros")
+        topics = table.get("topics", {})
+        if not isinstance(topics, dict) or not all(isinstance(v, str) for v in topics.values()):
+            raise self.error("ros.topics", 'expected a table such as { "Move->Gazebo" = "/cmd_vel" }, '
+                                           f"got {_show(topics)}")
+        external = table.get("external", [])
+        if not isinstance(external, list) or not all(isinstance(r, str) and r for r in external):
+            raise self.error("ros.external", f'expected an array of role names such as ["Joy"], got {_show(external)}')
+        distro = table.get("distro", "")
+        if not isinstance(distro, str):
+            raise self.error("ros.distro", f'expected a ROS 2 distribution such as "jazzy", got {_show(distro)}')
+        domain = table.get("domain")
+        if domain is not None and (not _is_int(domain) or not 0 <= domain <= 232):
+            raise self.error("ros.domain", f"expected a DDS domain id 0..232, got {_show(domain)}")
+        return RosBridge(topics=dict(topics), external=frozenset(external), distro=distro, domain=domain)
+
+    def known_keys(self, table: dict[str, Any], allowed: tuple[str, ...], prefix: str | None) -> None:
+        for key in table:
+            if key not in allowed:
+                dotted = f"{prefix}.{key}" if prefix else key
+                raise self.error(dotted, f"unknown key; expected one of {', '.join(sorted(allowed))}")
+
+    def required_string(self, table: dict[str, Any], key: str) -> str:
+        value = self.string(table, key)
+        if value is None:
+            raise self.error(key, "missing (it is required)")
+        return value
+
+    def string(self, table: dict[str, Any], key: str) -> str | None:
+        if key not in table:
+            return None
+        value = table[key]
+        if not isinstance(value, str) or not value:
+            raise self.error(key, f"expected a non-empty string, got {_show(value)}")
+        return value
+
+    def pythonpath(self, value: Any) -> tuple[Path, ...]:
+        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+            raise self.error("pythonpath", f"expected an array of directories, got {_show(value)}")
+        return tuple(Path(os.path.abspath(self.directory / entry)) for entry in value)
+
+    def groups(self, value: Any) -> dict[str, GroupConfig]:
+        if value is None:
+            raise self.error("groups", "missing (it is required): add a table such as [groups.main]")
+        if not isinstance(value, dict):
+            raise self.error("groups", f"expected tables such as [groups.main], got {_show(value)}")
+        if not value:
+            raise self.error("groups", "expected at least one group, such as [groups.main]")
+        groups: dict[str, GroupConfig] = {}
+        placed: dict[str, str] = {}
+        for name, table in value.items():
+            group = self.group(name, table)
+            for role in group.roles:
+                if role in placed:
+                    raise self.error(f"groups.{name}.roles.{role}",
+                                     f"role {role} is already in group {placed[role]}")
+                placed[role] = name
+            groups[name] = group
+        return groups
+
+    def group(self, name: str, table: Any) -> GroupConfig:
+        prefix = f"groups.{name}"
+        if not isinstance(table, dict):
+            raise self.error(prefix, f"expected a table, got {_show(table)}")
+        self.known_keys(table, _GROUP_KEYS, prefix)
+        priority = table.get("priority")
+        if priority is not None and (not _is_int(priority) or not 1 <= priority <= 99):
+            raise self.error(f"{prefix}.priority", f"expected an int 1..99, got {_show(priority)}")
+        memory = table.get("memory")
+        try:
+            memory_bytes = parse_memory(memory)
+        except ConfigurationError:
+            raise self.error(f"{prefix}.memory", "expected a size such as \"64MiB\", \"512KiB\" or a "
+                                                 f"number of bytes, at most 8 EiB, got {_show(memory)}") from None
+        on_failure = table.get("on_failure", "stop")
+        if on_failure not in {p.value for p in FailurePolicy}:
+            raise self.error(f"{prefix}.on_failure", f"expected one of "
+                             f"{', '.join(_show(p.value) for p in FailurePolicy)}, got {_show(on_failure)}")
+        max_restarts = table.get("max_restarts", 3)
+        if not _is_int(max_restarts) or max_restarts < 0:
+            raise self.error(f"{prefix}.max_restarts", f"expected an int >= 0, got {_show(max_restarts)}")
+        host = table.get("host")
+        if host is not None and (not isinstance(host, str) or not host.isidentifier()):
+            raise self.error(f"{prefix}.host", f"expected a name such as \"robot\", got {_show(host)}")
+        return GroupConfig(name, priority, memory_bytes, self.cpus(prefix, table.get("cpus")),
+                           on_failure, max_restarts, self.roles(prefix, table),
+                           f"{self.shown}: {prefix}", host)
+
+    def cpus(self, prefix: str, value: Any) -> tuple[int, ...] | None:
+        if value is None:
+            return None
+        if (not isinstance(value, list) or not value
+                or not all(_is_int(cpu) and cpu >= 0 for cpu in value)):
+            raise self.error(f"{prefix}.cpus", "expected a non-empty array of CPU numbers, "
+                                               f"got {_show(value)}")
+        return tuple(sorted(set(value)))
+
+    def roles(self, prefix: str, table: dict[str, Any]) -> dict[str, str]:
+        if "roles" not in table:
+            raise self.error(f"{prefix}.roles", "missing (it is required): "
+                             'roles = { Role = "module:function" }')
+        roles = table["roles"]
+        if not isinstance(roles, dict) or not roles:
+            raise self.error(f"{prefix}.roles", 'expected a table such as { Role = "module:function" }, '
+                                                f"got {_show(roles)}")
+        for role, reference in roles.items():
+            if not isinstance(reference, str) or not _REFERENCE.fullmatch(reference):
+                raise self.error(f"{prefix}.roles.{role}",
+                                 f'expected "module:function", got {_show(reference)}')
+        return dict(roles)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _show(value: Any) -> str:
+    """A value as TOML would spell it, for 'got ...' in messages."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        if len(value) > 60:  # a mistake thousands of characters long need not be repeated whole
+            return f"{_show(value[:24])[:-1]}...{_show(value[-24:])[1:]} ({len(value)} characters)"
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "a table"
+    return f"a {type(value).__name__}"  # dates and times
+
+
+def add_pythonpath(config: SystemConfig) -> None:
+    """Put the config's ``pythonpath`` in front of ``sys.path`` (once, in order)."""
+    for directory in reversed(config.pythonpath):
+        entry = str(directory)
+        if entry not in sys.path:
+            sys.path.insert(0, entry)
+
+
+def build_system(config: SystemConfig) -> System:
+    """Load the protocol, import the role functions and declare the groups.
+
+    Raises:
+        sessiontypes.ProtocolError: the protocol file has errors.
+        ConfigError: the protocol file cannot be read, has no such global, a group
+            or role is refused (``path: groups.NAME: ...``), or a role of the global
+            type is in no group.
+    """
+    shown = str(config.path)
+    try:
+        module = sessiontypes.load(str(config.protocol))
+    except OSError as error:
+        raise ConfigError(shown, "protocol", f"cannot read {config.protocol}: "
+                                             f"{error.strerror or error}") from None
+    if config.global_name not in module.globals:
+        raise ConfigError(shown, "global", f"no global {config.global_name} in {config.protocol}; "
+                                           f"expected one of {', '.join(module.globals) or '(none)'}")
+    global_type = module.globals[config.global_name]
+    add_pythonpath(config)
+    try:
+        system = System(global_type, transport=config.transport, monitors=config.monitors, ros=config.ros,
+                        capacities=config.capacities)
+        system.ros_settings()  # the topics against the protocol, now rather than when the run starts
+    except ConfigurationError as error:
+        key = "channels" if str(error).startswith("capacity of") else "ros"
+        raise ConfigError(shown, key, str(error)) from None
+    for group in config.groups.values():
+        try:
+            declared = system.group(group.name, priority=group.priority, memory=group.memory,
+                                    cpus=set(group.cpus) if group.cpus else None,
+                                    on_failure=group.on_failure, max_restarts=group.max_restarts,
+                                    host=group.host)
+            for role, reference in group.roles.items():
+                declared.role(role, reference)
+        except (ValueError, AnodizeError) as error:
+            raise ConfigError(shown, f"groups.{group.name}", str(error)) from None
+    missing = [role for role in global_type.roles if config.group_of(role) is None and role not in config.external]
+    if missing:
+        raise ConfigError(shown, "groups", f"{'role' if len(missing) == 1 else 'roles'} "
+                                           f"{', '.join(missing)} of global {global_type.name} "
+                                           f"{'is' if len(missing) == 1 else 'are'} in no group")
+    return system

@@ -1,0 +1,102 @@
+"""What ``anodize verify`` and ``anodize replay`` need besides the recording: the protocol, the topic map,
+the role's function."""
+
+from __future__ import annotations
+
+import json
+import sys
+import tomllib
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import sessiontypes
+from sessiontypes import GlobalType
+
+from .._recording.reader import Recording
+from .._supervision.group import resolve_function
+from .._transport.ros_lanes import ros_settings
+from ..errors import ConfigurationError
+
+__all__ = ["protocol_of", "topic_map", "role_function"]
+
+
+def protocol_of(recording: Recording, path: str | None, name: str | None) -> GlobalType:
+    """The global type to check ``recording`` against: from ``path`` if given, else the one the
+    recording carries (anodize records its protocol's source); ``name`` picks the global type.
+
+    Raises:
+        ConfigurationError: no protocol given and the recording carries none, or no such global.
+        ProtocolError: the protocol does not parse or check.
+    """
+    info = recording.info
+    if path is not None:
+        module = sessiontypes.load(path)
+    elif info.get("protocol_source"):
+        module = sessiontypes.loads(info["protocol_source"], info.get("protocol_file") or "<recorded protocol>")
+    else:
+        raise ConfigurationError(f"{recording.path} was not recorded by anodize: give its protocol with "
+                                 "--protocol FILE.proto (and --global G, and --topics MAP)")
+    name = name or (info.get("global") if path is None else None)
+    if name is None:
+        if len(module.globals) != 1:
+            raise ConfigurationError(f"{module.path} declares {len(module.globals)} global types: pick one with "
+                                     f"--global ({', '.join(module.globals) or 'none'})")
+        return next(iter(module.globals.values()))
+    if name not in module.globals:
+        raise ConfigurationError(f"{module.path} has no global type {name}; expected one of "
+                                 f"{', '.join(module.globals) or '(none)'}")
+    return module.globals[name]
+
+
+def topic_map(path: str, global_type: GlobalType) -> dict[str, tuple[str, str, str]]:
+    """topic -> (sender, receiver, label), from a TOML file of ``"Sender->Receiver[:label]" = "/topic"``
+    entries, at its top level or in ``[ros.topics]`` (so a system file serves as it is).
+
+    Raises:
+        ConfigurationError: the file is not TOML, or an entry names no channel or label of
+            ``global_type`` (naming the entry).
+    """
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigurationError(f"{path}: not a TOML file: {error}") from None
+    table = data.get("ros", {}).get("topics", data) if isinstance(data.get("ros"), dict) else data
+    entries = {key: value for key, value in table.items() if isinstance(value, str) and "->" in key}
+    if not entries:
+        raise ConfigurationError(f"{path}: no \"Sender->Receiver:label\" = \"/topic\" entries "
+                                 "(at the top level or in [ros.topics])")
+    machines = {role: global_type.project(role).fsm() for role in global_type.roles}
+    channels = {(t.peer, role) for role, m in machines.items() for t in m.all_transitions()
+                if t.action == "recv" and t.peer is not None}
+    try:
+        settings = ros_settings(machines, channels, entries)
+    except ConfigurationError as error:
+        raise ConfigurationError(f"{path}: {error}") from None
+    return {topic.name: key for key, topic in settings.topics.items()}
+
+
+def role_function(recording: Recording, role: str, reference: str | None,
+                  pythonpath: Sequence[str] = ()) -> Callable[..., Any]:
+    """The function to replay ``role`` with: ``reference`` (``"module:function"``) if given, else the
+    one the recording names. The folders of ``pythonpath`` go to the front of ``sys.path`` first.
+
+    Raises:
+        ConfigurationError: no reference given and the recording names none for ``role``.
+        AnodizeError: the function cannot be imported.
+    """
+    for folder in reversed(pythonpath):
+        path = str(Path(folder).resolve())
+        if path not in sys.path:
+            sys.path.insert(0, path)
+    if reference is None:
+        try:
+            functions = json.loads(recording.info.get("role_functions") or "{}")
+        except ValueError:
+            functions = {}
+        reference = functions.get(role)
+        if reference is None:
+            named = ", ".join(sorted(functions)) or "none"
+            raise ConfigurationError(f"{recording.path} does not name the function of role {role} (it names "
+                                     f"those of: {named}): give it with --function module:function")
+    return resolve_function(reference)

@@ -1,0 +1,513 @@
+/* The compiled hot path of the process transport: decoding runs of small frames (receiver)
+ * and writing the commonest frames (sender).
+ *
+ * decode_run() is Codec.decode_run in C, to the byte: the same frames are taken, the same
+ * tuples appended, the same offset returned, and the same frames (anything but a message
+ * whose payload is None or an 8-byte int, with a label already known) are left for the
+ * Python decoder, which reports every error. The Python version stays the reference and
+ * the fallback: codec.py uses this module only when it was built and ANODIZE_PURE_PYTHON
+ * is not set, and the tests run both and compare them on arbitrary bytes.
+ *
+ * The bytes come from another process, so they are hostile: every length is checked
+ * against the end of the buffer before it is used, in arithmetic that cannot overflow.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <pythread.h>
+#include <errno.h>
+#include <limits.h>
+#include <stdint.h>
+#include <string.h>
+#include <structmember.h>
+#include <unistd.h>
+
+#define KIND_MESSAGE 0x4D /* FrameKind.MESSAGE */
+#define TAG_NONE 0        /* Tag.NONE */
+#define TAG_INT 3         /* Tag.INT */
+
+static uint32_t read_u32(const unsigned char *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+
+static int64_t read_i64(const unsigned char *p)
+{
+    uint64_t value = 0;
+    for (int i = 7; i >= 0; i--) {
+        value = (value << 8) | p[i];
+    }
+    return (int64_t)value; /* two's complement, as struct's "<q" */
+}
+
+/* decode_run(buffer, at, names, into) -> int: see Codec.decode_run. */
+static PyObject *decode_run(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)module;
+    if (nargs != 4) {
+        PyErr_Format(PyExc_TypeError, "decode_run() takes 4 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    PyObject *names = args[2];
+    if (!PyDict_Check(names)) {
+        PyErr_SetString(PyExc_TypeError, "decode_run(): names must be a dict");
+        return NULL;
+    }
+    Py_ssize_t at = PyLong_AsSsize_t(args[1]);
+    if (at == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    if (at < 0) {
+        PyErr_SetString(PyExc_ValueError, "decode_run(): the offset must not be negative");
+        return NULL;
+    }
+    PyObject *append = PyObject_GetAttrString(args[3], "append");
+    if (append == NULL) {
+        return NULL;
+    }
+    Py_buffer view;
+    if (PyObject_GetBuffer(args[0], &view, PyBUF_SIMPLE) != 0) {
+        Py_DECREF(append);
+        return NULL;
+    }
+    const unsigned char *data = (const unsigned char *)view.buf;
+    const Py_ssize_t size = view.len;
+    PyObject *raw = NULL;   /* the last label's bytes, and its name: a stream repeats a label */
+    PyObject *label = NULL; /* a strong reference: append() may run code that changes names */
+    int failed = 0;
+    while (size - at >= 4) {
+        /* Lengths compared as unsigned 64-bit numbers: a 32-bit Py_ssize_t cannot hold them all. */
+        const uint64_t length = read_u32(data + at);
+        if (length > (uint64_t)(size - at - 4) || length < 6 || data[at + 4] != KIND_MESSAGE) {
+            break; /* incomplete, too short for kind, label size and tag, or not a message */
+        }
+        const Py_ssize_t end = at + 4 + (Py_ssize_t)length;
+        const uint64_t label_bytes_left = length - 5; /* after kind and label size: at least 1 */
+        if ((uint64_t)read_u32(data + at + 5) > label_bytes_left) {
+            break; /* the label runs past the frame: the Python decoder reports it */
+        }
+        const Py_ssize_t label_length = (Py_ssize_t)read_u32(data + at + 5);
+        const Py_ssize_t start = at + 9 + label_length;
+        const unsigned char *label_bytes = data + at + 9;
+        if (raw == NULL || PyBytes_GET_SIZE(raw) != label_length
+                || memcmp(PyBytes_AS_STRING(raw), label_bytes, (size_t)label_length) != 0) {
+            Py_XDECREF(raw);
+            raw = PyBytes_FromStringAndSize((const char *)label_bytes, label_length);
+            if (raw == NULL) {
+                failed = 1;
+                break;
+            }
+            PyObject *found = PyDict_GetItemWithError(names, raw);
+            Py_XSETREF(label, Py_XNewRef(found));
+            if (label == NULL) {
+                failed = PyErr_Occurred() != NULL;
+                break; /* a label not seen yet: decode_body learns it */
+            }
+        }
+        PyObject *payload;
+        if (end == start + 1 && data[start] == TAG_NONE) {
+            payload = Py_NewRef(Py_None);
+        } else if (end == start + 9 && data[start] == TAG_INT) {
+            payload = PyLong_FromLongLong((long long)read_i64(data + start + 1));
+            if (payload == NULL) {
+                failed = 1;
+                break;
+            }
+        } else {
+            break;
+        }
+        PyObject *message = PyTuple_New(2);
+        PyObject *frame_size = PyLong_FromSsize_t(4 + (Py_ssize_t)length);
+        PyObject *entry = PyTuple_New(2);
+        if (message == NULL || frame_size == NULL || entry == NULL) {
+            Py_XDECREF(message);
+            Py_XDECREF(frame_size);
+            Py_XDECREF(entry);
+            Py_DECREF(payload);
+            failed = 1;
+            break;
+        }
+        PyTuple_SET_ITEM(message, 0, Py_NewRef(label));
+        PyTuple_SET_ITEM(message, 1, payload);
+        PyTuple_SET_ITEM(entry, 0, message);
+        PyTuple_SET_ITEM(entry, 1, frame_size);
+        PyObject *appended = PyObject_CallOneArg(append, entry);
+        Py_DECREF(entry);
+        if (appended == NULL) {
+            failed = 1;
+            break;
+        }
+        Py_DECREF(appended);
+        at = end;
+    }
+    Py_XDECREF(raw);
+    Py_XDECREF(label);
+    PyBuffer_Release(&view);
+    Py_DECREF(append);
+    if (failed) {
+        return NULL;
+    }
+    return PyLong_FromSsize_t(at);
+}
+
+/* SmallFrameWriter(fd, empty_frames, int_prefixes, fallback): PipeSender.put for the commonest
+ * messages. Called with (label, payload): when the payload is None or an int of 8 bytes and the
+ * codec has already built that label's frame (empty_frames) or prefix (int_prefixes), it writes
+ * the frame (at most PIPE_BUF bytes: one write, never split nor interleaved) and returns None;
+ * anything else, and any failed write, goes to fallback(item), the Python put, which builds
+ * the frame, fills those caches and reports errors as it always does. */
+typedef struct {
+    PyObject_HEAD
+    vectorcallfunc vectorcall;
+    int fd;
+    PyObject *empty_frames; /* label -> whole frame */
+    PyObject *int_prefixes; /* label -> frame up to the int's 8 bytes */
+    PyObject *fallback;
+    /* The channel's one lock: every frame is written holding it, by this writer and by PipeSender
+     * (which takes it as its own lock, through acquire/release), so that no frame, nor a failure
+     * frame written from another thread, lands inside another that takes several writes. */
+    PyThread_type_lock lock;
+    int locked;
+} Writer;
+
+/* Take the lock, waiting without the GIL if another thread holds it. */
+static void take_lock(Writer *self)
+{
+    if (!PyThread_acquire_lock(self->lock, NOWAIT_LOCK)) {
+        Py_BEGIN_ALLOW_THREADS
+        PyThread_acquire_lock(self->lock, WAIT_LOCK);
+        Py_END_ALLOW_THREADS
+    }
+    self->locked = 1;
+}
+
+static void give_lock(Writer *self)
+{
+    self->locked = 0;
+    PyThread_release_lock(self->lock);
+}
+
+/* Write `size` bytes of `data` to fd as os.write in a loop would: the GIL released while each
+ * write waits, and after an interrupted or short write the signal handlers run (one may
+ * raise). *written counts the bytes that went. Returns 0 when all went, -1 with an exception
+ * set when a handler raised, or the errno of the write that failed. */
+static int write_out(int fd, const char *data, Py_ssize_t size, Py_ssize_t *written)
+{
+    *written = 0;
+    while (*written < size) {
+        ssize_t n;
+        int failure;
+        Py_BEGIN_ALLOW_THREADS
+        n = write(fd, data + *written, (size_t)(size - *written));
+        failure = n < 0 ? errno : 0;
+        Py_END_ALLOW_THREADS
+        if (failure != 0 && failure != EINTR) {
+            return failure;
+        }
+        *written += n > 0 ? n : 0;
+        if (*written < size && PyErr_CheckSignals() < 0) {
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* The frame of `item` into `frame` (PIPE_BUF bytes): its size, 0 if it is not a (label, payload)
+ * tuple whose frame the codec has cached, -1 with an exception set. */
+static Py_ssize_t small_frame(Writer *self, PyObject *item, char *frame)
+{
+    if (!PyTuple_CheckExact(item) || PyTuple_GET_SIZE(item) != 2) {
+        return 0;
+    }
+    PyObject *label = PyTuple_GET_ITEM(item, 0), *payload = PyTuple_GET_ITEM(item, 1);
+    Py_ssize_t size = 0;
+    if (payload == Py_None) {
+        PyObject *whole = PyDict_GetItemWithError(self->empty_frames, label);
+        if (whole != NULL && PyBytes_CheckExact(whole) && PyBytes_GET_SIZE(whole) <= PIPE_BUF) {
+            size = PyBytes_GET_SIZE(whole);
+            memcpy(frame, PyBytes_AS_STRING(whole), (size_t)size);
+        }
+    } else if (PyLong_CheckExact(payload)) {
+        int overflow = 0;
+        long long value = PyLong_AsLongLongAndOverflow(payload, &overflow);
+        PyObject *prefix = overflow == 0 && !(value == -1 && PyErr_Occurred())
+            ? PyDict_GetItemWithError(self->int_prefixes, label) : NULL;
+        if (prefix != NULL && PyBytes_CheckExact(prefix) && PyBytes_GET_SIZE(prefix) <= PIPE_BUF - 8) {
+            size = PyBytes_GET_SIZE(prefix);
+            memcpy(frame, PyBytes_AS_STRING(prefix), (size_t)size);
+            unsigned long long bits = (unsigned long long)value;
+            for (int i = 0; i < 8; i++) { /* little-endian, as struct's "<q" */
+                frame[size++] = (char)(bits >> (8 * i));
+            }
+        }
+    }
+    return PyErr_Occurred() ? -1 : size;
+}
+
+#define BATCH_BYTES (64 * 1024) /* one write of a batch; the receiver reads as much at once */
+
+/* write_many(items, start) -> (taken, errno): the longest run of items from `start` whose frames
+ * the codec has cached, written in writes of up to BATCH_BYTES; taken counts the items whose
+ * frames are wholly in the pipe, errno is 0 or why the last write failed (the caller then
+ * reports the peer gone and sends nothing more). PipeSender.put_many sends the rest. */
+static PyObject *writer_write_many(Writer *self, PyObject *args)
+{
+    PyObject *items;
+    Py_ssize_t start;
+    if (!PyArg_ParseTuple(args, "O!n:write_many", &PyList_Type, &items, &start)) {
+        return NULL;
+    }
+    if (start < 0) {
+        PyErr_SetString(PyExc_ValueError, "write_many(): start must not be negative");
+        return NULL;
+    }
+    /* The batch, and where each of its frames ends (a frame is at least 10 bytes: length, kind,
+     * label size, tag), to count the frames a failed write left whole in the pipe. */
+    enum { MOST_FRAMES = BATCH_BYTES / 10 };
+    char *batch = PyMem_Malloc(BATCH_BYTES);
+    Py_ssize_t *ends = PyMem_Malloc(MOST_FRAMES * sizeof(Py_ssize_t));
+    if (batch == NULL || ends == NULL) {
+        PyMem_Free(batch);
+        PyMem_Free(ends);
+        return PyErr_NoMemory();
+    }
+    Py_ssize_t taken = 0, in_batch = 0, size = 0;
+    int error = 0;
+    for (Py_ssize_t index = start; !error; index++) {
+        Py_ssize_t framed = 0;
+        char frame[PIPE_BUF];
+        if (index < PyList_GET_SIZE(items)) { /* re-read: the list may change while the GIL is released */
+            PyObject *item = Py_NewRef(PyList_GET_ITEM(items, index));
+            framed = small_frame(self, item, frame);
+            Py_DECREF(item);
+            if (framed < 0) {
+                PyMem_Free(batch);
+                PyMem_Free(ends);
+                return NULL;
+            }
+        }
+        if (in_batch > 0 && (framed == 0 || size + framed > BATCH_BYTES || in_batch == MOST_FRAMES)) {
+            Py_ssize_t written;
+            take_lock(self);
+            error = write_out(self->fd, batch, size, &written);
+            give_lock(self);
+            if (error < 0) { /* a signal handler raised */
+                PyMem_Free(batch);
+                PyMem_Free(ends);
+                return NULL;
+            }
+            for (Py_ssize_t k = 0; k < in_batch && ends[k] <= written; k++) {
+                taken++;
+            }
+            in_batch = size = 0;
+        }
+        if (framed == 0 || error) {
+            break;
+        }
+        memcpy(batch + size, frame, (size_t)framed);
+        size += framed;
+        ends[in_batch++] = size;
+    }
+    PyMem_Free(batch);
+    PyMem_Free(ends);
+    return Py_BuildValue("(ni)", taken, error);
+}
+
+/* acquire(blocking=True, timeout=-1) -> bool, as threading.Lock.acquire. */
+static PyObject *writer_acquire(Writer *self, PyObject *args, PyObject *kwargs)
+{
+    int blocking = 1;
+    double timeout = -1;
+    static char *names[] = {"blocking", "timeout", NULL};
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|pd:acquire", names, &blocking, &timeout)) {
+        return NULL;
+    }
+    PY_TIMEOUT_T microseconds = !blocking ? 0 : timeout < 0 ? -1 : (PY_TIMEOUT_T)(timeout * 1e6);
+    PyLockStatus status = PyThread_acquire_lock_timed(self->lock, 0, 0);
+    if (status != PY_LOCK_ACQUIRED && microseconds != 0) {
+        Py_BEGIN_ALLOW_THREADS
+        status = PyThread_acquire_lock_timed(self->lock, microseconds, 0);
+        Py_END_ALLOW_THREADS
+    }
+    if (status != PY_LOCK_ACQUIRED) {
+        Py_RETURN_FALSE;
+    }
+    self->locked = 1;
+    Py_RETURN_TRUE;
+}
+
+static PyObject *writer_release(Writer *self, PyObject *unused)
+{
+    (void)unused;
+    if (!self->locked) {
+        PyErr_SetString(PyExc_RuntimeError, "release unlocked lock");
+        return NULL;
+    }
+    give_lock(self);
+    Py_RETURN_NONE;
+}
+
+static PyObject *writer_enter(Writer *self, PyObject *unused)
+{
+    (void)unused;
+    take_lock(self);
+    Py_RETURN_TRUE;
+}
+
+static PyObject *writer_exit(Writer *self, PyObject *args)
+{
+    (void)args;
+    return writer_release(self, NULL);
+}
+
+static PyMethodDef writer_methods[] = {
+    {"acquire", (PyCFunction)(void (*)(void))writer_acquire, METH_VARARGS | METH_KEYWORDS,
+     "acquire(blocking=True, timeout=-1) -> bool: the channel's lock, as threading.Lock's."},
+    {"release", (PyCFunction)writer_release, METH_NOARGS, "release(): as threading.Lock's."},
+    {"__enter__", (PyCFunction)writer_enter, METH_NOARGS, NULL},
+    {"__exit__", (PyCFunction)writer_exit, METH_VARARGS, NULL},
+    {"write_many", (PyCFunction)writer_write_many, METH_VARARGS,
+     "write_many(items, start) -> (taken, errno): the items from start on whose frames are cached, "
+     "written in few writes; see PipeSender.put_many."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyObject *writer_call(Writer *self, PyObject *const *args, size_t nargsf, PyObject *kwnames)
+{
+    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
+    if (nargs != 1 || kwnames != NULL) {
+        return PyObject_Vectorcall(self->fallback, args, nargsf, kwnames);
+    }
+    PyObject *item = args[0];
+    char frame[PIPE_BUF];
+    Py_ssize_t size = small_frame(self, item, frame);
+    if (size < 0) {
+        return NULL;
+    }
+    if (size > 0) {
+        Py_ssize_t written;
+        take_lock(self);
+        int failed = write_out(self->fd, frame, size, &written);
+        give_lock(self);
+        if (failed < 0) {
+            return NULL;
+        }
+        if (failed == 0) {
+            Py_RETURN_NONE;
+        }
+        /* Nothing was written (a pipe takes PIPE_BUF bytes whole or not at all): the fallback
+         * writes again and turns the error into the peer's failure. */
+    }
+    return PyObject_CallOneArg(self->fallback, item);
+}
+
+static PyObject *writer_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
+{
+    int fd;
+    PyObject *empty_frames, *int_prefixes, *fallback;
+    static char *names[] = {"fd", "empty_frames", "int_prefixes", "fallback", NULL};
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "iO!O!O:SmallFrameWriter", names, &fd, &PyDict_Type,
+                                     &empty_frames, &PyDict_Type, &int_prefixes, &fallback)) {
+        return NULL;
+    }
+    if (!PyCallable_Check(fallback)) {
+        PyErr_SetString(PyExc_TypeError, "SmallFrameWriter: fallback must be callable");
+        return NULL;
+    }
+    Writer *self = (Writer *)type->tp_alloc(type, 0);
+    if (self == NULL) {
+        return NULL;
+    }
+    self->fd = fd;
+    self->empty_frames = Py_NewRef(empty_frames);
+    self->int_prefixes = Py_NewRef(int_prefixes);
+    self->fallback = Py_NewRef(fallback);
+    self->vectorcall = (vectorcallfunc)writer_call;
+    self->lock = PyThread_allocate_lock();
+    if (self->lock == NULL) {
+        Py_DECREF(self);
+        return PyErr_NoMemory();
+    }
+    return (PyObject *)self;
+}
+
+static int writer_traverse(Writer *self, visitproc visit, void *arg)
+{
+    Py_VISIT(Py_TYPE(self));
+    Py_VISIT(self->empty_frames);
+    Py_VISIT(self->int_prefixes);
+    Py_VISIT(self->fallback);
+    return 0;
+}
+
+static int writer_clear(Writer *self)
+{
+    Py_CLEAR(self->empty_frames);
+    Py_CLEAR(self->int_prefixes);
+    Py_CLEAR(self->fallback); /* a bound method of the PipeSender that holds this writer: a cycle */
+    return 0;
+}
+
+static void writer_dealloc(Writer *self)
+{
+    PyTypeObject *type = Py_TYPE(self);
+    PyObject_GC_UnTrack(self);
+    writer_clear(self);
+    if (self->lock != NULL) {
+        if (self->locked) {
+            PyThread_release_lock(self->lock);
+        }
+        PyThread_free_lock(self->lock);
+    }
+    type->tp_free((PyObject *)self);
+    Py_DECREF(type);
+}
+
+static PyMemberDef writer_members[] = {
+    {"__vectorcalloffset__", T_PYSSIZET, offsetof(Writer, vectorcall), READONLY, NULL},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PyType_Slot writer_slots[] = {
+    {Py_tp_doc, "SmallFrameWriter(fd, empty_frames, int_prefixes, fallback): PipeSender.put, "
+                "compiled for messages without a payload or with an 8-byte int."},
+    {Py_tp_new, writer_new},
+    {Py_tp_call, PyVectorcall_Call},
+    {Py_tp_dealloc, writer_dealloc},
+    {Py_tp_traverse, writer_traverse},
+    {Py_tp_clear, writer_clear},
+    {Py_tp_members, writer_members},
+    {Py_tp_methods, writer_methods},
+    {0, NULL},
+};
+
+static PyType_Spec writer_spec = {
+    "anodize._transport._frames.SmallFrameWriter", sizeof(Writer), 0,
+    Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC | Py_TPFLAGS_HAVE_VECTORCALL, writer_slots,
+};
+
+static PyMethodDef methods[] = {
+    {"decode_run", (PyCFunction)(void (*)(void))decode_run, METH_FASTCALL,
+     "decode_run(buffer, at, names, into) -> int\n\nCodec.decode_run in C (see anodize._transport.codec)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef frames_module = {
+    PyModuleDef_HEAD_INIT, "_frames",
+    "The compiled hot path of anodize._transport.codec (a pure-Python fallback stays).", -1, methods,
+    NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__frames(void)
+{
+    PyObject *module = PyModule_Create(&frames_module);
+    if (module == NULL) {
+        return NULL;
+    }
+    PyObject *writer_type = PyType_FromSpec(&writer_spec);
+    if (writer_type == NULL || PyModule_AddObject(module, "SmallFrameWriter", writer_type) < 0) {
+        Py_XDECREF(writer_type);
+        Py_DECREF(module);
+        return NULL;
+    }
+    return module;
+}

@@ -1,0 +1,138 @@
+"""Groups that fork, freeze, garble their control messages or lose their supervisor:
+every peer hears within a bounded time, and nothing outlives the run."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import fault_roles as roles
+import pytest
+
+import anodize
+import sessiontypes
+from anodize import PeerFailedError
+from anodize._supervision.report import GroupState, RoleStatus
+from anodize.errors import RoleError
+
+PING = sessiontypes.loads("global Ping(A, B) = mu t. A -> B : {ping(nat). B -> A : pong(nat). t, stop}",
+                          "test_faults.proto").globals["Ping"]
+
+pytestmark = pytest.mark.slow
+
+
+def run(client: object, *, transport: str = "process", timeout: float = 60, **options: object) -> anodize.RunReport:
+    system = anodize.System(PING, transport=transport)
+    system.group("a").role("A", client)
+    system.group("b").role("B", roles.server)
+    return system.run(timeout=timeout, grace=1.0, **options)  # type: ignore[arg-type]
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # A zombie is dead for our purpose (its parent has not reaped it yet).
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def gone_within(pid: int, seconds: float) -> bool:
+    deadline = time.monotonic() + seconds
+    while alive(pid):
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def test_a_fork_holding_the_pipe_does_not_delay_the_peer_and_dies_with_its_group(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("ANODIZE_TEST_DIR", str(tmp_path))
+    report = run(roles.forking_client, timeout=30)
+    error = report.roles["B"].error
+    assert isinstance(error, PeerFailedError), report.summary()
+    assert "the client failed, its children live on" in error.cause
+    assert report.outcome == "NOT ok"  # not "stopped": the failure was reported, not waited out
+    for name in ("child", "background"):
+        pid = int((tmp_path / name).read_text())
+        assert gone_within(pid, 5.0), f"the {name} process {pid} outlived its group"
+
+
+def test_a_frozen_group_is_failed_after_missing_its_heartbeats() -> None:
+    report = run(roles.freezing_client, liveness=1.0)
+    group = report.groups["a"]
+    assert group.status is GroupState.FAILED, report.summary()
+    assert isinstance(group.error, RoleError) and group.error.type_name == "Unresponsive"
+    assert "sent no heartbeat for" in str(group.error)
+    assert isinstance(report.roles["B"].error, PeerFailedError)
+    assert report.roles["A"].status is RoleStatus.FAILED
+
+
+@pytest.mark.parametrize("client", [roles.half_a_control_message, roles.infinite_memory_report])
+def test_a_garbled_control_connection_fails_that_group_not_the_supervisor(client: object) -> None:
+    report = run(client, liveness=1.0)
+    group = report.groups["a"]
+    assert group.status is GroupState.FAILED, report.summary()
+    assert isinstance(group.error, RoleError) and group.error.type_name == "ControlError"
+    assert isinstance(report.roles["B"].error, PeerFailedError)
+
+
+def test_the_inproc_timeout_returns_although_a_role_is_stuck_in_a_c_call() -> None:
+    report = run(roles.stuck_in_c, transport="inproc", timeout=0.5)
+    assert report.roles["A"].status is RoleStatus.STOPPED
+    assert "abandoned" in report.roles["A"].detail
+    assert report.roles["B"].status is RoleStatus.STOPPED
+
+
+def test_group_processes_die_with_their_supervisor(tmp_path: Path) -> None:
+    script = tmp_path / "supervisor.py"
+    script.write_text(textwrap.dedent(f"""
+        import sys
+        sys.path[:0] = {[str(Path(__file__).parents[1])]!r}
+        import anodize, sessiontypes, fault_roles
+        gt = sessiontypes.loads("global P(A, B) = A -> B : x", "p.proto").globals["P"]
+        system = anodize.System(gt, transport="process")
+        system.group("a").role("A", fault_roles.note_pid_and_freeze)
+        system.group("b").role("B", fault_roles.note_pid_and_freeze)
+        if __name__ == "__main__":
+            system.run()
+    """))
+    env = {**os.environ, "ANODIZE_TEST_DIR": str(tmp_path)}
+    supervisor = subprocess.Popen([sys.executable, str(script)], env=env)
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(tmp_path.glob("frozen-*"))) < 2:
+            assert time.monotonic() < deadline, "the groups did not start"
+            assert supervisor.poll() is None, "the supervisor ended early"
+            time.sleep(0.1)
+        groups = [int(p.read_text()) for p in tmp_path.glob("frozen-*")]
+        supervisor.send_signal(signal.SIGKILL)
+        supervisor.wait(10)
+        for pid in groups:
+            assert gone_within(pid, 5.0), f"group process {pid} outlived its supervisor"
+    finally:
+        supervisor.kill()
+
+
+@pytest.mark.parametrize("hog", [roles.hold_a_shared_mapping, roles.map_past_the_bound])
+def test_memory_the_data_limit_misses_is_still_bounded_and_reported(hog: object) -> None:
+    system = anodize.System(PING, transport="process")
+    system.group("a", memory="64MiB").role("A", hog)
+    system.group("b").role("B", roles.server)
+    report = system.run(timeout=60, grace=1.0)
+    group = report.groups["a"]
+    assert isinstance(group.error, anodize.MemoryBoundError), report.summary()
+    assert group.status is GroupState.FAILED
+    if hog is roles.hold_a_shared_mapping:  # the true peak, from the kernel, not "0.0 MiB"
+        assert group.peak_memory is not None and group.peak_memory > 64 * 2**20
+    assert "the bound covers resident memory" in group.memory_note
+    assert isinstance(report.roles["B"].error, PeerFailedError)

@@ -1,0 +1,172 @@
+"""transport="dds" across two simulated hosts: two network namespaces joined by a veth pair,
+optionally dropping packets at random (nftables ``numgen random``). Needs root."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from dds_hosts import finish, start_host, wait_for_group, wait_until_flowing, write_system
+
+from anodize import PeerFailedError
+from anodize._supervision.report import RoleStatus
+
+REPO = Path(__file__).resolve().parents[3]
+pytestmark = pytest.mark.slow
+
+
+def _unavailable() -> str | None:
+    if os.geteuid() != 0:
+        return "creating network namespaces needs root"
+    if shutil.which("ip") is None:
+        return "no 'ip' command (iproute2)"
+    probe = f"anz-probe-{os.getpid()}"
+    if subprocess.run(["ip", "netns", "add", probe], capture_output=True).returncode != 0:
+        return "this machine refuses 'ip netns add' (no CAP_SYS_ADMIN in a container?)"
+    subprocess.run(["ip", "netns", "del", probe], capture_output=True)
+    return None
+
+
+REASON = _unavailable()
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(REASON is not None, reason=REASON or "")]
+
+
+def sh(*argv: str) -> None:
+    subprocess.run(argv, check=True, capture_output=True, timeout=30)
+
+
+class Hosts:
+    """Namespaces ``a`` and ``b`` joined by a veth pair 10.79.x.1 <-> 10.79.x.2."""
+
+    def __init__(self) -> None:
+        tag = os.getpid() % 250
+        self.a, self.b = f"anz-a-{os.getpid()}", f"anz-b-{os.getpid()}"
+        self.veth_a, self.veth_b = f"anza{tag}", f"anzb{tag}"
+        self.subnet = f"10.79.{tag}"
+
+    def create(self) -> None:
+        sh("ip", "netns", "add", self.a)
+        sh("ip", "netns", "add", self.b)
+        sh("ip", "link", "add", self.veth_a, "netns", self.a, "type", "veth", "peer", "name", self.veth_b,
+           "netns", self.b)
+        for ns, dev, host in ((self.a, self.veth_a, 1), (self.b, self.veth_b, 2)):
+            sh("ip", "-n", ns, "addr", "add", f"{self.subnet}.{host}/30", "dev", dev)
+            sh("ip", "-n", ns, "link", "set", "lo", "up")
+            sh("ip", "-n", ns, "link", "set", dev, "up", "multicast", "on")  # Cyclone discovers by multicast
+
+    def drop(self, percent: int) -> None:
+        """Drop ``percent`` % of the packets leaving each namespace, at random."""
+        for ns, dev in ((self.a, self.veth_a), (self.b, self.veth_b)):
+            for command in ("add table inet lossy",
+                            "add chain inet lossy out { type filter hook output priority 0; }",
+                            f'add rule inet lossy out oifname "{dev}" numgen random mod 100 < {percent} counter drop'):
+                sh("ip", "netns", "exec", ns, "nft", command)
+
+    def dropped(self) -> int:
+        """Packets the loss rules dropped so far, in both namespaces."""
+        total = 0
+        for ns in (self.a, self.b):
+            listing = subprocess.run(["ip", "netns", "exec", ns, "nft", "list", "table", "inet", "lossy"],
+                                     capture_output=True, text=True, timeout=30).stdout
+            total += sum(int(n) for n in re.findall(r"counter packets (\d+)", listing))
+        return total
+
+    def cut(self) -> None:
+        """Take the link down: nothing crosses any more."""
+        sh("ip", "-n", self.a, "link", "set", self.veth_a, "down")
+
+    def delete(self) -> None:
+        for ns in (self.a, self.b):
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=30)
+
+
+@pytest.fixture
+def hosts() -> Iterator[Hosts]:
+    made = Hosts()
+    try:
+        made.create()
+        yield made
+    finally:
+        made.delete()
+
+
+def run_both(system: Path, hosts: Hosts, tmp_path: Path, seconds: float = 240,
+             first: str = "B") -> tuple[dict, dict, str]:
+    started = {}
+    for host in sorted("AB", key=lambda h: h != first):
+        started[host] = start_host(system, host, tmp_path / f"{host.lower()}.json",
+                                   namespace=hosts.a if host == "A" else hosts.b)
+        time.sleep(0.5)  # the first really is up first
+    a, b = started["A"], started["B"]
+    try:
+        out = finish(a, seconds) + finish(b, seconds)
+    finally:
+        for process in (a, b):
+            process.kill()
+            process.wait()
+    return json.loads((tmp_path / "a.json").read_text()), json.loads((tmp_path / "b.json").read_text()), out
+
+
+@pytest.mark.parametrize("first", ["A", "B"])
+def test_the_two_hosts_example_across_namespaces(hosts: Hosts, tmp_path: Path, first: str) -> None:
+    system = REPO / "examples/two_hosts/two_hosts.toml"
+    a, b, out = run_both(system, hosts, tmp_path, 120, first)
+    assert a["ok"] and b["ok"], out
+
+
+@pytest.mark.parametrize("loss", [0, 10])
+def test_messages_and_frames_cross_in_order(hosts: Hosts, tmp_path: Path, loss: int,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    if loss and shutil.which("nft") is None:
+        pytest.skip("nftables is not installed (scripts/bootstrap installs it when run as root)")
+    if loss:
+        hosts.drop(loss)
+    for producer, consumer, count in (("producer", "consumer", 100_000), ("frame_producer", "frame_consumer", 1000)):
+        monkeypatch.setenv("DDS_TEST_COUNT", str(count))
+        run = tmp_path / producer
+        run.mkdir()
+        system = write_system(run, producer, f"stream{loss}", consumer)
+        a, b, out = run_both(system, hosts, run)
+        assert a["ok"] and b["ok"], out  # the consumer checked every sequence number and checksum
+    if loss:
+        assert hosts.dropped() > 1000  # the link really lost packets
+
+
+@pytest.mark.parametrize("how", ["kill", "freeze", "cut"])
+def test_a_lost_host_is_reported_to_the_other(hosts: Hosts, tmp_path: Path, how: str) -> None:
+    system = write_system(tmp_path, "slow_producer", f"lost-{how}")
+    flowing = {"DDS_TEST_FLOWING": str(tmp_path / "flowing")}
+    consumer = start_host(system, "B", tmp_path / "b.json", flowing, namespace=hosts.b)
+    producer = start_host(system, "A", tmp_path / "a.json", flowing, namespace=hosts.a)
+    group = 0
+    try:
+        group = wait_for_group(producer, 60)
+        wait_until_flowing(tmp_path / "flowing", producer)  # past the start barrier
+        if how == "kill":
+            os.kill(group, signal.SIGKILL)
+        elif how == "freeze":  # stops answering: every thread of the group's process stands still
+            os.kill(group, signal.SIGSTOP)
+        else:
+            hosts.cut()
+        out = finish(consumer, 30)  # bounded: a hang fails here
+    finally:
+        if how == "freeze" and group:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(group, signal.SIGKILL)
+        for process in (producer, consumer):
+            with contextlib.suppress(ProcessLookupError):
+                process.kill()
+            process.wait()
+    role = json.loads((tmp_path / "b.json").read_text())["roles"]["C"]
+    assert role["status"] == RoleStatus.FAILED, out
+    assert role["error"]["type"] == PeerFailedError.__name__, out
+    assert "group producing on host A" in role["error"]["message"], out
