@@ -74,7 +74,7 @@ __all__ = [
 # Public names whose module needs an extra: imported on first use, so `import anodize` needs none
 # (a missing extra raises MissingExtraError there). Reachable as attributes (anodize.StartBarrierError)
 # but not in __all__, so `from anodize import *` works without the extra too.
-_NEEDS_AN_EXTRA = {"StartBarrierError": (".transport.dds", "cyclonedds", "dds")}
+_NEEDS_AN_EXTRA = {"StartBarrierError": ("._transport.dds", "cyclonedds", "dds")}
 
 
 def __getattr__(name: str) -> Any:

@@ -87,7 +87,7 @@ def test_user_code_uses_only_the_public_api(name: str) -> None:
 def test_the_scan_finds_private_uses() -> None:
     # The check above could pass by finding nothing: it must see each kind of private use.
     source = ("import anodize._session\nfrom anodize._tools.config import load_config\nfrom anodize import tools\n"
-              "import anodize\nanodize.supervision.System\nfrom anodize import System, errors\n"
+              "import anodize\nanodize._supervision.System\nfrom anodize import System, errors\n"
               "from anodize.errors import AnodizeError\nanodize.System\n")
     uses = _private_uses(source, "program.py")
     assert [use.split(": ", 1)[1] for use in uses] == [

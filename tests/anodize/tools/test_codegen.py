@@ -34,7 +34,7 @@ from anodize._tools.codegen import (
 )
 
 REPO = Path(__file__).resolve().parents[3]
-FIXTURES = Path(__file__).with_name("codegen_fixtures")
+FIXTURES = Path(__file__).resolve().parents[1] / "codegen_fixtures"
 FIXTURES_REL = FIXTURES.relative_to(REPO).as_posix()
 PROTOCOLS = sorted(p.relative_to(REPO).as_posix() for p in (REPO / "protocols").glob("*.proto"))
 FEATURES = f"{FIXTURES_REL}/features.proto"

@@ -19,8 +19,8 @@ from pathlib import Path
 from cyclonedds import core, domain, pub, sub, topic  # the tests' environment has every extra
 
 ANODIZE = Path(__file__).resolve().parents[3] / "anodize"
-SEAM = ANODIZE / "transport" / "dds" / "binding.py"
-PUBLIC_IMPORTS = {ANODIZE / "ros" / "idl.py": {"cyclonedds.idl"}}
+SEAM = ANODIZE / "_transport" / "dds" / "binding.py"
+PUBLIC_IMPORTS = {ANODIZE / "_ros" / "idl.py": {"cyclonedds.idl"}}
 
 
 def _binding_privates() -> frozenset[str]:
