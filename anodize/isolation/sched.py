@@ -15,7 +15,9 @@ import threading
 
 from ..errors import ConfigurationError
 
-__all__ = ["apply_thread_scheduling", "nice_for", "lower_thread_priority"]
+__all__ = ["apply_thread_scheduling", "nice_for", "lower_thread_priority", "side_work_priority", "SIDE_WORK_NICE"]
+
+SIDE_WORK_NICE = 19  # the weakest nice value: what side work gets where SCHED_IDLE is refused
 
 
 def nice_for(priority: int) -> int:
@@ -75,3 +77,35 @@ def lower_thread_priority(nice: int = 10) -> None:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))  # 0: the calling thread, on Linux
     with contextlib.suppress(OSError, AttributeError):
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+
+
+def side_work_priority(thread: int | None = None) -> str:
+    """Put a thread of side work (the live view, a recording's writer) below every group: the
+    lowest scheduling class the OS has; describe what was applied.
+
+    SCHED_IDLE (Linux) runs a thread only when no other thread of the CPU wants to: below
+    nice 19, which still takes about 1.5% of a CPU from a nice 0 thread, and far below any
+    SCHED_FIFO group. Where it is refused, the thread gets nice :data:`SIDE_WORK_NICE`. A
+    thread that inherited its group's SCHED_FIFO gives it up first either way.
+
+    Args:
+        thread: the native id of the thread (``threading.get_native_id()`` of it, or a task
+            id from ``/proc/self/task``); None, the calling thread.
+    """
+    tid = threading.get_native_id() if thread is None else thread
+    target = 0 if thread is None else tid  # 0: the calling thread, on Linux
+    idle = getattr(os, "SCHED_IDLE", None)
+    refused = "not supported on this OS"
+    if idle is not None:
+        try:
+            os.sched_setscheduler(target, idle, os.sched_param(0))
+            return "SCHED_IDLE"
+        except OSError as error:
+            refused = _reason(error)
+    with contextlib.suppress(OSError, AttributeError):
+        os.sched_setscheduler(target, os.SCHED_OTHER, os.sched_param(0))
+    try:
+        os.setpriority(os.PRIO_PROCESS, tid, SIDE_WORK_NICE)
+    except OSError as error:
+        return f"unchanged (SCHED_IDLE refused: {refused}; nice {SIDE_WORK_NICE} refused: {_reason(error)})"
+    return f"nice {SIDE_WORK_NICE} (SCHED_IDLE refused: {refused})"

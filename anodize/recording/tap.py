@@ -5,37 +5,53 @@ Each recorded channel is wrapped (:class:`RecordingChannel`): a message is encod
 sent, even if the sender changes the payload afterwards; a thread of the group writes
 it to the group's part file (an MCAP file without chunks, flushed every 0.1 s, so a
 group that is killed loses at most its last tenth of a second). That thread runs at
-ordinary priority, below every real-time role of the group, so recording does not
-delay the control loop; when it falls behind by more than :data:`BACKLOG` bytes (an
-eighth of the group's memory bound, if that is less) the senders wait for it (bounded
-memory; nothing is dropped). The supervisor merges the
-parts when the run ends (:mod:`.merge`).
+the lowest priority the OS has (SCHED_IDLE, else nice 19), below every role of the
+group, so recording does not delay the control loop. Its queue is bounded: when it
+falls behind by more than :data:`BACKLOG` bytes (an eighth of the group's memory bound,
+if that is less), a slow disk say, a sender does not wait for it; the message keeps its
+sequence number but is not recorded, and the recording gets a gap record on
+:data:`GAP_TOPIC` (the channel, the first missing number, how many) where the message
+would have been, so ``anodize verify`` reports a gap of the recording's, not a
+violation, and the run's report counts what was lost. When the group ends, the writer
+has :data:`CLOSE_WITHIN` seconds to write what is queued; what it has not written by
+then becomes a gap too. The supervisor merges the parts when the run ends (:mod:`.merge`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import threading
 import time
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from sessiontypes import StateMachine
 
-from ..isolation.sched import lower_thread_priority
+from ..isolation.sched import side_work_priority
 from ..session.channel import Channel
 from ..session.endpoint import put_each
 from .encoding import SortCodec, codec_for_sort
 from .plan import META, PROFILE, ChannelLabel, RecordPlan
 
 __all__ = ["Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG", "channel_metadata",
-           "QOS_PROFILES"]
+           "QOS_PROFILES", "GAP_TOPIC", "GAP_KEY", "CLOSE_WITHIN", "open_part"]
 
-BACKLOG = 64 * 2**20  # bytes a group's recorder may hold before its senders wait
+BACKLOG = 64 * 2**20  # bytes a group's recorder may hold; beyond it, messages become a gap
 SEQUENCE_WRAP = 2**32 - 1  # the largest MCAP sequence number
+CLOSE_WITHIN = 2.0    # seconds the writer has, once its group ends, to write what is queued
+GAP_TOPIC = "/anodize/recording/gaps"  # where a part says which messages it could not record
+GAP_KEY = f"{META}.gaps"  # the gap channel's metadata key (its value: "1")
 _FLUSH_EVERY = 0.1    # seconds
+_BATCH = 64           # messages the writer takes from its queue at a time
+_GAP = -1             # in the queue, in place of an MCAP channel: a gap record
+
+
+def open_part(path: Path) -> IO[bytes]:
+    """The part file a recorder writes (a seam: tests put a slow disk here)."""
+    return path.open("wb")
 
 # What anodize's channels offer, as rosbag2 writes it (metadata version 9): reliable, keep all, volatile.
 QOS_PROFILES = """- history: keep_all
@@ -72,7 +88,8 @@ class Recorder:
     """One group's recorder; :meth:`attach` it to the group's network, :meth:`close` at the end."""
 
     def __init__(self, plan: RecordPlan, group: str, incarnation: int, protocol: str,
-                 machines: Mapping[str, StateMachine], memory: int | None = None) -> None:
+                 machines: Mapping[str, StateMachine], memory: int | None = None,
+                 opener: Callable[[Path], IO[bytes]] | None = None) -> None:
         from mcap.writer import CompressionType, Writer
 
         self.plan = plan
@@ -81,7 +98,7 @@ class Recorder:
         self._labels = _local_labels(machines, self.recorded)
         Path(plan.parts).mkdir(parents=True, exist_ok=True)
         self.path = Path(plan.parts) / f"{group}-{incarnation}.mcap"
-        self._file = self.path.open("wb")
+        self._file = (opener or open_part)(self.path)
         self._writer = Writer(self._file, use_chunking=False, compression=CompressionType.NONE,
                               enable_crcs=False)
         self._writer.start(profile=PROFILE, library="anodize")
@@ -100,6 +117,10 @@ class Recorder:
         self._io = threading.Lock()  # the part file's writer: one thread at a time
         self._pair_of: dict[int, tuple[str, str]] = {}  # MCAP channel -> its channel
         self._writing: list[tuple[int, int, int, bytes]] = []  # the batch being written
+        self._gaps: dict[tuple[str, str], list[int]] = {}  # channel -> [first number, count, time] not queued
+        self.lost: dict[tuple[str, str], int] = {}  # channel -> messages not recorded: the writer was behind
+        self._gap_channel: int | None = None
+        self.priority = ""  # what side_work_priority applied to the writer
         self._thread = threading.Thread(target=self._write_loop, name=f"anodize-record:{group}", daemon=True)
         self._thread.start()
 
@@ -129,19 +150,39 @@ class Recorder:
         first[0] = int(first[0]) + 1
 
     def queue(self, pair: tuple[str, str], encoded: tuple[int, int, bytes]) -> None:
-        """Hand an encoded message to the writer (waiting while the writer is far behind)."""
+        """Hand an encoded message to the writer; never waits for it. Beyond the backlog the
+        message is numbered but not recorded: a gap, recorded as such before the next one."""
         channel_id, stamp, data = encoded
         with self._lock:
-            while self._pending_bytes > self.backlog and not self._closing:
-                self._lock.wait(0.1)
             if self.broken:  # the writer failed (e.g. a full disk): counted, never waited for
                 self._count_unrecorded(pair, "", self.broken)
                 return
             # MCAP's sequence is 32 bits: after 2**32 - 1 it wraps to 1 (verify knows).
             sequence = self._sequence[pair] = self._sequence[pair] % SEQUENCE_WRAP + 1
+            if self._pending_bytes + len(data) > self.backlog or self._closing:
+                self._lose(pair, sequence, stamp, 1)
+                return
+            gap = self._gaps.pop(pair, None)
+            if gap is not None:
+                self._pending.append(self._gap_record(pair, *gap))
             self._pending.append((channel_id, stamp, sequence, data))
             self._pending_bytes += len(data)
             self._lock.notify_all()
+
+    def _lose(self, pair: tuple[str, str], first: int, stamp: int, count: int) -> None:
+        """``count`` messages of ``pair`` from number ``first`` on are not recorded (lock held)."""
+        gap = self._gaps.get(pair)
+        if gap is None:
+            self._gaps[pair] = [first, count, stamp]
+        else:
+            gap[1] += count
+        self.lost[pair] = self.lost.get(pair, 0) + count
+
+    def _gap_record(self, pair: tuple[str, str], first: int, count: int, stamp: int) -> tuple[int, int, int, bytes]:
+        """A queue entry for the gap channel: ``count`` messages from number ``first`` are missing."""
+        text = json.dumps({"channel": f"{pair[0]}->{pair[1]}", "first": first, "count": count})
+        codec = codec_for_sort(None)  # a JSON String
+        return _GAP, stamp, 0, codec.ros.serialize(codec.ros.cls(data=text))
 
     def _channel(self, pair: tuple[str, str], label: str) -> tuple[int, SortCodec]:
         key = (*pair, label)
@@ -167,15 +208,29 @@ class Recorder:
         found = self._channels[key] = (channel_id, codec)
         return found
 
+    def _gap_channel_id(self) -> int:
+        """The part's gap channel, registered at its first gap (the caller holds ``_io``)."""
+        if self._gap_channel is None:
+            codec = codec_for_sort(None)
+            schema = self._schemas.get(codec.type_name)
+            if schema is None:
+                schema = self._schemas[codec.type_name] = self._writer.register_schema(
+                    codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+            self._gap_channel = self._writer.register_channel(GAP_TOPIC, "cdr", schema, {
+                "offered_qos_profiles": QOS_PROFILES, "topic_type_hash": codec.ros.type_hash,
+                f"{META}.protocol": self.protocol, GAP_KEY: "1"})
+        return self._gap_channel
+
     def _write_loop(self) -> None:
-        lower_thread_priority()  # it inherited the group's real-time priority
+        self.priority = side_work_priority()  # below every role: it inherited the group's priority
         try:
             self._write_until_closed()
         except Exception as error:  # a full disk, say: the run goes on, unrecorded, and says so
             with self._lock:
                 self.broken = f"the recording's writer failed: {type(error).__name__}: {error}"
                 for channel_id, *_ in [*self._writing, *self._pending]:
-                    self._count_unrecorded(self._pair_of.get(channel_id, ("?", "?")), "", self.broken)
+                    if channel_id != _GAP:
+                        self._count_unrecorded(self._pair_of.get(channel_id, ("?", "?")), "", self.broken)
                 self._writing = []
                 self._pending.clear()
                 self._pending_bytes = 0
@@ -189,16 +244,18 @@ class Recorder:
                     self._lock.wait(_FLUSH_EVERY)
                     if time.monotonic() - last_flush >= _FLUSH_EVERY:
                         break
-                batch = self._writing = list(self._pending)  # kept until written: a failure counts it
-                self._pending.clear()
+                # Kept until written (a failure counts it); a batch at a time, so that what is still
+                # queued when the group ends can be given up (close) rather than waited for.
+                batch = self._writing = [self._pending.popleft() for _ in range(min(_BATCH, len(self._pending)))]
                 closing = self._closing
             with self._io:
                 for channel_id, stamp, sequence, data in batch:
-                    self._writer.add_message(channel_id, stamp, data, stamp, sequence)
+                    target = channel_id if channel_id != _GAP else self._gap_channel_id()
+                    self._writer.add_message(target, stamp, data, stamp, sequence)
             self.written += len(batch)
             self._writing = []
             with self._lock:
-                self._pending_bytes -= sum(len(item[3]) for item in batch)
+                self._pending_bytes -= sum(len(item[3]) for item in batch if item[0] != _GAP)
                 self._lock.notify_all()
             if time.monotonic() - last_flush >= _FLUSH_EVERY or closing:
                 self._file.flush()
@@ -206,12 +263,24 @@ class Recorder:
             if closing and not batch:
                 return
 
-    def close(self) -> None:
-        """Write what is queued, end the part file properly, and stop the writer."""
+    def close(self, within: float = CLOSE_WITHIN) -> None:
+        """Write what is queued (for at most ``within`` seconds: the rest becomes a gap), end the
+        part file properly, and stop the writer."""
         with self._lock:
             self._closing = True
+            self._close_gaps()
             self._lock.notify_all()
-        self._thread.join()
+        self._thread.join(within)
+        if self._thread.is_alive():  # a slow disk: what is still queued is not waited for
+            with self._lock:
+                self._abandon_pending()
+                self._lock.notify_all()
+            self._thread.join(within)
+            if self._thread.is_alive():  # stuck in a write: the part is left unfinished (the merge keeps it)
+                return
+        behind = f"the recording's writer fell behind (a slow disk?) and was not waited for: a gap on {GAP_TOPIC}"
+        for pair, count in sorted(self.lost.items()):
+            self.unrecorded[f"{pair[0]}->{pair[1]}"] = [count, behind]
         with contextlib.suppress(Exception):  # best effort: a broken writer fails again (the merge notes it)
             if self.unrecorded:
                 self._writer.add_metadata(f"{META}.unrecorded", {
@@ -219,6 +288,32 @@ class Recorder:
                     for key, (count, reason) in self.unrecorded.items()})
             self._writer.finish()  # type: ignore[no-untyped-call]
             self._file.close()
+
+
+    def _close_gaps(self) -> None:
+        """Queue a record of each gap still open (lock held): there is no next message to put it before."""
+        for pair, gap in sorted(self._gaps.items()):
+            self._pending.append(self._gap_record(pair, *gap))
+        self._gaps.clear()
+
+    def _abandon_pending(self) -> None:
+        """Give up what is queued and not yet being written (lock held): per channel, one gap from
+        its first message not written to the last it numbered."""
+        first: dict[tuple[str, str], tuple[int, int]] = {}
+        for channel_id, stamp, sequence, data in self._pending:
+            self._pending_bytes -= len(data) if channel_id != _GAP else 0
+            if channel_id == _GAP:
+                found = json.loads(codec_for_sort(None).ros.deserialize(data).data)  # type: ignore[attr-defined]
+                sender, receiver = str(found["channel"]).split("->", 1)
+                first.setdefault((sender, receiver), (int(found["first"]), stamp))
+                continue  # its messages were counted when they were lost
+            pair = self._pair_of.get(channel_id, ("?", "?"))
+            first.setdefault(pair, (sequence, stamp))
+            self.lost[pair] = self.lost.get(pair, 0) + 1
+        self._pending.clear()
+        for pair, (sequence, stamp) in first.items():
+            count = (self._sequence.get(pair, sequence) - sequence) % SEQUENCE_WRAP + 1
+            self._pending.append(self._gap_record(pair, sequence, count, stamp))
 
 
 class TappedChannel:
