@@ -8,7 +8,9 @@ second, and the others skip the encoding. Nothing in the sending thread waits: t
 message is left for a thread of the group at ordinary priority, which sends it to the
 supervisor; large messages wait there in one slot per label (a newer one replaces
 it), small ones in a bounded queue (the oldest go first when it is full). The live
-view may thus skip messages; the protocol and a recording (``--record``) never do.
+view may thus skip messages, counted per label and sent to the supervisor every
+:data:`STATS_EVERY` seconds; the protocol and a recording (``--record``) never do. The
+tap's threads run at the lowest priority the OS has (SCHED_IDLE, else nice 19).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import time
 from collections import deque
 from collections.abc import Iterable
 
-from ..isolation.sched import lower_thread_priority
+from ..isolation.sched import side_work_priority
 from ..recording.encoding import SortCodec, codec_for_sort
 from ..recording.tap import TappedChannel
 from ..session.channel import Channel
@@ -35,6 +37,7 @@ LARGE = 4096       # bytes: a message above this is thinned, and waits in its la
 LARGE_RATE = 10.0  # messages per second a large label is shown at, at most
 QUEUE = 4096       # small messages waiting to be forwarded, at most (<= 16 MiB)
 _SEND_EVERY = 0.02  # seconds: how often the forwarding thread looks when nothing woke it
+STATS_EVERY = 1.0  # seconds between the counts a tap sends the supervisor
 
 
 class LiveTap:
@@ -55,6 +58,8 @@ class LiveTap:
         self._wake = threading.Event()
         self._closing = False
         self.shown = self.thinned = self.dropped = self.unencodable = 0
+        self._by_label: dict[int, list[int]] = {}  # label -> [thinned, dropped]
+        self.priority = ""  # what side_work_priority applied to the forwarding thread
         self.inputs = [ClientInput(x, codec_for_sort(x.sort)) for x in plan.labels if x.sender in roles]
         self._sock: socket.socket | None = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
@@ -88,6 +93,7 @@ class LiveTap:
         now = time.monotonic()
         if now < self._next_at.get(index, 0.0):
             self.thinned += 1
+            self._counts(index)[0] += 1
             return
         try:
             data = self._codec(index).encode(payload)
@@ -99,14 +105,28 @@ class LiveTap:
             self._next_at[index] = now + 1.0 / LARGE_RATE
             if self._large.get(index) is not None:
                 self.dropped += 1
+                self._counts(index)[1] += 1
             self._large[index] = (stamp, data)
         else:
             self._next_at.pop(index, None)
             if len(self._small) == QUEUE:
                 self.dropped += 1
+                self._counts(self._small[0][0])[1] += 1  # the oldest goes
             self._small.append((index, stamp, data))  # deque.append: atomic, no lock to wait for
         if not self._wake.is_set():
             self._wake.set()
+
+    def _counts(self, index: int) -> list[int]:
+        found = self._by_label.get(index)
+        if found is None:
+            found = self._by_label[index] = [0, 0]
+        return found
+
+    def _stats(self) -> bytes:
+        return json.dumps({"shown": self.shown, "thinned": self.thinned, "dropped": self.dropped,
+                           "unencodable": self.unencodable, "priority": self.priority,
+                           "labels": {str(i): list(c) for i, c in list(self._by_label.items())},
+                           "inputs": {x.label.topic: [x.received, x.rejected] for x in self.inputs}}).encode()
 
     def _codec(self, index: int) -> SortCodec:
         codec = self._codecs.get(index)
@@ -115,9 +135,10 @@ class LiveTap:
         return codec
 
     def _send_loop(self) -> None:
-        lower_thread_priority()
+        self.priority = side_work_priority()  # below every role: it inherited the group's priority
         sock = self._sock
         assert sock is not None
+        stats_at = time.monotonic() + STATS_EVERY
         try:
             while True:
                 self._wake.wait(_SEND_EVERY)
@@ -131,16 +152,16 @@ class LiveTap:
                     index, (stamp, data) = self._large.popitem()
                     send_frame(sock, MESSAGE, index, stamp, data)
                     self.shown += 1
+                if closing or time.monotonic() >= stats_at:
+                    send_frame(sock, STATS, 0, 0, self._stats())
+                    stats_at = time.monotonic() + STATS_EVERY
                 if closing:
-                    stats = {"shown": self.shown, "thinned": self.thinned, "dropped": self.dropped,
-                             "unencodable": self.unencodable,
-                             "inputs": {x.label.topic: [x.received, x.rejected] for x in self.inputs}}
-                    send_frame(sock, STATS, 0, 0, json.dumps(stats).encode())
                     return
         except OSError:  # the supervisor went away: nothing more to show
             self._closing = True
 
     def _read_loop(self) -> None:
+        side_work_priority()
         sock = self._sock
         assert sock is not None
         by_index = {self.plan.index[(x.label.sender, x.label.receiver, x.label.label)]: x for x in self.inputs}

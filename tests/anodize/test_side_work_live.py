@@ -1,0 +1,161 @@
+"""The live view under a slow client: bounded, counted, and below every group.
+
+A Foxglove client subscribes to every channel and then reads slowly (a viewer on a bad
+network): the run's roles still finish, the server holds a bounded amount, what was not
+shown is counted per topic on the status topic and in the report, and the view's
+threads (the SDK's too) run at the lowest priority the OS has. Every wait is bounded;
+nothing here asserts a duration.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import socket
+import struct
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+import live_roles
+
+from anodize import live
+from anodize.live import STATUS_TOPIC
+from anodize.live.outbox import OUTBOX_BYTES, Outbox
+from anodize.tools.cli import main
+
+pytest.importorskip("foxglove")
+websockets = pytest.importorskip("websockets")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_the_outbox_is_bounded_drops_the_oldest_and_counts_per_label() -> None:
+    box = Outbox(limit=1000, large=100)
+    for n in range(50):
+        box.put(1, n, b"s" * 50)  # small: one queue, the oldest go
+    assert box.held <= 1000 and box.dropped[1] == 30
+    box.put(2, 100, b"L" * 200)
+    box.put(2, 101, b"L" * 201)  # large: one slot per label, the newer replaces it
+    assert box.dropped[2] == 1 and box.held <= 1000
+    taken = box.take(timeout=1.0)
+    small = [stamp for index, stamp, _ in taken if index == 1]
+    assert small == list(range(50 - len(small), 50))  # the newest, in order: the oldest went
+    assert box.dropped[1] == 50 - len(small)
+    assert [(stamp, len(data)) for index, stamp, data in taken if index == 2] == [(101, 201)]
+    assert box.peak <= 1000 and box.held == 0
+    box.close()
+    assert box.take(timeout=1.0) == []
+
+
+class SlowClient:
+    """Subscribes to every channel, publishes Joys for the pad, and reads one message in a while."""
+
+    def __init__(self, port: int) -> None:
+        self.port = port
+        self.statuses: list[dict[str, Any]] = []
+        self.received = 0
+        self.done = threading.Event()
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(asyncio.wait_for(self._session(), timeout=60.0))
+        except BaseException as error:
+            self.error = error
+
+    async def _session(self) -> None:
+        ws = None
+        for _ in range(200):
+            with contextlib.suppress(OSError):
+                ws = await asyncio.wait_for(websockets.connect(
+                    f"ws://127.0.0.1:{self.port}", subprotocols=["foxglove.sdk.v1"], max_size=None), timeout=2.0)
+                break
+            await asyncio.sleep(0.05)
+        assert ws is not None, "the live view never listened"
+        async with ws:
+            advertised: dict[str, int] = {}
+            while not {"/joy", "/camera/image", STATUS_TOPIC} <= set(advertised):
+                op = json.loads(await asyncio.wait_for(ws.recv(), timeout=15.0))
+                if op.get("op") == "advertise":
+                    advertised.update({c["topic"]: c["id"] for c in op["channels"]})
+            topics = dict(enumerate(sorted(advertised), start=1))
+            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                {"id": n, "channelId": advertised[topic]} for n, topic in topics.items()]}))
+            await ws.send(json.dumps({"op": "advertise", "channels": [
+                {"id": 7, "topic": "/joy", "encoding": "cdr", "schemaName": "sensor_msgs/msg/Joy"}]}))
+            joy = b"\x01" + struct.pack("<I", 7) + _joy()
+            with contextlib.suppress(websockets.ConnectionClosed):
+                while not self.done.is_set():
+                    await ws.send(joy)
+                    with contextlib.suppress(TimeoutError):
+                        message = await asyncio.wait_for(ws.recv(), timeout=0.5)
+                        self._take(message, topics)
+                    await asyncio.sleep(0.2)  # a slow client: everything else waits in the server's queues
+
+    def _take(self, message: Any, topics: dict[int, str]) -> None:
+        if isinstance(message, str):
+            return
+        self.received += 1
+        subscription, _ = struct.unpack_from("<IQ", message, 1)
+        if topics.get(subscription) == STATUS_TOPIC:
+            self.statuses.append(json.loads(message[13:]))
+
+
+def _joy() -> bytes:
+    import test_foxglove
+
+    return test_foxglove._client_joy()
+
+
+def test_a_slow_client_subscribed_to_everything_is_bounded_counted_and_below_every_group(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "pad.proto").write_text(live_roles.PROTOCOL, encoding="utf-8")
+    system = tmp_path / "pad.toml"
+    system.write_text(live_roles.SYSTEM, encoding="utf-8")
+    monkeypatch.setenv("LIVE_TEST_OUT", str(tmp_path))
+    monkeypatch.syspath_prepend(str(Path(__file__).parent))
+    views: list[Any] = []
+    opened = live.open_live_view
+
+    def keep(port: int = live.DEFAULT_PORT, host: str = "127.0.0.1") -> Any:
+        views.append(opened(port, host))
+        return views[-1]
+
+    monkeypatch.setattr(live, "open_live_view", keep)
+    port = _free_port()
+    client = SlowClient(port)
+    try:
+        code = main(["run", str(system), "--foxglove", str(port), "--timeout", "40"])
+    finally:
+        client.done.set()
+        client.thread.join(timeout=10.0)
+    out = capsys.readouterr().out
+    assert client.error is None, repr(client.error)
+    assert code == 0, out  # the roles finished: the pad took the client's Joys and stopped the run
+    view = views[0]
+    assert view.outbox.peak <= OUTBOX_BYTES  # bounded, whatever the client did
+
+    # Not shown is counted, per topic: the pad sends images at 50 Hz, the view shows 10 a second.
+    assert view.not_shown().get("/camera/image", 0) > 0
+    assert "foxglove: not shown, per topic: " in out and "/camera/image " in out
+    assert client.statuses, "the slow client got no status at all"
+    assert {"clients", "shown", "not_shown"} <= set(client.statuses[-1]["live"])
+
+    # Every thread of the view, the SDK's own included, below every group.
+    assert {"anodize-live-publish", "anodize-live-accept"} <= set(view.priorities)
+    assert any(not name.startswith("anodize-live") for name in view.priorities), view.priorities
+    assert all(p == "SCHED_IDLE" or p.startswith("nice 19") for p in view.priorities.values()), view.priorities
+    assert "threads ran at SCHED_IDLE" in out or "threads ran at nice 19" in out
