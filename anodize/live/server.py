@@ -106,9 +106,9 @@ def open_live_view(port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> LiveVie
         view.close()
         raise AnodizeError(f"the live view cannot serve on {host}:{port}: {error}") from None
     view.host = host
-    # The SDK's threads (its runtime's workers) started with the server: below every group too.
-    # Threads they start later inherit their scheduling class.
-    for tid in sorted(_threads() - before):
+    # The SDK's threads (its runtime's workers, started with the first server of the process, and
+    # named tokio-*): below every group too. Threads they start later inherit their scheduling class.
+    for tid in sorted(_threads() - before | {t for t in _threads() if _thread_name(t).startswith("tokio-")}):
         view.lower(tid)
     return view
 
