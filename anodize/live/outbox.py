@@ -1,7 +1,7 @@
 """What the live view's server has taken from the groups and not yet handed to Foxglove.
 
 The threads that read the groups' taps put messages here and never wait; one thread of
-the server, at the lowest priority the OS has, takes them out and hands them to the
+the server, at the side-work priority, takes them out and hands them to the
 Foxglove SDK (which gives each client its own bounded queue). The outbox is bounded in
 bytes: a large message (an image) waits in its label's one slot, where a newer one
 replaces it; small ones wait in one queue. When the bound is reached the OLDEST message

@@ -13,7 +13,8 @@ can make it hurt a group: the threads that read the groups' taps never wait for 
 client (they leave messages in a bounded :class:`~.outbox.Outbox`); one publisher
 thread hands them to the SDK, which holds at most :data:`CLIENT_BACKLOG` messages per
 client (its oldest go first); every thread of the view, the SDK's included, runs at
-the lowest priority the OS has (:func:`~anodize.isolation.sched.side_work_priority`).
+the side-work priority (:func:`~anodize.isolation.sched.side_work_priority`: nice 19 in
+a supervisor that is not real time).
 What was not shown is counted per topic, on the status topic as the run goes and in
 the run's report at its end.
 """

@@ -10,7 +10,8 @@ supervisor; large messages wait there in one slot per label (a newer one replace
 it), small ones in a bounded queue (the oldest go first when it is full). The live
 view may thus skip messages, counted per label and sent to the supervisor every
 :data:`STATS_EVERY` seconds; the protocol and a recording (``--record``) never do. The
-tap's threads run at the lowest priority the OS has (SCHED_IDLE, else nice 19).
+tap's threads run at the side-work priority (SCHED_FIFO 1 in a real-time group, else
+nice 19: :func:`~anodize.isolation.sched.side_work_priority`).
 """
 
 from __future__ import annotations

@@ -5,8 +5,10 @@ Each recorded channel is wrapped (:class:`RecordingChannel`): a message is encod
 sent, even if the sender changes the payload afterwards; a thread of the group writes
 it to the group's part file (an MCAP file without chunks, flushed every 0.1 s, so a
 group that is killed loses at most its last tenth of a second). That thread runs at
-the lowest priority the OS has (SCHED_IDLE, else nice 19), below every role of the
-group, so recording does not delay the control loop. Its queue is bounded: when it
+the side-work priority (:func:`~anodize.isolation.sched.side_work_priority`: SCHED_FIFO 1
+in a real-time group, else nice 19), below every role of the group, so recording does
+not delay the control loop; a sender never touches the disk (channels are registered
+in the part by the writer). Its queue is bounded: when it
 falls behind by more than :data:`BACKLOG` bytes (an eighth of the group's memory bound,
 if that is less), a slow disk say, a sender does not wait for it; the message keeps its
 sequence number but is not recorded, and the recording gets a gap record on
@@ -41,7 +43,8 @@ __all__ = ["Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BA
 
 BACKLOG = 64 * 2**20  # bytes a group's recorder may hold; beyond it, messages become a gap
 SEQUENCE_WRAP = 2**32 - 1  # the largest MCAP sequence number
-CLOSE_WITHIN = 2.0    # seconds the writer has, once its group ends, to write what is queued
+CLOSE_WITHIN = 1.0    # seconds the writer has, once its group ends, to write what is queued (well
+                      # within the supervisor's liveness limit, 2 s by default: no heartbeat meanwhile)
 GAP_TOPIC = "/anodize/recording/gaps"  # where a part says which messages it could not record
 GAP_KEY = f"{META}.gaps"  # the gap channel's metadata key (its value: "1")
 _FLUSH_EVERY = 0.1    # seconds
@@ -115,12 +118,17 @@ class Recorder:
         self.unrecorded: dict[str, list[int | str]] = {}  # "A->B:label" -> [count, first reason]
         self.broken = ""  # why the writer stopped, if it did
         self._io = threading.Lock()  # the part file's writer: one thread at a time
-        self._pair_of: dict[int, tuple[str, str]] = {}  # MCAP channel -> its channel
+        self._pair_of: dict[int, tuple[str, str]] = {}  # queued label -> its channel
+        self._keys: list[tuple[ChannelLabel, SortCodec]] = []  # queued label -> what it is
+        self._mcap: dict[int, int] = {}  # queued label -> its MCAP channel in the part
         self._writing: list[tuple[int, int, int, bytes]] = []  # the batch being written
         self._gaps: dict[tuple[str, str], list[int]] = {}  # channel -> [first number, count, time] not queued
         self.lost: dict[tuple[str, str], int] = {}  # channel -> messages not recorded: the writer was behind
         self._gap_channel: int | None = None
+        self._give_up = threading.Event()  # close: the disk is too slow to wait for what is queued
         self.priority = ""  # what side_work_priority applied to the writer
+        for key in sorted(self._labels):  # codecs made now, not in a role's first send (building one takes time)
+            self._register(key)
         self._thread = threading.Thread(target=self._write_loop, name=f"anodize-record:{group}", daemon=True)
         self._thread.start()
 
@@ -131,7 +139,7 @@ class Recorder:
                 queues[pair] = RecordingChannel(queues[pair], self, pair, at_sender=(end == "send"))
 
     def encode(self, pair: tuple[str, str], label: str, payload: object) -> tuple[int, int, bytes] | None:
-        """A message of channel ``pair`` as it will be recorded: (MCAP channel, time, bytes).
+        """A message of channel ``pair`` as it will be recorded: (label's number, time, bytes).
 
         A payload that cannot be encoded (possible only without monitors) is counted, with the
         first reason, in the part's ``anodize.unrecorded`` metadata: the run goes on.
@@ -193,19 +201,30 @@ class Recorder:
         return found
 
     def _register(self, key: tuple[str, str, str]) -> tuple[int, SortCodec]:
+        """A label's number in the queue and its codec (lock held). Nothing is written here: the
+        sender's thread never touches the disk; the writer registers the MCAP channel."""
         item = self._labels.get(key) or ChannelLabel(*key, None)
         codec = codec_for_sort(item.sort)
-        schema = self._schemas.get(codec.type_name)
-        if schema is None:
-            with self._io:
+        number = len(self._keys)
+        self._keys.append((item, codec))
+        self._pair_of[number] = (key[0], key[1])
+        found = self._channels[key] = (number, codec)
+        return found
+
+    def _mcap_channel(self, number: int) -> int:
+        """The part's MCAP channel of queued label ``number``, registered at its first message
+        (the writer's thread, holding ``_io``)."""
+        found = self._mcap.get(number)
+        if found is None:
+            item, codec = self._keys[number]
+            schema = self._schemas.get(codec.type_name)
+            if schema is None:
                 schema = self._schemas[codec.type_name] = self._writer.register_schema(
                     codec.type_name, "ros2msg", codec.ros.message_definition().encode())
-        topic = self.plan.topics.get(key) or f"/anodize/{key[0]}/{key[1]}/{key[2]}"
-        metadata = channel_metadata(item, codec, self.protocol, self.plan.group_of)
-        with self._io:  # the writer thread may be writing messages to the same file
-            channel_id = self._writer.register_channel(topic, "cdr", schema, metadata)
-        self._pair_of[channel_id] = (key[0], key[1])
-        found = self._channels[key] = (channel_id, codec)
+            key = (item.sender, item.receiver, item.label)
+            topic = self.plan.topics.get(key) or f"/anodize/{key[0]}/{key[1]}/{key[2]}"
+            metadata = channel_metadata(item, codec, self.protocol, self.plan.group_of)
+            found = self._mcap[number] = self._writer.register_channel(topic, "cdr", schema, metadata)
         return found
 
     def _gap_channel_id(self) -> int:
@@ -249,10 +268,13 @@ class Recorder:
                 batch = self._writing = [self._pending.popleft() for _ in range(min(_BATCH, len(self._pending)))]
                 closing = self._closing
             with self._io:
-                for channel_id, stamp, sequence, data in batch:
-                    target = channel_id if channel_id != _GAP else self._gap_channel_id()
+                for done, (channel_id, stamp, sequence, data) in enumerate(batch):
+                    if self._give_up.is_set():  # the group has ended and the disk is slow: the rest is a gap
+                        self._write_gaps(batch[done:])
+                        return
+                    target = self._mcap_channel(channel_id) if channel_id != _GAP else self._gap_channel_id()
                     self._writer.add_message(target, stamp, data, stamp, sequence)
-            self.written += len(batch)
+                    self.written += channel_id != _GAP
             self._writing = []
             with self._lock:
                 self._pending_bytes -= sum(len(item[3]) for item in batch if item[0] != _GAP)
@@ -262,20 +284,36 @@ class Recorder:
                 last_flush = time.monotonic()
             if closing and not batch:
                 return
+            if self._give_up.is_set():
+                self._write_gaps([])
+                return
+
+    def _write_gaps(self, unwritten: list[tuple[int, int, int, bytes]]) -> None:
+        """Give up ``unwritten`` and what is queued: write one gap record per channel instead
+        (the caller holds ``_io``)."""
+        with self._lock:
+            records = self._abandon([*unwritten, *self._pending])
+            self._pending.clear()
+            self._pending_bytes = 0
+            self._writing = []
+        for _, stamp, _, data in records:
+            self._writer.add_message(self._gap_channel_id(), stamp, data, stamp, 0)
+        self._file.flush()
 
     def close(self, within: float = CLOSE_WITHIN) -> None:
         """Write what is queued (for at most ``within`` seconds: the rest becomes a gap), end the
         part file properly, and stop the writer."""
+        deadline = time.monotonic() + within
         with self._lock:
             self._closing = True
             self._close_gaps()
             self._lock.notify_all()
-        self._thread.join(within)
+        self._thread.join(within / 2)
         if self._thread.is_alive():  # a slow disk: what is still queued is not waited for
+            self._give_up.set()  # the writer stops after the write it is in, and writes the gaps
             with self._lock:
-                self._abandon_pending()
                 self._lock.notify_all()
-            self._thread.join(within)
+            self._thread.join(max(0.0, deadline - time.monotonic()))
             if self._thread.is_alive():  # stuck in a write: the part is left unfinished (the merge keeps it)
                 return
         behind = f"the recording's writer fell behind (a slow disk?) and was not waited for: a gap on {GAP_TOPIC}"
@@ -296,12 +334,11 @@ class Recorder:
             self._pending.append(self._gap_record(pair, *gap))
         self._gaps.clear()
 
-    def _abandon_pending(self) -> None:
-        """Give up what is queued and not yet being written (lock held): per channel, one gap from
-        its first message not written to the last it numbered."""
+    def _abandon(self, unwritten: list[tuple[int, int, int, bytes]]) -> list[tuple[int, int, int, bytes]]:
+        """The gap records that replace ``unwritten`` (lock held): per channel, one gap from its
+        first message not written to the last it numbered."""
         first: dict[tuple[str, str], tuple[int, int]] = {}
-        for channel_id, stamp, sequence, data in self._pending:
-            self._pending_bytes -= len(data) if channel_id != _GAP else 0
+        for channel_id, stamp, sequence, data in unwritten:
             if channel_id == _GAP:
                 found = json.loads(codec_for_sort(None).ros.deserialize(data).data)  # type: ignore[attr-defined]
                 sender, receiver = str(found["channel"]).split("->", 1)
@@ -310,10 +347,8 @@ class Recorder:
             pair = self._pair_of.get(channel_id, ("?", "?"))
             first.setdefault(pair, (sequence, stamp))
             self.lost[pair] = self.lost.get(pair, 0) + 1
-        self._pending.clear()
-        for pair, (sequence, stamp) in first.items():
-            count = (self._sequence.get(pair, sequence) - sequence) % SEQUENCE_WRAP + 1
-            self._pending.append(self._gap_record(pair, sequence, count, stamp))
+        return [self._gap_record(pair, sequence, (self._sequence.get(pair, sequence) - sequence) % SEQUENCE_WRAP + 1,
+                                 stamp) for pair, (sequence, stamp) in first.items()]
 
 
 class TappedChannel:

@@ -157,5 +157,5 @@ def test_a_slow_client_subscribed_to_everything_is_bounded_counted_and_below_eve
     # Every thread of the view, the SDK's own included, below every group.
     assert {"anodize-live-publish", "anodize-live-accept"} <= set(view.priorities)
     assert any(not name.startswith("anodize-live") for name in view.priorities), view.priorities
-    assert all(p == "SCHED_IDLE" or p.startswith("nice 19") for p in view.priorities.values()), view.priorities
-    assert "threads ran at SCHED_IDLE" in out or "threads ran at nice 19" in out
+    assert set(view.priorities.values()) == {"nice 19"}, view.priorities  # the supervisor is not real time
+    assert "threads ran at nice 19" in out
