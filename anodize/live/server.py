@@ -295,8 +295,9 @@ class LiveView:
                 f"{topic} {count}" for topic, count in sorted(not_shown.items())))
         if self.priorities:
             applied = sorted(set(self.priorities.values()))
-            notes.append(f"foxglove: the live view's {len(self.priorities)} threads ran at {' / '.join(applied)} "
-                         "(below every group)")
+            taps = sorted({str(s.get("priority")) for s in stats if s.get("priority")})
+            notes.append(f"foxglove: the live view's {len(self.priorities)} threads ran at {' / '.join(applied)}"
+                         + (f", the groups' taps at {' / '.join(taps)}" if taps else "") + " (below every group)")
         groups = set(plan.group_of.values())
         missing = sorted(groups - self._connected)
         if missing:

@@ -320,6 +320,7 @@ class Recorder:
         for pair, count in sorted(self.lost.items()):
             self.unrecorded[f"{pair[0]}->{pair[1]}"] = [count, behind]
         with contextlib.suppress(Exception):  # best effort: a broken writer fails again (the merge notes it)
+            self._writer.add_metadata(f"{META}.side_work", {"writer_priority": self.priority})
             if self.unrecorded:
                 self._writer.add_metadata(f"{META}.unrecorded", {
                     key: f"{count} messages not recorded; the first: {reason}"

@@ -139,6 +139,7 @@ def test_a_run_recording_to_a_slow_disk_ends_and_its_report_counts_the_gap(
     assert report.ok, report.summary()
     lost = [n for n in report.notes if "Talker->Listener: " in n and "a gap on /anodize/recording/gaps" in n]
     assert lost, report.notes
+    assert "recording: the groups' writers ran at nice 19 (listen-0, talk-0)" in report.notes  # reported
     with open_recording(tmp_path / "r.mcap") as recording:
         result = verify(recording, global_type)
     assert result.conforms, result.text()
