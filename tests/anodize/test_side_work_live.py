@@ -160,3 +160,50 @@ def test_a_slow_client_subscribed_to_everything_is_bounded_counted_and_below_eve
     assert set(view.priorities.values()) == {"nice 19"}, view.priorities  # the supervisor is not real time
     assert "threads ran at nice 19, the groups' taps at SCHED_FIFO 1" in out or \
         "threads ran at nice 19, the groups' taps at nice 19" in out  # SCHED_FIFO where it is permitted
+
+
+class _StuckChannel:
+    """A Foxglove channel whose clients take nothing: ``log`` waits until released."""
+
+    def __init__(self) -> None:
+        self.release = threading.Event()
+        self.logged = 0
+
+    def log(self, data: bytes, log_time: int | None = None) -> None:
+        self.release.wait(30)
+        self.logged += 1
+
+
+def test_a_stuck_client_never_blocks_the_threads_that_read_the_groups() -> None:
+    from anodize.live.plan import LiveLabel, LivePlan
+    from anodize.live.wire import HELLO, MESSAGE, send_frame
+
+    view = live.open_live_view(0)
+    try:
+        view.begin(LivePlan(view.socket_path, (LiveLabel("A", "B", "image", None, "/image"),
+                                                LiveLabel("A", "B", "pose", None, "/pose")), {"A": "g", "B": "g"}))
+        stuck = view._channels[0] = view._channels[1] = _StuckChannel()
+        image, pose = b"i" * 2**20, b"p" * 1000
+        sent = threading.Event()
+
+        def group() -> None:  # a group's tap, sending far more than the outbox holds
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+                sock.connect(view.socket_path)
+                send_frame(sock, HELLO, 0, 0, b"g")
+                for n in range(200):
+                    send_frame(sock, MESSAGE, 0, n + 1, image)
+                    send_frame(sock, MESSAGE, 1, n + 1, pose)
+                sent.set()
+
+        threading.Thread(target=group, daemon=True).start()
+        # 200 MiB through a socket whose reader would stop if it waited for the stuck client.
+        assert sent.wait(60), "the server's reader waited for a client"
+        assert view.outbox.peak <= OUTBOX_BYTES
+        stuck.release.set()
+        notes = view.end(wait=10)
+        assert view.outbox.dropped.get(0, 0) > 0  # images replaced by newer ones: counted
+        assert view.not_shown()["/image"] == view.outbox.dropped[0]
+        assert stuck.logged + sum(view.outbox.dropped.values()) == 400  # every message shown or counted
+        assert any(note.startswith("foxglove: not shown, per topic: /image ") for note in notes), notes
+    finally:
+        view.close()
