@@ -287,8 +287,8 @@ class LiveView:
         notes = [f"foxglove: showed {self.forwarded} messages live on {len(set(self._channels))} topics at "
                  f"{self.url} to {len(self.clients)} client(s)"
                  + (f"; {thinned} thinned (large messages at most {LARGE_RATE:g} times a second per topic) and "
-                    f"{dropped} dropped (a queue of the live view was full: it shows the newest); recordings "
-                    "keep every one" if thinned + dropped else "")]
+                    f"{dropped} dropped (a queue of the live view was full: it shows the newest); the protocol "
+                    "keeps every one" if thinned + dropped else "")]
         not_shown = self.not_shown()
         if not_shown:
             notes.append("foxglove: not shown, per topic: " + ", ".join(

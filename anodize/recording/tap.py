@@ -328,7 +328,6 @@ class Recorder:
             self._writer.finish()  # type: ignore[no-untyped-call]
             self._file.close()
 
-
     def _close_gaps(self) -> None:
         """Queue a record of each gap still open (lock held): there is no next message to put it before."""
         for pair, gap in sorted(self._gaps.items()):
