@@ -73,8 +73,9 @@ def _apply_priority(priority: int) -> str:
 
 
 def lower_thread_priority(nice: int = 10) -> None:
-    """The calling thread at ordinary priority, niced: for a helper thread (recording, the
-    live view) that inherited its group's real-time priority and must not delay its roles."""
+    """The calling thread at ordinary priority, niced: for a helper thread of a role (TinMan's
+    live picture) that inherited its group's real-time priority and must not delay its roles.
+    anodize's own side work (recording, the live view) uses :func:`side_work_priority`."""
     with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))  # 0: the calling thread, on Linux
     with contextlib.suppress(OSError, AttributeError):
