@@ -278,7 +278,7 @@ def _verdicts(groups: dict[str, Any]) -> int:
     return found
 
 
-def _side_work(notes: list[str]) -> dict[str, int]:
+def _side_work(notes: list[str]) -> dict[str, Any]:
     """What the live view did not show and what a recording could not write, from the notes."""
     gaps = sum(int(m.group(1)) for n in notes if "a gap on" in n
                for m in [re.search(r"(\d+) messages not recorded", n)] if m)
@@ -288,7 +288,8 @@ def _side_work(notes: list[str]) -> dict[str, int]:
             shown += int(m.group(1))
         if m := re.search(r"(\d+) thinned .* and (\d+) dropped", note):
             thinned, dropped = thinned + int(m.group(1)), dropped + int(m.group(2))
-    return {"recording_gap": gaps, "live_shown": shown, "live_thinned": thinned, "live_dropped": dropped}
+    return {"recording_gap": gaps, "live_shown": shown, "live_thinned": thinned, "live_dropped": dropped,
+            "side_work_notes": [n for n in notes if n.startswith(("recording", "foxglove", "recorded"))]}
 
 
 # ---- the table ----------------------------------------------------------------------------------
