@@ -39,6 +39,7 @@ LARGE_RATE = 10.0  # messages per second a large label is shown at, at most
 QUEUE = 4096       # small messages waiting to be forwarded, at most (<= 16 MiB)
 _SEND_EVERY = 0.02  # seconds: how often the forwarding thread looks when nothing woke it
 STATS_EVERY = 1.0  # seconds between the counts a tap sends the supervisor
+CLOSE_WITHIN = 0.5  # seconds a closing tap waits for its thread (the group sends no heartbeat meanwhile)
 
 
 class LiveTap:
@@ -181,7 +182,7 @@ class LiveTap:
             return
         self._closing = True
         self._wake.set()
-        self._sender.join(timeout=2.0)
+        self._sender.join(timeout=CLOSE_WITHIN)  # a slow supervisor: the last counts are not waited for
         with contextlib.suppress(OSError):
             self._sock.shutdown(socket.SHUT_RDWR)
         self._sock.close()
