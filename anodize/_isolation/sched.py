@@ -15,7 +15,11 @@ import threading
 
 from ..errors import ConfigurationError
 
-__all__ = ["apply_thread_scheduling", "nice_for", "lower_thread_priority"]
+__all__ = ["apply_thread_scheduling", "nice_for", "lower_thread_priority", "side_work_priority", "SIDE_WORK_NICE",
+           "SIDE_WORK_RT"]
+
+SIDE_WORK_NICE = 19  # the weakest nice value: side work in a process that is not real time
+SIDE_WORK_RT = 1     # the lowest SCHED_FIFO priority: side work in a real-time group's process
 
 
 def nice_for(priority: int) -> int:
@@ -69,9 +73,49 @@ def _apply_priority(priority: int) -> str:
 
 
 def lower_thread_priority(nice: int = 10) -> None:
-    """The calling thread at ordinary priority, niced: for a helper thread (recording, the
-    live view) that inherited its group's real-time priority and must not delay its roles."""
+    """The calling thread at ordinary priority, niced: for a helper thread of a role (TinMan's
+    live picture) that inherited its group's real-time priority and must not delay its roles.
+    anodize's own side work (recording, the live view) uses :func:`side_work_priority`."""
     with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))  # 0: the calling thread, on Linux
     with contextlib.suppress(OSError, AttributeError):
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+
+
+def side_work_priority(thread: int | None = None) -> str:
+    """Put a thread of side work (the live view, a recording's writer) below every group that
+    matters, yet where it cannot hold up the threads it shares a process with; describe what
+    was applied.
+
+    A thread of a real-time group (SCHED_FIFO/RR, inherited from the group) gets SCHED_FIFO
+    :data:`SIDE_WORK_RT` (1), the lowest real-time priority: below every group with a higher
+    one, above every process that is not real time. Any other thread gets SCHED_OTHER at nice
+    :data:`SIDE_WORK_NICE` (19), the weakest share of the CPU that is still a share.
+
+    Not SCHED_IDLE, though it is lower still: a Python thread holds the GIL (and the locks it
+    shares with the roles) while it runs, and a SCHED_IDLE thread preempted while holding it
+    waits for every other thread on its CPU, whichever process it is in, so the group's own
+    roles would wait behind the machine's load for it (measured with bench/criticality.py's
+    recording scenario: the control loop's period stretched to hundreds of milliseconds).
+
+    Args:
+        thread: the native id of the thread (``threading.get_native_id()`` of it, or a task
+            id from ``/proc/self/task``); None, the calling thread.
+    """
+    tid = threading.get_native_id() if thread is None else thread
+    target = 0 if thread is None else tid  # 0: the calling thread, on Linux
+    refused = ""
+    with contextlib.suppress(OSError, AttributeError):
+        if os.sched_getscheduler(target) in (os.SCHED_FIFO, os.SCHED_RR):
+            try:
+                os.sched_setscheduler(target, os.SCHED_FIFO, os.sched_param(SIDE_WORK_RT))
+                return f"SCHED_FIFO {SIDE_WORK_RT}"
+            except OSError as error:
+                refused = f" (SCHED_FIFO {SIDE_WORK_RT} refused: {_reason(error)})"
+    with contextlib.suppress(OSError, AttributeError):
+        os.sched_setscheduler(target, os.SCHED_OTHER, os.sched_param(0))
+    try:
+        os.setpriority(os.PRIO_PROCESS, tid, SIDE_WORK_NICE)
+    except OSError as error:
+        return f"unchanged (nice {SIDE_WORK_NICE} refused: {_reason(error)}){refused}"
+    return f"nice {SIDE_WORK_NICE}{refused}"

@@ -8,6 +8,16 @@ what the groups tap (:mod:`.tap`), publishes each group's state, rate and memory
 on :data:`~.plan.STATUS_TOPIC` (JSON), and hands what clients publish on a
 channel's topic to the role that sends on it (:mod:`.inputs`), once it is checked
 against the label's type: a message that is not is rejected, counted and logged.
+
+The live view is the least critical thing in a run, and is bounded so that no client
+can make it hurt a group: the threads that read the groups' taps never wait for a
+client (they leave messages in a bounded :class:`~.outbox.Outbox`); one publisher
+thread hands them to the SDK, which holds at most :data:`CLIENT_BACKLOG` messages per
+client (its oldest go first); every thread of the view, the SDK's included, runs at
+the side-work priority (:func:`~anodize._isolation.sched.side_work_priority`: nice 19 in
+a supervisor that is not real time).
+What was not shown is counted per topic, on the status topic as the run goes and in
+the run's report at its end.
 """
 
 from __future__ import annotations
@@ -15,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import shutil
 import socket
 import tempfile
@@ -25,17 +36,23 @@ from pathlib import Path
 from typing import Any
 
 from .._extras import import_extra
+from .._isolation.sched import side_work_priority
 from .._recording.encoding import SortCodec, codec_for_sort
 from .._session.payloads import validator_for
 from ..errors import AnodizeError
 from ..taps import TapRun
+from .outbox import Outbox
 from .plan import STATUS_TOPIC, LiveLabel, LivePlan, live_plan
-from .tap import LARGE_RATE, GroupLiveView
+from .tap import LARGE, LARGE_RATE, GroupLiveView
 from .wire import HELLO, INPUT, MESSAGE, STATS, read_frame, send_frame
 
-__all__ = ["LiveView", "open_live_view", "DEFAULT_PORT"]
+__all__ = ["LiveView", "open_live_view", "DEFAULT_PORT", "CLIENT_BACKLOG"]
 
 DEFAULT_PORT = 8765  # Foxglove's default for a WebSocket connection
+# Messages the SDK holds for one client at most (its default, 1024, is a gigabyte of images);
+# when a client is slower, the SDK drops that client's oldest, not the other clients'.
+CLIENT_BACKLOG = 32
+_PUBLISH_EVERY = 0.1  # seconds: how often the publisher looks for a new status when nothing came
 _log = logging.getLogger("anodize.live")
 
 _STATUS_SCHEMA = {
@@ -45,7 +62,10 @@ _STATUS_SCHEMA = {
         "properties": {"state": {"type": "string"}, "pid": {"type": ["integer", "null"]},
                        "memory_mib": {"type": ["number", "null"]}, "messages": {"type": "integer"},
                        "received": {"type": "integer"}, "rate_hz": {"type": ["number", "null"]},
-                       "restarts": {"type": "integer"}, "note": {"type": "string"}}}}},
+                       "restarts": {"type": "integer"}, "note": {"type": "string"}}}},
+        "live": {"type": "object", "properties": {
+            "clients": {"type": "integer"}, "shown": {"type": "integer"},
+            "not_shown": {"type": "object", "additionalProperties": {"type": "integer"}}}}},
 }
 
 FEATURE = "the live view in Foxglove (--foxglove)"
@@ -62,10 +82,17 @@ def open_live_view(port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> LiveVie
     import foxglove
     from foxglove.websocket import Capability, ServerListener
 
+    before = _threads()
     view = LiveView()
 
     class Listener(ServerListener):
         """Client channels and messages, to the view (the SDK's defaults for the rest)."""
+
+        def on_subscribe(self, client: Any, channel: Any) -> None:
+            view.subscribed(client.id, channel.topic, True)
+
+        def on_unsubscribe(self, client: Any, channel: Any) -> None:
+            view.subscribed(client.id, channel.topic, False)
 
         def on_client_advertise(self, client: Any, channel: Any) -> None:
             view.client_advertised(client.id, channel.id, channel.topic, channel.encoding, channel.schema_name or "")
@@ -79,12 +106,32 @@ def open_live_view(port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> LiveVie
     try:
         view.server = foxglove.start_server(
             name="anodize", host=host, port=port, context=view.context, server_listener=Listener(),
-            capabilities=[Capability.ClientPublish], supported_encodings=["cdr"])
+            capabilities=[Capability.ClientPublish], supported_encodings=["cdr"],
+            message_backlog_size=CLIENT_BACKLOG)
     except Exception as error:  # the SDK's own error type: e.g. the port is taken
         view.close()
         raise AnodizeError(f"the live view cannot serve on {host}:{port}: {error}") from None
     view.host = host
+    # The SDK's threads (its runtime's workers, started with the first server of the process, and
+    # named tokio-*): below every group too. Threads they start later inherit their scheduling class.
+    for tid in sorted(_threads() - before | {t for t in _threads() if _thread_name(t).startswith("tokio-")}):
+        view.lower(tid)
     return view
+
+
+def _threads() -> set[int]:
+    """The native ids of this process's threads (Linux; elsewhere none are known)."""
+    try:
+        return {int(name) for name in os.listdir("/proc/self/task")}
+    except OSError:
+        return set()
+
+
+def _thread_name(tid: int) -> str:
+    try:
+        return Path(f"/proc/self/task/{tid}/comm").read_text(encoding="utf-8").strip()
+    except OSError:
+        return str(tid)
 
 
 class LiveView:
@@ -93,6 +140,8 @@ class LiveView:
     Attributes:
         port: the port it serves on.
         url: ``ws://host:port``, what the Foxglove app opens.
+        outbox: what the groups sent and the publisher has not yet handed to the SDK.
+        priorities: thread name -> the scheduling its side work was given.
     """
 
     def __init__(self) -> None:
@@ -113,9 +162,15 @@ class LiveView:
         self._status: Any = None
         self._groups: dict[str, tuple[socket.socket, threading.Lock]] = {}
         self._connected: set[str] = set()
-        self._stats: list[dict[str, Any]] = []
+        self._stats: dict[tuple[str, int], dict[str, Any]] = {}  # (group, connection) -> its tap's latest
+        self.outbox = Outbox(large=LARGE)
+        self.priorities: dict[str, str] = {}
+        self.clients: dict[int, set[str]] = {}  # client -> topics it subscribes to
+        self._latest_status: dict[str, Any] | None = None
+        self._publisher: threading.Thread | None = None
         self._reading = threading.Condition(self._lock)
         self._readers = 0  # groups' sockets still open
+        self._connections = 0  # groups' sockets ever opened
         self.forwarded = 0
         self.client_messages: dict[str, int] = {}  # topic -> delivered to its group
         self.rejected: dict[str, list[int | str]] = {}  # topic -> [count, first reason]
@@ -159,10 +214,47 @@ class LiveView:
                                    data=json.dumps(_STATUS_SCHEMA).encode()))
         self.plan = plan
         threading.Thread(target=self._accept_loop, name="anodize-live-accept", daemon=True).start()
+        self._publisher = threading.Thread(target=self._publish_loop, name="anodize-live-publish", daemon=True)
+        self._publisher.start()
         return GroupLiveView(plan)
 
+    def lower(self, tid: int | None = None) -> None:
+        """Put a thread of the view (None: the calling one) below every group; note what was applied."""
+        applied = side_work_priority(tid)
+        with self._lock:
+            self.priorities[threading.current_thread().name if tid is None else _thread_name(tid)] = applied
+
+    def subscribed(self, client: int, topic: str, on: bool) -> None:
+        """A client (un)subscribed to ``topic`` (the SDK's listener calls it)."""
+        with self._lock:
+            topics = self.clients.setdefault(client, set())
+            if on:
+                topics.add(topic)
+            else:
+                topics.discard(topic)
+
+    def not_shown(self) -> dict[str, int]:
+        """Per topic, the messages the live view did not show: thinned or dropped by the groups'
+        taps, or dropped by the server's outbox."""
+        plan = self.plan
+        if plan is None:
+            return {}
+        found: dict[str, int] = {}
+
+        def add(index: int, count: int) -> None:
+            if 0 <= index < len(plan.labels) and count:
+                topic = plan.labels[index].topic
+                found[topic] = found.get(topic, 0) + count
+        for index, count in list(self.outbox.dropped.items()):
+            add(index, count)
+        for stats in list(self._stats.values()):
+            for index, counts in dict(stats.get("labels", {})).items():
+                add(int(index), sum(int(n) for n in counts))
+        return found
+
     def status(self, statuses: Mapping[str, Any]) -> None:
-        """Publish the groups' :class:`~anodize._supervision.report.GroupStatus` on the status channel."""
+        """Publish the groups' :class:`~anodize._supervision.report.GroupStatus` on the status channel
+        (by the publisher: the caller, the supervisor, never waits for a client)."""
         if self._status is None:
             return
         groups = {name: {"state": str(s.state), "pid": s.pid,
@@ -170,7 +262,24 @@ class LiveView:
                          "messages": s.messages, "received": s.received, "rate_hz": s.rate_hz,
                          "restarts": s.restarts, "note": s.note}
                   for name, s in statuses.items()}
-        self._status.log({"groups": groups}, log_time=time.time_ns())
+        self._latest_status = {"groups": groups}
+
+    def _publish_loop(self) -> None:
+        """Hand what the groups sent, and the latest status, to the SDK (and so to the clients)."""
+        self.lower()
+        while True:
+            for index, stamp, data in self.outbox.take(_PUBLISH_EVERY):
+                with contextlib.suppress(ValueError, OverflowError, TypeError):  # a bad stamp: that one unshown
+                    self._channels[index].log(data, log_time=stamp)
+                    self.forwarded += 1
+            status, self._latest_status = self._latest_status, None
+            if status is not None and self._status is not None:
+                with self._lock:
+                    clients = len(self.clients)
+                status["live"] = {"clients": clients, "shown": self.forwarded, "not_shown": self.not_shown()}
+                self._status.log(status, log_time=time.time_ns())
+            if self.outbox.closed and not self.outbox.held:
+                return
 
     def end(self, wait: float = 1.0) -> list[str]:
         """Notes for the run's report: what was shown, thinned, and taken from clients."""
@@ -179,12 +288,26 @@ class LiveView:
             return []
         with self._reading:  # the groups have ended: their last frames are on their way
             self._reading.wait_for(lambda: self._readers == 0, timeout=wait)
-        thinned = sum(int(s.get("thinned", 0)) for s in self._stats)
-        dropped = sum(int(s.get("dropped", 0)) for s in self._stats)
+        self.outbox.close()
+        if self._publisher is not None:
+            self._publisher.join(wait)
+        stats = list(self._stats.values())
+        thinned = sum(int(s.get("thinned", 0)) for s in stats)
+        dropped = sum(int(s.get("dropped", 0)) for s in stats) + sum(self.outbox.dropped.values())
         notes = [f"foxglove: showed {self.forwarded} messages live on {len(set(self._channels))} topics at "
-                 f"{self.url}" + (f"; {thinned + dropped} not shown (the live view shows large messages at "
-                                  f"most {LARGE_RATE:g} times a second per topic; recordings keep every one)"
-                                  if thinned + dropped else "")]
+                 f"{self.url} to {len(self.clients)} client(s)"
+                 + (f"; {thinned} thinned (large messages at most {LARGE_RATE:g} times a second per topic) and "
+                    f"{dropped} dropped (a queue of the live view was full: it shows the newest); the protocol "
+                    "keeps every one" if thinned + dropped else "")]
+        not_shown = self.not_shown()
+        if not_shown:
+            notes.append("foxglove: not shown, per topic: " + ", ".join(
+                f"{topic} {count}" for topic, count in sorted(not_shown.items())))
+        if self.priorities:
+            applied = sorted(set(self.priorities.values()))
+            taps = sorted({str(s.get("priority")) for s in stats if s.get("priority")})
+            notes.append(f"foxglove: the live view's {len(self.priorities)} threads ran at {' / '.join(applied)}"
+                         + (f", the groups' taps at {' / '.join(taps)}" if taps else "") + " (below every group)")
         groups = set(plan.group_of.values())
         missing = sorted(groups - self._connected)
         if missing:
@@ -204,6 +327,7 @@ class LiveView:
         with contextlib.suppress(OSError):
             self._listener.shutdown(socket.SHUT_RDWR)
         self._listener.close()
+        self.outbox.close()
         with self._lock:
             for sock, _ in self._groups.values():
                 with contextlib.suppress(OSError):
@@ -214,6 +338,7 @@ class LiveView:
 
     # ---- the groups' taps -------------------------------------------------------------------
     def _accept_loop(self) -> None:
+        self.lower()
         while True:
             try:
                 sock, _ = self._listener.accept()
@@ -221,26 +346,26 @@ class LiveView:
                 return
             with self._lock:
                 self._readers += 1
-            threading.Thread(target=self._read_group, args=(sock,), name="anodize-live-group",
+                connection = self._connections = self._connections + 1
+            threading.Thread(target=self._read_group, args=(sock, connection), name=f"anodize-live-group-{connection}",
                              daemon=True).start()
 
-    def _read_group(self, sock: socket.socket) -> None:
+    def _read_group(self, sock: socket.socket, connection: int) -> None:
+        self.lower()
         group = None
-        # A frame the SDK refuses (a bad stamp) or stats that are not JSON end this group's feed,
-        # never the count of readers that end() waits for.
+        # Stats that are not JSON end this group's feed, never the count of readers that end() waits for.
         with contextlib.suppress(OSError, ValueError, OverflowError, TypeError), sock:
             while (frame := read_frame(sock)) is not None:
                 kind, index, stamp, data = frame
                 if kind == MESSAGE and 0 <= index < len(self._channels):
-                    self._channels[index].log(data, log_time=stamp)
-                    self.forwarded += 1
+                    self.outbox.put(index, stamp, data)  # never waits: the publisher hands it on
                 elif kind == HELLO:
                     group = data.decode(errors="replace")
                     with self._lock:
                         self._groups[group] = (sock, threading.Lock())  # a restarted group replaces it
                         self._connected.add(group)
-                elif kind == STATS:
-                    self._stats.append(json.loads(data))
+                elif kind == STATS:  # the tap's counts so far (a later one replaces it)
+                    self._stats[(group or "?", connection)] = json.loads(data)
         with self._reading:
             if group is not None and self._groups.get(group, (None,))[0] is sock:
                 del self._groups[group]

@@ -8,7 +8,10 @@ second, and the others skip the encoding. Nothing in the sending thread waits: t
 message is left for a thread of the group at ordinary priority, which sends it to the
 supervisor; large messages wait there in one slot per label (a newer one replaces
 it), small ones in a bounded queue (the oldest go first when it is full). The live
-view may thus skip messages; the protocol and a recording (``--record``) never do.
+view may thus skip messages, counted per label and sent to the supervisor every
+:data:`STATS_EVERY` seconds; the protocol and a recording (``--record``) never do. The
+tap's threads run at the side-work priority (SCHED_FIFO 1 in a real-time group, else
+nice 19: :func:`~anodize._isolation.sched.side_work_priority`).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from .._isolation.sched import lower_thread_priority
+from .._isolation.sched import side_work_priority
 from .._recording.encoding import SortCodec, codec_for_sort
 from .._recording.tap import TappedChannel
 from .._session.channel import Channel
@@ -37,6 +40,8 @@ LARGE = 4096       # bytes: a message above this is thinned, and waits in its la
 LARGE_RATE = 10.0  # messages per second a large label is shown at, at most
 QUEUE = 4096       # small messages waiting to be forwarded, at most (<= 16 MiB)
 _SEND_EVERY = 0.02  # seconds: how often the forwarding thread looks when nothing woke it
+STATS_EVERY = 1.0  # seconds between the counts a tap sends the supervisor
+CLOSE_WITHIN = 0.5  # seconds a closing tap waits for its thread (the group sends no heartbeat meanwhile)
 
 
 @dataclass(frozen=True)
@@ -68,6 +73,8 @@ class LiveTap:
         self._wake = threading.Event()
         self._closing = False
         self.shown = self.thinned = self.dropped = self.unencodable = 0
+        self._by_label: dict[int, list[int]] = {}  # label -> [thinned, dropped]
+        self.priority = ""  # what side_work_priority applied to the forwarding thread
         self.inputs = [ClientInput(x, codec_for_sort(x.sort)) for x in plan.labels if x.sender in roles]
         self._sock: socket.socket | None = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
@@ -101,6 +108,7 @@ class LiveTap:
         now = time.monotonic()
         if now < self._next_at.get(index, 0.0):
             self.thinned += 1
+            self._counts(index)[0] += 1
             return
         try:
             data = self._codec(index).encode(payload)
@@ -112,14 +120,28 @@ class LiveTap:
             self._next_at[index] = now + 1.0 / LARGE_RATE
             if self._large.get(index) is not None:
                 self.dropped += 1
+                self._counts(index)[1] += 1
             self._large[index] = (stamp, data)
         else:
             self._next_at.pop(index, None)
             if len(self._small) == QUEUE:
                 self.dropped += 1
+                self._counts(self._small[0][0])[1] += 1  # the oldest goes
             self._small.append((index, stamp, data))  # deque.append: atomic, no lock to wait for
         if not self._wake.is_set():
             self._wake.set()
+
+    def _counts(self, index: int) -> list[int]:
+        found = self._by_label.get(index)
+        if found is None:
+            found = self._by_label[index] = [0, 0]
+        return found
+
+    def _stats(self) -> bytes:
+        return json.dumps({"shown": self.shown, "thinned": self.thinned, "dropped": self.dropped,
+                           "unencodable": self.unencodable, "priority": self.priority,
+                           "labels": {str(i): list(c) for i, c in list(self._by_label.items())},
+                           "inputs": {x.label.topic: [x.received, x.rejected] for x in self.inputs}}).encode()
 
     def _codec(self, index: int) -> SortCodec:
         codec = self._codecs.get(index)
@@ -128,9 +150,10 @@ class LiveTap:
         return codec
 
     def _send_loop(self) -> None:
-        lower_thread_priority()
+        self.priority = side_work_priority()  # below every role: it inherited the group's priority
         sock = self._sock
         assert sock is not None
+        stats_at = time.monotonic() + STATS_EVERY
         try:
             while True:
                 self._wake.wait(_SEND_EVERY)
@@ -144,16 +167,16 @@ class LiveTap:
                     index, (stamp, data) = self._large.popitem()
                     send_frame(sock, MESSAGE, index, stamp, data)
                     self.shown += 1
+                if closing or time.monotonic() >= stats_at:
+                    send_frame(sock, STATS, 0, 0, self._stats())
+                    stats_at = time.monotonic() + STATS_EVERY
                 if closing:
-                    stats = {"shown": self.shown, "thinned": self.thinned, "dropped": self.dropped,
-                             "unencodable": self.unencodable,
-                             "inputs": {x.label.topic: [x.received, x.rejected] for x in self.inputs}}
-                    send_frame(sock, STATS, 0, 0, json.dumps(stats).encode())
                     return
         except OSError:  # the supervisor went away: nothing more to show
             self._closing = True
 
     def _read_loop(self) -> None:
+        side_work_priority()
         sock = self._sock
         assert sock is not None
         by_index = {self.plan.index[(x.label.sender, x.label.receiver, x.label.label)]: x for x in self.inputs}
@@ -172,7 +195,7 @@ class LiveTap:
             return
         self._closing = True
         self._wake.set()
-        self._sender.join(timeout=2.0)
+        self._sender.join(timeout=CLOSE_WITHIN)  # a slow supervisor: the last counts are not waited for
         with contextlib.suppress(OSError):
             self._sock.shutdown(socket.SHUT_RDWR)
         self._sock.close()

@@ -96,6 +96,13 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
         result.channels = len(topics)
         for source in sources:
             result.notes.extend(source.notes)
+        ran_at: dict[str, list[str]] = {}
+        for source in sources:
+            if source.priority:
+                ran_at.setdefault(source.priority, []).append(source.path.stem)
+        if ran_at:
+            result.notes.append("the groups' writers ran at " + "; ".join(
+                f"{priority} ({', '.join(parts)})" for priority, parts in sorted(ran_at.items())))
         if result.messages == 0:
             start = end = 0
         bag = _bag_metadata(path.name, topics, start, end, result.messages)
@@ -116,6 +123,7 @@ class _Part:
         self.notes: list[str] = []
         self.channels: dict[int, tuple[str, str, bytes, dict[str, str]]] = {}
         self._schemas: dict[int, tuple[str, bytes]] = {}
+        self.priority = ""  # what the part's writer ran at (its group's side-work priority)
 
     def _records(self) -> Iterator[Any]:
         from mcap.stream_reader import StreamReader
@@ -139,6 +147,8 @@ class _Part:
             self.channels[record.id] = (record.topic, name, definition, dict(record.metadata))
         elif isinstance(record, Metadata) and record.name == f"{META}.unrecorded":
             self.notes.extend(f"{key}: {text}" for key, text in record.metadata.items())
+        elif isinstance(record, Metadata) and record.name == f"{META}.side_work":
+            self.priority = record.metadata.get("writer_priority", "")
 
     def messages(self, number: int) -> Iterator[tuple[int, int, int, int, int, bytes]]:
         from mcap.records import Message

@@ -5,28 +5,36 @@ Each recorded channel is wrapped (:class:`RecordingChannel`): a message is encod
 sent, even if the sender changes the payload afterwards; a thread of the group writes
 it to the group's part file (an MCAP file without chunks, flushed every 0.1 s, so a
 group that is killed loses at most its last tenth of a second). That thread runs at
-ordinary priority, below every real-time role of the group, so recording does not
-delay the control loop; when it falls behind by more than :data:`BACKLOG` bytes (an
-eighth of the group's memory bound, if that is less) the senders wait for it (bounded
-memory; nothing is dropped). The supervisor merges the
-parts when the run ends (:mod:`.merge`).
+the side-work priority (:func:`~anodize._isolation.sched.side_work_priority`: SCHED_FIFO 1
+in a real-time group, else nice 19), below every role of the group, so recording does
+not delay the control loop; a sender never touches the disk (channels are registered
+in the part by the writer). Its queue is bounded: when it
+falls behind by more than :data:`BACKLOG` bytes (an eighth of the group's memory bound,
+if that is less), a slow disk say, a sender does not wait for it; the message keeps its
+sequence number but is not recorded, and the recording gets a gap record on
+:data:`GAP_TOPIC` (the channel, the first missing number, how many) where the message
+would have been, so ``anodize verify`` reports a gap of the recording's, not a
+violation, and the run's report counts what was lost. When the group ends, the writer
+has :data:`CLOSE_WITHIN` seconds to write what is queued; what it has not written by
+then becomes a gap too. The supervisor merges the parts when the run ends (:mod:`.merge`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import threading
 import time
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from sessiontypes import StateMachine
 
 from .._extras import import_extra
-from .._isolation.sched import lower_thread_priority
+from .._isolation.sched import side_work_priority
 from .._session.channel import Channel
 from .._session.endpoint import put_each
 from ..taps import TapGroup
@@ -34,12 +42,23 @@ from .encoding import SortCodec, codec_for_sort
 from .plan import META, PROFILE, ChannelLabel, RecordPlan
 
 __all__ = ["GroupRecording", "Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG",
-           "channel_metadata", "QOS_PROFILES"]
+           "channel_metadata", "QOS_PROFILES", "GAP_TOPIC", "GAP_KEY", "CLOSE_WITHIN", "open_part"]
 
 FEATURE = "recording a run (--record)"
-BACKLOG = 64 * 2**20  # bytes a group's recorder may hold before its senders wait
+BACKLOG = 64 * 2**20  # bytes a group's recorder may hold; beyond it, messages become a gap
 SEQUENCE_WRAP = 2**32 - 1  # the largest MCAP sequence number
+CLOSE_WITHIN = 1.0    # seconds the writer has, once its group ends, to write what is queued (well
+                      # within the supervisor's liveness limit, 2 s by default: no heartbeat meanwhile)
+GAP_TOPIC = "/anodize/_recording/gaps"  # where a part says which messages it could not record
+GAP_KEY = f"{META}.gaps"  # the gap channel's metadata key (its value: "1")
 _FLUSH_EVERY = 0.1    # seconds
+_BATCH = 64           # messages the writer takes from its queue at a time
+_GAP = -1             # in the queue, in place of an MCAP channel: a gap record
+
+
+def open_part(path: Path) -> IO[bytes]:
+    """The part file a recorder writes (a seam: tests put a slow disk here)."""
+    return path.open("wb")
 
 # What anodize's channels offer, as rosbag2 writes it (metadata version 9): reliable, keep all, volatile.
 QOS_PROFILES = """- history: keep_all
@@ -87,7 +106,8 @@ class Recorder:
     """One group's recorder; :meth:`attach` it to the group's network, :meth:`close` at the end."""
 
     def __init__(self, plan: RecordPlan, group: str, incarnation: int, protocol: str,
-                 machines: Mapping[str, StateMachine], memory: int | None = None) -> None:
+                 machines: Mapping[str, StateMachine], memory: int | None = None,
+                 opener: Callable[[Path], IO[bytes]] | None = None) -> None:
         import_extra("mcap.writer", "record", FEATURE)
         from mcap.writer import CompressionType, Writer
 
@@ -97,7 +117,7 @@ class Recorder:
         self._labels = _local_labels(machines, self.recorded)
         Path(plan.parts).mkdir(parents=True, exist_ok=True)
         self.path = Path(plan.parts) / f"{group}-{incarnation}.mcap"
-        self._file = self.path.open("wb")
+        self._file = (opener or open_part)(self.path)
         self._writer = Writer(self._file, use_chunking=False, compression=CompressionType.NONE,
                               enable_crcs=False)
         self._writer.start(profile=PROFILE, library="anodize")
@@ -114,8 +134,17 @@ class Recorder:
         self.unrecorded: dict[str, list[int | str]] = {}  # "A->B:label" -> [count, first reason]
         self.broken = ""  # why the writer stopped, if it did
         self._io = threading.Lock()  # the part file's writer: one thread at a time
-        self._pair_of: dict[int, tuple[str, str]] = {}  # MCAP channel -> its channel
+        self._pair_of: dict[int, tuple[str, str]] = {}  # queued label -> its channel
+        self._keys: list[tuple[ChannelLabel, SortCodec]] = []  # queued label -> what it is
+        self._mcap: dict[int, int] = {}  # queued label -> its MCAP channel in the part
         self._writing: list[tuple[int, int, int, bytes]] = []  # the batch being written
+        self._gaps: dict[tuple[str, str], list[int]] = {}  # channel -> [first number, count, time] not queued
+        self.lost: dict[tuple[str, str], int] = {}  # channel -> messages not recorded: the writer was behind
+        self._gap_channel: int | None = None
+        self._give_up = threading.Event()  # close: the disk is too slow to wait for what is queued
+        self.priority = ""  # what side_work_priority applied to the writer
+        for key in sorted(self._labels):  # codecs made now, not in a role's first send (building one takes time)
+            self._register(key)
         self._thread = threading.Thread(target=self._write_loop, name=f"anodize-record:{group}", daemon=True)
         self._thread.start()
 
@@ -126,7 +155,7 @@ class Recorder:
                 queues[pair] = RecordingChannel(queues[pair], self, pair, at_sender=(end == "send"))
 
     def encode(self, pair: tuple[str, str], label: str, payload: object) -> tuple[int, int, bytes] | None:
-        """A message of channel ``pair`` as it will be recorded: (MCAP channel, time, bytes).
+        """A message of channel ``pair`` as it will be recorded: (label's number, time, bytes).
 
         A payload that cannot be encoded (possible only without monitors) is counted, with the
         first reason, in the part's ``anodize.unrecorded`` metadata: the run goes on.
@@ -145,19 +174,39 @@ class Recorder:
         first[0] = int(first[0]) + 1
 
     def queue(self, pair: tuple[str, str], encoded: tuple[int, int, bytes]) -> None:
-        """Hand an encoded message to the writer (waiting while the writer is far behind)."""
+        """Hand an encoded message to the writer; never waits for it. Beyond the backlog the
+        message is numbered but not recorded: a gap, recorded as such before the next one."""
         channel_id, stamp, data = encoded
         with self._lock:
-            while self._pending_bytes > self.backlog and not self._closing:
-                self._lock.wait(0.1)
             if self.broken:  # the writer failed (e.g. a full disk): counted, never waited for
                 self._count_unrecorded(pair, "", self.broken)
                 return
             # MCAP's sequence is 32 bits: after 2**32 - 1 it wraps to 1 (verify knows).
             sequence = self._sequence[pair] = self._sequence[pair] % SEQUENCE_WRAP + 1
+            if self._pending_bytes + len(data) > self.backlog or self._closing:
+                self._lose(pair, sequence, stamp, 1)
+                return
+            gap = self._gaps.pop(pair, None)
+            if gap is not None:
+                self._pending.append(self._gap_record(pair, *gap))
             self._pending.append((channel_id, stamp, sequence, data))
             self._pending_bytes += len(data)
             self._lock.notify_all()
+
+    def _lose(self, pair: tuple[str, str], first: int, stamp: int, count: int) -> None:
+        """``count`` messages of ``pair`` from number ``first`` on are not recorded (lock held)."""
+        gap = self._gaps.get(pair)
+        if gap is None:
+            self._gaps[pair] = [first, count, stamp]
+        else:
+            gap[1] += count
+        self.lost[pair] = self.lost.get(pair, 0) + count
+
+    def _gap_record(self, pair: tuple[str, str], first: int, count: int, stamp: int) -> tuple[int, int, int, bytes]:
+        """A queue entry for the gap channel: ``count`` messages from number ``first`` are missing."""
+        text = json.dumps({"channel": f"{pair[0]}->{pair[1]}", "first": first, "count": count})
+        codec = codec_for_sort(None)  # a JSON String
+        return _GAP, stamp, 0, codec.ros.serialize(codec.ros.cls(data=text))
 
     def _channel(self, pair: tuple[str, str], label: str) -> tuple[int, SortCodec]:
         key = (*pair, label)
@@ -168,30 +217,55 @@ class Recorder:
         return found
 
     def _register(self, key: tuple[str, str, str]) -> tuple[int, SortCodec]:
+        """A label's number in the queue and its codec (lock held). Nothing is written here: the
+        sender's thread never touches the disk; the writer registers the MCAP channel."""
         item = self._labels.get(key) or ChannelLabel(*key, None)
         codec = codec_for_sort(item.sort)
-        schema = self._schemas.get(codec.type_name)
-        if schema is None:
-            with self._io:
-                schema = self._schemas[codec.type_name] = self._writer.register_schema(
-                    codec.type_name, "ros2msg", codec.ros.message_definition().encode())
-        topic = self.plan.topics.get(key) or f"/anodize/{key[0]}/{key[1]}/{key[2]}"
-        metadata = channel_metadata(item, codec, self.protocol, self.plan.group_of)
-        with self._io:  # the writer thread may be writing messages to the same file
-            channel_id = self._writer.register_channel(topic, "cdr", schema, metadata)
-        self._pair_of[channel_id] = (key[0], key[1])
-        found = self._channels[key] = (channel_id, codec)
+        number = len(self._keys)
+        self._keys.append((item, codec))
+        self._pair_of[number] = (key[0], key[1])
+        found = self._channels[key] = (number, codec)
         return found
 
+    def _mcap_channel(self, number: int) -> int:
+        """The part's MCAP channel of queued label ``number``, registered at its first message
+        (the writer's thread, holding ``_io``)."""
+        found = self._mcap.get(number)
+        if found is None:
+            item, codec = self._keys[number]
+            schema = self._schemas.get(codec.type_name)
+            if schema is None:
+                schema = self._schemas[codec.type_name] = self._writer.register_schema(
+                    codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+            key = (item.sender, item.receiver, item.label)
+            topic = self.plan.topics.get(key) or f"/anodize/{key[0]}/{key[1]}/{key[2]}"
+            metadata = channel_metadata(item, codec, self.protocol, self.plan.group_of)
+            found = self._mcap[number] = self._writer.register_channel(topic, "cdr", schema, metadata)
+        return found
+
+    def _gap_channel_id(self) -> int:
+        """The part's gap channel, registered at its first gap (the caller holds ``_io``)."""
+        if self._gap_channel is None:
+            codec = codec_for_sort(None)
+            schema = self._schemas.get(codec.type_name)
+            if schema is None:
+                schema = self._schemas[codec.type_name] = self._writer.register_schema(
+                    codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+            self._gap_channel = self._writer.register_channel(GAP_TOPIC, "cdr", schema, {
+                "offered_qos_profiles": QOS_PROFILES, "topic_type_hash": codec.ros.type_hash,
+                f"{META}.protocol": self.protocol, GAP_KEY: "1"})
+        return self._gap_channel
+
     def _write_loop(self) -> None:
-        lower_thread_priority()  # it inherited the group's real-time priority
+        self.priority = side_work_priority()  # below every role: it inherited the group's priority
         try:
             self._write_until_closed()
         except Exception as error:  # a full disk, say: the run goes on, unrecorded, and says so
             with self._lock:
                 self.broken = f"the recording's writer failed: {type(error).__name__}: {error}"
                 for channel_id, *_ in [*self._writing, *self._pending]:
-                    self._count_unrecorded(self._pair_of.get(channel_id, ("?", "?")), "", self.broken)
+                    if channel_id != _GAP:
+                        self._count_unrecorded(self._pair_of.get(channel_id, ("?", "?")), "", self.broken)
                 self._writing = []
                 self._pending.clear()
                 self._pending_bytes = 0
@@ -205,36 +279,92 @@ class Recorder:
                     self._lock.wait(_FLUSH_EVERY)
                     if time.monotonic() - last_flush >= _FLUSH_EVERY:
                         break
-                batch = self._writing = list(self._pending)  # kept until written: a failure counts it
-                self._pending.clear()
+                # Kept until written (a failure counts it); a batch at a time, so that what is still
+                # queued when the group ends can be given up (close) rather than waited for.
+                batch = self._writing = [self._pending.popleft() for _ in range(min(_BATCH, len(self._pending)))]
                 closing = self._closing
             with self._io:
-                for channel_id, stamp, sequence, data in batch:
-                    self._writer.add_message(channel_id, stamp, data, stamp, sequence)
-            self.written += len(batch)
+                for done, (channel_id, stamp, sequence, data) in enumerate(batch):
+                    if self._give_up.is_set():  # the group has ended and the disk is slow: the rest is a gap
+                        self._write_gaps(batch[done:])
+                        return
+                    target = self._mcap_channel(channel_id) if channel_id != _GAP else self._gap_channel_id()
+                    self._writer.add_message(target, stamp, data, stamp, sequence)
+                    self.written += channel_id != _GAP
             self._writing = []
             with self._lock:
-                self._pending_bytes -= sum(len(item[3]) for item in batch)
+                self._pending_bytes -= sum(len(item[3]) for item in batch if item[0] != _GAP)
                 self._lock.notify_all()
             if time.monotonic() - last_flush >= _FLUSH_EVERY or closing:
                 self._file.flush()
                 last_flush = time.monotonic()
             if closing and not batch:
                 return
+            if self._give_up.is_set():
+                self._write_gaps([])
+                return
 
-    def close(self) -> None:
-        """Write what is queued, end the part file properly, and stop the writer."""
+    def _write_gaps(self, unwritten: list[tuple[int, int, int, bytes]]) -> None:
+        """Give up ``unwritten`` and what is queued: write one gap record per channel instead
+        (the caller holds ``_io``)."""
+        with self._lock:
+            records = self._abandon([*unwritten, *self._pending])
+            self._pending.clear()
+            self._pending_bytes = 0
+            self._writing = []
+        for _, stamp, _, data in records:
+            self._writer.add_message(self._gap_channel_id(), stamp, data, stamp, 0)
+        self._file.flush()
+
+    def close(self, within: float = CLOSE_WITHIN) -> None:
+        """Write what is queued (for at most ``within`` seconds: the rest becomes a gap), end the
+        part file properly, and stop the writer."""
+        deadline = time.monotonic() + within
         with self._lock:
             self._closing = True
+            self._close_gaps()
             self._lock.notify_all()
-        self._thread.join()
+        self._thread.join(within / 2)
+        if self._thread.is_alive():  # a slow disk: what is still queued is not waited for
+            self._give_up.set()  # the writer stops after the write it is in, and writes the gaps
+            with self._lock:
+                self._lock.notify_all()
+            self._thread.join(max(0.0, deadline - time.monotonic()))
+            if self._thread.is_alive():  # stuck in a write: the part is left unfinished (the merge keeps it)
+                return
+        behind = f"the recording's writer fell behind (a slow disk?) and was not waited for: a gap on {GAP_TOPIC}"
+        for pair, count in sorted(self.lost.items()):
+            self.unrecorded[f"{pair[0]}->{pair[1]}"] = [count, behind]
         with contextlib.suppress(Exception):  # best effort: a broken writer fails again (the merge notes it)
+            self._writer.add_metadata(f"{META}.side_work", {"writer_priority": self.priority})
             if self.unrecorded:
                 self._writer.add_metadata(f"{META}.unrecorded", {
                     key: f"{count} messages not recorded; the first: {reason}"
                     for key, (count, reason) in self.unrecorded.items()})
             self._writer.finish()  # type: ignore[no-untyped-call]
             self._file.close()
+
+    def _close_gaps(self) -> None:
+        """Queue a record of each gap still open (lock held): there is no next message to put it before."""
+        for pair, gap in sorted(self._gaps.items()):
+            self._pending.append(self._gap_record(pair, *gap))
+        self._gaps.clear()
+
+    def _abandon(self, unwritten: list[tuple[int, int, int, bytes]]) -> list[tuple[int, int, int, bytes]]:
+        """The gap records that replace ``unwritten`` (lock held): per channel, one gap from its
+        first message not written to the last it numbered."""
+        first: dict[tuple[str, str], tuple[int, int]] = {}
+        for channel_id, stamp, sequence, data in unwritten:
+            if channel_id == _GAP:
+                found = json.loads(codec_for_sort(None).ros.deserialize(data).data)  # type: ignore[attr-defined]
+                sender, receiver = str(found["channel"]).split("->", 1)
+                first.setdefault((sender, receiver), (int(found["first"]), stamp))
+                continue  # its messages were counted when they were lost
+            pair = self._pair_of.get(channel_id, ("?", "?"))
+            first.setdefault(pair, (sequence, stamp))
+            self.lost[pair] = self.lost.get(pair, 0) + 1
+        return [self._gap_record(pair, sequence, (self._sequence.get(pair, sequence) - sequence) % SEQUENCE_WRAP + 1,
+                                 stamp) for pair, (sequence, stamp) in first.items()]
 
 
 class TappedChannel:

@@ -10,11 +10,15 @@ would blame it. How channels interleave is not checked (docs/recording.md says w
 A recording made by anodize numbers each channel's messages: a number skipped or out
 of order means the recording itself lost or reordered a message, and is reported as
 such, blaming no role; numbering that starts again at 1 is a restarted group (the
-channel starts again from the protocol's beginning).
+channel starts again from the protocol's beginning). A gap the recorder itself marked
+(on :data:`~.tap.GAP_TOPIC`: its writer fell behind and the sender did not wait for it)
+is the recording's, reported as a gap, not as a violation: the channel's check goes on
+after it from every state the missing messages could have led to.
 """
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -29,9 +33,9 @@ from .channel_view import ChannelView, Node, sort_key
 from .encoding import JSON_TYPE, SortCodec, UnknownObject, codec_for_sort
 from .plan import META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
-from .tap import SEQUENCE_WRAP
+from .tap import GAP_KEY, SEQUENCE_WRAP
 
-__all__ = ["Violation", "ChannelResult", "VerifyReport", "verify", "RECORDING_FAULT"]
+__all__ = ["Violation", "ChannelResult", "VerifyReport", "verify", "RECORDING_FAULT", "Gap"]
 
 RECORDING_FAULT = "the recording (no role: a message was lost or reordered after it was sent)"
 
@@ -77,6 +81,27 @@ class Violation:
         return "\n".join(lines)
 
 
+@dataclass(frozen=True)
+class Gap:
+    """Messages the recorder numbered but could not write (it marked them: not a violation).
+
+    Attributes:
+        channel: ``"Sender->Receiver"``.
+        first: the sequence number of the first one missing.
+        count: how many are missing.
+        log_time: when the first of them was sent, ns since the epoch.
+    """
+
+    channel: str
+    first: int
+    count: int
+    log_time: int
+
+    def __str__(self) -> str:
+        return (f"channel {self.channel}: {self.count} message(s) from number {self.first} not recorded "
+                f"(the recorder fell behind; log time {_clock(self.log_time)})")
+
+
 @dataclass
 class ChannelResult:
     channel: str
@@ -94,6 +119,7 @@ class VerifyReport:
         unmapped: recorded topics that are no channel's (not checked).
         missing: channels of the protocol with no message in the recording.
         inside: channels an anodize recording leaves out by design (both ends in one group).
+        gaps: messages the recorder marked as not recorded (the recording's, not a violation).
     """
 
     recording: str
@@ -103,6 +129,7 @@ class VerifyReport:
     unmapped: list[str] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)
     inside: list[str] = field(default_factory=list)
+    gaps: list[Gap] = field(default_factory=list)
     messages: int = 0
     bytes: int = 0
     seconds: float = 0.0
@@ -122,6 +149,7 @@ class VerifyReport:
         lines.extend(f"not checked: topic {text} is no channel of the protocol (give it in --topics)"
                      for text in self.unmapped)
         lines.extend(f"missing: no message on channel {channel}" for channel in self.missing)
+        lines.extend(f"gap: {gap}" for gap in self.gaps)
         if self.inside:
             lines.append(f"not recorded (both ends in one group): {', '.join(self.inside)}")
         return "\n".join(lines)
@@ -132,6 +160,7 @@ class VerifyReport:
                                     "violation": None if r.violation is None else r.violation.__dict__}
                              for name, r in self.channels.items()},
                 "unknown": self.unknown, "unmapped": self.unmapped, "missing": self.missing, "inside": self.inside,
+                "gaps": [gap.__dict__ for gap in self.gaps],
                 "messages": self.messages, "bytes": self.bytes, "seconds": self.seconds}
 
 
@@ -145,6 +174,7 @@ class _ChannelCheck:
         self.reset()
         self.result = ChannelResult(self.name)
         self.sequence = 0
+        self.gaps: dict[int, int] = {}  # first missing number -> how many: the recorder's marked gaps
 
     def reset(self) -> None:
         self.states: list[frozenset[Node]] = [view.start for view in self.views]
@@ -185,10 +215,18 @@ class _ChannelCheck:
         if sequence == 1:  # the sender's group started again: so does the channel
             self.reset()
             return ""
+        if sequence > previous + 1 and self.gaps.get(previous + 1) == sequence - previous - 1:
+            self._skip(sequence - previous - 1)  # a gap the recorder marked: the recording's, not a role's
+            return ""
         if sequence > previous + 1:
             return (f"the sender numbered it {sequence} after {previous}: "
                     f"{sequence - previous - 1} message(s) before it are missing from the recording")
         return f"the sender numbered it {sequence} after {previous}: the recording has it out of order"
+
+    def _skip(self, count: int) -> None:
+        """Go on from every state ``count`` messages of any label could have led to."""
+        for side, view in enumerate(self.views):
+            self.states[side] = _after_any(view, self.states[side], count)
 
     def _fail(self, message: RecordedMessage, index: int, label: str, side: int, blamed: str,
               reason: str = "") -> None:
@@ -202,6 +240,22 @@ class _ChannelCheck:
             self.name, index, message.log_time, message.topic.topic, blamed, role, view.describe(nodes),
             tuple(str(t) for t in allowed), _actual(side, self, label, message.topic),
             str(concerned.location) if concerned is not None else "", reason)
+
+
+def _after_any(view: ChannelView, nodes: frozenset[Node], count: int) -> frozenset[Node]:
+    """The states ``count`` steps of any label lead to from ``nodes`` (the sets repeat: a
+    cycle is not walked round more than once)."""
+    history = [nodes]
+    seen = {nodes: 0}
+    for step in range(1, count + 1):
+        labels = {t.label for t in view.allowed(nodes)}
+        nodes = frozenset().union(*(view.step(nodes, label) for label in labels))
+        if nodes in seen:
+            start = seen[nodes]
+            return history[start + (count - step) % (step - start)]
+        seen[nodes] = step
+        history.append(nodes)
+    return nodes
 
 
 def _actual(side: int, check: _ChannelCheck, label: str, topic: RecordedTopic) -> str:
@@ -292,9 +346,12 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
     pairs = {(s, r) for s, r, _ in labels}
     report = VerifyReport(str(recording.path), global_type.name)
     keys: dict[int, tuple[str, str, str]] = {}
+    gap_topics: set[int] = set()
     for topic in recording.topics:
         key = _key_of(topic, topics or {})
-        if key is None:
+        if topic.metadata.get(GAP_KEY) == "1":
+            gap_topics.add(topic.id)
+        elif key is None:
             report.unmapped.append(f"{topic.topic} ({topic.type_name})")
         elif key[:2] not in pairs:
             report.unknown.append(f"{key[0]}->{key[1]} (topic {topic.topic}): global {global_type.name} "
@@ -309,6 +366,8 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
         key = keys.get(message.topic.id)
         if key is not None:
             checks[key[:2]].check(message, key[2], codecs)
+        elif message.topic.id in gap_topics:
+            _note_gap(report, checks, message)
     report.channels = {check.name: check.result for check in checks.values()}
     recorded = recording.info.get("recorded_channels")
     # An anodize recording says which channels it records: those inside one group it does not.
@@ -319,6 +378,20 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
     report.inside = [f"{s}->{r}" for s, r in sorted(pairs) if (s, r) not in expected]
     report.seconds = time.perf_counter() - began
     return report
+
+
+def _note_gap(report: VerifyReport, checks: Mapping[tuple[str, str], _ChannelCheck], message: RecordedMessage) -> None:
+    """A gap record: which channel's numbers are missing, for its check to accept the skip."""
+    try:
+        found = json.loads(codec_for_sort(None).ros.deserialize(message.data).data)  # type: ignore[attr-defined]
+        gap = Gap(str(found["channel"]), int(found["first"]), int(found["count"]), message.log_time)
+        sender, receiver = gap.channel.split("->", 1)
+    except (ValueError, KeyError, TypeError, AttributeError, AnodizeError):
+        return  # not a gap record anodize wrote: ignored (a skip it does not explain stays a fault)
+    report.gaps.append(gap)
+    check = checks.get((sender, receiver))
+    if check is not None:
+        check.gaps[gap.first] = gap.count
 
 
 def _key_of(topic: RecordedTopic, topics: Mapping[str, tuple[str, str, str]]) -> tuple[str, str, str] | None:
