@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 import tomllib
 from pathlib import Path
+from typing import Any
 
 import grimp
 import networkx as nx
@@ -91,11 +93,70 @@ def test_sessiontypes_imports_itself_only_at_module_level() -> None:
     assert found == []
 
 
-def test_sessiontypes_layers_contract_lists_every_module() -> None:
+PACKAGE_DIRS = (ROOT / "sessiontypes", ROOT / "anodize", ROOT / "tinman" / "src" / "tinman")
+
+
+def _children(package: Path) -> set[str]:
+    """The modules and subpackages directly inside ``package``, by their last name."""
+    modules = {p.stem for p in package.glob("*.py") if p.stem != "__init__"}
+    return modules | {p.parent.name for p in package.glob("*/__init__.py")}
+
+
+def _layered(layer: str) -> set[str]:
+    # `|` separates independent modules of a layer, `:` siblings that may import each other, and
+    # parentheses mark an optional layer.
+    return {name.strip().strip("()") for name in re.split(r"[|:]", layer)}
+
+
+def uncontracted_packages(package_dirs: tuple[Path, ...], contracts: list[dict[str, Any]]) -> list[str]:
+    """What is wrong with the layers contracts of every package of two or more modules.
+
+    Each such package, found on disk under ``package_dirs`` (the root packages), needs a
+    ``layers`` contract with that package as its one container, marked ``exhaustive`` and
+    listing exactly the package's modules and subpackages. Returns one line per problem.
+    """
+    by_container = {tuple(c.get("containers", [])): c for c in contracts if c.get("type") == "layers"}
+    problems = []
+    for root in package_dirs:
+        for init in sorted(root.rglob("__init__.py")):
+            package = init.parent
+            name = ".".join(package.relative_to(root.parent).parts)
+            children = _children(package)
+            if len(children) < 2:
+                continue
+            contract = by_container.get((name,))
+            if contract is None:
+                problems.append(f"{name}: expected a layers contract with containers = [{name!r}], found none")
+                continue
+            if contract.get("exhaustive") is not True:
+                problems.append(f"{name}: expected its layers contract to be exhaustive, it is not")
+            listed = set().union(*(_layered(layer) for layer in contract.get("layers", [])))
+            if listed != children:
+                problems.append(f"{name}: expected the layers to list {sorted(children)}, "
+                                f"unlisted {sorted(children - listed)}, not modules {sorted(listed - children)}")
+    return problems
+
+
+def test_every_package_of_two_or_more_modules_has_an_exhaustive_layers_contract() -> None:
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
-    (contract,) = [c for c in pyproject["tool"]["importlinter"]["contracts"] if c.get("containers") == ["sessiontypes"]]
-    assert contract["exhaustive"] is True
-    listed = {name.strip() for layer in contract["layers"] for name in layer.split("|")}
-    modules = {p.stem for p in (ROOT / "sessiontypes").glob("*.py") if p.stem != "__init__"}
-    modules |= {p.parent.name for p in (ROOT / "sessiontypes").glob("*/__init__.py")}
-    assert listed == modules
+    assert uncontracted_packages(PACKAGE_DIRS, pyproject["tool"]["importlinter"]["contracts"]) == []
+
+
+def test_a_package_without_a_complete_contract_is_found(tmp_path: Path) -> None:
+    top = tmp_path / "top"
+    for folder in (top, top / "sub", top / "one", top / "part"):
+        folder.mkdir()
+        (folder / "__init__.py").write_text("")
+    for module in ("top/a.py", "top/b.py", "top/sub/x.py", "top/sub/y.py", "top/one/only.py",
+                   "top/part/p.py", "top/part/q.py"):
+        (tmp_path / module).write_text("")
+    contracts: list[dict[str, Any]] = [
+        {"type": "layers", "containers": ["top"], "exhaustive": True, "layers": ["a : sub", "(b) | one | part"]},
+        {"type": "layers", "containers": ["top.part"], "layers": ["p"]},
+        {"type": "forbidden", "containers": ["top.sub"]},
+    ]
+    assert uncontracted_packages((top,), contracts) == [
+        "top.part: expected its layers contract to be exhaustive, it is not",
+        "top.part: expected the layers to list ['p', 'q'], unlisted ['q'], not modules []",
+        "top.sub: expected a layers contract with containers = ['top.sub'], found none",
+    ]
