@@ -21,7 +21,9 @@ docs/language.md has its own, stricter test (tests/test_language_doc.py). Every 
   same page), ``transcript``
   (an illustrative session: ``$ `` lines are checked as ``commands`` are, except that the
   files they name need not exist; the rest is output) or ``usage`` (each
-  ``--option`` in it exists in the command-line front ends).
+  ``--option`` in it exists in the command-line front ends), or ``diagram`` (a picture drawn
+  in text: it shows no ``$ `` command, and each NAME in capitals it shows is a constant that
+  anodize's sources define).
 
 A block of any other kind, or without an expectation, fails this test.
 """
@@ -55,7 +57,7 @@ SOURCE_KINDS = {"proto": "example.proto", "scribble": "example.scr", "nuscr": "e
 VERBS = {
     "proto": {"ok", "projections", "error"}, "scribble": {"ok", "projections", "error"},
     "nuscr": {"ok", "projections", "error"}, "python": {"run", "compile", "doctest"}, "toml": {"toml"},
-    "sh": {"commands"}, "text": {"report", "transcript", "usage"},
+    "sh": {"commands"}, "text": {"report", "transcript", "usage", "diagram"},
 }
 NEEDS_OUTPUT = {"projections", "error"}
 # The tools `.venv/bin` holds after scripts/bootstrap: the project's scripts and its extras' tools.
@@ -301,3 +303,12 @@ def test_usage_block(checked: Checked) -> None:
                       for p in [*REPO.glob("anodize/**/*.py"), *REPO.glob("tinman/src/tinman/*.py")])
     for option in sorted(set(re.findall(r"--[a-z][a-z-]*", checked.code))):
         assert f'"{option}"' in sources, f"{option}: no front end defines it"
+
+
+@pytest.mark.parametrize("checked", [c for c in ALL if c.verb == "diagram"], ids=_id)
+def test_diagram_block(checked: Checked) -> None:
+    assert not any(line.startswith("$ ") for line in checked.code.splitlines()), \
+        "a diagram shows no command; make a session a transcript"
+    sources = "".join(p.read_text(encoding="utf-8") for p in REPO.glob("anodize/**/*.py"))
+    for name in sorted(set(re.findall(r"\b[A-Z][A-Z0-9]*_[A-Z0-9_]+\b|\b[A-Z]{4,}\b", checked.code))):
+        assert re.search(rf"^{name}\b.*=", sources, re.MULTILINE), f"{name}: no constant of anodize defines it"
