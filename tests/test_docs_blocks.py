@@ -17,11 +17,13 @@ docs/language.md has its own, stricter test (tests/test_language_doc.py). Every 
   subcommand and options exist (its ``--help`` lists them), and the repository files it
   names exist;
 - ```text: the output of the example above it, or ``report`` (a run report: it starts
-  ``protocol NAME:`` and NAME is a global of the repository's protocols or of a block of the
-  same page), ``transcript``
+  ``protocol NAME: OUTCOME in N s (TRANSPORT)`` as ``RunReport.summary()`` does, and NAME is
+  a global of the repository's protocols or of a block of the same page), ``transcript``
   (an illustrative session: ``$ `` lines are checked as ``commands`` are, except that the
-  files they name need not exist; the rest is output) or ``usage`` (each
-  ``--option`` in it exists in the command-line front ends).
+  files they name need not exist; the rest is output), ``usage`` (each
+  ``--option`` in it exists in the command-line front ends) or ``diagram`` (a picture drawn
+  in text: it shows no ``$ `` command, and each NAME in capitals it shows is a constant that
+  anodize's sources define).
 
 A block of any other kind, or without an expectation, fails this test.
 """
@@ -55,7 +57,7 @@ SOURCE_KINDS = {"proto": "example.proto", "scribble": "example.scr", "nuscr": "e
 VERBS = {
     "proto": {"ok", "projections", "error"}, "scribble": {"ok", "projections", "error"},
     "nuscr": {"ok", "projections", "error"}, "python": {"run", "compile", "doctest"}, "toml": {"toml"},
-    "sh": {"commands"}, "text": {"report", "transcript", "usage"},
+    "sh": {"commands"}, "text": {"report", "transcript", "usage", "diagram"},
 }
 NEEDS_OUTPUT = {"projections", "error"}
 # The tools `.venv/bin` holds after scripts/bootstrap: the project's scripts and its extras' tools.
@@ -288,8 +290,9 @@ def _globals_of_the_repository() -> set[str]:
 @pytest.mark.parametrize("checked", [c for c in ALL if c.verb == "report"], ids=_id)
 def test_report_block(checked: Checked) -> None:
     first = checked.code.splitlines()[0]
-    found = re.match(r"protocol (\w+): (ok|NOT ok|stopped|interrupted)", first)
-    assert found, f"a run report starts 'protocol NAME: outcome', got {first!r}"
+    found = re.match(r"protocol (\w+): (ok|NOT ok|stopped, no failures|interrupted) in [0-9.]+ s "
+                     r"\((inproc|process|dds)\)$", first)
+    assert found, f"a run report starts 'protocol NAME: outcome in N s (transport)' (RunReport.summary), got {first!r}"
     on_the_page = {name for c in ALL if c.page == checked.page for name in re.findall(r"global\s+(\w+)", c.code)}
     assert found.group(1) in _globals_of_the_repository() | on_the_page, \
         f"no global {found.group(1)} in the repository's protocols or on the page"
@@ -301,3 +304,24 @@ def test_usage_block(checked: Checked) -> None:
                       for p in [*REPO.glob("anodize/**/*.py"), *REPO.glob("tinman/src/tinman/*.py")])
     for option in sorted(set(re.findall(r"--[a-z][a-z-]*", checked.code))):
         assert f'"{option}"' in sources, f"{option}: no front end defines it"
+
+
+def check_diagram(code: str) -> None:
+    """A picture in text: no command in it, and each constant it names defined in anodize."""
+    assert not any(line.startswith("$ ") for line in code.splitlines()), \
+        "a diagram shows no command; make a session a transcript"
+    sources = "".join(p.read_text(encoding="utf-8") for p in REPO.glob("anodize/**/*.py"))
+    for name in sorted(set(re.findall(r"\b[A-Z][A-Z0-9]*_[A-Z0-9_]+\b|\b[A-Z]{4,}\b", code))):
+        assert re.search(rf"^{name}\b.*=", sources, re.MULTILINE), f"{name}: no constant of anodize defines it"
+
+
+@pytest.mark.parametrize("checked", [c for c in ALL if c.verb == "diagram"], ids=_id)
+def test_diagram_block(checked: Checked) -> None:
+    check_diagram(checked.code)
+
+
+def test_the_diagram_check_catches_what_it_should() -> None:
+    check_diagram("role --> queue (CLIENT_BACKLOG messages)\n")
+    for bad in ["$ anodize run x.toml\n", "role --> queue (NO_SUCH_CONSTANT messages)\n"]:
+        with pytest.raises(AssertionError):
+            check_diagram(bad)

@@ -49,7 +49,7 @@ BACKLOG = 64 * 2**20  # bytes a group's recorder may hold; beyond it, messages b
 SEQUENCE_WRAP = 2**32 - 1  # the largest MCAP sequence number
 CLOSE_WITHIN = 1.0    # seconds the writer has, once its group ends, to write what is queued (well
                       # within the supervisor's liveness limit, 2 s by default: no heartbeat meanwhile)
-GAP_TOPIC = "/anodize/_recording/gaps"  # where a part says which messages it could not record
+GAP_TOPIC = "/anodize/recording/gaps"  # where a part says which messages it could not record
 GAP_KEY = f"{META}.gaps"  # the gap channel's metadata key (its value: "1")
 _FLUSH_EVERY = 0.1    # seconds
 _BATCH = 64           # messages the writer takes from its queue at a time

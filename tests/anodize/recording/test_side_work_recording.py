@@ -86,7 +86,7 @@ def test_a_recorder_on_a_slow_disk_never_blocks_its_sender_and_marks_the_gap(tmp
     assert recorder.priority == "nice 19"  # this process is not real time: the weakest nice value
 
     result = merge_parts(tmp_path / "parts", tmp_path / "r.mcap", {"global": "Texts"})
-    assert any("a gap on /anodize/_recording/gaps" in note and note.startswith(f"Talker->Listener: {lost} ")
+    assert any("a gap on /anodize/recording/gaps" in note and note.startswith(f"Talker->Listener: {lost} ")
                for note in result.notes), result.notes
     with open_recording(tmp_path / "r.mcap") as recording:
         report = verify(recording, global_type)
@@ -137,7 +137,7 @@ def test_a_run_recording_to_a_slow_disk_ends_and_its_report_counts_the_gap(
     system.group("listen").role("Listener", listener)
     report = system.run(timeout=60, record=tmp_path / "r.mcap")
     assert report.ok, report.summary()
-    lost = [n for n in report.notes if "Talker->Listener: " in n and "a gap on /anodize/_recording/gaps" in n]
+    lost = [n for n in report.notes if "Talker->Listener: " in n and "a gap on /anodize/recording/gaps" in n]
     assert lost, report.notes
     assert "recording: the groups' writers ran at nice 19 (listen-0, talk-0)" in report.notes  # reported
     with open_recording(tmp_path / "r.mcap") as recording:
