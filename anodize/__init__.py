@@ -17,8 +17,10 @@ from typing import TYPE_CHECKING, Any
 
 from ._isolation.sched import lower_thread_priority
 from ._live.inputs import ClientInput, client_input
+from ._live.server import LiveView, open_live_view
 from ._recording.reader import RecordingError
 from ._recording.replay_network import ReplayDivergenceError
+from ._recording.run import Recording
 from ._ros.messages import RosDecodeError, RosEncodeError
 from ._session import Endpoint, EndpointStatistics, Message, State
 from ._supervision import (
@@ -60,6 +62,8 @@ __all__ = [
     "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
     "Inproc", "Processes", "Dds", "RosBridge", "ChannelTap",
+    # The taps a program can hand to System.run itself: a recording, the live view in Foxglove.
+    "Recording", "open_live_view", "LiveView",
     "EndpointStatistics",
     # System files and named systems (`anodize run FILE`, `anodize run NAME`), as TinMan uses them.
     "SystemConfig", "load_config", "build_system", "NamedSystem", "Prepared", "Finished",

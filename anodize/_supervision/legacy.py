@@ -95,7 +95,7 @@ def legacy_taps(record: str | os.PathLike[str] | None, live: ChannelTap | None) 
         # this deprecated keyword reaches up for it, by name, and it goes with the keyword.
         recording: Any = importlib.import_module("anodize._recording")
         taps.append(recording.Recording(record))
-        _deprecated("System.run(record=path)", "System.run(taps=[anodize._recording.Recording(path)])")
+        _deprecated("System.run(record=path)", "System.run(taps=[anodize.Recording(path)])")
     if live is not None:
         taps.append(live)
         _deprecated("System.run(live=view)", "System.run(taps=[view])")
