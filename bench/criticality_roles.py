@@ -45,8 +45,10 @@ def system_file(folder: Path) -> Path:
     system = folder / "mini.toml"
     system.write_text(f"""protocol = "mini.proto"
 global = "Mini"
-transport = "process"
 pythonpath = [{json.dumps(str(Path(__file__).resolve().parent))}]
+
+[transport]
+kind = "process"
 
 [groups.control]
 priority = 90
