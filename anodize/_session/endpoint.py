@@ -24,6 +24,7 @@ from sessiontypes import StateMachine
 from ..errors import Action, AnodizeError, PeerFailedError, ProtocolViolationError, RoleStopped
 from . import compiled
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
+from .inheriting import inheriting
 from .monitor import Monitor
 from .statistics import EndpointStatistics
 
@@ -88,6 +89,9 @@ class Endpoint(_Core):
         self._out = {p: (queues[(role, p)], network.doorbells.get(p))
                      for p in sends_to if (role, p) in queues}
         self._in = {p: queues[(p, role)] for p in receives_from if (p, role) in queues}
+        # Priority inheritance (where the network carries a table): only blocking waits lend.
+        self._in = inheriting(getattr(network, "inheritance", None), role, self._in,
+                              {p: channel for p, (channel, _) in self._out.items()})
         self.sent: dict[str, int] = dict.fromkeys(self._out, 0)
         # Channels that can say how many messages wait in them (queues between threads, DDS with
         # credits; not pipes): the most seen just after a send is the channel's high-water mark.

@@ -15,9 +15,10 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
+from contextlib import AbstractContextManager, nullcontext
 from queue import Empty, SimpleQueue
-from typing import Protocol
+from typing import Any, Protocol
 
 from .._session.channel import STOP, Channel, Doorbell, PeerFailure
 from ..errors import PeerFailedError, RoleStopped
@@ -48,6 +49,8 @@ class BoundedQueue:
         self._items: deque[object] = deque()
         self._messages = 0
         self._changed = threading.Condition()
+        # Set by the sender's endpoint under priority inheritance: the context a full-channel wait runs in.
+        self.blocked: Callable[[], AbstractContextManager[None]] | None = None
 
     def put(self, item: object) -> None:
         """Add ``item``; a message waits for room first.
@@ -58,9 +61,11 @@ class BoundedQueue:
         """
         with self._changed:
             if type(item) is tuple:
-                while self._messages >= self.capacity:
-                    self._check_waiting()
-                    self._changed.wait(_LOOK)
+                if self._messages >= self.capacity:
+                    with self.blocked() if self.blocked is not None else nullcontext():
+                        while self._messages >= self.capacity:
+                            self._check_waiting()
+                            self._changed.wait(_LOOK)
                 self._messages += 1
             self._items.append(item)
             self._changed.notify_all()
@@ -126,6 +131,7 @@ class InprocNetwork:
             for pair in channels}
         self.doorbells: dict[str, Doorbell] = {role: SimpleQueue() for role in doorbell_roles}
         self.failed: dict[str, str] = {}
+        self.inheritance: Any = None  # the run's priority inheritance table, set by the runner
         self.stopping = False
         self.stopped: set[str] = set()  # roles told to stop on their own (their group stops)
         self._stop_events: dict[str, threading.Event] = {}
