@@ -1,0 +1,118 @@
+"""Roles for the priority inheritance tests (module level: group processes import them).
+
+Each target role writes its thread id where the asking role can find it (``ANODIZE_TEST_DIR``),
+answers each ``ask`` with the priority its own thread has *while the asker waits* (it sleeps
+first, so the asker is surely blocked), and the asker reads the target's priority by thread id
+after the wait ended, to see the boost removed. Every wait is bounded; nothing spins.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from pathlib import Path
+
+from anodize import Endpoint
+
+PAUSE = 0.2  # how long a target sleeps before answering: the asker blocks meanwhile
+
+
+def _dir() -> Path:
+    return Path(os.environ["ANODIZE_TEST_DIR"])
+
+
+def own_priority(tid: int = 0) -> int:
+    """The SCHED_FIFO priority of thread ``tid`` (0: this one), 0 when not under SCHED_FIFO."""
+    return os.sched_getparam(tid).sched_priority if os.sched_getscheduler(tid) == os.SCHED_FIFO else 0
+
+
+def _tell_tid(role: str) -> None:
+    (_dir() / f"{role}.tid").write_text(str(threading.get_native_id()))
+
+
+def _tid_of(role: str) -> int:
+    path = _dir() / f"{role}.tid"
+    deadline = time.monotonic() + 10
+    while not path.exists() or not path.read_text():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{role} never wrote its thread id")
+        time.sleep(0.01)
+    return int(path.read_text())
+
+
+def _log(line: str) -> None:
+    with (_dir() / "log").open("a") as log:
+        log.write(line + "\n")
+
+
+def asker(ep: Endpoint) -> None:
+    """H: ask twice (logs what the target ran at during each wait, and just after), then stop."""
+    tid = _tid_of("L")
+    for _ in range(2):
+        ep.send("L", "ask")
+        during = ep.recv("L", timeout=10).payload
+        _log(f"during {during} after {own_priority(tid)}")
+    ep.send("L", "stop")
+
+
+def impatient_asker(ep: Endpoint) -> None:
+    """H: asks, gives up waiting before the answer comes, looks at the target, then takes it."""
+    tid = _tid_of("L")
+    ep.send("L", "ask")
+    try:
+        ep.recv("L", timeout=PAUSE / 4)
+    except TimeoutError:
+        _log(f"timeout after {own_priority(tid)}")
+    ep.recv("L", timeout=10)
+    ep.send("L", "stop")
+
+
+def answerer(ep: Endpoint) -> None:
+    """L: answers each ask, after a pause, with its own priority at that moment."""
+    _tell_tid("L")
+    while ep.recv("H", timeout=30).label == "ask":
+        time.sleep(PAUSE)
+        ep.send("H", "answer", own_priority())
+
+
+def middle(ep: Endpoint) -> None:
+    """M in a chain H -> M -> L: each ask from H becomes an ask to L; L's answer goes back."""
+    _tell_tid("M")
+    while ep.recv("H", timeout=30).label == "ask":
+        ep.send("L", "ask")
+        ep.send("H", "answer", ep.recv("L", timeout=10).payload)
+    ep.send("L", "stop")
+
+
+def chain_answerer(ep: Endpoint) -> None:
+    """L at the end of the chain: answers M."""
+    _tell_tid("L")
+    while ep.recv("M", timeout=30).label == "ask":
+        time.sleep(PAUSE)
+        ep.send("M", "answer", own_priority())
+
+
+def chain_asker(ep: Endpoint) -> None:
+    """H at the head of the chain: asks M once, logs what L ran at, and after."""
+    tid = _tid_of("L")
+    ep.send("M", "ask")
+    during = ep.recv("M", timeout=10).payload
+    _log(f"during {during} after {own_priority(tid)}")
+    ep.send("M", "stop")
+
+
+def dying_asker(ep: Endpoint) -> None:
+    """H: asks, then its process dies (SIGKILL) while it waits."""
+    _tid_of("L")
+    ep.send("L", "ask")
+    threading.Timer(PAUSE / 4, os.kill, (os.getpid(), 9)).start()
+    ep.recv("L", timeout=10)
+
+
+def watching_answerer(ep: Endpoint) -> None:
+    """L for dying_asker: logs its priority once its asker is long dead, then ends."""
+    _tell_tid("L")
+    ep.recv("H", timeout=30)
+    time.sleep(PAUSE * 3)  # the asker died meanwhile, and the supervisor noticed
+    _log(f"orphan {own_priority()}")

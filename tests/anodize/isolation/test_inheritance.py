@@ -1,0 +1,136 @@
+"""Priority inheritance over channels: the boost is applied while a wait blocks and removed
+after it, through chains, on timeout and on the waiter's death; off per group; never at or
+below the waiter's own priority. Behaviour, not timings: priorities are read from the kernel
+(``sched_getparam`` on the target thread's id)."""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+import inherit_roles as roles
+import pytest
+
+import anodize
+import sessiontypes
+from anodize._isolation.inherit import BoostTable, RoleSeat
+from anodize._supervision.report import RunReport
+
+ASK = sessiontypes.loads("global Ask(H, L) = mu t. H -> L : {ask. L -> H : answer(nat). t, stop}",
+                         "test_inheritance.proto").globals["Ask"]
+CHAIN = sessiontypes.loads(
+    "global Chain(H, M, L) = mu t. H -> M : {ask. M -> L : ask. L -> M : answer(nat). "
+    "M -> H : answer(nat). t, stop. M -> L : stop}", "test_inheritance_chain.proto").globals["Chain"]
+
+
+TRANSPORTS = {"inproc": anodize.Inproc, "process": anodize.Processes}
+
+
+def _fifo_refused() -> str:
+    if os.environ.get("ANODIZE_NO_RT"):
+        return "ANODIZE_NO_RT is set"
+    try:
+        before = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+        os.sched_setscheduler(0, before[0], before[1])
+    except (OSError, AttributeError) as error:
+        return f"SCHED_FIFO refused here ({error}): inheritance is inactive"
+    return ""
+
+
+pytestmark = pytest.mark.skipif(bool(_fifo_refused()), reason=_fifo_refused() or "-")
+
+
+@pytest.fixture(autouse=True)
+def test_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setenv("ANODIZE_TEST_DIR", str(tmp_path))
+    return tmp_path
+
+
+def _log(tmp_path: Path) -> list[str]:
+    return (tmp_path / "log").read_text().splitlines()
+
+
+def _ask(transport: str, h: int, l_priority: int, inherit: bool = True,
+         asker: Callable[[anodize.Endpoint], None] = roles.asker) -> RunReport:
+    system = anodize.System(ASK, transport=TRANSPORTS[transport]())
+    system.group("high", priority=h, cpus={0}).role("H", asker)
+    system.group("low", priority=l_priority, cpus={0}, priority_inheritance=inherit).role("L", roles.answerer)
+    return system.run(timeout=30)
+
+
+@pytest.mark.parametrize("transport", ["inproc", "process"])
+def test_the_target_runs_at_the_waiters_priority_while_it_waits_and_drops_back(
+        transport: str, test_dir: Path) -> None:
+    report = _ask(transport, 60, 10)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["during 60 after 10"] * 2
+    assert report.boosts["H->L"]["episodes"] == 2
+    assert report.boosts["H->L"]["seconds"] > 0
+    assert "priority inheritance: H->L 2 boosts" in report.summary()
+
+
+def test_turned_off_per_group(test_dir: Path) -> None:
+    report = _ask("inproc", 60, 10, inherit=False)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["during 10 after 10"] * 2
+    assert "H->L" not in report.boosts
+
+
+def test_never_applied_at_or_below_the_waiters_own_priority(test_dir: Path) -> None:
+    report = _ask("inproc", 10, 40)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["during 40 after 40"] * 2
+    assert "H->L" not in report.boosts  # (L, waiting on H's next ask, does lend H its 40)
+
+
+def test_undone_when_the_wait_times_out(test_dir: Path) -> None:
+    report = _ask("inproc", 60, 10, asker=roles.impatient_asker)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["timeout after 10"]
+
+
+@pytest.mark.parametrize("transport", ["inproc", "process"])
+def test_through_a_chain(transport: str, test_dir: Path) -> None:
+    system = anodize.System(CHAIN, transport=TRANSPORTS[transport]())
+    system.group("high", priority=70, cpus={0}).role("H", roles.chain_asker)
+    system.group("mid", priority=30, cpus={0}).role("M", roles.middle)
+    system.group("low", priority=10, cpus={0}).role("L", roles.chain_answerer)
+    report = system.run(timeout=30)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["during 70 after 10"]
+
+
+@pytest.mark.slow
+def test_a_waiter_that_dies_leaves_no_peer_boosted(test_dir: Path) -> None:
+    system = anodize.System(ASK, transport=anodize.Processes())
+    system.group("high", priority=60, cpus={0}).role("H", roles.dying_asker)
+    system.group("low", priority=10, cpus={0}).role("L", roles.watching_answerer)
+    system.run(timeout=30)
+    assert _log(test_dir) == ["orphan 10"]
+
+
+def test_a_restarted_target_is_boosted_by_a_waiter_already_waiting() -> None:
+    table = BoostTable.create([RoleSeat("H", 60, True), RoleSeat("L", 10, True)])
+    try:
+        seen: list[int] = []
+        table.enter("H")  # this thread plays H (it is not under SCHED_FIFO here: lends nothing)
+        assert table.inactive() == ["H"]
+        done = threading.Event()
+
+        def target() -> None:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+            table.enter("L")
+            seen.append(roles.own_priority())
+            table.leave("L")
+            done.set()
+
+        thread = threading.Thread(target=target)
+        thread.start()
+        assert done.wait(10)
+        thread.join(10)
+        assert seen == [10]
+    finally:
+        table.close()
