@@ -84,8 +84,8 @@ def test_the_whole_block_of_text() -> None:
         "  chain: H ?L(reply) [state 1] -> L",
         "  roles: H (group high, priority 90, CPUs any), L (group low, priority 10, CPUs any)",
         "  preempted by: medium (priority 50, CPUs any) over L",
-        "  priority inheritance: cannot cover it: H waits on group low, which turns it off "
-        "(priority_inheritance = false)",
+        ("  priority inheritance: cannot cover it: H waits on group low, which turns it off "
+         "(priority_inheritance = false)"),
         "  unbounded: medium can preempt L for as long as it runs",
         "1 priority inversion (1 unbounded) among 2 waits; priority inheritance is turned off in some groups",
     ]
