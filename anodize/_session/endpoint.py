@@ -24,7 +24,7 @@ from sessiontypes import StateMachine
 from ..errors import Action, AnodizeError, PeerFailedError, ProtocolViolationError, RoleStopped
 from . import compiled
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
-from .inheriting import inheriting
+from .inheriting import get_lending, inheriting
 from .monitor import Monitor
 from .statistics import EndpointStatistics
 
@@ -90,8 +90,8 @@ class Endpoint(_Core):
                      for p in sends_to if (role, p) in queues}
         self._in = {p: queues[(p, role)] for p in receives_from if (p, role) in queues}
         # Priority inheritance (where the network carries a table): only blocking waits lend.
-        self._in = inheriting(getattr(network, "inheritance", None), role, self._in,
-                              {p: channel for p, (channel, _) in self._out.items()})
+        self._lending = inheriting(getattr(network, "inheritance", None), role, self._in,
+                                   {p: channel for p, (channel, _) in self._out.items()})
         self.sent: dict[str, int] = dict.fromkeys(self._out, 0)
         # Channels that can say how many messages wait in them (queues between threads, DDS with
         # credits; not pipes): the most seen just after a send is the channel's high-water mark.
@@ -264,8 +264,9 @@ class Endpoint(_Core):
         channel = self._in.get(frm)
         if channel is None:
             raise AnodizeError(f"role {self.role} has no channel from {frm}")
+        lend = self._lending.get(frm) if self._lending else None
         try:
-            item = channel.get(timeout=timeout)
+            item = channel.get(timeout=timeout) if lend is None else get_lending(channel, timeout, lend)
         except queue.Empty:
             raise TimeoutError(f"role {self.role}: no message from {frm} within {timeout} s") from None
         if self._doorbell is not None and self._doorbell.qsize() > _DRAIN_AT:

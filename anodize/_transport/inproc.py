@@ -49,8 +49,10 @@ class BoundedQueue:
         self._items: deque[object] = deque()
         self._messages = 0
         self._changed = threading.Condition()
-        # Set by the sender's endpoint under priority inheritance: the context a full-channel wait runs in.
-        self.blocked: Callable[[], AbstractContextManager[None]] | None = None
+        # Set by the endpoints under priority inheritance: the contexts in which a sender waiting for
+        # room, and a receiver waiting for a message, lend their priority (anodize._session.inheriting).
+        self.lend_while_full: Callable[[], AbstractContextManager[None]] | None = None
+        self.lend_while_empty: Callable[[], AbstractContextManager[None]] | None = None
 
     def put(self, item: object) -> None:
         """Add ``item``; a message waits for room first.
@@ -62,7 +64,7 @@ class BoundedQueue:
         with self._changed:
             if type(item) is tuple:
                 if self._messages >= self.capacity:
-                    with self.blocked() if self.blocked is not None else nullcontext():
+                    with self.lend_while_full() if self.lend_while_full is not None else nullcontext():
                         while self._messages >= self.capacity:
                             self._check_waiting()
                             self._changed.wait(_LOOK)
@@ -87,11 +89,15 @@ class BoundedQueue:
         """
         deadline = None if timeout is None else time.monotonic() + timeout
         with self._changed:
-            while not self._items:
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
+            if not self._items:
+                if timeout is not None and timeout <= 0:
                     raise Empty
-                self._changed.wait(left)
+                with self.lend_while_empty() if self.lend_while_empty is not None else nullcontext():
+                    while not self._items:
+                        left = None if deadline is None else deadline - time.monotonic()
+                        if left is not None and left <= 0:
+                            raise Empty
+                        self._changed.wait(left)
             item = self._items.popleft()
             if type(item) is tuple:
                 self._messages -= 1

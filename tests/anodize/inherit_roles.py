@@ -116,3 +116,24 @@ def watching_answerer(ep: Endpoint) -> None:
     ep.recv("H", timeout=30)
     time.sleep(PAUSE * 3)  # the asker died meanwhile, and the supervisor noticed
     _log(f"orphan {own_priority()}")
+
+
+BIG = b"x" * 300_000  # between processes, a few of these fill the pipe (1 MiB)
+
+
+def flooder(ep: Endpoint) -> None:
+    """H: sends more than the channel holds (it blocks on a full channel), then looks at L."""
+    tid = _tid_of("L")
+    for _ in range(8):
+        ep.send("L", "data", BIG)
+    _log(f"after {own_priority(tid)}")
+    ep.send("L", "stop")
+
+
+def slow_sink(ep: Endpoint) -> None:
+    """L: lets its channel fill (H blocks sending), logs its priority then, and drains it."""
+    _tell_tid("L")
+    time.sleep(PAUSE * 2)
+    _log(f"during {own_priority()}")
+    while ep.recv("H", timeout=30).label == "data":
+        pass

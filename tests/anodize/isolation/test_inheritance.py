@@ -20,6 +20,8 @@ from anodize._supervision.report import RunReport
 
 ASK = sessiontypes.loads("global Ask(H, L) = mu t. H -> L : {ask. L -> H : answer(nat). t, stop}",
                          "test_inheritance.proto").globals["Ask"]
+FLOOD = sessiontypes.loads("global Flood(H, L) = mu t. H -> L : {data(bytes). t, stop}",
+                           "test_inheritance_flood.proto").globals["Flood"]
 CHAIN = sessiontypes.loads(
     "global Chain(H, M, L) = mu t. H -> M : {ask. M -> L : ask. L -> M : answer(nat). "
     "M -> H : answer(nat). t, stop. M -> L : stop}", "test_inheritance_chain.proto").globals["Chain"]
@@ -101,6 +103,19 @@ def test_through_a_chain(transport: str, test_dir: Path) -> None:
     report = system.run(timeout=30)
     assert report.ok, report.summary()
     assert _log(test_dir) == ["during 70 after 10"]
+
+
+@pytest.mark.parametrize("transport", ["inproc", "process"])
+def test_a_sender_blocked_on_a_full_channel_lends_its_priority(transport: str, test_dir: Path) -> None:
+    # between threads a capacity of 1 message; between processes the pipe (1 MiB) fills
+    capacities = {"H->L": 1} if transport == "inproc" else None
+    system = anodize.System(FLOOD, transport=TRANSPORTS[transport](), capacities=capacities)
+    system.group("high", priority=60, cpus={0}).role("H", roles.flooder)
+    system.group("low", priority=10, cpus={0}).role("L", roles.slow_sink)
+    report = system.run(timeout=30)
+    assert report.ok, report.summary()
+    assert sorted(_log(test_dir)) == ["after 10", "during 60"]
+    assert report.boosts["H->L"]["episodes"] >= 1
 
 
 @pytest.mark.slow
