@@ -93,10 +93,10 @@ class ProcessRunner:
         self.start_timeout = _START_TIMEOUT
         remove_stale_segments()  # of earlier runs whose supervisor was killed (the inheritance table too)
         remove_stale_cgroups()
-        # Priority inheritance: one table every group process maps (groups on other hosts are not in it).
-        self.inheritance = inheritance_table(
-            (g for g in self.groups.values() if g.host is None),
-            os.path.join(segment_dir(), f"anodize-{self.run_id}-inherit"))
+        # Priority inheritance: one table every group process of this host maps (a DdsRunner passes
+        # only this host's groups: roles elsewhere are not in it, and nobody lends to them).
+        self.inheritance = inheritance_table(self.groups.values(),
+                                             os.path.join(segment_dir(), f"anodize-{self.run_id}-inherit"))
         self.boosts: dict[tuple[str, str], Boosts] = {}
         self.inactive: list[str] = []
 

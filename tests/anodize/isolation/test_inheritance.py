@@ -12,6 +12,7 @@ from pathlib import Path
 
 import inherit_roles as roles
 import pytest
+from dds_hosts import domain
 
 import anodize
 import sessiontypes
@@ -116,6 +117,17 @@ def test_a_sender_blocked_on_a_full_channel_lends_its_priority(transport: str, t
     assert report.ok, report.summary()
     assert sorted(_log(test_dir)) == ["after 10", "during 60"]
     assert report.boosts["H->L"]["episodes"] >= 1
+
+
+@pytest.mark.slow
+def test_dds_groups_on_this_host_inherit_too(test_dir: Path) -> None:
+    pytest.importorskip("cyclonedds", reason="the Dds transport needs cyclonedds")
+    system = anodize.System(ASK, transport=anodize.Dds(domain=domain(), run_id="inherit", wait=20))
+    system.group("high", priority=60, cpus={0}).role("H", roles.asker)
+    system.group("low", priority=10, cpus={0}).role("L", roles.answerer)
+    report = system.run(timeout=60)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["during 60 after 10"] * 2
 
 
 @pytest.mark.slow
