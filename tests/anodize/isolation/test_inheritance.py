@@ -139,25 +139,74 @@ def test_a_waiter_that_dies_leaves_no_peer_boosted(test_dir: Path) -> None:
     assert _log(test_dir) == ["orphan 10"]
 
 
-def test_a_restarted_target_is_boosted_by_a_waiter_already_waiting() -> None:
+class _Player:
+    """A thread that plays ``role`` in ``table`` at SCHED_FIFO ``priority``, blocking (never
+    spinning) until told to look at its own priority or to end."""
+
+    def __init__(self, table: BoostTable, role: str, priority: int) -> None:
+        self.table, self.role, self.priority = table, role, priority
+        self.entered, self.look, self.looked, self.end = (threading.Event() for _ in range(4))
+        self.seen: list[int] = []
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+        assert self.entered.wait(10)
+
+    def _run(self) -> None:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.priority))
+        self.table.enter(self.role)
+        self.entered.set()
+        while not self.end.is_set():
+            if self.look.wait(0.05):
+                self.look.clear()
+                self.seen.append(roles.own_priority())
+                self.looked.set()
+        self.table.leave(self.role)
+
+    def priority_now(self) -> int:
+        self.looked.clear()
+        self.look.set()
+        assert self.looked.wait(10)
+        return self.seen[-1]
+
+    def stop(self) -> None:
+        self.end.set()
+        self.thread.join(10)
+
+
+def test_a_restarted_target_runs_at_its_own_priority_unless_a_waiter_still_waits() -> None:
     table = BoostTable.create([RoleSeat("H", 60, True), RoleSeat("L", 10, True)])
+    waiter = None
     try:
-        seen: list[int] = []
-        table.enter("H")  # this thread plays H (it is not under SCHED_FIFO here: lends nothing)
-        assert table.inactive() == ["H"]
-        done = threading.Event()
-
-        def target() -> None:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
-            table.enter("L")
-            seen.append(roles.own_priority())
-            table.leave("L")
-            done.set()
-
-        thread = threading.Thread(target=target)
-        thread.start()
-        assert done.wait(10)
-        thread.join(10)
-        assert seen == [10]
+        before = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(60))  # this thread plays H
+        try:
+            table.enter("H")
+            first = _Player(table, "L", 10)
+            waiting = table.waiting("H", "L")
+            waiting.__enter__()
+            waiter = waiting
+            assert first.priority_now() == 60
+            first.stop()  # the target's incarnation ends while H waits on it
+            assert table.applied("L") == 0
+            second = _Player(table, "L", 10)  # restarted: H still waits, so it is lent H's priority
+            assert second.priority_now() == 60
+            waiting.__exit__(None, None, None)
+            waiter = None
+            assert second.priority_now() == 10
+            second.stop()
+            third = _Player(table, "L", 10)  # restarted with nobody waiting: its own priority
+            assert third.priority_now() == 10
+            third.stop()
+        finally:
+            if waiter is not None:
+                waiter.__exit__(None, None, None)
+            table.leave("H")
+            os.sched_setscheduler(0, before[0], before[1])
     finally:
         table.close()
+
+
+def test_the_group_keyword_is_checked() -> None:
+    system = anodize.System(ASK, transport=anodize.Inproc())
+    with pytest.raises(ValueError, match="priority_inheritance must be True or False, got 'no'"):
+        system.group("g", priority_inheritance="no")  # type: ignore[arg-type]
