@@ -3,8 +3,10 @@ request) and waits for the reply, over the process transport, both pinned to CPU
 unrelated SCHED_FIFO 50 process on the same CPU spins in bounded bursts (60 ms every 200 ms,
 with a hard stop). Three scenarios in one run: nothing spinning; spinning, with priority
 inheritance (the default); spinning, with inheritance turned off in L's group. Prints H's
-response time p50/p99/max and the ratios against the quiet run, and writes JSON
-(``bench/results/inversion.json``) through ``runs.write_results``.
+response time p50/p99/max and the ratios against the quiet run, then what inheritance costs
+(:mod:`inheritance_cost`: a receive that finds its message waiting, with and without the
+hook, and one boost episode), and writes JSON (``bench/results/inversion.json``) through
+``runs.write_results``.
 
     python bench/inversion.py [--asks 150] [--json PATH]
 
@@ -28,6 +30,7 @@ if str(BENCH) not in sys.path:
 sys.path.insert(0, str(BENCH.parent))
 os.environ["PYTHONPATH"] = os.pathsep.join([str(BENCH), str(BENCH.parent), os.environ.get("PYTHONPATH", "")])
 
+import inheritance_cost  # noqa: E402
 import inversion_roles as roles  # noqa: E402
 from runs import LoadWatch, bench_env, print_table, source_state, write_results  # noqa: E402
 
@@ -99,9 +102,16 @@ def main(argv: list[str] | None = None) -> int:
         table.append([name, f"{r['p50_ms']:.2f}", f"{r['p99_ms']:.2f}", f"{r['max_ms']:.2f}",
                       f"{r['p99_ms'] / quiet['p99_ms']:.1f}x"])
     print_table(table, (0,))
+    cost = inheritance_cost.measure()
+    print()
+    print_table([["what inheritance costs", "ns"],
+                 ["recv of a waiting message, no table", f"{cost['recv_plain_ns']:.0f}"],
+                 ["recv of a waiting message, hooked", f"{cost['recv_hooked_ns']:.0f}"],
+                 ["one boost episode (lend and take back)", f"{cost['episode_ns']:.0f}"]], (0,))
     how = (f"H (SCHED_FIFO 90) asks L (SCHED_FIFO 10, 2 ms of work) {args.asks} times over Processes, both on "
            "CPU 0; a SCHED_FIFO 50 process spins 60 ms every 200 ms on CPU 0")
-    write_results(args.json, {"table": table, "results": results, "source": source, "asks": args.asks},
+    write_results(args.json, {"table": table, "results": results, "cost_ns": cost, "source": source,
+                              "asks": args.asks},
                   started, title="Priority inversion and inheritance", how=how, watch=watch)
     return 0
 

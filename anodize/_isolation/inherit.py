@@ -1,19 +1,25 @@
 """Priority inheritance over channels: a waiter lends its priority to the role it waits on.
 
-One :class:`BoostTable` per run (per batch of groups started together) holds, for every role
-on this host, the thread that plays it (its Linux thread id), the priority it runs at of its
-own (SCHED_FIFO 1..99, or 0 for any other policy), whether its group accepts boosts, which
-role it is waiting on right now, and the priority a boost has applied to it (0: none).
+One :class:`BoostTable` per run holds, for every role on this host, the threads that play it
+(Linux thread ids: the role's thread, and the threads of its parallel branches once they
+have waited in the session), each thread's own scheduling (SCHED_FIFO 1..99, or 0 for any
+other policy) and the priority a boost has applied to it (0: none), whether the role's group
+accepts boosts, and, per ordered pair of roles, how many waits of the first on the second
+are blocked right now.
 
-A waiter that is about to block (:meth:`BoostTable.waiting`) writes whom it waits on, then
-*settles* the table: every role's effective priority is the highest of its own and those of
-the roles waiting on it, through chains (A waits on B which waits on C: C runs at A's
-priority), and every thread whose effective priority changed gets one ``sched_setscheduler``
-call. When the wait ends (message, timeout, failure, stop) the waiter clears its entry and
-settles again, which drops the boost at once. A role whose thread ends clears its own entry
-(:meth:`BoostTable.leave`); a group whose process dies is cleared by the supervisor
-(:meth:`BoostTable.release`). Who undoes a boost is therefore always someone alive: the
-waiter, the ending thread, or the supervisor; a boost outlives none of them.
+A waiter that is about to block (:meth:`BoostTable.waiting`) counts its wait, then *settles*
+the table: every role's effective priority is the highest of its own and those of the roles
+blocked on it, through chains (A waits on B which waits on C: C runs at A's priority), and
+every thread whose effective priority changed gets one ``sched_setscheduler`` call. When
+the wait ends (a message, a timeout, a failure, a stop) the waiter takes its count back and
+settles again, which drops the boost at once. A role whose thread ends clears its entry
+and restores its threads (:meth:`BoostTable.leave`); a group whose process died is cleared
+by the supervisor (:meth:`BoostTable.release`). Who undoes a boost is therefore always
+someone alive: the waiter, the ending thread, or the supervisor; a boost outlives none.
+
+A role's boost goes to every thread registered for it: the role's thread (at its start) and
+each thread of its parallel branches from its first blocking wait on (a branch thread that
+never blocks is busy anyway); a helper thread that never calls the endpoint is never boosted.
 
 Between threads the table lives in anonymous memory; between processes in a file under
 ``/dev/shm`` that the supervisor creates and every group maps (a threading lock plus
@@ -38,10 +44,11 @@ from typing import Any, Protocol
 
 __all__ = ["BoostTable", "RoleSeat", "Boosts", "thread_priority", "inheritance_table"]
 
-# Per role: thread id, own FIFO priority (0: not FIFO), own policy, accepts boosts,
-# waits on (role index or -1), applied boost (0: none), static (group) priority.
-_TID, _BASE, _POLICY, _INHERIT, _WAITS, _APPLIED, _STATIC = range(7)
-_FIELDS = 7
+THREADS = 8  # threads per role the table can boost (the role's, and its parallel branches')
+# Per role: accepts boosts, then per thread: thread id, policy, own priority (0: not FIFO), applied boost.
+_INHERIT = 0
+_TID, _POLICY, _BASE, _APPLIED = range(4)
+_ROLE_FIELDS = 1 + 4 * THREADS
 
 
 @dataclass(frozen=True)
@@ -56,8 +63,8 @@ class RoleSeat:
 
 @dataclass(frozen=True)
 class Boosts:
-    """What inheritance did on one channel: ``episodes`` waits in which the target ran boosted,
-    ``seconds`` the time it did."""
+    """What inheritance did on one pair of roles: ``episodes`` waits in which the target ran
+    boosted, ``seconds`` the time it did."""
 
     episodes: int
     seconds: float
@@ -73,8 +80,8 @@ def thread_priority(tid: int = 0) -> tuple[int, int]:
 class BoostTable:
     """The run's inheritance table (see the module docstring).
 
-    Create it with :meth:`create` (the supervisor), open it in a group process with
-    :meth:`open`; between threads :meth:`create` with no path is enough.
+    Create it with :meth:`create` (the supervisor, or the in-process runner), open it in a
+    group process with :meth:`open`.
     """
 
     def __init__(self, seats: Sequence[RoleSeat], memory: mmap.mmap, fd: int | None, path: str | None) -> None:
@@ -84,17 +91,20 @@ class BoostTable:
         self._fd = fd
         self._memory = memory
         count = len(self.seats)
+        roles, pairs = count * _ROLE_FIELDS, count * count
         words = memoryview(memory).cast("q")
         self._words = words
-        self._slots = words[: count * _FIELDS]
-        self._episodes = words[count * _FIELDS: count * _FIELDS + count * count]
-        self._nanos = words[count * _FIELDS + count * count: count * _FIELDS + 2 * count * count]
+        self._slots = words[:roles]
+        self._active = words[roles:roles + pairs]  # blocked waits of i on j, now
+        self._episodes = words[roles + pairs:roles + 2 * pairs]
+        self._nanos = words[roles + 2 * pairs:roles + 3 * pairs]
         self._lock = threading.Lock()
+        self._known: set[int] = set()  # this process's threads already registered (native ids)
 
     # ---- life cycle --------------------------------------------------------------------
     @staticmethod
     def _size(count: int) -> int:
-        return 8 * (count * _FIELDS + 2 * count * count)
+        return max(8, 8 * (count * _ROLE_FIELDS + 3 * count * count))
 
     @classmethod
     def create(cls, seats: Sequence[RoleSeat], path: str | None = None) -> BoostTable:
@@ -103,27 +113,25 @@ class BoostTable:
         size = cls._size(len(seats))
         fd = None
         if path is None:
-            memory = mmap.mmap(-1, max(size, 8))
+            memory = mmap.mmap(-1, size)
         else:
             fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_TRUNC, 0o600)
-            os.ftruncate(fd, max(size, 8))
-            memory = mmap.mmap(fd, max(size, 8))
+            os.ftruncate(fd, size)
+            memory = mmap.mmap(fd, size)
         table = cls(seats, memory, fd, path)
         for i, seat in enumerate(table.seats):
-            table._put(i, _WAITS, -1)
-            table._put(i, _INHERIT, int(seat.inherit))
-            table._put(i, _STATIC, seat.priority or 0)
+            table._slots[i * _ROLE_FIELDS + _INHERIT] = int(seat.inherit)
         return table
 
     @classmethod
     def open(cls, seats: Sequence[RoleSeat], path: str) -> BoostTable:
         """The table the supervisor created at ``path`` (``seats`` as it was given them)."""
         fd = os.open(path, os.O_RDWR)
-        return cls(seats, mmap.mmap(fd, max(cls._size(len(seats)), 8)), fd, path)
+        return cls(seats, mmap.mmap(fd, cls._size(len(seats))), fd, path)
 
     def close(self, unlink: bool = False) -> None:
         """Unmap the table (``unlink``: and remove its file: the supervisor, at the end)."""
-        for view in (self._slots, self._episodes, self._nanos, self._words):
+        for view in (self._slots, self._active, self._episodes, self._nanos, self._words):
             view.release()
         with contextlib.suppress(BufferError):
             self._memory.close()
@@ -140,97 +148,153 @@ class BoostTable:
         i = self.index.get(role)
         if i is None:
             return
-        policy, priority = thread_priority()
         with self._locked():
-            self._put(i, _TID, threading.get_native_id())
-            self._put(i, _POLICY, policy)
-            self._put(i, _BASE, priority)
-            self._put(i, _APPLIED, 0)
-            self._put(i, _WAITS, -1)
+            self._forget(i, restore=False)  # an earlier incarnation's threads are gone
+            self._join(i)
             self._settle()  # roles already waiting on it lend it their priority now
 
-    def leave(self, role: str) -> None:
-        """The thread of ``role`` ends: what it lent is taken back."""
-        self.release([role])
+    def join(self, role: str) -> None:
+        """The calling thread plays ``role`` too (a parallel branch's thread): boosts reach it."""
+        i = self.index.get(role)
+        if i is None or threading.get_native_id() in self._known:
+            return
+        with self._locked():
+            self._join(i)
+            self._settle()
 
-    def release(self, roles: Sequence[str]) -> None:
-        """Forget ``roles``' threads (ended, or their process died): boosts they lent or held end."""
+    def leave(self, role: str) -> None:
+        """The thread of ``role`` ends: what it lent is taken back, its threads run at their own
+        priority again, and the table forgets them."""
+        i = self.index.get(role)
+        if i is None:
+            return
+        with self._locked():
+            self._forget(i, restore=True)
+            self._settle()
+
+    def release(self, roles: Iterable[str]) -> None:
+        """Forget ``roles``' threads, which are gone (their process died): boosts they lent end."""
         with self._locked():
             for role in roles:
                 i = self.index.get(role)
                 if i is not None:
-                    self._put(i, _WAITS, -1)
-                    self._put(i, _TID, 0)
-                    self._put(i, _APPLIED, 0)
+                    self._forget(i, restore=False)
             self._settle()
 
     def could_boost(self, waiter: str, target: str) -> bool:
-        """Whether ``waiter``'s waits on ``target`` can ever lend it a priority (static view: a
-        chain can still raise a target at or above the waiter's own group)."""
+        """Whether ``waiter``'s waits on ``target`` can ever lend it a priority (a static view from
+        the groups' priorities: a chain can raise a waiter above its own group's)."""
         i, j = self.index.get(waiter), self.index.get(target)
-        if i is None or j is None or i == j:
+        if i is None or j is None or i == j or not self.seats[j].inherit:
             return False
         seat, lower = self.seats[i], self.seats[j].priority or 0
-        if not self.seats[j].inherit:
-            return False
         if (seat.priority or 0) > lower:
             return True
         # A waiter that is itself boosted (through a chain) passes on what it was lent.
-        return seat.inherit and any((seat.priority or 0) > lower for seat in self.seats)
+        return seat.inherit and any((other.priority or 0) > lower for other in self.seats)
 
     @contextlib.contextmanager
-    def waiting(self, waiter: str, target: str) -> Iterator[None]:
-        """While the body runs (a blocking wait), ``target`` runs at least at ``waiter``'s priority."""
-        i, j = self.index[waiter], self.index[target]
+    def waiting(self, waiter: str, *targets: str) -> Iterator[None]:
+        """While the body runs (a blocking wait of the calling thread, which plays ``waiter``, on
+        any of ``targets``), each target runs at least at ``waiter``'s priority."""
+        i = self.index[waiter]
+        count = len(self.seats)
+        cells = [i * count + self.index[target] for target in targets]
         with self._locked():
-            self._put(i, _WAITS, j)
+            if threading.get_native_id() not in self._known:
+                self._join(i)  # a parallel branch's thread, waiting for the first time
+            for cell in cells:
+                self._active[cell] += 1
             self._settle()
-            boosted = self._get(j, _APPLIED) > 0 and self._effective_of(i) > self._get(j, _BASE)
+            mine = self._effective(i)
+            boosted = [cell for cell in cells if self._lent(cell % count, mine)]
         start = time.monotonic_ns() if boosted else 0
         try:
             yield
         finally:
             with self._locked():
-                if self._get(i, _WAITS) == j:
-                    self._put(i, _WAITS, -1)
+                for cell in cells:
+                    if self._active[cell] > 0:  # (a release may have cleared it)
+                        self._active[cell] -= 1
                 self._settle()
                 if boosted:
-                    cell = i * len(self.seats) + j
-                    self._episodes[cell] += 1
-                    self._nanos[cell] += time.monotonic_ns() - start
+                    spent = time.monotonic_ns() - start
+                    for cell in boosted:
+                        self._episodes[cell] += 1
+                        self._nanos[cell] += spent
 
     # ---- what the supervisor reads ----------------------------------------------------
     def boosts(self) -> dict[tuple[str, str], Boosts]:
         """Per (waiter, target) with at least one episode: what inheritance did."""
         found = {}
         count = len(self.seats)
-        for i in range(count):
-            for j in range(count):
-                episodes = self._episodes[i * count + j]
-                if episodes:
-                    found[(self.seats[i].role, self.seats[j].role)] = Boosts(
-                        episodes, self._nanos[i * count + j] / 1e9)
+        for cell in range(count * count):
+            episodes = self._episodes[cell]
+            if episodes:
+                waiter, target = self.seats[cell // count].role, self.seats[cell % count].role
+                found[(waiter, target)] = Boosts(episodes, self._nanos[cell] / 1e9)
         return found
 
     def inactive(self) -> list[str]:
         """Roles whose group asked for a priority but whose thread is not under SCHED_FIFO: their
         waits lend nothing (the fallback to nice values is in force)."""
         return [seat.role for i, seat in enumerate(self.seats)
-                if seat.priority and self._get(i, _TID) and not self._get(i, _BASE)]
+                if seat.priority and self._threads(i) and not self._base(i)]
 
     def applied(self, role: str) -> int:
-        """The priority a boost has applied to ``role``'s thread now (0: none)."""
-        return self._get(self.index[role], _APPLIED)
+        """The highest priority a boost has applied to one of ``role``'s threads now (0: none)."""
+        i = self.index[role]
+        return max((self._get(i, k, _APPLIED) for k in self._threads(i)), default=0)
 
     # ---- internals --------------------------------------------------------------------------
-    def _get(self, i: int, what: int) -> int:
-        return int(self._slots[i * _FIELDS + what])
+    def _get(self, i: int, k: int, what: int) -> int:
+        return int(self._slots[i * _ROLE_FIELDS + 1 + 4 * k + what])
 
-    def _put(self, i: int, what: int, value: int) -> None:
-        self._slots[i * _FIELDS + what] = value
+    def _put(self, i: int, k: int, what: int, value: int) -> None:
+        self._slots[i * _ROLE_FIELDS + 1 + 4 * k + what] = value
 
-    def _effective_of(self, i: int) -> int:
-        return max(self._get(i, _BASE), self._get(i, _APPLIED))
+    def _threads(self, i: int) -> list[int]:
+        """The sub-slots of role ``i`` that hold a thread."""
+        return [k for k in range(THREADS) if self._get(i, k, _TID)]
+
+    def _base(self, i: int) -> int:
+        """Role ``i``'s own priority: the highest of its threads' (0: none under SCHED_FIFO)."""
+        return max((self._get(i, k, _BASE) for k in self._threads(i)), default=0)
+
+    def _effective(self, i: int) -> int:
+        return max((max(self._get(i, k, _BASE), self._get(i, k, _APPLIED)) for k in self._threads(i)), default=0)
+
+    def _lent(self, j: int, priority: int) -> bool:
+        """Whether role ``j`` now runs boosted to at least ``priority`` above its own."""
+        return priority > self._base(j) and self.applied(self.seats[j].role) >= priority
+
+    def _join(self, i: int) -> None:
+        """Register the calling thread for role ``i`` (in a free sub-slot; none free: not boosted)."""
+        tid = threading.get_native_id()
+        free = [k for k in range(THREADS) if self._get(i, k, _TID) in (0, tid)]
+        if not free:
+            return
+        policy, priority = thread_priority()
+        k = free[0]
+        self._put(i, k, _TID, tid)
+        self._put(i, k, _POLICY, policy)
+        self._put(i, k, _BASE, priority)
+        self._put(i, k, _APPLIED, 0)
+        self._known.add(tid)
+
+    def _forget(self, i: int, restore: bool) -> None:
+        """Clear role ``i``: its waits, and its threads (``restore``: back to their own priority)."""
+        count = len(self.seats)
+        for j in range(count):
+            self._active[i * count + j] = 0
+        for k in self._threads(i):
+            tid = self._get(i, k, _TID)
+            if restore and self._get(i, k, _APPLIED):
+                with contextlib.suppress(OSError):  # the thread has already ended
+                    os.sched_setscheduler(tid, self._get(i, k, _POLICY), os.sched_param(self._get(i, k, _BASE)))
+            self._known.discard(tid)
+            for what in (_TID, _POLICY, _BASE, _APPLIED):
+                self._put(i, k, what, 0)
 
     @contextlib.contextmanager
     def _locked(self) -> Iterator[None]:
@@ -247,35 +311,34 @@ class BoostTable:
     def _settle(self) -> None:
         """Effective priorities through the chains of waits; one scheduling call per change."""
         count = len(self.seats)
-        live = [self._get(i, _TID) != 0 for i in range(count)]
-        effective = [self._get(i, _BASE) if live[i] else 0 for i in range(count)]
+        live = [bool(self._threads(i)) for i in range(count)]
+        effective = [self._base(i) if live[i] else 0 for i in range(count)]
+        active = self._active
+        edges = [(i, j) for i in range(count) if live[i] for j in range(count)
+                 if active[i * count + j] and live[j] and self._slots[j * _ROLE_FIELDS + _INHERIT]]
         for _ in range(count):  # a chain is at most ``count`` long; a cycle cannot raise anything further
             changed = False
-            for i in range(count):
-                j = self._get(i, _WAITS)
-                if (j >= 0 and live[i] and live[j] and self._get(j, _INHERIT)
-                        and effective[i] > effective[j]):
+            for i, j in edges:
+                if effective[i] > effective[j]:
                     effective[j] = effective[i]
                     changed = True
             if not changed:
                 break
         for j in range(count):
-            if not live[j]:
-                continue
-            base = self._get(j, _BASE)
-            want = effective[j] if effective[j] > base else 0
-            if want == self._get(j, _APPLIED):
-                continue
-            tid = self._get(j, _TID)
-            try:
-                if want:
-                    os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(want))
-                else:
-                    policy = self._get(j, _POLICY)
-                    os.sched_setscheduler(tid, policy, os.sched_param(base))
-            except OSError:  # the thread is gone, or the boost was refused: nothing is applied
-                want = 0
-            self._put(j, _APPLIED, want)
+            for k in self._threads(j) if live[j] else ():
+                base = self._get(j, k, _BASE)
+                want = effective[j] if effective[j] > base else 0
+                if want == self._get(j, k, _APPLIED):
+                    continue
+                tid = self._get(j, k, _TID)
+                try:
+                    if want:
+                        os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(want))
+                    else:
+                        os.sched_setscheduler(tid, self._get(j, k, _POLICY), os.sched_param(base))
+                except OSError:  # the thread is gone, or the boost was refused: nothing is applied
+                    want = 0
+                self._put(j, k, _APPLIED, want)
 
 
 class _Grouped(Protocol):

@@ -19,12 +19,13 @@ the priority back.
 from __future__ import annotations
 
 import queue
+from collections.abc import Iterable
 from contextlib import AbstractContextManager
 from typing import Protocol
 
 from .channel import Channel
 
-__all__ = ["Lender", "Lend", "inheriting", "get_lending"]
+__all__ = ["Lender", "Lend", "inheriting", "get_lending", "lend_to_any"]
 
 
 class Lender(Protocol):
@@ -33,22 +34,25 @@ class Lender(Protocol):
     def could_boost(self, waiter: str, target: str) -> bool:
         """Whether ``waiter`` waiting on ``target`` may ever raise ``target``'s priority."""
 
-    def waiting(self, waiter: str, target: str) -> AbstractContextManager[None]:
-        """While inside, ``target`` runs at least at ``waiter``'s priority."""
+    def join(self, role: str) -> None:
+        """The calling thread plays ``role`` too (a parallel branch's thread)."""
+
+    def waiting(self, waiter: str, *targets: str) -> AbstractContextManager[None]:
+        """While inside, each of ``targets`` runs at least at ``waiter``'s priority."""
 
 
 class Lend:
-    """``lend()``: the context in which ``waiter``, blocked on ``target``, lends it its priority."""
+    """``lend()``: the context in which ``waiter``, blocked on ``targets``, lends them its priority."""
 
-    __slots__ = ("_lender", "target", "waiter")
+    __slots__ = ("_lender", "targets", "waiter")
 
-    def __init__(self, lender: Lender, waiter: str, target: str) -> None:
+    def __init__(self, lender: Lender, waiter: str, *targets: str) -> None:
         self._lender = lender
         self.waiter = waiter
-        self.target = target
+        self.targets = targets
 
     def __call__(self) -> AbstractContextManager[None]:
-        return self._lender.waiting(self.waiter, self.target)
+        return self._lender.waiting(self.waiter, *self.targets)
 
 
 def inheriting(lender: Lender | None, waiter: str, incoming: dict[str, Channel],
@@ -83,3 +87,12 @@ def get_lending(channel: Channel, timeout: float | None, lend: Lend) -> object:
             raise
     with lend():
         return channel.get(timeout=timeout)
+
+
+def lend_to_any(lender: Lender | None, waiter: str, peers: Iterable[str]) -> Lend | None:
+    """The :class:`Lend` for a wait on whichever of ``peers`` sends first (``recv_any``), or None
+    when none of them could be boosted."""
+    if lender is None:
+        return None
+    targets = [peer for peer in peers if lender.could_boost(waiter, peer)]
+    return Lend(lender, waiter, *targets) if targets else None

@@ -137,3 +137,47 @@ def slow_sink(ep: Endpoint) -> None:
     _log(f"during {own_priority()}")
     while ep.recv("H", timeout=30).label == "data":
         pass
+
+
+def branch_answerer(ep: Endpoint) -> None:
+    """L with two parallel branches, each on its own thread: the one H waits on answers H after
+    a pause with its thread's priority; the other takes K's message."""
+    _tell_tid("L")
+    to_h, from_k = ep.fork()
+
+    def answer_h() -> None:
+        to_h.recv("H", timeout=30)
+        time.sleep(PAUSE)
+        to_h.send("H", "answer", own_priority())
+
+    helper = threading.Thread(target=answer_h)
+    helper.start()
+    from_k.recv("K", timeout=30)
+    helper.join(30)
+
+
+def kicker(ep: Endpoint) -> None:
+    """K: one message to L."""
+    ep.send("L", "go")
+
+
+def single_asker(ep: Endpoint) -> None:
+    """H: asks once, logs what L's answering thread ran at."""
+    ep.send("L", "ask")
+    _log(f"during {ep.recv('L', timeout=10).payload}")
+
+
+def any_asker(ep: Endpoint) -> None:
+    """H: asks L and M, then takes whichever answers first (recv_any), twice."""
+    ep.send("L", "ask")
+    ep.send("M", "ask")
+    for _ in range(2):
+        peer, message = ep.recv_any(timeout=10)
+        _log(f"{peer} during {message.payload}")
+
+
+def any_answerer(ep: Endpoint) -> None:
+    """L or M for any_asker: answers after a pause (M pauses longer: L answers first)."""
+    ep.recv("H", timeout=30)
+    time.sleep(PAUSE if ep.role == "L" else PAUSE * 2)
+    ep.send("H", "answer", own_priority())

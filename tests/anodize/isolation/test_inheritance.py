@@ -23,6 +23,13 @@ ASK = sessiontypes.loads("global Ask(H, L) = mu t. H -> L : {ask. L -> H : answe
                          "test_inheritance.proto").globals["Ask"]
 FLOOD = sessiontypes.loads("global Flood(H, L) = mu t. H -> L : {data(bytes). t, stop}",
                            "test_inheritance_flood.proto").globals["Flood"]
+PARALLEL = sessiontypes.loads(
+    "global Par(H, L, K) = (H -> L : ask. L -> H : answer(nat). end || K -> L : go. end)",
+    "test_inheritance_par.proto").globals["Par"]
+EITHER = sessiontypes.loads(
+    "global Either(H, L, M) = H -> L : ask. H -> M : ask. "
+    "(L -> H : answer(nat). end || M -> H : answer(nat). end)",
+    "test_inheritance_either.proto").globals["Either"]
 CHAIN = sessiontypes.loads(
     "global Chain(H, M, L) = mu t. H -> M : {ask. M -> L : ask. L -> M : answer(nat). "
     "M -> H : answer(nat). t, stop. M -> L : stop}", "test_inheritance_chain.proto").globals["Chain"]
@@ -117,6 +124,27 @@ def test_a_sender_blocked_on_a_full_channel_lends_its_priority(transport: str, t
     assert report.ok, report.summary()
     assert sorted(_log(test_dir)) == ["after 10", "during 60"]
     assert report.boosts["H->L"]["episodes"] >= 1
+
+
+@pytest.mark.parametrize("transport", ["inproc", "process"])
+def test_the_thread_of_a_parallel_branch_is_boosted(transport: str, test_dir: Path) -> None:
+    system = anodize.System(PARALLEL, transport=TRANSPORTS[transport]())
+    system.group("high", priority=60, cpus={0}).role("H", roles.single_asker)
+    system.group("low", priority=10, cpus={0}).role("L", roles.branch_answerer)
+    system.group("kick", priority=20).role("K", roles.kicker)
+    report = system.run(timeout=30)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["during 60"]
+
+
+def test_a_wait_on_whichever_peer_sends_first_lends_to_each(test_dir: Path) -> None:
+    system = anodize.System(EITHER, transport=anodize.Inproc())
+    system.group("high", priority=60, cpus={0}).role("H", roles.any_asker)
+    system.group("low", priority=10, cpus={0}).role("L", roles.any_answerer)
+    system.group("mid", priority=20, cpus={0}).role("M", roles.any_answerer)
+    report = system.run(timeout=30)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["L during 60", "M during 60"]
 
 
 @pytest.mark.slow
