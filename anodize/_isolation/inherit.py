@@ -205,9 +205,9 @@ class BoostTable:
                 self._join(i)  # a parallel branch's thread, waiting for the first time
             for cell in cells:
                 self._active[cell] += 1
-            self._settle()
-            mine = self._effective(i)
-            boosted = [cell for cell in cells if self._lent(cell % count, mine)]
+            effective, own = self._settle()
+            mine = effective[i]  # what this wait lends: the waiter's own priority, or what it was lent
+            boosted = [cell for cell in cells if mine > own[cell % count] and effective[cell % count] >= mine]
         start = time.monotonic_ns() if boosted else 0
         try:
             yield
@@ -261,13 +261,6 @@ class BoostTable:
         """Role ``i``'s own priority: the highest of its threads' (0: none under SCHED_FIFO)."""
         return max((self._get(i, k, _BASE) for k in self._threads(i)), default=0)
 
-    def _effective(self, i: int) -> int:
-        return max((max(self._get(i, k, _BASE), self._get(i, k, _APPLIED)) for k in self._threads(i)), default=0)
-
-    def _lent(self, j: int, priority: int) -> bool:
-        """Whether role ``j`` now runs boosted to at least ``priority`` above its own."""
-        return priority > self._base(j) and self.applied(self.seats[j].role) >= priority
-
     def _join(self, i: int) -> None:
         """Register the calling thread for role ``i`` (in a free sub-slot; none free: not boosted)."""
         tid = threading.get_native_id()
@@ -308,14 +301,26 @@ class BoostTable:
             finally:
                 fcntl.flock(self._fd, fcntl.LOCK_UN)
 
-    def _settle(self) -> None:
-        """Effective priorities through the chains of waits; one scheduling call per change."""
+    def _settle(self) -> tuple[list[int], list[int]]:
+        """Effective priorities through the chains of waits; one scheduling call per change.
+        Returns each role's effective priority and its own (the table read once, as lists)."""
         count = len(self.seats)
-        live = [bool(self._threads(i)) for i in range(count)]
-        effective = [self._base(i) if live[i] else 0 for i in range(count)]
-        active = self._active
-        edges = [(i, j) for i in range(count) if live[i] for j in range(count)
-                 if active[i * count + j] and live[j] and self._slots[j * _ROLE_FIELDS + _INHERIT]]
+        slots = self._slots.tolist()
+        threads: list[list[int]] = []  # per role: where each of its threads' fields start
+        own = [0] * count
+        for i in range(count):
+            start = i * _ROLE_FIELDS + 1
+            held = [start + 4 * k for k in range(THREADS) if slots[start + 4 * k + _TID]]
+            threads.append(held)
+            if held:
+                own[i] = max(slots[at + _BASE] for at in held)
+        effective = own[:]
+        edges = []
+        for cell, blocked in enumerate(self._active.tolist()):
+            if blocked:
+                i, j = divmod(cell, count)
+                if threads[i] and threads[j] and slots[j * _ROLE_FIELDS + _INHERIT]:
+                    edges.append((i, j))
         for _ in range(count):  # a chain is at most ``count`` long; a cycle cannot raise anything further
             changed = False
             for i, j in edges:
@@ -325,20 +330,20 @@ class BoostTable:
             if not changed:
                 break
         for j in range(count):
-            for k in self._threads(j) if live[j] else ():
-                base = self._get(j, k, _BASE)
+            for at in threads[j]:
+                base = slots[at + _BASE]
                 want = effective[j] if effective[j] > base else 0
-                if want == self._get(j, k, _APPLIED):
+                if want == slots[at + _APPLIED]:
                     continue
-                tid = self._get(j, k, _TID)
                 try:
                     if want:
-                        os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(want))
+                        os.sched_setscheduler(slots[at + _TID], os.SCHED_FIFO, os.sched_param(want))
                     else:
-                        os.sched_setscheduler(tid, self._get(j, k, _POLICY), os.sched_param(base))
+                        os.sched_setscheduler(slots[at + _TID], slots[at + _POLICY], os.sched_param(base))
                 except OSError:  # the thread is gone, or the boost was refused: nothing is applied
                     want = 0
-                self._put(j, k, _APPLIED, want)
+                self._slots[at + _APPLIED] = want
+        return effective, own
 
 
 class _Grouped(Protocol):
