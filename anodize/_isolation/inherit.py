@@ -45,10 +45,11 @@ from typing import Any, Protocol
 __all__ = ["BoostTable", "RoleSeat", "Boosts", "thread_priority", "inheritance_table"]
 
 THREADS = 8  # threads per role the table can boost (the role's, and its parallel branches')
-# Per role: accepts boosts, then per thread: thread id, policy, own priority (0: not FIFO), applied boost.
-_INHERIT = 0
+# Per role: accepts boosts, ran without SCHED_FIFO though its group asked for a priority, then per
+# thread: thread id, policy, own priority (0: not FIFO), applied boost.
+_INHERIT, _INACTIVE, _HEAD = 0, 1, 2
 _TID, _POLICY, _BASE, _APPLIED = range(4)
-_ROLE_FIELDS = 1 + 4 * THREADS
+_ROLE_FIELDS = _HEAD + 4 * THREADS
 
 
 @dataclass(frozen=True)
@@ -151,6 +152,8 @@ class BoostTable:
         with self._locked():
             self._forget(i, restore=False)  # an earlier incarnation's threads are gone
             self._join(i)
+            if self.seats[i].priority and not self._base(i):  # SCHED_FIFO was refused: a nice value
+                self._slots[i * _ROLE_FIELDS + _INACTIVE] = 1
             self._settle()  # roles already waiting on it lend it their priority now
 
     def join(self, role: str) -> None:
@@ -238,8 +241,7 @@ class BoostTable:
     def inactive(self) -> list[str]:
         """Roles whose group asked for a priority but whose thread is not under SCHED_FIFO: their
         waits lend nothing (the fallback to nice values is in force)."""
-        return [seat.role for i, seat in enumerate(self.seats)
-                if seat.priority and self._threads(i) and not self._base(i)]
+        return [seat.role for i, seat in enumerate(self.seats) if self._slots[i * _ROLE_FIELDS + _INACTIVE]]
 
     def applied(self, role: str) -> int:
         """The highest priority a boost has applied to one of ``role``'s threads now (0: none)."""
@@ -248,10 +250,10 @@ class BoostTable:
 
     # ---- internals --------------------------------------------------------------------------
     def _get(self, i: int, k: int, what: int) -> int:
-        return int(self._slots[i * _ROLE_FIELDS + 1 + 4 * k + what])
+        return int(self._slots[i * _ROLE_FIELDS + _HEAD + 4 * k + what])
 
     def _put(self, i: int, k: int, what: int, value: int) -> None:
-        self._slots[i * _ROLE_FIELDS + 1 + 4 * k + what] = value
+        self._slots[i * _ROLE_FIELDS + _HEAD + 4 * k + what] = value
 
     def _threads(self, i: int) -> list[int]:
         """The sub-slots of role ``i`` that hold a thread."""
@@ -309,7 +311,7 @@ class BoostTable:
         threads: list[list[int]] = []  # per role: where each of its threads' fields start
         own = [0] * count
         for i in range(count):
-            start = i * _ROLE_FIELDS + 1
+            start = i * _ROLE_FIELDS + _HEAD
             held = [start + 4 * k for k in range(THREADS) if slots[start + 4 * k + _TID]]
             threads.append(held)
             if held:

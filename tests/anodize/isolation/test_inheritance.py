@@ -80,6 +80,19 @@ def test_the_target_runs_at_the_waiters_priority_while_it_waits_and_drops_back(
     assert report.boosts["H->L"]["episodes"] == 2
     assert report.boosts["H->L"]["seconds"] > 0
     assert "priority inheritance: H->L 2 boosts" in report.summary()
+    assert report.to_dict()["boosts"]["H->L"]["episodes"] == 2
+    assert report.inheritance_inactive == ()
+
+
+def test_where_sched_fifo_was_refused_the_report_says_inheritance_is_inactive(
+        test_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("ANODIZE_NO_RT", "1")  # every group falls back to a nice value
+    report = _ask("inproc", 60, 10)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["during 0 after 0"] * 2
+    assert (report.boosts, report.inheritance_inactive) == ({}, ("H", "L"))
+    assert "priority inheritance inactive for H, L (no SCHED_FIFO: a nice value was applied instead)" \
+        in report.summary()
 
 
 def test_turned_off_per_group(test_dir: Path) -> None:
