@@ -181,3 +181,22 @@ def any_answerer(ep: Endpoint) -> None:
     ep.recv("H", timeout=30)
     time.sleep(PAUSE if ep.role == "L" else PAUSE * 2)
     ep.send("H", "answer", own_priority())
+
+
+def ticker(ep: Endpoint) -> None:
+    """H: small messages (the compiled writer's) until the pipe is full and well past it."""
+    tid = _tid_of("L")
+    for _ in range(200_000):
+        ep.send("L", "tick")
+    _log(f"after {own_priority(tid)}")
+    ep.send("L", "stop")
+
+
+def tick_sink(ep: Endpoint) -> None:
+    """L: lets the pipe fill (H blocks writing), logs its priority then, and drains it."""
+    _tell_tid("L")
+    time.sleep(PAUSE * 2)
+    _log(f"during {own_priority()}")
+    while True:
+        if any(message.label == "stop" for message in ep.recv_many("H", timeout=30)):
+            return

@@ -30,6 +30,8 @@ EITHER = sessiontypes.loads(
     "global Either(H, L, M) = H -> L : ask. H -> M : ask. "
     "(L -> H : answer(nat). end || M -> H : answer(nat). end)",
     "test_inheritance_either.proto").globals["Either"]
+TICKS = sessiontypes.loads("global Ticks(H, L) = mu t. H -> L : {tick. t, stop}",
+                           "test_inheritance_ticks.proto").globals["Ticks"]
 CHAIN = sessiontypes.loads(
     "global Chain(H, M, L) = mu t. H -> M : {ask. M -> L : ask. L -> M : answer(nat). "
     "M -> H : answer(nat). t, stop. M -> L : stop}", "test_inheritance_chain.proto").globals["Chain"]
@@ -137,6 +139,15 @@ def test_a_sender_blocked_on_a_full_channel_lends_its_priority(transport: str, t
     assert report.ok, report.summary()
     assert sorted(_log(test_dir)) == ["after 10", "during 60"]
     assert report.boosts["H->L"]["episodes"] >= 1
+
+
+def test_small_messages_written_by_the_compiled_writer_lend_when_the_pipe_is_full(test_dir: Path) -> None:
+    system = anodize.System(TICKS, transport=anodize.Processes())
+    system.group("high", priority=60, cpus={0}).role("H", roles.ticker)
+    system.group("low", priority=10, cpus={0}).role("L", roles.tick_sink)
+    report = system.run(timeout=60)
+    assert report.ok, report.summary()
+    assert sorted(_log(test_dir)) == ["after 10", "during 60"]
 
 
 @pytest.mark.parametrize("transport", ["inproc", "process"])
