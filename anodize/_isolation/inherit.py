@@ -150,6 +150,7 @@ class BoostTable:
         if i is None:
             return
         with self._locked():
+            self._slots[i * _ROLE_FIELDS + _INHERIT] = int(self.seats[i].inherit)  # (a demotion was the last one's)
             self._forget(i, restore=False)  # an earlier incarnation's threads are gone
             self._join(i)
             if self.seats[i].priority and not self._base(i):  # SCHED_FIFO was refused: a nice value
@@ -182,6 +183,21 @@ class BoostTable:
                 i = self.index.get(role)
                 if i is not None:
                     self._forget(i, restore=False)
+            self._settle()
+
+    def demote(self, roles: Iterable[str]) -> None:
+        """``roles``' threads were moved to SCHED_OTHER (the watchdog demoted their group): they
+        are never boosted again in this incarnation, and lend nothing."""
+        with self._locked():
+            for role in roles:
+                i = self.index.get(role)
+                if i is None:
+                    continue
+                self._slots[i * _ROLE_FIELDS + _INHERIT] = 0
+                for k in self._threads(i):
+                    self._put(i, k, _POLICY, os.SCHED_OTHER)
+                    self._put(i, k, _BASE, 0)
+                    self._put(i, k, _APPLIED, 0)
             self._settle()
 
     def could_boost(self, waiter: str, target: str) -> bool:

@@ -95,8 +95,14 @@ class ProcessRunner:
         remove_stale_cgroups()
         # Priority inheritance: one table every group process of this host maps (a DdsRunner passes
         # only this host's groups: roles elsewhere are not in it, and nobody lends to them).
-        self.inheritance = inheritance_table(self.groups.values(),
-                                             os.path.join(segment_dir(), f"anodize-{self.run_id}-inherit"))
+        self.inheritance_note = ""
+        try:
+            self.inheritance = inheritance_table(self.groups.values(),
+                                                 os.path.join(segment_dir(), f"anodize-{self.run_id}-inherit"))
+        except OSError as error:  # no shared memory to put the table in: inheritance is off, and says so
+            self.inheritance = None
+            self.inheritance_note = (f"priority inheritance off: its table could not be made in {segment_dir()} "
+                                     f"({error})")
         self.boosts: dict[tuple[str, str], Boosts] = {}
         self.inactive: list[str] = []
 
@@ -398,11 +404,15 @@ class ProcessRunner:
             inc.deaf = True
 
     def _demoted(self, group: str, description: str) -> None:
+        if self.inheritance is not None:  # a demoted group is not boosted back up by a waiter
+            self.inheritance.demote(list(self.groups[group].roles))
         self.pending.append(Note(group=group, text=description))
 
     def notes(self) -> list[str]:
         notes = [(f"real-time guard: kernel RT throttling {rt_throttling()}; watchdog demotes a SCHED_FIFO "
                   f"group that keeps a CPU busy for {WATCHDOG_LIMIT:g} s"), *self.watch.notes()]
+        if self.inheritance_note:
+            notes.append(self.inheritance_note)
         if self.transport == "process":
             piped = sorted(f"{a}->{b}" for a, b in self.capacities if self.group_of.get(a) != self.group_of.get(b))
             if piped:

@@ -258,6 +258,31 @@ def test_a_restarted_target_runs_at_its_own_priority_unless_a_waiter_still_waits
         table.close()
 
 
+def test_a_group_the_watchdog_demoted_is_not_boosted_back_up() -> None:
+    table = BoostTable.create([RoleSeat("H", 60, True), RoleSeat("L", 10, True)])
+    before = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(60))  # this thread plays H
+        table.enter("H")
+        target = _Player(table, "L", 10)
+        try:
+            with table.waiting("H", "L"):
+                assert target.priority_now() == 60
+                tid = target.thread.native_id
+                assert tid is not None
+                os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))  # as watchdog.demote does
+                table.demote(["L"])
+            assert (target.priority_now(), os.sched_getscheduler(tid)) == (0, os.SCHED_OTHER)
+            with table.waiting("H", "L"):
+                assert target.priority_now() == 0
+        finally:
+            target.stop()
+            table.leave("H")
+    finally:
+        os.sched_setscheduler(0, before[0], before[1])
+        table.close()
+
+
 def test_the_group_keyword_is_checked() -> None:
     system = anodize.System(ASK, transport=anodize.Inproc())
     with pytest.raises(ValueError, match="priority_inheritance must be True or False, got 'no'"):
