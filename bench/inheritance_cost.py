@@ -68,8 +68,9 @@ def measure(count: int = 20_000) -> dict[str, Any]:
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(90))  # the waiter must be under FIFO to lend
         table.enter("H")
-        plain = _receive_ns(None, count)
-        hooked = _receive_ns(table, count)
+        _receive_ns(table, count // 10)  # untimed: the first endpoint built pays for what the others find warm
+        plain = min(_receive_ns(None, count), _receive_ns(None, count))
+        hooked = min(_receive_ns(table, count), _receive_ns(table, count))
         episode = _episode_ns(table, max(1, count // 10))
         lent = table.boosts().get(("H", "L"))
     finally:
