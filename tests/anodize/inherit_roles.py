@@ -183,11 +183,15 @@ def any_answerer(ep: Endpoint) -> None:
     ep.send("H", "answer", own_priority())
 
 
+TICK = "tick_" + "x" * 250  # a long label: few of these small frames fill the pipe (1 MiB)
+
+
 def ticker(ep: Endpoint) -> None:
-    """H: small messages (the compiled writer's) until the pipe is full and well past it."""
+    """H: small messages (the compiled writer's) until the pipe is full and well past it (it
+    blocks rather than spins: each frame is about 270 bytes, so 8000 are twice the pipe)."""
     tid = _tid_of("L")
-    for _ in range(200_000):
-        ep.send("L", "tick")
+    for _ in range(8000):
+        ep.send("L", TICK)
     _log(f"after {own_priority(tid)}")
     ep.send("L", "stop")
 

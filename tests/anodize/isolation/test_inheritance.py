@@ -30,7 +30,7 @@ EITHER = sessiontypes.loads(
     "global Either(H, L, M) = H -> L : ask. H -> M : ask. "
     "(L -> H : answer(nat). end || M -> H : answer(nat). end)",
     "test_inheritance_either.proto").globals["Either"]
-TICKS = sessiontypes.loads("global Ticks(H, L) = mu t. H -> L : {tick. t, stop}",
+TICKS = sessiontypes.loads(f"global Ticks(H, L) = mu t. H -> L : {{{roles.TICK}. t, stop}}",
                            "test_inheritance_ticks.proto").globals["Ticks"]
 CHAIN = sessiontypes.loads(
     "global Chain(H, M, L) = mu t. H -> M : {ask. M -> L : ask. L -> M : answer(nat). "
