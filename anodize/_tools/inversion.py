@@ -132,8 +132,7 @@ class Inversion:
         if self.uncoverable:
             inheritance = "cannot cover it: " + "; ".join(self.uncoverable)
         else:
-            inheritance = "would cover it (every link on one host, to a process anodize runs)"
-            inheritance += "; applied"
+            inheritance = "covers it (every link on one host, to a group anodize runs that accepts it); applied"
         unbounded = "; ".join(self.unbounded) or "nothing (the wait is bounded by the lower roles' own work)"
         kind = "unbounded" if self.unbounded else "bounded"
         lines = [f"{kind} inversion: {self.high.describe()} can wait on {self.low.describe()}",

@@ -186,7 +186,7 @@ def test_inheritance_applied_bounds_a_wait_a_medium_group_could_stretch() -> Non
     assert report.inheritance_applied
     assert report.inversions[0].bounded
     assert report.lines()[-3:] == [
-        "  priority inheritance: would cover it (every link on one host, to a process anodize runs); applied",
+        "  priority inheritance: covers it (every link on one host, to a group anodize runs that accepts it); applied",
         "  unbounded: nothing (the wait is bounded by the lower roles' own work)",
         "1 priority inversion (0 unbounded) among 2 waits; priority inheritance is applied"]
 
