@@ -326,9 +326,11 @@ class PipeReceiver:
                 continue  # decode what that read brought before waiting for more
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
             lend = self.lend_while_empty
-            if lend is not None and left != 0 and not self._fill(0):  # it will block: lend while it does
-                with lend():
-                    filled = self._fill(left)
+            if lend is not None and left != 0:
+                filled = self._fill(0)  # what the pipe holds now, without waiting
+                if not filled:  # it will block: lend while it does
+                    with lend():
+                        filled = self._fill(left)
             else:
                 filled = self._fill(left)
             if not filled and deadline is not None and time.monotonic() >= deadline:

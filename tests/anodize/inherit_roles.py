@@ -204,3 +204,19 @@ def tick_sink(ep: Endpoint) -> None:
     while True:
         if any(message.label == "stop" for message in ep.recv_many("H", timeout=30)):
             return
+
+
+def late_asker(ep: Endpoint) -> None:
+    """H: asks, lets the answer arrive in the pipe before it receives (the no-wait path), twice."""
+    for _ in range(2):
+        ep.send("L", "ask")
+        time.sleep(PAUSE)
+        ep.recv("L")  # no timeout (the compiled core's path); the run's timeout bounds it
+    _log("answered")
+    ep.send("L", "stop")
+
+
+def prompt_answerer(ep: Endpoint) -> None:
+    """L: answers each ask at once."""
+    while ep.recv("H", timeout=30).label == "ask":
+        ep.send("H", "answer", 0)

@@ -97,6 +97,17 @@ def test_where_sched_fifo_was_refused_the_report_says_inheritance_is_inactive(
         in report.summary()
 
 
+@pytest.mark.parametrize("transport", ["inproc", "process"])
+def test_a_message_already_there_is_taken_without_waiting(transport: str, test_dir: Path) -> None:
+    system = anodize.System(ASK, transport=TRANSPORTS[transport]())
+    system.group("high", priority=60, cpus={0}).role("H", roles.late_asker)
+    system.group("low", priority=10, cpus={0}).role("L", roles.prompt_answerer)
+    report = system.run(timeout=10)
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["answered"]
+    assert "H->L" not in report.boosts  # H never blocked on L
+
+
 def test_turned_off_per_group(test_dir: Path) -> None:
     report = _ask("inproc", 60, 10, inherit=False)
     assert report.ok, report.summary()
