@@ -4,9 +4,11 @@ An endpoint whose network carries an inheritance table (``network.inheritance``,
 :mod:`anodize._isolation.inherit`) hooks each channel on which it may wait for a role that
 could be boosted:
 
-- a channel that knows where it blocks offers a ``lend_while_empty`` attribute (receiving)
-  or ``lend_while_full`` (sending: a bounded queue between threads, a pipe between processes);
-  the endpoint sets it to a :class:`Lend`, and the channel enters it only in its blocking branch;
+- a channel that knows where it blocks declares a ``lend_while_empty`` attribute on its class
+  (receiving) or ``lend_while_full`` (sending: a bounded queue between threads, a pipe between
+  processes); the endpoint sets it to a :class:`Lend`, and the channel enters it only in its
+  blocking branch. Declared on the class, so that a wrapper forwarding attributes (a channel
+  tapped by a recording or the live view) is not taken for the channel it wraps;
 - any other channel (a ``queue.SimpleQueue`` between threads) is listed in the endpoint's
   ``_lending`` table: its receive first takes a message already there (``get_nowait``, no
   scheduling call; the compiled core does this in C) and only when none is waiting enters
@@ -21,7 +23,7 @@ from __future__ import annotations
 import queue
 from collections.abc import Iterable
 from contextlib import AbstractContextManager
-from typing import Protocol
+from typing import Any, Protocol
 
 from .channel import Channel
 
@@ -62,15 +64,18 @@ def inheriting(lender: Lender | None, waiter: str, incoming: dict[str, Channel],
     if lender is None:
         return {}
     lending = {}
+    hooked: Any  # a channel whose class declares the hook
     for peer, channel in incoming.items():
         if lender.could_boost(waiter, peer):
-            if hasattr(channel, "lend_while_empty"):
-                channel.lend_while_empty = Lend(lender, waiter, peer)
+            if hasattr(type(channel), "lend_while_empty"):
+                hooked = channel
+                hooked.lend_while_empty = Lend(lender, waiter, peer)
             else:
                 lending[peer] = Lend(lender, waiter, peer)
     for peer, channel in outgoing.items():
-        if hasattr(channel, "lend_while_full") and lender.could_boost(waiter, peer):
-            channel.lend_while_full = Lend(lender, waiter, peer)
+        if hasattr(type(channel), "lend_while_full") and lender.could_boost(waiter, peer):
+            hooked = channel
+            hooked.lend_while_full = Lend(lender, waiter, peer)
     return lending
 
 

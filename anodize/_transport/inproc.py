@@ -41,6 +41,11 @@ class BoundedQueue:
     it is full (back pressure, bounded memory), and stops waiting when the run stops or its
     receiver fails. Signals (a failure, STOP) never wait and do not count."""
 
+    # Priority inheritance (anodize._session.inheriting): set by the endpoints, entered only
+    # in the blocking branches of put and get.
+    lend_while_full: Callable[[], AbstractContextManager[None]] | None = None
+    lend_while_empty: Callable[[], AbstractContextManager[None]] | None = None
+
     def __init__(self, capacity: int, network: _Watched, sender: str, receiver: str) -> None:
         self.capacity = capacity
         self._network = network
@@ -49,10 +54,6 @@ class BoundedQueue:
         self._items: deque[object] = deque()
         self._messages = 0
         self._changed = threading.Condition()
-        # Set by the endpoints under priority inheritance: the contexts in which a sender waiting for
-        # room, and a receiver waiting for a message, lend their priority (anodize._session.inheriting).
-        self.lend_while_full: Callable[[], AbstractContextManager[None]] | None = None
-        self.lend_while_empty: Callable[[], AbstractContextManager[None]] | None = None
 
     def put(self, item: object) -> None:
         """Add ``item``; a message waits for room first.

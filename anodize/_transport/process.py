@@ -271,6 +271,10 @@ class PipeSender:
 class PipeReceiver:
     """The read end of a channel from a role in another process (one reading thread)."""
 
+    # Priority inheritance: set by the receiver's endpoint (anodize._session.inheriting), entered
+    # only when a receive must wait for the pipe.
+    lend_while_empty: Callable[[], AbstractContextManager[None]] | None = None
+
     def __init__(self, fd: int, codec: Codec, network: LinkNetwork, sender: str, wake_fd: int) -> None:
         self.fd = fd
         self.codec = codec
@@ -282,8 +286,6 @@ class PipeReceiver:
         self._pushed: deque[object] = deque()  # sentinels put back so later receives see them too
         self._ready: deque[tuple[object, int]] = deque()  # small messages decoded in a run, with frame sizes
         self._eof = False
-        # Set by the receiver's endpoint under priority inheritance (anodize._session.inheriting).
-        self.lend_while_empty: Callable[[], AbstractContextManager[None]] | None = None
         self._poll = select.poll()
         # Rung by the supervisor's word that the sender failed: a forked child of the sender's
         # group may keep the pipe's write end open, so end-of-file alone cannot be waited for.

@@ -108,6 +108,18 @@ def test_a_message_already_there_is_taken_without_waiting(transport: str, test_d
     assert "H->L" not in report.boosts  # H never blocked on L
 
 
+@pytest.mark.parametrize("transport", ["inproc", "process"])
+def test_a_recorded_run_inherits_too(transport: str, test_dir: Path) -> None:
+    from anodize._recording import Recording
+
+    system = anodize.System(ASK, transport=TRANSPORTS[transport]())
+    system.group("high", priority=60, cpus={0}).role("H", roles.asker)
+    system.group("low", priority=10, cpus={0}).role("L", roles.answerer)
+    report = system.run(timeout=30, taps=[Recording(test_dir / "run.mcap")])  # every channel tapped
+    assert report.ok, report.summary()
+    assert _log(test_dir) == ["during 60 after 10"] * 2
+
+
 def test_turned_off_per_group(test_dir: Path) -> None:
     report = _ask("inproc", 60, 10, inherit=False)
     assert report.ok, report.summary()
