@@ -65,6 +65,14 @@ def test_every_result_file_is_on_the_performance_page_with_its_load() -> None:
     assert page.count("Load average (1 / 5 / 15 min)") == len(files)
 
 
+def test_one_benchmark_alone_for_a_guide_page() -> None:
+    page = generate.expand("<!-- generated: benchmark inversion -->\n")
+    assert "`bench/inversion.py`" in page and "## Priority inversion and inheritance" in page
+    assert "`bench/peers.py`" not in page
+    with pytest.raises(generate.GenerationError, match="no such benchmark result"):
+        generate.generate("benchmark nonsense")
+
+
 def test_a_result_without_its_load_is_refused() -> None:
     document = {"title": "t", "how": "h", "table": [["a"], ["1"]]}
     with pytest.raises(generate.GenerationError, match="missing load"):

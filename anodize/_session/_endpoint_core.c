@@ -28,6 +28,7 @@ typedef struct {
     PyObject *waiting;   /* peer -> qsize, for channels that can tell */
     PyObject *high_water;
     PyObject *doorbell;  /* this role's doorbell, or None */
+    PyObject *lending;   /* peer -> Lend: receives that lend their priority if they block (inheriting.py) */
     /* The monitor's tables (never changed after it is built), read from `cached` once. */
     PyObject *cached;
     PyObject *sends;
@@ -42,6 +43,8 @@ typedef struct {
     PyObject *recv_peer, *recv_label, *recv_step;
 } Core;
 
+static PyObject *empty_error; /* queue.Empty */
+static PyObject *str_get_nowait;
 static PyObject *str_state, *str_sends, *str_recvs, *str_recv_peers, *str_alarm, *str_put, *str_get,
     *str_send, *str_recv, *str_send_python, *str_recv_python, *str_refuse_if_down, *str_no_channel,
     *str_accept, *kw_timeout;
@@ -381,8 +384,25 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
         return PyErr_Occurred() ? NULL : pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
     }
     Py_INCREF(channel);
-    PyObject *get_args[3] = {NULL, channel, Py_None}; /* channel.get(timeout=None) */
-    PyObject *item = PyObject_VectorcallMethod(str_get, get_args + 1, 1 | PY_VECTORCALL_ARGUMENTS_OFFSET, kw_timeout);
+    PyObject *item;
+    PyObject *lend = self->lending != NULL && PyDict_CheckExact(self->lending) && PyDict_GET_SIZE(self->lending) > 0
+        ? PyDict_GetItemWithError(self->lending, frm) : NULL; /* borrowed */
+    if (lend != NULL) {
+        /* Priority inheritance: a message already there is taken without a scheduling call; if none
+         * is, the Python core lends while it waits (nothing has happened yet: it checks again). */
+        item = PyObject_CallMethodNoArgs(channel, str_get_nowait);
+        if (item == NULL && PyErr_ExceptionMatches(empty_error)) {
+            PyErr_Clear();
+            Py_DECREF(channel);
+            Py_XDECREF(monitor);
+            return pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
+        }
+    } else if (PyErr_Occurred()) {
+        item = NULL;
+    } else {
+        PyObject *get_args[3] = {NULL, channel, Py_None}; /* channel.get(timeout=None) */
+        item = PyObject_VectorcallMethod(str_get, get_args + 1, 1 | PY_VECTORCALL_ARGUMENTS_OFFSET, kw_timeout);
+    }
     if (item == NULL) {
         Py_DECREF(channel);
         Py_XDECREF(monitor);
@@ -436,7 +456,7 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
 /* Every object field of Core, once: what traverse visits and clear clears. */
 #define CORE_OBJECTS(X) \
     X(role) X(plain) X(monitor) X(network) X(out) X(in) X(sent) X(received) X(waiting) \
-    X(high_water) X(doorbell) X(cached) X(sends) X(recvs) X(recv_peers) \
+    X(high_water) X(doorbell) X(lending) X(cached) X(sends) X(recvs) X(recv_peers) \
     X(send_peer) X(send_label) X(send_step) X(recv_peer) X(recv_label) X(recv_step)
 
 static int core_traverse(Core *self, visitproc visit, void *arg)
@@ -484,7 +504,7 @@ static PyMemberDef core_members[] = {
     MEMBER("role", role), MEMBER("_plain", plain), MEMBER("_monitor", monitor),
     MEMBER("_network", network), MEMBER("_out", out), MEMBER("_in", in), MEMBER("sent", sent),
     MEMBER("received", received), MEMBER("_waiting", waiting), MEMBER("high_water", high_water),
-    MEMBER("_doorbell", doorbell), {NULL, 0, 0, 0, NULL},
+    MEMBER("_doorbell", doorbell), MEMBER("_lending", lending), {NULL, 0, 0, 0, NULL},
 };
 
 static PyMethodDef core_methods[] = {
@@ -554,6 +574,13 @@ PyMODINIT_FUNC PyInit__endpoint_core(void)
     INTERN(str_alarm, "alarm");
     INTERN(str_put, "put");
     INTERN(str_get, "get");
+    INTERN(str_get_nowait, "get_nowait");
+    PyObject *queue_module = PyImport_ImportModule("queue");
+    empty_error = queue_module ? PyObject_GetAttrString(queue_module, "Empty") : NULL;
+    Py_XDECREF(queue_module);
+    if (empty_error == NULL) {
+        return NULL;
+    }
     INTERN(str_send, "send");
     INTERN(str_recv, "recv");
     INTERN(str_send_python, "_send_python");

@@ -12,6 +12,7 @@ part in.
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import threading
 import time
@@ -24,6 +25,7 @@ from sessiontypes import StateMachine
 from ..errors import Action, AnodizeError, PeerFailedError, ProtocolViolationError, RoleStopped
 from . import compiled
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
+from .inheriting import Lender, get_lending, inheriting, lend_to_any
 from .monitor import Monitor
 from .statistics import EndpointStatistics
 
@@ -88,6 +90,10 @@ class Endpoint(_Core):
         self._out = {p: (queues[(role, p)], network.doorbells.get(p))
                      for p in sends_to if (role, p) in queues}
         self._in = {p: queues[(p, role)] for p in receives_from if (p, role) in queues}
+        # Priority inheritance (where the network carries a table): only blocking waits lend.
+        self._lender: Lender | None = getattr(network, "inheritance", None)
+        self._lending = inheriting(self._lender, role, self._in,
+                                   {p: channel for p, (channel, _) in self._out.items()})
         self.sent: dict[str, int] = dict.fromkeys(self._out, 0)
         # Channels that can say how many messages wait in them (queues between threads, DDS with
         # credits; not pipes): the most seen just after a send is the channel's high-water mark.
@@ -103,6 +109,9 @@ class Endpoint(_Core):
         self._recv_route: dict[str, Endpoint] = {}
         self.failed_peer: str | None = None  # set when a peer failure ended this endpoint
         self._skipped: set[str] = set()  # rung by peers whose messages were not expected yet
+        # A parallel branch's endpoint under priority inheritance: its thread is registered (to be
+        # boosted with the role) at its first action, which takes the Python path until then.
+        self._join_pending = False
 
     # ---- the protocol's actions ------------------------------------------------------
     def send(self, to: str, label: str, payload: object = None) -> None:
@@ -112,7 +121,7 @@ class Endpoint(_Core):
             ProtocolViolationError: the local type does not allow it now (nothing is sent).
             PeerFailedError: ``to`` has failed.
         """
-        if not self._plain and self._forked():
+        if not self._plain and self._forked_now():
             self._branch_for(self._send_route, to, "send", label).send(to, label, payload)
             return
         monitor = self._monitor
@@ -153,7 +162,7 @@ class Endpoint(_Core):
         Raises:
             ProtocolViolationError, PeerFailedError: as :meth:`send`.
         """
-        if not self._plain and self._forked():
+        if not self._plain and self._forked_now():
             return self._branch_for(self._send_route, to, "send", label).send_many(to, label, payloads)
         pending = list(payloads)
         monitor = self._monitor
@@ -233,7 +242,7 @@ class Endpoint(_Core):
         only the slot's address, and the array becomes read-only here (the slot is
         the receiver's). Elsewhere it is an ordinary ``numpy.empty`` array.
         """
-        if not self._plain and self._forked():
+        if not self._plain and self._forked_now():
             return self._branch_for(self._send_route, to, "send", "").buffer(to, shape, dtype)
         out = self._out.get(to)
         make = getattr(out[0], "buffer", None) if out is not None else None
@@ -252,7 +261,7 @@ class Endpoint(_Core):
             PeerFailedError: ``frm`` failed before sending.
             TimeoutError: nothing arrived within ``timeout`` seconds.
         """
-        if not self._plain and self._forked():
+        if not self._plain and self._forked_now():
             return self._branch_for(self._recv_route, frm, "recv", "").recv(frm, timeout)
         monitor = self._monitor
         if monitor is not None and frm not in monitor.recv_peers[monitor.state]:
@@ -260,8 +269,9 @@ class Endpoint(_Core):
         channel = self._in.get(frm)
         if channel is None:
             raise AnodizeError(f"role {self.role} has no channel from {frm}")
+        lend = self._lending.get(frm) if self._lending else None
         try:
-            item = channel.get(timeout=timeout)
+            item = channel.get(timeout=timeout) if lend is None else get_lending(channel, timeout, lend)
         except queue.Empty:
             raise TimeoutError(f"role {self.role}: no message from {frm} within {timeout} s") from None
         if self._doorbell is not None and self._doorbell.qsize() > _DRAIN_AT:
@@ -292,7 +302,7 @@ class Endpoint(_Core):
         """
         if limit < 1:
             raise ValueError(f"recv_many: limit {limit} must be at least 1")
-        if not self._plain and self._forked():
+        if not self._plain and self._forked_now():
             return self._branch_for(self._recv_route, frm, "recv", "").recv_many(frm, limit, timeout)
         messages = [self.recv(frm, timeout)]
         take = getattr(self._in.get(frm), "take_ready", None)
@@ -355,6 +365,9 @@ class Endpoint(_Core):
         """
         def wanted(peer: str) -> bool:
             return (peers is None or peer in peers) and self._expects(peer)
+
+        if self._join_pending:
+            self._forked_now()
 
         if not any(wanted(peer) for peer in self._all_in()):
             if self._monitor is None:
@@ -508,6 +521,15 @@ class Endpoint(_Core):
                  if t.action == "recv" and (frm is None or t.peer == frm)]
         return f"blocked in state {monitor.state} waiting for {' or '.join(waits) or 'a message from ' + str(frm)}"
 
+    def _forked_now(self) -> bool:
+        """``_forked()``, having first registered a branch's thread for priority inheritance."""
+        if self._join_pending:
+            self._join_pending = False
+            self._plain = not self._machine.forks
+            if self._lender is not None:
+                self._lender.join(self.role)
+        return self._forked()
+
     def _forked(self) -> bool:
         if self._branches is not None:
             return True
@@ -528,6 +550,9 @@ class Endpoint(_Core):
                 branch = type(self)(self.role, self.protocol, machine, self._network,
                                   self._monitor is not None, (sends_to, receives_from))
                 branch._doorbell = self._doorbell
+                if self._lender is not None:
+                    branch._join_pending = True
+                    branch._plain = False  # the Python path at first: see _join_pending
                 branches.append(branch)
                 self._send_route.update(dict.fromkeys(sends_to, branch))
                 self._recv_route.update(dict.fromkeys(receives_from, branch))
@@ -544,18 +569,36 @@ class Endpoint(_Core):
         doorbell = self._doorbell
         if doorbell is not None:
             try:
-                return doorbell.get(timeout=timeout)
+                if self._lender is None:
+                    return doorbell.get(timeout=timeout)
+                try:
+                    return doorbell.get_nowait()  # a ring waits already: no scheduling call
+                except queue.Empty:
+                    if timeout is not None and timeout <= 0:
+                        raise
+                lend = lend_to_any(self._lender, self.role, filter(wanted, self._all_in()))
+                if lend is None:
+                    return doorbell.get(timeout=timeout)
+                with lend():  # blocked on whichever wanted peer sends first: each is lent our priority
+                    return doorbell.get(timeout=timeout)
             except queue.Empty:
                 raise TimeoutError(f"role {self.role}: no message within {timeout} s") from None
         # No doorbell (a role without parallel branches): poll its few channels.
         deadline = None if timeout is None else time.monotonic() + timeout
-        while True:
-            for peer, channel in self._all_in().items():
-                if wanted(peer) and not channel.empty():
-                    return peer
-            if deadline is not None and time.monotonic() >= deadline:
-                raise TimeoutError(f"role {self.role}: no message within {timeout} s")
-            time.sleep(0.0005)
+        looked = self._lender is None
+        with contextlib.ExitStack() as lending:
+            while True:
+                for peer, channel in self._all_in().items():
+                    if wanted(peer) and not channel.empty():
+                        return peer
+                if deadline is not None and time.monotonic() >= deadline:
+                    raise TimeoutError(f"role {self.role}: no message within {timeout} s")
+                if not looked:  # nothing found: it waits from now on, lending to the peers it waits for
+                    looked = True
+                    lend = lend_to_any(self._lender, self.role, filter(wanted, self._all_in()))
+                    if lend is not None:
+                        lending.enter_context(lend())
+                time.sleep(0.0005)
 
     def _all_in(self) -> dict[str, Channel]:
         if self._branches is None:

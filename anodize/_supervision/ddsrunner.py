@@ -72,7 +72,8 @@ class DdsRunner(ProcessRunner):
                 channels=self.channels, dead=dead, monitors=self.monitors,
                 priority=group.priority, cpus=group.cpus, memory=group.memory,
                 sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities, taps=self.plan.taps,
-                dds=replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)))
+                dds=replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)),
+                inheritance=None if self.inheritance is None else (self.inheritance.seats, self.inheritance.path))
             parent_end, child_end = self.context.Pipe()
             process = self.context.Process(target=group_main, args=(spec, child_end, {}),
                                            name=f"anodize:{name}", daemon=True)

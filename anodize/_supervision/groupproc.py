@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 from sessiontypes import Sort, StateMachine
 
+from .._isolation.inherit import BoostTable, RoleSeat
 from .._isolation.memory import data_size, limit_data
 from .._isolation.sched import apply_thread_scheduling
 from .._isolation.tree import become_subreaper, kill_tree
@@ -100,6 +101,7 @@ class GroupSpec:
     capacities: dict[tuple[str, str], int] = field(default_factory=dict)  # channels that hold at most so many
     taps: tuple[GroupTapPlan, ...] = ()    # what the group opens to tap its channels (recording, live view)
     dds: DdsSettings | None = None         # transport Dds: how the group joins the run's domain (else pipes)
+    inheritance: tuple[tuple[RoleSeat, ...], str | None] | None = None  # the inheritance table's seats and file
 
 
 def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
@@ -146,6 +148,7 @@ class _GroupProcess:
         self.reserve: bytearray | None = bytearray(_RESERVE)
         self.baseline = 0
         self.peak = 0
+        self.inheritance: BoostTable | None = None
         self.send_lock = threading.Lock()  # the control reader and the main thread both send
 
     def run(self) -> None:
@@ -154,6 +157,9 @@ class _GroupProcess:
         functions = {role: resolve_function(ref) for role, ref in spec.roles.items()}
         threading.excepthook = self._thread_failed
         network = self.network = self._network()
+        self.inheritance = None if spec.inheritance is None or spec.inheritance[1] is None else (
+            BoostTable.open(spec.inheritance[0], spec.inheritance[1]))
+        network.inheritance = self.inheritance  # before the endpoints: they hook their waits on it
         self.taps = _open_taps(spec, network.queues)  # before the endpoints take their channels
         endpoints = {role: Endpoint(role, spec.protocol, spec.machines[role], network, spec.monitors)
                      for role in spec.roles}
@@ -239,7 +245,8 @@ class _GroupProcess:
 
     def _role_thread(self, role: str, function: Any, endpoint: Endpoint) -> None:
         self.gate.wait()
-        run_role(self.spec.name, None, None, role, function, endpoint, self.results.put, schedule=False)
+        run_role(self.spec.name, None, None, role, function, endpoint, self.results.put, schedule=False,
+                 inheritance=self.inheritance)
 
     def _supervise(self, count: int) -> None:
         reported = 0

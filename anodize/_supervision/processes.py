@@ -21,11 +21,12 @@ from collections.abc import Sequence
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from .._isolation.inherit import Boosts, inheritance_table
 from .._isolation.memory import CGROUP_SLACK, Cgroup, make_cgroup, peak_rss, remove_stale_cgroups, rss
 from .._isolation.tree import descendants, kill_tree
 from .._isolation.watchdog import Watchdog, rt_throttling
 from .._transport.codec import DecodeError
-from .._transport.shm import remove_run_segments, remove_stale_segments
+from .._transport.shm import remove_run_segments, remove_stale_segments, segment_dir
 from ..errors import MemoryBoundError, RoleError, error_from_data
 from . import control
 from .group import Group, reference_of
@@ -90,8 +91,20 @@ class ProcessRunner:
         self.watchdog = Watchdog(WATCHDOG_LIMIT, self._demoted)
         self.watch = LivenessWatch(liveness)  # the liveness rule's samples (see .liveness)
         self.start_timeout = _START_TIMEOUT
-        remove_stale_segments()  # of earlier runs whose supervisor was killed
+        remove_stale_segments()  # of earlier runs whose supervisor was killed (the inheritance table too)
         remove_stale_cgroups()
+        # Priority inheritance: one table every group process of this host maps (a DdsRunner passes
+        # only this host's groups: roles elsewhere are not in it, and nobody lends to them).
+        self.inheritance_note = ""
+        try:
+            self.inheritance = inheritance_table(self.groups.values(),
+                                                 os.path.join(segment_dir(), f"anodize-{self.run_id}-inherit"))
+        except OSError as error:  # no shared memory to put the table in: inheritance is off, and says so
+            self.inheritance = None
+            self.inheritance_note = (f"priority inheritance off: its table could not be made in {segment_dir()} "
+                                     f"({error})")
+        self.boosts: dict[tuple[str, str], Boosts] = {}
+        self.inactive: list[str] = []
 
     # ---- starting --------------------------------------------------------------------------
     def start(self, groups: Sequence[str], incarnation: int) -> None:
@@ -115,7 +128,8 @@ class ProcessRunner:
                 channels=self.channels, dead=dead, monitors=self.monitors,
                 priority=group.priority, cpus=group.cpus, memory=group.memory,
                 sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
-                taps=self.plan.taps)
+                taps=self.plan.taps,
+                inheritance=None if self.inheritance is None else (self.inheritance.seats, self.inheritance.path))
             parent_end, child_end = self.context.Pipe()
             process = self.context.Process(target=group_main, args=(spec, child_end, pipes[name]),
                                            name=f"anodize:{name}", daemon=True)
@@ -324,6 +338,8 @@ class ProcessRunner:
         if note:
             self.pending.append(Note(group=inc.group.name, text=note))
         self._close(inc)
+        if self.inheritance is not None:  # a process that died waiting leaves no peer boosted
+            self.inheritance.release(list(inc.group.roles))
         self.pending.append(GroupExited(group=inc.group.name, incarnation=inc.number,
                                         unreported=f"its process ended (exit status {code})"))
 
@@ -388,11 +404,15 @@ class ProcessRunner:
             inc.deaf = True
 
     def _demoted(self, group: str, description: str) -> None:
+        if self.inheritance is not None:  # a demoted group is not boosted back up by a waiter
+            self.inheritance.demote(list(self.groups[group].roles))
         self.pending.append(Note(group=group, text=description))
 
     def notes(self) -> list[str]:
         notes = [(f"real-time guard: kernel RT throttling {rt_throttling()}; watchdog demotes a SCHED_FIFO "
                   f"group that keeps a CPU busy for {WATCHDOG_LIMIT:g} s"), *self.watch.notes()]
+        if self.inheritance_note:
+            notes.append(self.inheritance_note)
         if self.transport == "process":
             piped = sorted(f"{a}->{b}" for a, b in self.capacities if self.group_of.get(a) != self.group_of.get(b))
             if piped:
@@ -412,6 +432,14 @@ class ProcessRunner:
                 inc.cgroup.remove()
             self._close(inc)
         remove_run_segments(self.run_id)
+        if self.inheritance is not None:
+            self.inheritance.release(list(self.group_of))
+            self.boosts, self.inactive = self.inheritance.boosts(), self.inheritance.inactive()
+            self.inheritance.close(unlink=True)
+
+    def inheritance_report(self) -> tuple[dict[tuple[str, str], Boosts], list[str]]:
+        """What priority inheritance did (per waiter->target), and the roles it was inactive for."""
+        return self.boosts, self.inactive
 
 
 def _role_report(group: str, message: control.RoleEnded) -> RoleReport:

@@ -155,6 +155,11 @@ class RunReport:
             that many messages wait).
         interrupted: the run was ended by Ctrl-C (SIGINT).
         notes: system-wide facts, e.g. the real-time guard in force.
+        boosts: priority inheritance, per ``"waiter->target"`` pair of roles whose target ran
+            at the waiter's priority at least once: ``{"episodes": n, "seconds": s}`` (the waits
+            in which it was boosted, and the time it ran boosted).
+        inheritance_inactive: roles whose group asked for a priority but did not get SCHED_FIFO
+            (the fallback is a nice value): their waits lend no priority.
     """
 
     protocol: str
@@ -168,6 +173,8 @@ class RunReport:
     transport: str = "inproc"
     interrupted: bool = False
     notes: tuple[str, ...] = ()
+    boosts: dict[str, dict[str, float]] = field(default_factory=dict)
+    inheritance_inactive: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -203,6 +210,12 @@ class RunReport:
             lines.append("  most messages waiting: " + ", ".join(
                 f"{channel} {n}" + (f" of {self.capacities[channel]}" if channel in self.capacities else "")
                 for channel, n in self.high_water.items()))
+        if self.boosts:
+            lines.append("  priority inheritance: " + ", ".join(
+                f"{pair} {int(b['episodes'])} boosts {b['seconds'] * 1000:.1f} ms" for pair, b in self.boosts.items()))
+        if self.inheritance_inactive:
+            lines.append("  priority inheritance inactive for " + ", ".join(self.inheritance_inactive)
+                         + " (no SCHED_FIFO: a nice value was applied instead)")
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)
 
@@ -214,6 +227,8 @@ class RunReport:
             "transport": self.transport, "notes": list(self.notes), "messages": dict(self.messages),
             "received": dict(self.received), "high_water": dict(self.high_water),
             "capacities": dict(self.capacities),
+            "boosts": {pair: dict(b) for pair, b in self.boosts.items()},
+            "inheritance_inactive": list(self.inheritance_inactive),
             "groups": {name: {
                 "status": str(g.status), "scheduling": g.scheduling, "peak_memory": g.peak_memory,
                 "memory_bound": g.memory_bound, "memory_note": g.memory_note, "notes": list(g.notes),

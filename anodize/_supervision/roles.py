@@ -10,6 +10,7 @@ import traceback
 from collections.abc import Callable
 from typing import Any
 
+from .._isolation.inherit import BoostTable
 from .._isolation.sched import apply_thread_scheduling
 from .._session.endpoint import Endpoint
 from .._session.typed import argument_for
@@ -44,17 +45,25 @@ def where_raised(error: BaseException) -> tuple[str, tuple[str, ...]]:
 
 def run_role(group: str, priority: int | None, cpus: frozenset[int] | None, role: str,
              function: Callable[..., Any], endpoint: Endpoint,
-             report: Callable[[RoleReport], None], schedule: bool = True) -> None:
+             report: Callable[[RoleReport], None], schedule: bool = True,
+             inheritance: BoostTable | None = None) -> None:
     """Run ``function`` for ``role`` on the calling thread and ``report`` how it ended.
 
     ``schedule`` False leaves the thread's scheduling alone (a group process has
-    already applied it to the whole process).
+    already applied it to the whole process). ``inheritance``: the run's priority
+    inheritance table, which learns this thread and forgets it when the role ends.
     """
     scheduling = ""
     try:
         if schedule:
             scheduling = apply_thread_scheduling(priority, cpus)
-        function(argument_for(function, endpoint))
+        if inheritance is not None:
+            inheritance.enter(role)
+        try:
+            function(argument_for(function, endpoint))
+        finally:
+            if inheritance is not None:  # before the report: no boost outlives the role
+                inheritance.leave(role)
         unfinished = endpoint.unfinished()
         if unfinished:
             raise unfinished[0].end_violation()

@@ -616,10 +616,16 @@ class Supervisor:
             sent.update({c: n for c, n in r.sent.items() if c in sent})
             received.update({c: n for c, n in r.received.items() if c in received})
             high_water.update({c: n for c, n in r.high_water.items() if c in sent})
+        # Priority inheritance, where the runner applies it (in-process and process runners).
+        inheritance = getattr(self.runner, "inheritance_report", None)
+        boosts, inactive = inheritance() if inheritance is not None else ({}, [])
         return RunReport(protocol=self.protocol, roles={role: roles[role] for role in self.roles},
                          groups=groups, messages=sent, received=received, high_water=high_water,
                          duration=time.monotonic() - self.started, transport=self.runner.transport,
-                         interrupted=self.interrupted, notes=tuple(self.notes))
+                         interrupted=self.interrupted, notes=tuple(self.notes),
+                         boosts={f"{waiter}->{target}": {"episodes": b.episodes, "seconds": round(b.seconds, 6)}
+                                 for (waiter, target), b in boosts.items()},
+                         inheritance_inactive=tuple(inactive))
 
 
 def window_rates(samples: list[tuple[float, int]], window: float = RATE_WINDOW) -> list[float]:

@@ -102,7 +102,7 @@ class System:
 
     def group(self, name: str, priority: int | None = None, memory: int | str | None = None,
               cpus: set[int] | frozenset[int] | None = None, on_failure: str = FailurePolicy.STOP,
-              max_restarts: int = 3, host: str | None = None) -> Group:
+              max_restarts: int = 3, host: str | None = None, priority_inheritance: bool = True) -> Group:
         """Declare a group; add its roles with ``.role(name, function)``.
 
         Args:
@@ -114,6 +114,10 @@ class System:
                 ``"restart"`` (it starts again from its initial states, at most
                 ``max_restarts`` times) or ``"stop-system"`` (every group stops).
             host: on :class:`~anodize.Dds`, the host it runs on (see ``Dds.host``).
+            priority_inheritance: while a role of a higher priority waits on one of this
+                group's roles (a receive from it, a send to it on a full channel), that role's
+                thread runs at the waiter's priority (docs/guide/priority-inheritance.md).
+                False: this group always runs at its own priority.
 
         Raises:
             ConfigurationError: (a ``ValueError``) a duplicate name, a priority outside 1..99, a bad memory size,
@@ -138,8 +142,11 @@ class System:
                                  f"the CPUs this process may use {sorted(available)}")
         if host is not None and (not isinstance(host, str) or not host.isidentifier()):
             raise ConfigurationError(f"group {name}: host {host!r}: expected a name such as robot or base_1")
+        if not isinstance(priority_inheritance, bool):
+            raise ConfigurationError(f"group {name}: priority_inheritance must be True or False, "
+                                     f"got {priority_inheritance!r}")
         group = Group(name, priority, parse_memory(memory), cpus or None, policy, max_restarts, host,
-                      _system=self)
+                      priority_inheritance=priority_inheritance, _system=self)
         self.groups[name] = group
         return group
 

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from queue import Empty, SimpleQueue
 from typing import Any
 
+from .._isolation.inherit import Boosts, inheritance_table
 from .._session.endpoint import Endpoint
 from .._transport.inproc import InprocNetwork
 from ..taps import GroupTap
@@ -63,6 +64,9 @@ class ThreadRunner:
         self.current: dict[str, _Incarnation] = {}
         self.inbox: SimpleQueue[Event] = SimpleQueue()
         self.taps: list[GroupTap] = []  # every group's taps, closed at the end of the run
+        self.inheritance = inheritance_table(self.groups.values())
+        self.boosts: dict[tuple[str, str], Boosts] = {}
+        self.inactive: list[str] = []
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         batch = set(groups)
@@ -73,6 +77,7 @@ class ThreadRunner:
         # A doorbell for each role that may wait on several peers at once (recv_any).
         doorbells = [r for r in roles if self.machines[r].forks or self.machines[r].waits_on_several()]
         network = InprocNetwork(channels, doorbells, dead, self.capacities)
+        network.inheritance = self.inheritance
         for name in groups:
             group = self.groups[name]
             for tap_plan in self.plan.taps:  # before the endpoints take their channels
@@ -99,7 +104,8 @@ class ThreadRunner:
             if role_report.status is RoleStatus.FAILED:
                 inc.network.fail(role, describe_error(role_report.error))
 
-        run_role(group.name, group.priority, group.cpus, role, function, inc.endpoints[role], report)
+        run_role(group.name, group.priority, group.cpus, role, function, inc.endpoints[role], report,
+                 inheritance=self.inheritance)
 
     def go(self, group: str) -> None:
         self.current[group].gate.set()
@@ -163,3 +169,9 @@ class ThreadRunner:
             self.kill(name)
         for tap in self.taps:
             tap.close()
+        if self.inheritance is not None:
+            self.boosts, self.inactive = self.inheritance.boosts(), self.inheritance.inactive()
+
+    def inheritance_report(self) -> tuple[dict[tuple[str, str], Boosts], list[str]]:
+        """What priority inheritance did (per waiter->target), and the roles it was inactive for."""
+        return self.boosts, self.inactive

@@ -28,6 +28,7 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     on_failure = "stop"                      # "stop" (default), "restart" or "stop-system"
     max_restarts = 3                         # with on_failure = "restart" (default 3)
     host = "robot"                           # kind = "dds": the host it runs on
+    priority_inheritance = true              # roles waiting on this group lend it their priority (default)
     roles = { Source = "memory_hog:source", Sink = "memory_hog:sink" }   # role -> "module:function"
 
 Only ``protocol``, ``global``, ``groups`` and each group's ``roles`` are required.
@@ -65,7 +66,8 @@ _CHANNEL_KEYS = ("capacity",)
 _ROS_KEYS = ("topics", "external", "distro", "domain")
 _OLD_DDS_KEYS = ("domain", "run_id")  # top-level keys of the earlier form, now fields of [transport]
 _RUN_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
-_GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host")
+_GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host",
+               "priority_inheritance")
 _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
 _TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
 
@@ -116,6 +118,8 @@ class GroupConfig:
         roles: role name -> ``"module:function"``, in file order.
         location: where the group is written, for messages: ``"path: groups.NAME"``.
         host: ``transport = "dds"``: the host the group runs on, or None.
+        priority_inheritance: whether a higher-priority role waiting on this group's roles
+            raises their priority while it waits (default True).
     """
 
     name: str
@@ -127,6 +131,7 @@ class GroupConfig:
     roles: dict[str, str]
     location: str
     host: str | None = None
+    priority_inheritance: bool = True
 
 
 @dataclass(frozen=True)
@@ -403,9 +408,12 @@ class _Reader:
         host = table.get("host")
         if host is not None and (not isinstance(host, str) or not host.isidentifier()):
             raise self.error(f"{prefix}.host", f"expected a name such as \"robot\", got {_show(host)}")
+        inherit = table.get("priority_inheritance", True)
+        if not isinstance(inherit, bool):
+            raise self.error(f"{prefix}.priority_inheritance", f"expected true or false, got {_show(inherit)}")
         return GroupConfig(name, priority, memory_bytes, self.cpus(prefix, table.get("cpus")),
                            on_failure, max_restarts, self.roles(prefix, table),
-                           f"{self.shown}: {prefix}", host)
+                           f"{self.shown}: {prefix}", host, inherit)
 
     def cpus(self, prefix: str, value: Any) -> tuple[int, ...] | None:
         if value is None:
@@ -492,7 +500,7 @@ def build_system(config: SystemConfig) -> System:
             declared = system.group(group.name, priority=group.priority, memory=group.memory,
                                     cpus=set(group.cpus) if group.cpus else None,
                                     on_failure=group.on_failure, max_restarts=group.max_restarts,
-                                    host=group.host)
+                                    host=group.host, priority_inheritance=group.priority_inheritance)
             for role, reference in group.roles.items():
                 declared.role(role, reference)
         except (ValueError, AnodizeError) as error:

@@ -29,13 +29,8 @@ from .chains import ChainSearch
 from .config import ConfigError, GroupConfig, SystemConfig
 from .waits import Wait, waits_for_graph
 
-__all__ = ["INHERITANCE_APPLIED", "Party", "Preemption", "Inversion", "InversionReport",
+__all__ = ["Party", "Preemption", "Inversion", "InversionReport",
            "analyse_inversions", "inversion_report", "load_global"]
-
-# Priority inheritance over channels (issue 26, point 2) is not built yet. This is the one
-# place the analysis reads whether it is applied: while False, every wait a medium group
-# can stretch is reported unbounded, and the output says inheritance is not applied.
-INHERITANCE_APPLIED = False
 
 
 @dataclass(frozen=True)
@@ -137,8 +132,7 @@ class Inversion:
         if self.uncoverable:
             inheritance = "cannot cover it: " + "; ".join(self.uncoverable)
         else:
-            inheritance = "would cover it (every link on one host, to a process anodize runs)"
-        inheritance += "; applied" if INHERITANCE_APPLIED else "; not applied yet"
+            inheritance = "covers it (every link on one host, to a group anodize runs that accepts it); applied"
         unbounded = "; ".join(self.unbounded) or "nothing (the wait is bounded by the lower roles' own work)"
         kind = "unbounded" if self.unbounded else "bounded"
         lines = [f"{kind} inversion: {self.high.describe()} can wait on {self.low.describe()}",
@@ -174,7 +168,8 @@ class InversionReport:
     Attributes:
         inversions: by the waiting role's priority (highest first), then the lower role's.
         waits: how many waits the protocol has (states where a role can block on a peer).
-        inheritance_applied: whether priority inheritance is applied (:data:`INHERITANCE_APPLIED`).
+        inheritance_applied: whether every group accepts priority inheritance (no group's
+            table says ``priority_inheritance = false``).
     """
 
     inversions: tuple[Inversion, ...]
@@ -193,7 +188,7 @@ class InversionReport:
         if not self.inversions:
             return [*found, f"no priority inversion among {waits}"]
         count = len(self.inversions)
-        inheritance = "applied" if self.inheritance_applied else "not applied yet"
+        inheritance = "applied" if self.inheritance_applied else "turned off in some groups"
         return [*found, (f"{count} priority {'inversion' if count == 1 else 'inversions'} "
                          f"({len(self.unbounded)} unbounded) among {waits}; priority inheritance is {inheritance}")]
 
@@ -275,7 +270,8 @@ def analyse_inversions(config: SystemConfig, global_type: GlobalType) -> Inversi
                       f"(see {_and([f'{waiter} -> {role}' for role in further])})")
             inversion = dataclasses.replace(inversion, unbounded=(*inversion.unbounded, reason))
         inversions.append(inversion)
-    return InversionReport(tuple(inversions), graph.number_of_nodes(), INHERITANCE_APPLIED)
+    return InversionReport(tuple(inversions), graph.number_of_nodes(),
+                           all(group.priority_inheritance for group in config.groups.values()))
 
 
 def _beyond(chain: tuple[Wait, ...], search: ChainSearch) -> list[str]:
@@ -302,12 +298,15 @@ def _inversion(chain: tuple[Wait, ...], parties: dict[str, Party], config: Syste
         elif peer.host != waiter.host:
             uncoverable.append(f"{wait.role} waits on group {peer.group} on {_host_name(peer.host)} "
                                f"across the network, from {_host_name(waiter.host)}")
+        elif peer.group is not None and not config.groups[peer.group].priority_inheritance:
+            uncoverable.append(f"{wait.role} waits on group {peer.group}, which turns it off "
+                               "(priority_inheritance = false)")
     unbounded = [f"{peer.role} is an external ROS 2 node: its priority and timing are unknown"
                  for peer in on_chain[1:] if peer.external]
     unbounded += [f"{wait.peer} runs on {_host_name(parties[wait.peer].host)}: no inheritance crosses hosts"
                   for wait in chain
                   if not parties[wait.peer].external and parties[wait.peer].host != parties[wait.role].host]
-    if not INHERITANCE_APPLIED or uncoverable:
+    if uncoverable:  # inheritance (applied unless a group turns it off) bounds the rest
         unbounded += [f"{p.group} can preempt {p.role} for as long as it runs" for p in preemptions]
         unbounded += [f"{party.role} has no real-time priority: any process on the machine can delay it"
                       for party in on_chain[1:] if not party.external and party.priority is None]

@@ -19,6 +19,7 @@
 #include <stdint.h>
 #include <string.h>
 #include <structmember.h>
+#include <sys/uio.h>
 #include <unistd.h>
 
 #define KIND_MESSAGE 0x4D /* FrameKind.MESSAGE */
@@ -167,6 +168,10 @@ typedef struct {
      * frame written from another thread, lands inside another that takes several writes. */
     PyThread_type_lock lock;
     int locked;
+    /* Priority inheritance (anodize._session.inheriting): None, or a callable returning the context
+     * in which a write that must wait for room lends the sender's priority. Set, every write first
+     * tries without waiting (RWF_NOWAIT): the fast path makes no extra call. */
+    PyObject *lend;
 } Writer;
 
 /* Take the lock, waiting without the GIL if another thread holds it. */
@@ -209,6 +214,67 @@ static int write_out(int fd, const char *data, Py_ssize_t size, Py_ssize_t *writ
         }
     }
     return 0;
+}
+
+/* Call the context manager's __exit__(None, None, None), keeping any exception already set. */
+static int exit_context(PyObject *context)
+{
+    PyObject *type, *value, *traceback;
+    PyErr_Fetch(&type, &value, &traceback);
+    PyObject *done = PyObject_CallMethod(context, "__exit__", "OOO", Py_None, Py_None, Py_None);
+    int failed = done == NULL;
+    Py_XDECREF(done);
+    if (type != NULL) {
+        if (failed) {
+            PyErr_Clear();
+        }
+        PyErr_Restore(type, value, traceback);
+        return -1;
+    }
+    return failed ? -1 : 0;
+}
+
+/* write_out, lending the sender's priority while it waits for room (self->lend set): one try
+ * without waiting first; what did not fit is written inside the lend context. The bytes that
+ * went are counted in *written even when the context fails (the frame is always completed). */
+static int write_lending(Writer *self, const char *data, Py_ssize_t size, Py_ssize_t *written)
+{
+    if (self->lend == NULL || self->lend == Py_None) {
+        return write_out(self->fd, data, size, written);
+    }
+    *written = 0;
+    struct iovec iov = {(void *)data, (size_t)size};
+    ssize_t n = pwritev2(self->fd, &iov, 1, -1, RWF_NOWAIT);
+    if (n == size) {
+        *written = size;
+        return 0;
+    }
+    if (n < 0) {
+        int failure = errno;
+        if (failure == EOPNOTSUPP || failure == EINVAL || failure == ENOSYS) { /* no RWF_NOWAIT: plain */
+            return write_out(self->fd, data, size, written);
+        }
+        if (failure != EAGAIN && failure != EINTR) {
+            return failure;
+        }
+        n = 0;
+    }
+    PyObject *context = PyObject_CallNoArgs(self->lend);
+    PyObject *entered = context ? PyObject_CallMethod(context, "__enter__", NULL) : NULL;
+    Py_XDECREF(entered);
+    Py_ssize_t rest = 0;
+    int failure = write_out(self->fd, data + n, size - n, &rest); /* also when lending failed: whole frames only */
+    *written = n + rest;
+    if (context == NULL) {
+        return -1;
+    }
+    if (entered == NULL) { /* an exception is set: report it after the frame went out */
+        Py_DECREF(context);
+        return -1;
+    }
+    int exited = exit_context(context);
+    Py_DECREF(context);
+    return failure != 0 ? failure : exited;
 }
 
 /* The frame of `item` into `frame` (PIPE_BUF bytes): its size, 0 if it is not a (label, payload)
@@ -288,7 +354,7 @@ static PyObject *writer_write_many(Writer *self, PyObject *args)
         if (in_batch > 0 && (framed == 0 || size + framed > BATCH_BYTES || in_batch == MOST_FRAMES)) {
             Py_ssize_t written;
             take_lock(self);
-            error = write_out(self->fd, batch, size, &written);
+            error = write_lending(self, batch, size, &written);
             give_lock(self);
             if (error < 0) { /* a signal handler raised */
                 PyMem_Free(batch);
@@ -386,7 +452,7 @@ static PyObject *writer_call(Writer *self, PyObject *const *args, size_t nargsf,
     if (size > 0) {
         Py_ssize_t written;
         take_lock(self);
-        int failed = write_out(self->fd, frame, size, &written);
+        int failed = write_lending(self, frame, size, &written);
         give_lock(self);
         if (failed < 0) {
             return NULL;
@@ -421,6 +487,7 @@ static PyObject *writer_new(PyTypeObject *type, PyObject *args, PyObject *kwargs
     self->empty_frames = Py_NewRef(empty_frames);
     self->int_prefixes = Py_NewRef(int_prefixes);
     self->fallback = Py_NewRef(fallback);
+    self->lend = Py_NewRef(Py_None);
     self->vectorcall = (vectorcallfunc)writer_call;
     self->lock = PyThread_allocate_lock();
     if (self->lock == NULL) {
@@ -436,6 +503,7 @@ static int writer_traverse(Writer *self, visitproc visit, void *arg)
     Py_VISIT(self->empty_frames);
     Py_VISIT(self->int_prefixes);
     Py_VISIT(self->fallback);
+    Py_VISIT(self->lend);
     return 0;
 }
 
@@ -444,6 +512,7 @@ static int writer_clear(Writer *self)
     Py_CLEAR(self->empty_frames);
     Py_CLEAR(self->int_prefixes);
     Py_CLEAR(self->fallback); /* a bound method of the PipeSender that holds this writer: a cycle */
+    Py_CLEAR(self->lend);
     return 0;
 }
 
@@ -464,6 +533,8 @@ static void writer_dealloc(Writer *self)
 
 static PyMemberDef writer_members[] = {
     {"__vectorcalloffset__", T_PYSSIZET, offsetof(Writer, vectorcall), READONLY, NULL},
+    {"lend", T_OBJECT, offsetof(Writer, lend), 0,
+     "None, or the context in which a write waiting for room lends the sender's priority."},
     {NULL, 0, 0, 0, NULL},
 };
 

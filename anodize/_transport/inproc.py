@@ -15,9 +15,10 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
+from contextlib import AbstractContextManager, nullcontext
 from queue import Empty, SimpleQueue
-from typing import Protocol
+from typing import Any, Protocol
 
 from .._session.channel import STOP, Channel, Doorbell, PeerFailure
 from ..errors import PeerFailedError, RoleStopped
@@ -40,6 +41,11 @@ class BoundedQueue:
     it is full (back pressure, bounded memory), and stops waiting when the run stops or its
     receiver fails. Signals (a failure, STOP) never wait and do not count."""
 
+    # Priority inheritance (anodize._session.inheriting): set by the endpoints, entered only
+    # in the blocking branches of put and get.
+    lend_while_full: Callable[[], AbstractContextManager[None]] | None = None
+    lend_while_empty: Callable[[], AbstractContextManager[None]] | None = None
+
     def __init__(self, capacity: int, network: _Watched, sender: str, receiver: str) -> None:
         self.capacity = capacity
         self._network = network
@@ -58,9 +64,11 @@ class BoundedQueue:
         """
         with self._changed:
             if type(item) is tuple:
-                while self._messages >= self.capacity:
-                    self._check_waiting()
-                    self._changed.wait(_LOOK)
+                if self._messages >= self.capacity:
+                    with self.lend_while_full() if self.lend_while_full is not None else nullcontext():
+                        while self._messages >= self.capacity:
+                            self._check_waiting()
+                            self._changed.wait(_LOOK)
                 self._messages += 1
             self._items.append(item)
             self._changed.notify_all()
@@ -82,11 +90,15 @@ class BoundedQueue:
         """
         deadline = None if timeout is None else time.monotonic() + timeout
         with self._changed:
-            while not self._items:
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
+            if not self._items:
+                if timeout is not None and timeout <= 0:
                     raise Empty
-                self._changed.wait(left)
+                with self.lend_while_empty() if self.lend_while_empty is not None else nullcontext():
+                    while not self._items:
+                        left = None if deadline is None else deadline - time.monotonic()
+                        if left is not None and left <= 0:
+                            raise Empty
+                        self._changed.wait(left)
             item = self._items.popleft()
             if type(item) is tuple:
                 self._messages -= 1
@@ -126,6 +138,7 @@ class InprocNetwork:
             for pair in channels}
         self.doorbells: dict[str, Doorbell] = {role: SimpleQueue() for role in doorbell_roles}
         self.failed: dict[str, str] = {}
+        self.inheritance: Any = None  # the run's priority inheritance table, set by the runner
         self.stopping = False
         self.stopped: set[str] = set()  # roles told to stop on their own (their group stops)
         self._stop_events: dict[str, threading.Event] = {}

@@ -19,6 +19,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterable, Mapping
 from queue import SimpleQueue
+from typing import Any
 
 from .._session.channel import STOP, Channel, Doorbell, PeerFailure
 from .bridge import bridge
@@ -58,6 +59,7 @@ class GroupNetwork:
             for pair in channels if pair[0] in local and pair[1] in local}
         self.doorbells: dict[str, Doorbell] = {role: SimpleQueue() for role in doorbell_roles if role in local}
         self.failed: dict[str, str] = dict(dead)
+        self.inheritance: Any = None  # the run's priority inheritance table, set by the group process
         self.stopping = False
         self.stopped: set[str] = set()  # never filled here: a group's process stops as a whole
         # Raised on any failure or stop: senders test this one flag on the fast path.

@@ -12,12 +12,14 @@ failure frame written after its last message, so nothing it sent is lost.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import select
 import threading
 import time
 from collections import deque
-from collections.abc import Collection, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
+from contextlib import AbstractContextManager
 from queue import Empty
 from typing import Any
 
@@ -103,6 +105,20 @@ class PipeSender:
             # Its lock is the channel's lock.
             self._small = self._lock = SmallFrameWriter(fd, *codec.small_frames(), self.put_python)
             self.put = self._small  # type: ignore[method-assign]
+        self._lend: Callable[[], AbstractContextManager[None]] | None = None
+
+    @property
+    def lend_while_full(self) -> Callable[[], AbstractContextManager[None]] | None:
+        """Set by the sender's endpoint under priority inheritance: the context in which a write
+        that must wait for room in the pipe lends the sender's priority (anodize._session.inheriting).
+        Every write then first tries without waiting (``RWF_NOWAIT``): no extra call on the fast path."""
+        return self._lend
+
+    @lend_while_full.setter
+    def lend_while_full(self, lend: Callable[[], AbstractContextManager[None]] | None) -> None:
+        self._lend = lend
+        if self._small is not None:
+            self._small.lend = lend
 
     def put_python(self, item: object) -> None:
         """:meth:`put` in Python: the reference, and the compiled writer's fallback."""
@@ -194,7 +210,14 @@ class PipeSender:
             return
         with self._lock:
             try:
-                written = os.write(self.fd, data)  # one call for all but huge frames
+                if self._lend is None:
+                    written = os.write(self.fd, data)  # one call for all but huge frames
+                else:
+                    written = _write_nowait(self.fd, data)
+                    if written != len(data):  # the pipe is full: lend while the rest waits for room
+                        with self._lend():
+                            _write_all(self.fd, data[written:])
+                        return
                 if written != len(data):
                     _write_all(self.fd, data[written:])
             except OSError:
@@ -248,6 +271,10 @@ class PipeSender:
 class PipeReceiver:
     """The read end of a channel from a role in another process (one reading thread)."""
 
+    # Priority inheritance: set by the receiver's endpoint (anodize._session.inheriting), entered
+    # only when a receive must wait for the pipe.
+    lend_while_empty: Callable[[], AbstractContextManager[None]] | None = None
+
     def __init__(self, fd: int, codec: Codec, network: LinkNetwork, sender: str, wake_fd: int) -> None:
         self.fd = fd
         self.codec = codec
@@ -300,7 +327,15 @@ class PipeReceiver:
                     return PeerFailure(self.sender, failed)
                 continue  # decode what that read brought before waiting for more
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
-            if not self._fill(left) and deadline is not None and time.monotonic() >= deadline:
+            lend = self.lend_while_empty
+            if lend is not None and left != 0:
+                filled = self._fill(0)  # what the pipe holds now, without waiting
+                if not filled:  # it will block: lend while it does
+                    with lend():
+                        filled = self._fill(left)
+            else:
+                filled = self._fill(left)
+            if not filled and deadline is not None and time.monotonic() >= deadline:
                 raise Empty
 
     def get_nowait(self) -> object:
@@ -415,6 +450,18 @@ def _silence(fd: int) -> None:
         os.dup2(null, fd)
     finally:
         os.close(null)
+
+
+def _write_nowait(fd: int, data: bytes) -> int:
+    """Write what fits in the pipe now, without waiting (``RWF_NOWAIT``); the bytes written."""
+    try:
+        return os.pwritev(fd, [data], -1, os.RWF_NOWAIT)
+    except BlockingIOError:
+        return 0
+    except OSError as error:
+        if error.errno in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):  # no RWF_NOWAIT here: plain write
+            return os.write(fd, data)
+        raise
 
 
 def _write_all(fd: int, data: bytes) -> None:

@@ -5,6 +5,7 @@ before the page is rendered, so what the site says cannot drift from its source:
 
 - ``<!-- generated: layers -->``: the import-linter contracts of ``pyproject.toml``;
 - ``<!-- generated: benchmarks -->``: every ``bench/results/*.json``, with the machine's load;
+- ``<!-- generated: benchmark NAME -->``: ``bench/results/NAME.json`` alone (for a guide page);
 - ``<!-- generated: api PACKAGE -->``: one mkdocstrings block per name in ``PACKAGE.__all__``;
 - ``<!-- generated: decisions -->``: the list of ``docs/decisions/NNNN-*.md``.
 
@@ -163,12 +164,17 @@ def generate(what: str) -> str:
         return layers()
     if verb == "benchmarks" and not rest:
         return benchmarks()
+    if verb == "benchmark" and len(rest) == 1:
+        path = REPO / "bench" / "results" / f"{rest[0]}.json"
+        if not path.exists():
+            raise GenerationError(f"{path}: no such benchmark result (run bench/{rest[0]}.py)")
+        return benchmark(rest[0], json.loads(path.read_text(encoding="utf-8")))
     if verb == "api" and len(rest) == 1 and rest[0] in {"anodize", "sessiontypes"}:
         return api(rest[0])
     if verb == "decisions" and not rest:
         return decisions()
-    raise GenerationError(f"unknown generated part {what!r}; expected layers, benchmarks, decisions, "
-                          "api anodize or api sessiontypes")
+    raise GenerationError(f"unknown generated part {what!r}; expected layers, benchmarks, benchmark NAME, "
+                          "decisions, api anodize or api sessiontypes")
 
 
 def expand(markdown: str) -> str:

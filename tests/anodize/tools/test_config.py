@@ -130,7 +130,10 @@ BAD = {
     "unknown_group_key": (
         MINIMAL + GROUP + "prio = 3\n",
         ("groups.g.prio: unknown key; expected one of cpus, host, max_restarts, memory, on_failure, "
-         "priority, roles")),
+         "priority, priority_inheritance, roles")),
+    "priority_inheritance_not_a_bool": (
+        MINIMAL + GROUP + "priority_inheritance = 0\n",
+        "groups.g.priority_inheritance: expected true or false, got 0"),
     "missing_protocol": ('global = "G"\n' + GROUP, "protocol: missing (it is required)"),
     "missing_global": ('protocol = "p.proto"\n' + GROUP, "global: missing (it is required)"),
     "missing_groups": (MINIMAL, "groups: missing (it is required): add a table such as [groups.main]"),
@@ -254,6 +257,13 @@ def build(directory: Path, groups: str, header: str = 'global = "Stream"\n') -> 
 
 TWO_GROUPS = ('[groups.a]\nroles = { P = "cfg_roles:producer" }\n'
               '[groups.b]\nroles = { C = "cfg_roles:consumer" }\n')
+
+
+def test_priority_inheritance_is_on_unless_a_group_turns_it_off(system_dir: Path) -> None:
+    config = build(system_dir, TWO_GROUPS.replace("[groups.b]\n", "[groups.b]\npriority_inheritance = false\n"))
+    assert [g.priority_inheritance for g in config.groups.values()] == [True, False]
+    system = build_system(config)
+    assert [g.priority_inheritance for g in system.groups.values()] == [True, False]
 
 
 def test_build_system_runs_an_inproc_system(system_dir: Path) -> None:

@@ -39,10 +39,11 @@ Groups = dict[str, tuple[int | None, tuple[str, ...], tuple[int, ...] | None]]
 
 
 def system(groups: Groups, external: tuple[str, ...] = (), capacities: dict[str, int] | None = None,
-           hosts: dict[str, str] | None = None) -> SystemConfig:
-    """A checked system file's value: group name -> (priority, roles, CPUs)."""
+           hosts: dict[str, str] | None = None, inheritance: bool = False) -> SystemConfig:
+    """A checked system file's value: group name -> (priority, roles, CPUs). Priority inheritance is
+    turned off in every group unless ``inheritance``: most tests here are about what it leaves open."""
     table = {name: GroupConfig(name, priority, None, cpus, "stop", 3, dict.fromkeys(roles, "m:f"),
-                               f"system.toml: groups.{name}", (hosts or {}).get(name))
+                               f"system.toml: groups.{name}", (hosts or {}).get(name), inheritance)
              for name, (priority, roles, cpus) in groups.items()}
     transport = Dds() if external or hosts else Processes()
     return SystemConfig(Path("system.toml"), Path("p.proto"), "G", transport, None, True, (), table,
@@ -69,7 +70,9 @@ def test_a_reply_from_a_lower_group_is_an_unbounded_inversion_while_inheritance_
     assert [p.describe() for p in found.parties] == ["H (group high, priority 90, CPUs any)",
                                                       "L (group low, priority 10, CPUs any)"]
     assert found.preemptions == (Preemption("medium", 50, None, "L"),)
-    assert (found.uncoverable, found.unbounded) == ((), ("medium can preempt L for as long as it runs",))
+    assert (found.uncoverable, found.unbounded) == (
+        ("H waits on group low, which turns it off (priority_inheritance = false)",),
+        ("medium can preempt L for as long as it runs",))
     assert report.unbounded == (found,)
     assert (report.waits, report.inheritance_applied) == (2, False)
 
@@ -81,9 +84,10 @@ def test_the_whole_block_of_text() -> None:
         "  chain: H ?L(reply) [state 1] -> L",
         "  roles: H (group high, priority 90, CPUs any), L (group low, priority 10, CPUs any)",
         "  preempted by: medium (priority 50, CPUs any) over L",
-        "  priority inheritance: would cover it (every link on one host, to a process anodize runs); not applied yet",
+        ("  priority inheritance: cannot cover it: H waits on group low, which turns it off "
+         "(priority_inheritance = false)"),
         "  unbounded: medium can preempt L for as long as it runs",
-        "1 priority inversion (1 unbounded) among 2 waits; priority inheritance is not applied yet",
+        "1 priority inversion (1 unbounded) among 2 waits; priority inheritance is turned off in some groups",
     ]
 
 
@@ -167,7 +171,6 @@ def test_a_wait_on_an_external_ros_node_is_unbounded_and_inheritance_cannot_cove
     assert found.low.describe() == "L (external ROS 2 node, priority unknown)"
     assert found.uncoverable == ("H waits on external ROS 2 node L",)
     assert found.unbounded == ("L is an external ROS 2 node: its priority and timing are unknown",)
-    monkeypatch.setattr(inversion, "INHERITANCE_APPLIED", True)
     assert not analyse(ASK_REPLY, config).inversions[0].bounded
 
 
@@ -178,13 +181,12 @@ def test_a_wait_on_a_group_on_another_host_is_unbounded() -> None:
     assert found.unbounded == ("L runs on host base: no inheritance crosses hosts",)
 
 
-def test_inheritance_is_switched_in_one_place(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(inversion, "INHERITANCE_APPLIED", True)
-    report = analyse(ASK_REPLY, system(HIGH_MEDIUM_LOW))
+def test_inheritance_applied_bounds_a_wait_a_medium_group_could_stretch() -> None:
+    report = analyse(ASK_REPLY, system(HIGH_MEDIUM_LOW, inheritance=True))
     assert report.inheritance_applied
     assert report.inversions[0].bounded
     assert report.lines()[-3:] == [
-        "  priority inheritance: would cover it (every link on one host, to a process anodize runs); applied",
+        "  priority inheritance: covers it (every link on one host, to a group anodize runs that accepts it); applied",
         "  unbounded: nothing (the wait is bounded by the lower roles' own work)",
         "1 priority inversion (0 unbounded) among 2 waits; priority inheritance is applied"]
 
@@ -469,7 +471,8 @@ def test_the_lint_command_prints_the_inversions_after_the_isolation_findings_as_
     path.write_text(f'protocol = "ask.proto"\nglobal = "AskReply"\npythonpath = ["{fixtures}"]\n'
                     '[groups.control]\npriority = 90\ncpus = [0]\nroles = { H = "constants:producer" }\n'
                     '[groups.logging]\npriority = 50\nroles = { Spinner = "constants:producer" }\n'
-                    '[groups.slow]\npriority = 10\ncpus = [0]\nroles = { L = "constants:consumer" }\n',
+                    '[groups.slow]\npriority = 10\ncpus = [0]\npriority_inheritance = false\n'
+                    'roles = { L = "constants:consumer" }\n',
                     encoding="utf-8")
     out_json = tmp_path / "lint.json"
     assert main(["lint", str(path), "--json", str(out_json)]) == 0  # an inversion is a warning
@@ -482,9 +485,10 @@ def test_the_lint_command_prints_the_inversions_after_the_isolation_findings_as_
         "  chain: H ?L(reply) [state 1] -> L\n"
         "  roles: H (group control, priority 90, CPUs 0), L (group slow, priority 10, CPUs 0)\n"
         "  preempted by: logging (priority 50, CPUs any) over L\n"
-        "  priority inheritance: would cover it (every link on one host, to a process anodize runs); not applied yet\n"
+        "  priority inheritance: cannot cover it: H waits on group slow, which turns it off "
+        "(priority_inheritance = false)\n"
         "  unbounded: logging can preempt L for as long as it runs\n"
-        "1 priority inversion (1 unbounded) among 2 waits; priority inheritance is not applied yet\n"
+        "1 priority inversion (1 unbounded) among 2 waits; priority inheritance is turned off in some groups\n"
         f"wrote {out_json}\n")
     data = json.loads(out_json.read_text(encoding="utf-8"))
     assert (data["findings"], data["inheritance_applied"], data["waits"]) == ([], False, 2)
@@ -503,7 +507,8 @@ def test_the_lint_command_prints_the_inversions_after_the_isolation_findings_as_
     assert main(["lint", str(path), "--strict"]) == 0
     out = capsys.readouterr().out
     assert out.splitlines()[2].startswith("bounded inversion: H")
-    assert out.endswith("1 priority inversion (0 unbounded) among 2 waits; priority inheritance is not applied yet\n")
+    assert out.endswith("1 priority inversion (0 unbounded) among 2 waits; "
+                        "priority inheritance is turned off in some groups\n")
 
 
 TINMAN_INVERSIONS = [
@@ -528,8 +533,8 @@ def test_lint_tinman_by_name_prints_its_inversions(
     assert [[part.split()[0] for part in c[len("  chain: "):].split(" -> ")] for c in chains] == [
         r for _, _, r in TINMAN_INVERSIONS]
     assert "  preempted by: perception (priority 50, CPUs any) over Planner" in analysis
-    assert analysis.endswith("6 priority inversions (6 unbounded) among 11 waits; "
-                             "priority inheritance is not applied yet\n")
+    assert analysis.endswith("6 priority inversions (0 unbounded) among 11 waits; "
+                             "priority inheritance is applied\n")
 
 
 def test_lint_tinman_exits_0_on_its_inversions_alone_and_1_with_strict(
@@ -538,8 +543,8 @@ def test_lint_tinman_exits_0_on_its_inversions_alone_and_1_with_strict(
     monkeypatch.setattr("anodize._tools.lint.lint_report", lambda config: LintReport((), ("tinman/app.py",)))
     assert main(["lint", "tinman"]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("no isolation problems found in 1 module\n\nunbounded inversion: Move")
-    assert main(["lint", "tinman", "--strict"]) == 1  # unbounded until priority inheritance is applied
+    assert out.startswith("no isolation problems found in 1 module\n\nbounded inversion: Move")
+    assert main(["lint", "tinman", "--strict"]) == 0  # priority inheritance bounds every one of them
     assert capsys.readouterr().out == out
 
 
