@@ -16,11 +16,9 @@ from dataclasses import replace
 
 from .._transport.dds import DdsSettings
 from . import processes
-from .group import reference_of
-from .groupproc import GroupSpec, group_main
 from .hostlink import HostLink
 from .plan import RunPlan
-from .processes import ProcessRunner, _Incarnation, _sys_path
+from .processes import ProcessRunner
 from .supervisor import Elsewhere, Scope
 
 __all__ = ["DdsRunner"]
@@ -62,24 +60,10 @@ class DdsRunner(ProcessRunner):
             batch = frozenset(self.settings.host_of) if incarnation == 0 else frozenset(groups)
         group_of = self.settings.group_of
         for name in groups:
-            group = self.groups[name]
             dead = {role: f"group {group_of[role]} did not start again with group {name}"
                     for role in self.machines if role in group_of and group_of[role] not in batch}
-            spec = GroupSpec(
-                run_id=self.run_id, name=name, incarnation=incarnation, protocol=self.protocol,
-                roles={role: reference_of(fn) for role, fn in group.roles.items()},
-                machines={role: self.machines[role] for role in group.roles},
-                channels=self.channels, dead=dead, monitors=self.monitors,
-                priority=group.priority, cpus=group.cpus, memory=group.memory,
-                sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities, taps=self.plan.taps,
-                dds=replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)),
-                inheritance=None if self.inheritance is None else (self.inheritance.seats, self.inheritance.path))
-            parent_end, child_end = self.context.Pipe()
-            process = self.context.Process(target=group_main, args=(spec, child_end, {}),
-                                           name=f"anodize:{name}", daemon=True)
-            process.start()
-            child_end.close()
-            self.current[name] = _Incarnation(group, incarnation, process, parent_end)
+            self._launch(name, incarnation, dead, {},
+                         dds=replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)))
 
     def notes(self) -> list[str]:
         notes = super().notes()

@@ -19,7 +19,7 @@ import sys
 import time
 from collections.abc import Sequence
 from multiprocessing.connection import Connection, wait
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .._isolation.inherit import Boosts, inheritance_table
 from .._isolation.memory import CGROUP_SLACK, Cgroup, make_cgroup, peak_rss, remove_stale_cgroups, rss
@@ -36,6 +36,9 @@ from .plan import RunPlan
 from .report import RoleReport, RoleStatus
 from .supervisor import Counts, Event, GroupExited, GroupFailed, Note, Ready, RoleEnded, Scope
 from .watching import LivenessWatch
+
+if TYPE_CHECKING:
+    from .._transport.dds.settings import DdsSettings
 
 __all__ = ["ProcessRunner", "WATCHDOG_LIMIT"]
 
@@ -118,27 +121,34 @@ class ProcessRunner:
                 pipes[gs][(sender, receiver)] = writer
                 pipes[gr][(sender, receiver)] = reader
         for name in groups:
-            group = self.groups[name]
             dead = {role: f"group {self.group_of[role]} did not start again with group {name}"
                     for role in self.machines if self.group_of[role] not in batch}
-            spec = GroupSpec(
-                run_id=self.run_id, name=name, incarnation=incarnation, protocol=self.protocol,
-                roles={role: reference_of(fn) for role, fn in group.roles.items()},
-                machines={role: self.machines[role] for role in group.roles},
-                channels=self.channels, dead=dead, monitors=self.monitors,
-                priority=group.priority, cpus=group.cpus, memory=group.memory,
-                sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
-                taps=self.plan.taps,
-                inheritance=None if self.inheritance is None else (self.inheritance.seats, self.inheritance.path))
-            parent_end, child_end = self.context.Pipe()
-            process = self.context.Process(target=group_main, args=(spec, child_end, pipes[name]),
-                                           name=f"anodize:{name}", daemon=True)
-            process.start()
-            child_end.close()
-            self.current[name] = _Incarnation(group, incarnation, process, parent_end)
+            self._launch(name, incarnation, dead, pipes[name])
         for ends in pipes.values():
             for conn in ends.values():
                 conn.close()  # only the groups hold them now: a dead group means end-of-file
+
+    def _launch(self, name: str, incarnation: int, dead: dict[str, str],
+                pipes: dict[tuple[str, str], Connection], dds: DdsSettings | None = None) -> None:
+        """Start group ``name``'s process: its spec, with ``dead`` (role -> why its channels are
+        gone), its ends of the pipes to the rest of its batch, and its DDS settings where channels
+        between groups are DDS topics."""
+        group = self.groups[name]
+        spec = GroupSpec(
+            run_id=self.run_id, name=name, incarnation=incarnation, protocol=self.protocol,
+            roles={role: reference_of(fn) for role, fn in group.roles.items()},
+            machines={role: self.machines[role] for role in group.roles},
+            channels=self.channels, dead=dead, monitors=self.monitors,
+            priority=group.priority, cpus=group.cpus, memory=group.memory,
+            sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
+            taps=self.plan.taps, dds=dds,
+            inheritance=None if self.inheritance is None else (self.inheritance.seats, self.inheritance.path))
+        parent_end, child_end = self.context.Pipe()
+        process = self.context.Process(target=group_main, args=(spec, child_end, pipes),
+                                       name=f"anodize:{name}", daemon=True)
+        process.start()
+        child_end.close()
+        self.current[name] = _Incarnation(group, incarnation, process, parent_end)
 
     def _on_ready(self, inc: _Incarnation, ready: control.Ready) -> None:
         inc.ready = True
