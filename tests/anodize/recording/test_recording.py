@@ -28,7 +28,7 @@ from role_drivers import BOGUS_LABEL, build_system, can_always_end, load_global,
 from strategies import GeneratedGlobal, global_protocols
 
 import sessiontypes
-from anodize import System
+from anodize import Processes, System
 from anodize._recording.encoding import codec_for_sort, from_json, to_json
 from anodize._recording.reader import open_recording
 from anodize._recording.verify import RECORDING_FAULT, verify

@@ -75,7 +75,7 @@ def test_capacities_are_checked_against_the_protocol() -> None:
 @pytest.mark.parametrize("capacities", [None, {"P->C": 2}])
 def test_a_receiver_waiting_on_its_groups_own_channel_is_stopped_by_the_timeout(
         capacities: dict[str, int] | None) -> None:
-    system = anodize.System(STREAM, transport="process", capacities=capacities)
+    system = anodize.System(STREAM, transport=anodize.Processes(), capacities=capacities)
     system.group("both").role("P", "capacity_roles:silent_producer").role("C", "capacity_roles:waiting_consumer")
     report = system.run(timeout=1.0, grace=5.0)
     consumer = report.roles["C"]
