@@ -1,4 +1,4 @@
-"""Recordings: ``System.run(record=...)`` / ``anodize run --record``, and ``anodize verify``.
+"""Recordings: ``System.run(taps=[Recording(path)])`` / ``anodize run --record``, and ``anodize verify``.
 
 - a recording holds every message between groups, as sent, in order: checked against
   what the role drivers themselves saw sent (an independent account), and read back

@@ -1,4 +1,4 @@
-"""Channels as ROS 2 topics (``transport="dds"``): what anodize publishes is what a ROS 2 node
+"""Channels as ROS 2 topics (``transport=Dds()``): what anodize publishes is what a ROS 2 node
 publishes (topic ``rt/<name>``, type ``pkg::msg::dds_::Name_``, plain CDR, the RIHS01 type hash in
 USER_DATA), and a ROS 2 node can play a role. The "ROS node" here is a plain Cyclone DDS program
 written against the ROS types; ``test_ros_interop.py`` does the same with Fast DDS."""

@@ -1,4 +1,4 @@
-"""transport="process": groups as OS processes, isolated, supervised, and still monitored."""
+"""``transport=Processes()``: groups as OS processes, isolated, supervised, and still monitored."""
 
 from __future__ import annotations
 
