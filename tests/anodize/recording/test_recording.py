@@ -382,7 +382,7 @@ global Stream(Talker, Listener) = mu t. Talker -> Listener : { number(int). t, s
 def test_a_killed_group_keeps_what_it_recorded_and_the_report_says_its_part_ended_early(tmp_path: Path) -> None:
     import recording_roles
 
-    system = System(load_global(STREAM, "Stream"), transport="process")
+    system = System(load_global(STREAM, "Stream"), transport=Processes())
     system.group("talk").role("Talker", "recording_roles:talker_killed_midway")
     system.group("listen").role("Listener", "recording_roles:listener")
     report = system.run(timeout=20, taps=[Recording(tmp_path / "r.mcap")])

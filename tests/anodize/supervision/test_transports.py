@@ -179,7 +179,7 @@ def test_run_liveness_still_runs_with_a_warning_pointing_at_the_caller() -> None
 
 def test_run_record_is_a_shim_for_a_recording_tap(tmp_path: Path) -> None:
     pytest.importorskip("mcap")
-    with pytest.warns(DeprecationWarning, match=r"write System.run\(taps=\[anodize._recording.Recording\(path\)\]\)"):
+    with pytest.warns(DeprecationWarning, match=r"write System.run\(taps=\[anodize.Recording\(path\)\]\)"):
         report = stream().run(timeout=10, record=tmp_path / "r.mcap")
     assert report.ok, report.summary()
     assert (tmp_path / "r.mcap").is_file()
