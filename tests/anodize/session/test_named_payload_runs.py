@@ -96,7 +96,8 @@ def test_named_payloads_and_multicasts_run(transport: Transport) -> None:
     (roles.missing_field_seller, f"field where is missing (expected {WANTED})"),
     (roles.wrong_nested_field_seller, "field where: field x of Point: expected int, got str '1'"),
 ])
-def test_a_misfit_is_the_senders_violation_and_nothing_is_sent(transport: Transport, seller: object, reason: str) -> None:
+def test_a_misfit_is_the_senders_violation_and_nothing_is_sent(transport: Transport, seller: object,
+                                                               reason: str) -> None:
     report = run(transport, seller)
     error = report.roles["S"].error
     assert isinstance(error, ProtocolViolationError), report.summary()

@@ -331,7 +331,8 @@ def test_typed_programs_run_on_the_runtime(programs: Path) -> None:
 
 
 @pytest.mark.parametrize("transport", [anodize.Inproc(), anodize.Processes()], ids=["inproc", "process"])
-def test_a_typed_program_with_named_payloads_and_multicasts_runs(programs: Path, transport: anodize.Inproc | anodize.Processes) -> None:
+def test_a_typed_program_with_named_payloads_and_multicasts_runs(
+        programs: Path, transport: anodize.Inproc | anodize.Processes) -> None:
     import quotes_program
 
     system = anodize.System(sessiontypes.load(QUOTES).globals["Quotes"], transport=transport)
@@ -343,7 +344,8 @@ def test_a_typed_program_with_named_payloads_and_multicasts_runs(programs: Path,
 
 
 @pytest.mark.parametrize("transport", [anodize.Inproc(), anodize.Processes()], ids=["inproc", "process"])
-def test_a_typed_program_with_choices_among_peers_runs(programs: Path, transport: anodize.Inproc | anodize.Processes) -> None:
+def test_a_typed_program_with_choices_among_peers_runs(programs: Path,
+                                                       transport: anodize.Inproc | anodize.Processes) -> None:
     import route_program
 
     system = anodize.System(sessiontypes.load(ROUTE).globals["Route"], transport=transport)
