@@ -141,7 +141,7 @@ def seller(start: twobuyer_s.Initial) -> twobuyer_s.End:
 
 def main() -> int:
     protocol = sessiontypes.load(Path(__file__).with_name("two_buyer.proto")).globals["TwoBuyer"]
-    system = anodize.System(protocol, transport="inproc")
+    system = anodize.System(protocol, transport=anodize.Inproc())
     system.group("buyers").role("B1", buyer1).role("B2", buyer2)
     system.group("seller").role("S", seller)
     report = system.run(timeout=20)

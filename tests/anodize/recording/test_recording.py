@@ -1,4 +1,4 @@
-"""Recordings: ``System.run(record=...)`` / ``anodize run --record``, and ``anodize verify``.
+"""Recordings: ``System.run(taps=[Recording(path)])`` / ``anodize run --record``, and ``anodize verify``.
 
 - a recording holds every message between groups, as sent, in order: checked against
   what the role drivers themselves saw sent (an independent account), and read back
@@ -28,7 +28,7 @@ from role_drivers import BOGUS_LABEL, build_system, can_always_end, load_global,
 from strategies import GeneratedGlobal, global_protocols
 
 import sessiontypes
-from anodize import System
+from anodize import Processes, Recording, System
 from anodize._recording.encoding import codec_for_sort, from_json, to_json
 from anodize._recording.reader import open_recording
 from anodize._recording.verify import RECORDING_FAULT, verify
@@ -51,7 +51,7 @@ global Buy(B, S) =
 
 def _recorded_run(global_type: sessiontypes.GlobalType, seed: int, path: Path) -> Any:
     system, drivers_saw, _ = build_system(global_type, seed)
-    report = system.run(timeout=20.0, record=path)
+    report = system.run(timeout=20.0, taps=[Recording(path)])
     assert report.ok, report.summary()
     return drivers_saw
 
@@ -353,7 +353,7 @@ def test_a_system_run_records_only_channels_between_groups(tmp_path: Path) -> No
 
     system = System(global_type)
     system.group("all").role("B", buyer).role("S", seller)
-    report = system.run(timeout=10, record=tmp_path / "r.mcap")
+    report = system.run(timeout=10, taps=[Recording(tmp_path / "r.mcap")])
     assert report.ok
     assert any("recorded 0 messages" in n for n in report.notes), report.notes
     with open_recording(tmp_path / "r.mcap") as recording:
@@ -382,10 +382,10 @@ global Stream(Talker, Listener) = mu t. Talker -> Listener : { number(int). t, s
 def test_a_killed_group_keeps_what_it_recorded_and_the_report_says_its_part_ended_early(tmp_path: Path) -> None:
     import recording_roles
 
-    system = System(load_global(STREAM, "Stream"), transport="process")
+    system = System(load_global(STREAM, "Stream"), transport=Processes())
     system.group("talk").role("Talker", "recording_roles:talker_killed_midway")
     system.group("listen").role("Listener", "recording_roles:listener")
-    report = system.run(timeout=20, record=tmp_path / "r.mcap")
+    report = system.run(timeout=20, taps=[Recording(tmp_path / "r.mcap")])
     assert report.failed
     assert any("part talk-0.mcap ends early" in n for n in report.notes), report.notes
     with open_recording(tmp_path / "r.mcap") as recording:

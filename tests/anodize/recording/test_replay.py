@@ -38,7 +38,7 @@ from role_drivers import Recorder, RoleDriver, build_system, can_always_end, loa
 from strategies import GeneratedGlobal, global_protocols  # noqa: E402
 
 import sessiontypes  # noqa: E402
-from anodize import Endpoint, ProtocolViolationError, System  # noqa: E402
+from anodize import Endpoint, ProtocolViolationError, Recording, System  # noqa: E402
 from anodize._recording.compare import payload_difference, same_value  # noqa: E402
 from anodize._recording.encoding import codec_for_sort  # noqa: E402
 from anodize._recording.reader import open_recording  # noqa: E402
@@ -209,7 +209,7 @@ def cut_short(tmp_path_factory: pytest.TempPathFactory) -> Path:
     system.group("b").role("B", buyer)
     system.group("s").role("S", seller)
     path = tmp_path_factory.mktemp("cut") / "run.mcap"
-    report = system.run(timeout=0.5, record=path)
+    report = system.run(timeout=0.5, taps=[Recording(path)])
     assert not report.ok and report.roles["B"].status == "stopped"
     return path
 
@@ -243,7 +243,7 @@ def test_a_channel_inside_a_group_is_counted_not_compared_and_cannot_be_fed(tmp_
     system.group("shop").role("B1", replay_roles.buyer1).role("S", replay_roles.seller)
     system.group("b2").role("B2", replay_roles.buyer2)
     path = tmp_path / "run.mcap"
-    assert system.run(timeout=20.0, record=path).ok
+    assert system.run(timeout=20.0, taps=[Recording(path)]).ok
     report = _replay(path, "B1", replay_roles.buyer1)
     assert (report.ok, report.outcome) == (True, "not recorded")
     assert report.detail == (
@@ -308,7 +308,7 @@ def test_any_role_of_a_recorded_run_replays_with_the_same_driver_and_matches(
     assume(all(can_always_end(m) for m in machines.values()))
     system, _, _ = build_system(global_type, seed)
     path = tmp_path_factory.mktemp("prop") / "run.mcap"
-    run = system.run(timeout=20.0, record=path)
+    run = system.run(timeout=20.0, taps=[Recording(path)])
     assert run.ok, run.summary()
     role = data.draw(st.sampled_from(global_type.roles), label="role")
     driver = RoleDriver(role, machines[role], Recorder(global_type.roles), seed)

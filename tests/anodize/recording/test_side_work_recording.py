@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from role_drivers import load_global, machines_of
 
-from anodize import System
+from anodize import Recording, System
 from anodize._recording import tap as recording_tap
 from anodize._recording.merge import merge_parts
 from anodize._recording.plan import record_plan
@@ -135,7 +135,7 @@ def test_a_run_recording_to_a_slow_disk_ends_and_its_report_counts_the_gap(
     system = System(global_type)
     system.group("talk", memory=8 * 2**20).role("Talker", talker)
     system.group("listen").role("Listener", listener)
-    report = system.run(timeout=60, record=tmp_path / "r.mcap")
+    report = system.run(timeout=60, taps=[Recording(tmp_path / "r.mcap")])
     assert report.ok, report.summary()
     lost = [n for n in report.notes if "Talker->Listener: " in n and "a gap on /anodize/recording/gaps" in n]
     assert lost, report.notes

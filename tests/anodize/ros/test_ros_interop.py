@@ -33,8 +33,8 @@ def ros_domain(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> int:
 
 
 def teleop() -> anodize.System:
-    system = anodize.System(TELEOP, transport="dds", run_id="interop", ros_topics=roles.JOY_TOPICS,
-                            external=("J", "W"))
+    system = anodize.System(TELEOP, transport=anodize.Dds(run_id="interop", wait=30),
+                            ros=anodize.RosBridge(topics=roles.JOY_TOPICS, external=frozenset({"J", "W"})))
     system.group("control").role("C", roles.controller)
     return system
 
@@ -43,7 +43,7 @@ def test_fast_dds_drives_the_controller_and_reads_its_twists(ros_domain: int, tm
     wheels = start_peer("listen-twist", topic="rt/cmd_vel", domain=ros_domain, count=40, timeout=60)
     joystick = start_peer("publish-joy", topic="rt/joy", domain=ros_domain, count=40, period_ms=30, wait_match=30,
                           typehash=ros_type("sensor_msgs/msg/Joy").type_hash)
-    report = teleop().run(timeout=60, wait=30)
+    report = teleop().run(timeout=60)
     joy_code, joy_out, joy_err = finish_peer(joystick, 30)
     _, twist_out, _ = finish_peer(wheels, 70)  # it waits for 40 Twists: as many as Joys came
     assert joy_code == 0, joy_out + joy_err
@@ -69,7 +69,7 @@ def test_a_fast_dds_joy_of_another_type_hash_is_rejected_and_the_external_role_b
     wheels = start_peer("listen-twist", topic="rt/cmd_vel", domain=ros_domain, count=1, timeout=15)
     joystick = start_peer("publish-joy", topic="rt/joy", domain=ros_domain, count=40, period_ms=30, wait_match=30,
                           typehash="RIHS01_" + "ab" * 32)
-    report = teleop().run(timeout=30, wait=30)
+    report = teleop().run(timeout=30)
     finish_peer(joystick, 30)
     _, twist_out, _ = finish_peer(wheels, 30)
     error = report.roles["C"].error

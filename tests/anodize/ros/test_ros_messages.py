@@ -573,7 +573,7 @@ global Steer(Pilot, Base) = Pilot -> Base : cmd(Twist)
 
 
 def run(global_name: str, pilot: Any, base: Any) -> anodize.RunReport:
-    system = anodize.System(PROTOCOLS[global_name], transport="process")
+    system = anodize.System(PROTOCOLS[global_name], transport=anodize.Processes())
     system.group("pilot").role("Pilot", pilot)
     system.group("base").role("Base", base)
     return system.run(timeout=60)

@@ -1,4 +1,4 @@
-"""Channels as ROS 2 topics (``transport="dds"``): what anodize publishes is what a ROS 2 node
+"""Channels as ROS 2 topics (``transport=Dds()``): what anodize publishes is what a ROS 2 node
 publishes (topic ``rt/<name>``, type ``pkg::msg::dds_::Name_``, plain CDR, the RIHS01 type hash in
 USER_DATA), and a ROS 2 node can play a role. The "ROS node" here is a plain Cyclone DDS program
 written against the ROS types; ``test_ros_interop.py`` does the same with Fast DDS."""
@@ -94,10 +94,11 @@ def test_colour_and_depth_on_their_topics_and_commands_back_reach_ros_nodes_too(
     node = RosNode(ros_domain)
     color = node.reader("/camera/color/image_raw", "sensor_msgs/msg/Image")
     cmd = node.reader("/cmd_vel", "geometry_msgs/msg/Twist")
-    system = anodize.System(CAMERA, transport="dds", run_id="camera", ros_topics=roles.CAMERA_TOPICS)
+    system = anodize.System(CAMERA, transport=anodize.Dds(run_id="camera", wait=20),
+                            ros=anodize.RosBridge(topics=roles.CAMERA_TOPICS))
     system.group("camera").role("C", roles.camera)
     system.group("viewer").role("V", roles.viewer)
-    report = system.run(timeout=60, wait=20)
+    report = system.run(timeout=60)
     node.close()
     assert report.ok, report.summary()
     assert json.loads((tmp_path / "viewer.json").read_text()) == list(range(20))
@@ -115,9 +116,9 @@ def test_colour_and_depth_on_their_topics_and_commands_back_reach_ros_nodes_too(
     assert "DDS domain" in report.summary() and f"ROS 2 topics on domain {ros_domain}" in report.summary()
 
 
-def _teleop(external: tuple[str, ...]) -> anodize.System:
-    system = anodize.System(TELEOP, transport="dds", run_id="teleop", ros_topics=roles.JOY_TOPICS,
-                            external=external)
+def _teleop(external: tuple[str, ...], wait: float = 20) -> anodize.System:
+    system = anodize.System(TELEOP, transport=anodize.Dds(run_id="teleop", wait=wait),
+                            ros=anodize.RosBridge(topics=roles.JOY_TOPICS, external=frozenset(external)))
     system.group("control").role("C", roles.controller)
     if "W" not in external:
         system.group("wheels").role("W", roles.wheels)
@@ -144,7 +145,7 @@ def _teleop_with_joystick(node: RosNode, userdata: bytes, timeout: float) -> ano
     publisher = threading.Thread(target=_publish_joys, args=(node, userdata, stop), daemon=True)
     publisher.start()
     try:
-        return _teleop(("J", "W")).run(timeout=timeout, wait=20)
+        return _teleop(("J", "W")).run(timeout=timeout)
     finally:
         stop.set()
         publisher.join(5)
@@ -180,6 +181,6 @@ def test_a_ros_node_built_against_another_joy_is_rejected_and_blamed(ros_domain:
 
 
 def test_an_external_role_that_never_appears_is_named_with_its_topic(ros_domain: int) -> None:
-    report = _teleop(("J", "W")).run(timeout=10, wait=1.0)
+    report = _teleop(("J", "W"), wait=1.0).run(timeout=10)
     assert not report.ok
     assert "external role J (a ROS 2 node) (for J->C on ROS topic /joy)" in report.summary(), report.summary()

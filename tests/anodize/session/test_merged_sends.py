@@ -27,7 +27,7 @@ global R(A, B, C) = mu t. A -> B : { more. C -> B : reading(int). B -> C : more.
 
 
 def run(global_type: sessiontypes.GlobalType, **roles: Callable[[Endpoint], None]) -> anodize.RunReport:
-    system = anodize.System(global_type, transport="inproc")
+    system = anodize.System(global_type, transport=anodize.Inproc())
     group = system.group("all")
     for name, function in roles.items():
         group.role(name, function)

@@ -19,6 +19,7 @@ from anodize._recording.reader import open_recording
 from anodize._recording.verify import verify
 from anodize._session.monitor import Monitor
 from anodize._session.payloads import exact_types_for, validator_for
+from anodize._supervision.transports import Transport
 
 QUOTES = sessiontypes.loads("""
 type Point = "payload_roles:Point"
@@ -28,7 +29,7 @@ global Quotes(S, A, B) =
   S -> A, B : {sold(price: nat), unsold}
 """, "quotes.proto").globals["Quotes"]
 
-TRANSPORTS = ["inproc", "process"]
+TRANSPORTS = [pytest.param(anodize.Inproc(), id="inproc"), pytest.param(anodize.Processes(), id="process")]
 WANTED = "a dict with the fields price: nat, where: Point, by: str"
 
 
@@ -38,12 +39,12 @@ def quote_sort() -> sessiontypes.Sort:
     return sort
 
 
-def run(transport: str, seller: object, record: Path | None = None) -> anodize.RunReport:
+def run(transport: Transport, seller: object, record: Path | None = None) -> anodize.RunReport:
     system = anodize.System(QUOTES, transport=transport)
     system.group("s").role("S", seller)
     system.group("a").role("A", roles.buyer)
     system.group("b").role("B", roles.watcher)
-    return system.run(timeout=60, record=record)
+    return system.run(timeout=60, taps=[anodize.Recording(record)] if record else [])
 
 
 # Each payload and the reason it is refused with (the table is the specification).
@@ -84,7 +85,7 @@ def test_both_monitors_name_the_field_and_blame_the_sender() -> None:
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_named_payloads_and_multicasts_run(transport: str) -> None:
+def test_named_payloads_and_multicasts_run(transport: Transport) -> None:
     report = run(transport, roles.seller)
     assert report.ok, report.summary()
 
@@ -95,7 +96,8 @@ def test_named_payloads_and_multicasts_run(transport: str) -> None:
     (roles.missing_field_seller, f"field where is missing (expected {WANTED})"),
     (roles.wrong_nested_field_seller, "field where: field x of Point: expected int, got str '1'"),
 ])
-def test_a_misfit_is_the_senders_violation_and_nothing_is_sent(transport: str, seller: object, reason: str) -> None:
+def test_a_misfit_is_the_senders_violation_and_nothing_is_sent(transport: Transport, seller: object,
+                                                               reason: str) -> None:
     report = run(transport, seller)
     error = report.roles["S"].error
     assert isinstance(error, ProtocolViolationError), report.summary()
@@ -104,7 +106,7 @@ def test_a_misfit_is_the_senders_violation_and_nothing_is_sent(transport: str, s
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_a_misfit_that_bypassed_the_senders_monitor_is_caught_on_arrival(transport: str) -> None:
+def test_a_misfit_that_bypassed_the_senders_monitor_is_caught_on_arrival(transport: Transport) -> None:
     report = run(transport, roles.smuggling_seller)
     error = report.roles["A"].error
     assert isinstance(error, ProtocolViolationError), report.summary()
@@ -113,7 +115,7 @@ def test_a_misfit_that_bypassed_the_senders_monitor_is_caught_on_arrival(transpo
 
 def test_a_recording_of_named_payloads_verifies(tmp_path: Path) -> None:
     path = tmp_path / "quotes.mcap"
-    report = run("process", roles.seller, record=path)
+    report = run(anodize.Processes(), roles.seller, record=path)
     assert report.ok, report.summary()
     with open_recording(path) as recording:
         result = verify(recording, QUOTES)

@@ -17,6 +17,7 @@ import sessiontypes
 from anodize import PeerFailedError, ProtocolViolationError
 from anodize._session.monitor import Monitor
 from anodize._session.payloads import check_fields, exact_types_for, validator_for
+from anodize._supervision.transports import Transport
 
 PROTOCOLS = sessiontypes.loads("""
 type Point = "payload_roles:Point"
@@ -189,18 +190,18 @@ def test_the_monitors_blame_the_sender_and_a_refused_send_does_not_move_the_send
     assert received.value.reason == "field x of Point: expected int, got str 'a'"
 
 
-def run(transport: str, sender: object) -> anodize.RunReport:
+def run(transport: Transport, sender: object) -> anodize.RunReport:
     system = anodize.System(PROTOCOLS["Points"], transport=transport)
     system.group("a").role("A", sender)
     system.group("b").role("B", roles.receiver)
     return system.run(timeout=60)
 
 
-TRANSPORTS = ["inproc", "process"]
+TRANSPORTS = [pytest.param(anodize.Inproc(), id="inproc"), pytest.param(anodize.Processes(), id="process")]
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_conforming_dataclasses_pass_both_monitors(transport: str) -> None:
+def test_conforming_dataclasses_pass_both_monitors(transport: Transport) -> None:
     report = run(transport, roles.good_sender)
     assert report.ok, report.summary()
 
@@ -210,7 +211,7 @@ def test_conforming_dataclasses_pass_both_monitors(transport: str) -> None:
     (roles.bad_point_sender, "field x of Point: expected int, got str 'a'"),
     (roles.bad_track_sender, "field points[1].x of Track: expected int, got str 'b'"),
 ])
-def test_the_sender_is_blamed_and_nothing_is_sent(transport: str, sender: object, reason: str) -> None:
+def test_the_sender_is_blamed_and_nothing_is_sent(transport: Transport, sender: object, reason: str) -> None:
     report = run(transport, sender)
     error = report.roles["A"].error
     assert isinstance(error, ProtocolViolationError), report.summary()
@@ -224,7 +225,7 @@ def test_the_sender_is_blamed_and_nothing_is_sent(transport: str, sender: object
     (roles.smuggling_track_sender, "track", "field points[1].x of Track: expected int, got str 'b'"),
 ])
 def test_a_misfit_that_bypassed_the_senders_monitor_is_caught_on_arrival(
-        transport: str, sender: object, label: str, reason: str) -> None:
+        transport: Transport, sender: object, label: str, reason: str) -> None:
     report = run(transport, sender)
     error = report.roles["B"].error
     assert isinstance(error, ProtocolViolationError), report.summary()

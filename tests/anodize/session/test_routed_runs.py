@@ -19,6 +19,7 @@ import sessiontypes
 from anodize import Endpoint, ProtocolViolationError
 from anodize._recording.reader import open_recording
 from anodize._recording.verify import verify
+from anodize._supervision.transports import Transport
 
 ROUTED = sessiontypes.loads("""
 global Route(A, B, C) =
@@ -29,16 +30,16 @@ global Route(A, B, C) =
   }
 """, "route.proto").globals["Route"]
 
-TRANSPORTS = ["inproc", "process"]
+TRANSPORTS = [pytest.param(anodize.Inproc(), id="inproc"), pytest.param(anodize.Processes(), id="process")]
 
 
-def run(transport: str, c: Callable[[Endpoint], None] = roles.worker_c, record: Path | None = None,
+def run(transport: Transport, c: Callable[[Endpoint], None] = roles.worker_c, record: Path | None = None,
         ) -> anodize.RunReport:
     system = anodize.System(ROUTED, transport=transport)
     system.group("a").role("A", roles.chooser)
     system.group("b").role("B", roles.worker_b)
     system.group("c").role("C", c)
-    return system.run(timeout=60, record=record)
+    return system.run(timeout=60, taps=[anodize.Recording(record)] if record else [])
 
 
 def test_the_projections() -> None:
@@ -50,20 +51,20 @@ def test_the_projections() -> None:
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_roles_that_learn_from_either_peer_run_monitored(transport: str) -> None:
+def test_roles_that_learn_from_either_peer_run_monitored(transport: Transport) -> None:
     report = run(transport)
     assert report.ok, report.summary()
     assert report.messages == {"A->B": 3, "A->C": 3, "B->C": 3, "C->A": 2, "C->B": 3, "B->A": 3}
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_a_role_that_knows_whom_to_wait_for_may_name_the_peer(transport: str) -> None:
+def test_a_role_that_knows_whom_to_wait_for_may_name_the_peer(transport: Transport) -> None:
     report = run(transport, roles.worker_c_by_peer)
     assert report.ok, report.summary()
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_a_send_outside_the_branch_taken_is_blamed_on_its_sender(transport: str) -> None:
+def test_a_send_outside_the_branch_taken_is_blamed_on_its_sender(transport: Transport) -> None:
     report = run(transport, roles.lazy_c)
     error = report.roles["C"].error
     assert isinstance(error, ProtocolViolationError), report.summary()
@@ -77,7 +78,7 @@ def test_the_roles_that_wait_on_two_peers_get_a_doorbell() -> None:
 
 def test_a_recording_verifies(tmp_path: Path) -> None:
     path = tmp_path / "route.mcap"
-    report = run("process", record=path)
+    report = run(anodize.Processes(), record=path)
     assert report.ok, report.summary()
     with open_recording(path) as recording:
         result = verify(recording, ROUTED)

@@ -14,7 +14,7 @@ sys.path.insert(0, str(Path(__file__).parents[1]))
 import send_many_roles
 
 import sessiontypes
-from anodize import ProtocolViolationError, System
+from anodize import Inproc, Processes, ProtocolViolationError, Recording, System
 from anodize._recording.reader import open_recording
 from anodize._recording.verify import verify
 
@@ -22,14 +22,14 @@ STREAM = sessiontypes.loads("global S(A, B) = mu t. A -> B : { num(int). t, fin 
 TWO = sessiontypes.loads("global T(A, B) = A -> B : num(int). A -> B : num(int)", "t.proto").globals["T"]
 
 
-@pytest.mark.parametrize("transport", ["inproc", "process"])
+@pytest.mark.parametrize("transport", [Inproc(), Processes()], ids=["inproc", "process"])
 def test_a_batch_arrives_whole_and_in_order_and_is_recorded(
-        transport: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+        transport: Inproc | Processes, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("SEND_MANY_OUT", str(tmp_path / "got.json"))
     system = System(STREAM, transport=transport)
     system.group("a").role("A", "send_many_roles:batch_sender")
     system.group("b").role("B", "send_many_roles:counting_receiver")
-    report = system.run(timeout=60, record=tmp_path / "r.mcap")
+    report = system.run(timeout=60, taps=[Recording(tmp_path / "r.mcap")])
     assert report.ok, report.summary()
     assert json.loads((tmp_path / "got.json").read_text()) == list(range(send_many_roles.COUNT))
     assert report.messages["A->B"] == send_many_roles.COUNT + 1
@@ -78,7 +78,7 @@ FLOATS = sessiontypes.loads("global F(A, B) = mu t. A -> B : { num(float). t, fi
 def test_recv_many_takes_what_has_arrived_in_order_and_leaves_what_needs_a_full_check(
         global_type: sessiontypes.GlobalType, sender: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("SEND_MANY_OUT", str(tmp_path / "got.json"))
-    system = System(global_type, transport="process")
+    system = System(global_type, transport=Processes())
     system.group("a").role("A", f"send_many_roles:{sender}")
     system.group("b").role("B", "send_many_roles:batch_receiver")
     report = system.run(timeout=60)
@@ -113,7 +113,7 @@ STRINGS = sessiontypes.loads("global S(A, B) = mu t. A -> B : { s(str). t, fin }
 def test_a_batch_of_more_arrays_than_the_ring_has_slots_goes_through(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("SEND_MANY_OUT", str(tmp_path / "got.json"))
-    system = System(FRAMES, transport="process")
+    system = System(FRAMES, transport=Processes())
     system.group("a").role("A", "send_many_roles:array_batch_sender")
     system.group("b").role("B", "send_many_roles:array_receiver")
     report = system.run(timeout=60)
@@ -122,10 +122,10 @@ def test_a_batch_of_more_arrays_than_the_ring_has_slots_goes_through(
 
 
 def test_what_a_failed_batch_did_send_is_counted_and_recorded(tmp_path: Path) -> None:
-    system = System(STRINGS, transport="process")
+    system = System(STRINGS, transport=Processes())
     system.group("a").role("A", "send_many_roles:too_big_in_the_middle")
     system.group("b").role("B", "send_many_roles:string_receiver")
-    report = system.run(timeout=60, record=tmp_path / "r.mcap")
+    report = system.run(timeout=60, taps=[Recording(tmp_path / "r.mcap")])
     assert report.roles["A"].status == "failed" and "cannot send s to B" in str(report.roles["A"].error)
     assert report.messages["A->B"] == 2
     with open_recording(tmp_path / "r.mcap") as recording:

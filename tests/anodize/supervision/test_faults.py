@@ -18,6 +18,7 @@ import anodize
 import sessiontypes
 from anodize import PeerFailedError
 from anodize._supervision.report import GroupState, RoleStatus
+from anodize._supervision.transports import Transport
 from anodize.errors import RoleError
 
 PING = sessiontypes.loads("global Ping(A, B) = mu t. A -> B : {ping(nat). B -> A : pong(nat). t, stop}",
@@ -26,11 +27,11 @@ PING = sessiontypes.loads("global Ping(A, B) = mu t. A -> B : {ping(nat). B -> A
 pytestmark = pytest.mark.slow
 
 
-def run(client: object, *, transport: str = "process", timeout: float = 60, **options: object) -> anodize.RunReport:
-    system = anodize.System(PING, transport=transport)
+def run(client: object, *, transport: Transport | None = None, timeout: float = 60) -> anodize.RunReport:
+    system = anodize.System(PING, transport=transport or anodize.Processes())
     system.group("a").role("A", client)
     system.group("b").role("B", roles.server)
-    return system.run(timeout=timeout, grace=1.0, **options)  # type: ignore[arg-type]
+    return system.run(timeout=timeout, grace=1.0)
 
 
 def alive(pid: int) -> bool:
@@ -68,7 +69,7 @@ def test_a_fork_holding_the_pipe_does_not_delay_the_peer_and_dies_with_its_group
 
 
 def test_a_frozen_group_is_failed_after_missing_its_heartbeats() -> None:
-    report = run(roles.freezing_client, liveness=1.0)
+    report = run(roles.freezing_client, transport=anodize.Processes(liveness=1.0))
     group = report.groups["a"]
     assert group.status is GroupState.FAILED, report.summary()
     assert isinstance(group.error, RoleError) and group.error.type_name == "Unresponsive"
@@ -79,7 +80,7 @@ def test_a_frozen_group_is_failed_after_missing_its_heartbeats() -> None:
 
 @pytest.mark.parametrize("client", [roles.half_a_control_message, roles.infinite_memory_report])
 def test_a_garbled_control_connection_fails_that_group_not_the_supervisor(client: object) -> None:
-    report = run(client, liveness=1.0)
+    report = run(client, transport=anodize.Processes(liveness=1.0))
     group = report.groups["a"]
     assert group.status is GroupState.FAILED, report.summary()
     assert isinstance(group.error, RoleError) and group.error.type_name == "ControlError"
@@ -87,7 +88,7 @@ def test_a_garbled_control_connection_fails_that_group_not_the_supervisor(client
 
 
 def test_the_inproc_timeout_returns_although_a_role_is_stuck_in_a_c_call() -> None:
-    report = run(roles.stuck_in_c, transport="inproc", timeout=0.5)
+    report = run(roles.stuck_in_c, transport=anodize.Inproc(), timeout=0.5)
     assert report.roles["A"].status is RoleStatus.STOPPED
     assert "abandoned" in report.roles["A"].detail
     assert report.roles["B"].status is RoleStatus.STOPPED
@@ -100,7 +101,7 @@ def test_group_processes_die_with_their_supervisor(tmp_path: Path) -> None:
         sys.path[:0] = {[str(Path(__file__).parents[1])]!r}
         import anodize, sessiontypes, fault_roles
         gt = sessiontypes.loads("global P(A, B) = A -> B : x", "p.proto").globals["P"]
-        system = anodize.System(gt, transport="process")
+        system = anodize.System(gt, transport=anodize.Processes())
         system.group("a").role("A", fault_roles.note_pid_and_freeze)
         system.group("b").role("B", fault_roles.note_pid_and_freeze)
         if __name__ == "__main__":
@@ -125,7 +126,7 @@ def test_group_processes_die_with_their_supervisor(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("hog", [roles.hold_a_shared_mapping, roles.map_past_the_bound])
 def test_memory_the_data_limit_misses_is_still_bounded_and_reported(hog: object) -> None:
-    system = anodize.System(PING, transport="process")
+    system = anodize.System(PING, transport=anodize.Processes())
     system.group("a", memory="64MiB").role("A", hog)
     system.group("b").role("B", roles.server)
     report = system.run(timeout=60, grace=1.0)

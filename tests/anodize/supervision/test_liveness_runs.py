@@ -32,10 +32,10 @@ pytestmark = pytest.mark.slow
 
 
 def run(client: Callable[..., Any], timeout: float = 60) -> RunReport:
-    system = anodize.System(PING, transport="process")
+    system = anodize.System(PING, transport=anodize.Processes(liveness=LIMIT))
     system.group("a").role("A", client)
     system.group("b").role("B", roles.server)
-    return system.run(timeout=timeout, grace=1.0, liveness=LIMIT)
+    return system.run(timeout=timeout, grace=1.0)
 
 
 def wait_for(path: Path, seconds: float) -> str:
@@ -101,10 +101,10 @@ def test_a_stopped_supervisor_blames_no_group(tmp_path: Path) -> None:
         import anodize, sessiontypes, liveness_roles as roles
         PING = sessiontypes.loads({PING_SOURCE!r}, "stopped.proto").globals["Ping"]
         if __name__ == "__main__":
-            system = anodize.System(PING, transport="process")
+            system = anodize.System(PING, transport=anodize.Processes(liveness={LIMIT}))
             system.group("a").role("A", roles.pings_for_a_while)
             system.group("b").role("B", roles.server)
-            report = system.run(timeout=60, grace=1.0, liveness={LIMIT})
+            report = system.run(timeout=60, grace=1.0)
             print(report.outcome)
             print(report.summary())
     """))

@@ -13,6 +13,7 @@ import sessiontypes
 from anodize import PeerFailedError
 from anodize._supervision.report import GroupState, RoleStatus
 from anodize._supervision.supervisor import window_rates
+from anodize._supervision.transports import Transport
 
 # A ping-pong pair and an independent stream: a policy's reach shows on the stream.
 POLICIES = sessiontypes.loads("""
@@ -20,10 +21,11 @@ global Policies(A, B, C, D) = (mu t. A -> B : {ping(nat). B -> A : pong(nat). t,
                                || mu u. C -> D : {tick(int). u, fin})
 """, "test_supervision.proto").globals["Policies"]
 
-TRANSPORTS = [pytest.param("inproc"), pytest.param("process", marks=pytest.mark.slow)]
+TRANSPORTS = [pytest.param(anodize.Inproc(), id="inproc"),
+              pytest.param(anodize.Processes(), id="process", marks=pytest.mark.slow)]
 
 
-def run(transport: str, client: object, *, a: str = "stop", b: str = "stop", max_restarts: int = 3,
+def run(transport: Transport, client: object, *, a: str = "stop", b: str = "stop", max_restarts: int = 3,
         server: object = roles.server, timeout: float = 60) -> anodize.RunReport:
     system = anodize.System(POLICIES, transport=transport)
     system.group("a", on_failure=a, max_restarts=max_restarts).role("A", client)
@@ -33,7 +35,7 @@ def run(transport: str, client: object, *, a: str = "stop", b: str = "stop", max
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_stop_ends_the_failed_group_and_its_peers_learn_of_it_the_rest_runs_on(transport: str) -> None:
+def test_stop_ends_the_failed_group_and_its_peers_learn_of_it_the_rest_runs_on(transport: Transport) -> None:
     report = run(transport, roles.failing_client)
     assert report.roles["A"].status is RoleStatus.FAILED
     assert isinstance(report.roles["B"].error, PeerFailedError), report.summary()
@@ -45,7 +47,7 @@ def test_stop_ends_the_failed_group_and_its_peers_learn_of_it_the_rest_runs_on(t
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_stop_system_stops_every_group(transport: str) -> None:
+def test_stop_system_stops_every_group(transport: Transport) -> None:
     report = run(transport, roles.failing_client, a="stop-system")
     assert report.roles["A"].status is RoleStatus.FAILED
     assert report.groups["c"].status is GroupState.STOPPED, report.summary()
@@ -55,7 +57,7 @@ def test_stop_system_stops_every_group(transport: str) -> None:
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_restart_starts_the_connected_groups_again(transport: str, tmp_path, monkeypatch) -> None:
+def test_restart_starts_the_connected_groups_again(transport: Transport, tmp_path, monkeypatch) -> None:
     monkeypatch.setenv("ANODIZE_TEST_MARKER", str(tmp_path / f"marker-{transport}"))
     report = run(transport, roles.once_failing_client, a="restart", b="restart")
     assert report.ok, report.summary()
@@ -66,7 +68,7 @@ def test_restart_starts_the_connected_groups_again(transport: str, tmp_path, mon
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_restart_gives_up_after_max_restarts(transport: str) -> None:
+def test_restart_gives_up_after_max_restarts(transport: Transport) -> None:
     report = run(transport, roles.failing_client, a="restart", b="restart", max_restarts=2)
     group = report.groups["a"]
     assert (group.restarts, len(group.failures), group.status) == (2, 3, GroupState.FAILED), report.summary()
@@ -75,7 +77,7 @@ def test_restart_gives_up_after_max_restarts(transport: str) -> None:
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_a_role_that_raises_is_reported_with_the_place_in_its_own_code(transport: str) -> None:
+def test_a_role_that_raises_is_reported_with_the_place_in_its_own_code(transport: Transport) -> None:
     report = run(transport, roles.failing_client)
     lines, first = inspect.getsourcelines(roles.failing_client)
     line = first + next(i for i, text in enumerate(lines) if "FAILING_LINE" in text)
@@ -89,7 +91,7 @@ def test_a_role_that_raises_is_reported_with_the_place_in_its_own_code(transport
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_a_timeout_names_every_blocked_role_and_what_it_waited_for(transport: str) -> None:
+def test_a_timeout_names_every_blocked_role_and_what_it_waited_for(transport: Transport) -> None:
     report = run(transport, roles.ping_then_sleep, timeout=1.0)
     assert report.outcome == "stopped, no failures"
     machine = POLICIES.project("B").fsm()
@@ -103,7 +105,7 @@ def test_a_timeout_names_every_blocked_role_and_what_it_waited_for(transport: st
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_counts_show_what_each_group_received(transport: str) -> None:
+def test_counts_show_what_each_group_received(transport: Transport) -> None:
     report = run(transport, roles.client)
     assert report.ok, report.summary()
     assert report.groups["a"].messages == 6 and report.groups["a"].received == 5

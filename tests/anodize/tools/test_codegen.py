@@ -330,8 +330,9 @@ def test_typed_programs_run_on_the_runtime(programs: Path) -> None:
     assert report.ok, {name: role.error for name, role in report.roles.items()}
 
 
-@pytest.mark.parametrize("transport", ["inproc", "process"])
-def test_a_typed_program_with_named_payloads_and_multicasts_runs(programs: Path, transport: str) -> None:
+@pytest.mark.parametrize("transport", [anodize.Inproc(), anodize.Processes()], ids=["inproc", "process"])
+def test_a_typed_program_with_named_payloads_and_multicasts_runs(
+        programs: Path, transport: anodize.Inproc | anodize.Processes) -> None:
     import quotes_program
 
     system = anodize.System(sessiontypes.load(QUOTES).globals["Quotes"], transport=transport)
@@ -342,8 +343,9 @@ def test_a_typed_program_with_named_payloads_and_multicasts_runs(programs: Path,
     assert report.ok, report.summary()
 
 
-@pytest.mark.parametrize("transport", ["inproc", "process"])
-def test_a_typed_program_with_choices_among_peers_runs(programs: Path, transport: str) -> None:
+@pytest.mark.parametrize("transport", [anodize.Inproc(), anodize.Processes()], ids=["inproc", "process"])
+def test_a_typed_program_with_choices_among_peers_runs(programs: Path,
+                                                       transport: anodize.Inproc | anodize.Processes) -> None:
     import route_program
 
     system = anodize.System(sessiontypes.load(ROUTE).globals["Route"], transport=transport)

@@ -12,14 +12,14 @@ import anodize
 import sessiontypes
 from anodize import ConfigurationError, PeerFailedError, RoleStopped
 from anodize._supervision.report import RoleStatus
+from anodize._supervision.transports import Transport
 
 STREAM = sessiontypes.loads(roles.STREAM, "stream.proto").globals["Stream"]
 
 
-def stream(transport: str, capacities: dict[str, int] | None = None, same_group: bool = True,
+def stream(transport: Transport | None = None, capacities: dict[str, int] | None = None, same_group: bool = True,
            consumer: object = roles.slow_consumer) -> anodize.System:
-    extra = {"domain": domain(), "run_id": "capacity"} if transport == "dds" else {}
-    system = anodize.System(STREAM, transport=transport, capacities=capacities, **extra)  # type: ignore[arg-type]
+    system = anodize.System(STREAM, transport=transport or anodize.Inproc(), capacities=capacities)
     if same_group:
         system.group("both").role("P", roles.eager_producer).role("C", consumer)
     else:
@@ -29,14 +29,15 @@ def stream(transport: str, capacities: dict[str, int] | None = None, same_group:
 
 
 def test_an_unbounded_channel_reports_how_far_its_receiver_fell_behind() -> None:
-    report = stream("inproc").run(timeout=30)
+    report = stream().run(timeout=30)
     assert report.ok, report.summary()
     assert report.high_water["P->C"] > 100  # the producer ran ahead by most of its 200
     assert report.capacities == {} and f"most messages waiting: P->C {report.high_water['P->C']}" in report.summary()
 
 
-@pytest.mark.parametrize("transport", ["inproc", pytest.param("process", marks=pytest.mark.slow)])
-def test_a_capacity_holds_the_sender_back(transport: str) -> None:
+@pytest.mark.parametrize("transport", [pytest.param(anodize.Inproc(), id="inproc"),
+                                       pytest.param(anodize.Processes(), id="process", marks=pytest.mark.slow)])
+def test_a_capacity_holds_the_sender_back(transport: Transport) -> None:
     report = stream(transport, {"P->C": 3}).run(timeout=30)
     assert report.ok, report.summary()
     assert 1 <= report.high_water["P->C"] <= 3, report.high_water
@@ -45,14 +46,15 @@ def test_a_capacity_holds_the_sender_back(transport: str) -> None:
 
 @pytest.mark.slow
 def test_a_capacity_narrows_the_dds_credit_window() -> None:
-    report = stream("dds", {"P->C": 5}, same_group=False).run(timeout=60, wait=20)
+    carrier = anodize.Dds(domain=domain(), run_id="capacity", wait=20)
+    report = stream(carrier, {"P->C": 5}, same_group=False).run(timeout=60)
     assert report.ok, report.summary()
     # Counted from the receiver's credits: at most the capacity (plus the message being sent).
     assert 1 <= report.high_water["P->C"] <= 5, report.high_water
 
 
 def test_a_sender_waiting_on_a_full_channel_is_stopped_by_the_timeout() -> None:
-    report = stream("inproc", {"P->C": 2}, consumer=roles.stuck_consumer).run(timeout=1.0)
+    report = stream(anodize.Inproc(), {"P->C": 2}, consumer=roles.stuck_consumer).run(timeout=1.0)
     producer = report.roles["P"]
     assert producer.status is RoleStatus.STOPPED, report.summary()
     assert isinstance(producer.error, RoleStopped) or producer.error is None
@@ -60,22 +62,22 @@ def test_a_sender_waiting_on_a_full_channel_is_stopped_by_the_timeout() -> None:
 
 
 def test_a_sender_waiting_on_a_full_channel_hears_that_its_receiver_failed() -> None:
-    report = stream("inproc", {"P->C": 2}, consumer=roles.failing_consumer).run(timeout=30)
+    report = stream(anodize.Inproc(), {"P->C": 2}, consumer=roles.failing_consumer).run(timeout=30)
     assert isinstance(report.roles["P"].error, PeerFailedError), report.summary()
     assert "the consumer gives up" in str(report.roles["P"].error)
 
 
 def test_capacities_are_checked_against_the_protocol() -> None:
     with pytest.raises(ConfigurationError, match="global Stream has no channel C->P; its channels are P->C"):
-        stream("inproc", {"C->P": 2})
+        stream(anodize.Inproc(), {"C->P": 2})
     with pytest.raises(ConfigurationError, match="expected a whole number of messages >= 1, got 0"):
-        stream("inproc", {"P->C": 0})
+        stream(anodize.Inproc(), {"P->C": 0})
 
 
 @pytest.mark.parametrize("capacities", [None, {"P->C": 2}])
 def test_a_receiver_waiting_on_its_groups_own_channel_is_stopped_by_the_timeout(
         capacities: dict[str, int] | None) -> None:
-    system = anodize.System(STREAM, transport="process", capacities=capacities)
+    system = anodize.System(STREAM, transport=anodize.Processes(), capacities=capacities)
     system.group("both").role("P", "capacity_roles:silent_producer").role("C", "capacity_roles:waiting_consumer")
     report = system.run(timeout=1.0, grace=5.0)
     consumer = report.roles["C"]

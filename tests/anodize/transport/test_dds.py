@@ -26,8 +26,8 @@ STREAM = sessiontypes.loads(dds_roles.STREAM, "stream.proto").globals["Stream"]
 REPO = Path(__file__).resolve().parents[3]
 
 
-def stream_system(producer: object, consumer: object, run_id: str) -> anodize.System:
-    system = anodize.System(STREAM, transport=anodize.Dds(domain=domain(), run_id=run_id, wait=20))
+def stream_system(producer: object, consumer: object, run_id: str, host: str | None = None) -> anodize.System:
+    system = anodize.System(STREAM, transport=anodize.Dds(domain=domain(), run_id=run_id, host=host, wait=20))
     system.group("producing").role("P", producer)
     system.group("consuming").role("C", consumer)
     return system
@@ -88,10 +88,10 @@ def test_100000_messages_and_1000_frames_cross_in_order(monkeypatch: pytest.Monk
 
 
 def test_peers_that_never_appear_are_named_with_their_host() -> None:
-    system = anodize.System(STREAM, transport="dds", domain=domain(), run_id="lonely")
+    system = anodize.System(STREAM, transport=anodize.Dds(domain=domain(), run_id="lonely", host="robot", wait=1.0))
     system.group("producing", host="robot").role("P", dds_roles.producer)
     system.group("consuming", host="base").role("C", dds_roles.consumer)
-    report = system.run(timeout=30, wait=1.0, host="robot")
+    report = system.run(timeout=30)
     assert not report.ok
     error = str(report.groups["producing"].error)
     assert "no sign of group consuming on host base (for P->C)" in error, error
@@ -99,9 +99,9 @@ def test_peers_that_never_appear_are_named_with_their_host() -> None:
 
 
 def test_an_unknown_host_is_a_configuration_error() -> None:
-    system = stream_system(dds_roles.producer, dds_roles.consumer, "x")
+    system = stream_system(dds_roles.producer, dds_roles.consumer, "x", host="moon")
     with pytest.raises(anodize.ConfigurationError, match="no group runs on host 'moon'"):
-        system.run(host="moon")
+        system.run()
 
 
 def test_a_killed_host_is_reported_to_the_other_as_a_peer_failure(tmp_path: Path) -> None:
@@ -165,8 +165,8 @@ def test_a_forged_writer_is_rejected_and_reported(tmp_path: Path, monkeypatch: p
 
 
 def test_with_a_host_given_every_group_needs_one() -> None:
-    system = anodize.System(STREAM, transport="dds", domain=domain(), run_id="half")
+    system = anodize.System(STREAM, transport=anodize.Dds(domain=domain(), run_id="half", host="robot"))
     system.group("producing", host="robot").role("P", dds_roles.producer)
     system.group("consuming").role("C", dds_roles.consumer)
     with pytest.raises(anodize.ConfigurationError, match="groups consuming have no host"):
-        system.run(host="robot")
+        system.run()

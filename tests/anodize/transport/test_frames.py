@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).parents[1]))
 import send_many_roles
 
 import sessiontypes
-from anodize import System
+from anodize import Processes, System
 from anodize._transport import frames
 from anodize._transport.codec import HEADER, Codec, FrameKind, Tag
 
@@ -164,7 +164,7 @@ def test_a_stream_between_processes_arrives_whole_with_either_decoder(
     else:
         monkeypatch.delenv("ANODIZE_PURE_PYTHON", raising=False)
     monkeypatch.setenv("SEND_MANY_OUT", str(tmp_path / "got.json"))
-    system = System(STREAM, transport="process")
+    system = System(STREAM, transport=Processes())
     system.group("a").role("A", "send_many_roles:batch_sender")  # one write for many frames: runs to decode
     system.group("b").role("B", "send_many_roles:frames_receiver")
     report = system.run(timeout=60)

@@ -1,4 +1,4 @@
-"""transport="process": groups as OS processes, isolated, supervised, and still monitored."""
+"""``transport=Processes()``: groups as OS processes, isolated, supervised, and still monitored."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ global Hog(C, S, H, K) = (mu t. C -> S : {tick(int). t, done} || mu u. H -> K : 
 
 def run(global_name: str, groups: dict[str, dict[str, object]], timeout: float = 60, **options: object
         ) -> anodize.RunReport:
-    system = anodize.System(PROTOCOLS[global_name], transport="process")
+    system = anodize.System(PROTOCOLS[global_name], transport=anodize.Processes())
     for name, spec in groups.items():
         spec = dict(spec)
         placed = spec.pop("roles")
@@ -200,7 +200,7 @@ def test_an_unnamed_class_is_refused_at_the_sender() -> None:
 
 
 def test_role_functions_must_be_importable_by_other_processes() -> None:
-    system = anodize.System(PROTOCOLS["Ping"], transport="process")
+    system = anodize.System(PROTOCOLS["Ping"], transport=anodize.Processes())
     with pytest.raises(anodize.AnodizeError, match="no import path"):
         system.group("a").role("A", lambda ep: None)
     with pytest.raises(anodize.AnodizeError, match="cannot import"):

@@ -40,7 +40,7 @@ global Flood(A, B, C) = (mu t. A -> B : {blob(bytes). t, fin} || C -> B : hello)
 
 
 def run(global_name: str, groups: dict[str, dict[str, object]], timeout: float = 60) -> anodize.RunReport:
-    system = anodize.System(PROTOCOLS[global_name], transport="process")
+    system = anodize.System(PROTOCOLS[global_name], transport=anodize.Processes())
     for name, spec in groups.items():
         spec = dict(spec)
         placed = spec.pop("roles")
