@@ -34,6 +34,7 @@ from ._supervision import (
     RosBridge,
     RunReport,
     System,
+    Transport,
 )
 from ._tools.config import ConfigError, SystemConfig, build_system, load_config
 from ._tools.named import Finished, NamedSystem, Prepared
@@ -61,7 +62,7 @@ __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
     "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
-    "Inproc", "Processes", "Dds", "RosBridge", "ChannelTap",
+    "Inproc", "Processes", "Dds", "RosBridge", "ChannelTap", "Transport",
     # The taps a program can hand to System.run itself: a recording, the live view in Foxglove.
     "Recording", "open_live_view", "LiveView",
     "EndpointStatistics",

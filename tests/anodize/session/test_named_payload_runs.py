@@ -14,12 +14,11 @@ import pytest
 
 import anodize
 import sessiontypes
-from anodize import PeerFailedError, ProtocolViolationError
+from anodize import PeerFailedError, ProtocolViolationError, Transport
 from anodize._recording.reader import open_recording
 from anodize._recording.verify import verify
 from anodize._session.monitor import Monitor
 from anodize._session.payloads import exact_types_for, validator_for
-from anodize._supervision.transports import Transport
 
 QUOTES = sessiontypes.loads("""
 type Point = "payload_roles:Point"

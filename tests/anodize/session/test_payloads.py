@@ -14,10 +14,9 @@ import pytest
 
 import anodize
 import sessiontypes
-from anodize import PeerFailedError, ProtocolViolationError
+from anodize import PeerFailedError, ProtocolViolationError, Transport
 from anodize._session.monitor import Monitor
 from anodize._session.payloads import check_fields, exact_types_for, validator_for
-from anodize._supervision.transports import Transport
 
 PROTOCOLS = sessiontypes.loads("""
 type Point = "payload_roles:Point"

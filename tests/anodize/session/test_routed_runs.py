@@ -16,10 +16,9 @@ import routed_roles as roles
 
 import anodize
 import sessiontypes
-from anodize import Endpoint, ProtocolViolationError
+from anodize import Endpoint, ProtocolViolationError, Transport
 from anodize._recording.reader import open_recording
 from anodize._recording.verify import verify
-from anodize._supervision.transports import Transport
 
 ROUTED = sessiontypes.loads("""
 global Route(A, B, C) =

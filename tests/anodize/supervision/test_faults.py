@@ -16,9 +16,8 @@ import pytest
 
 import anodize
 import sessiontypes
-from anodize import PeerFailedError
+from anodize import PeerFailedError, Transport
 from anodize._supervision.report import GroupState, RoleStatus
-from anodize._supervision.transports import Transport
 from anodize.errors import RoleError
 
 PING = sessiontypes.loads("global Ping(A, B) = mu t. A -> B : {ping(nat). B -> A : pong(nat). t, stop}",

@@ -10,10 +10,9 @@ import pytest
 
 import anodize
 import sessiontypes
-from anodize import PeerFailedError
+from anodize import PeerFailedError, Transport
 from anodize._supervision.report import GroupState, RoleStatus
 from anodize._supervision.supervisor import window_rates
-from anodize._supervision.transports import Transport
 
 # A ping-pong pair and an independent stream: a policy's reach shows on the stream.
 POLICIES = sessiontypes.loads("""

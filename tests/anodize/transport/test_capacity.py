@@ -10,9 +10,8 @@ from dds_hosts import domain
 
 import anodize
 import sessiontypes
-from anodize import ConfigurationError, PeerFailedError, RoleStopped
+from anodize import ConfigurationError, PeerFailedError, RoleStopped, Transport
 from anodize._supervision.report import RoleStatus
-from anodize._supervision.transports import Transport
 
 STREAM = sessiontypes.loads(roles.STREAM, "stream.proto").globals["Stream"]
 
