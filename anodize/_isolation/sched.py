@@ -16,7 +16,7 @@ import threading
 from ..errors import ConfigurationError
 
 __all__ = ["apply_thread_scheduling", "nice_for", "lower_thread_priority", "side_work_priority", "SIDE_WORK_NICE",
-           "SIDE_WORK_RT"]
+           "SIDE_WORK_RT", "ThreadScheduling", "thread_scheduling", "restore_thread_scheduling"]
 
 SIDE_WORK_NICE = 19  # the weakest nice value: side work in a process that is not real time
 SIDE_WORK_RT = 1     # the lowest SCHED_FIFO priority: side work in a real-time group's process
@@ -119,3 +119,28 @@ def side_work_priority(thread: int | None = None) -> str:
     except OSError as error:
         return f"unchanged (nice {SIDE_WORK_NICE} refused: {_reason(error)}){refused}"
     return f"nice {SIDE_WORK_NICE}{refused}"
+
+
+ThreadScheduling = tuple[int, int, int]  # policy, real-time priority, nice
+
+
+def thread_scheduling() -> ThreadScheduling | None:
+    """The calling thread's policy, real-time priority and nice value (None where unreadable)."""
+    try:
+        tid = threading.get_native_id()
+        return (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority,
+                os.getpriority(os.PRIO_PROCESS, tid))
+    except (OSError, AttributeError):
+        return None
+
+
+def restore_thread_scheduling(thread: int, saved: ThreadScheduling | None) -> None:
+    """Give thread ``thread`` (a native id) back the scheduling :func:`thread_scheduling` saved,
+    as far as the kernel allows (best effort: a refusal leaves it where it is)."""
+    if saved is None:
+        return
+    policy, priority, nice = saved
+    with contextlib.suppress(OSError, AttributeError):
+        os.sched_setscheduler(thread, policy, os.sched_param(priority))
+    with contextlib.suppress(OSError, AttributeError):
+        os.setpriority(os.PRIO_PROCESS, thread, nice)

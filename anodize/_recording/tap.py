@@ -34,7 +34,7 @@ from typing import IO, Any
 from sessiontypes import StateMachine
 
 from .._extras import import_extra
-from .._isolation.sched import side_work_priority
+from .._isolation.sched import restore_thread_scheduling, side_work_priority, thread_scheduling
 from .._session.channel import Channel
 from .._session.endpoint import put_each
 from ..taps import TapGroup
@@ -145,6 +145,8 @@ class Recorder:
         self.priority = ""  # what side_work_priority applied to the writer
         for key in sorted(self._labels):  # codecs made now, not in a role's first send (building one takes time)
             self._register(key)
+        self._tid: int | None = None  # the writer's native id, once it runs
+        self._group_scheduling: tuple[int, int, int] | None = None
         self._thread = threading.Thread(target=self._write_loop, name=f"anodize-record:{group}", daemon=True)
         self._thread.start()
 
@@ -257,7 +259,11 @@ class Recorder:
         return self._gap_channel
 
     def _write_loop(self) -> None:
+        self._tid = threading.get_native_id()
+        self._group_scheduling = thread_scheduling()  # what it inherited: given back at close
         self.priority = side_work_priority()  # below every role: it inherited the group's priority
+        if self._closing:  # closed before it ran: drain at the group's scheduling, as close gives it
+            restore_thread_scheduling(self._tid, self._group_scheduling)
         try:
             self._write_until_closed()
         except Exception as error:  # a full disk, say: the run goes on, unrecorded, and says so
@@ -320,6 +326,10 @@ class Recorder:
         """Write what is queued (for at most ``within`` seconds: the rest becomes a gap), end the
         part file properly, and stop the writer."""
         deadline = time.monotonic() + within
+        # The group's roles have ended: finishing the recording is now the group's own work, not
+        # side work, so the writer drains at the group's scheduling, not below a busy machine's load.
+        if self._tid is not None:
+            restore_thread_scheduling(self._tid, self._group_scheduling)
         with self._lock:
             self._closing = True
             self._close_gaps()
