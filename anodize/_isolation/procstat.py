@@ -18,7 +18,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-__all__ = ["ProcSample", "sample", "own_run_delay", "rivals", "machine_load", "cpu_quota"]
+__all__ = ["ProcSample", "sample", "cpu_seconds", "own_run_delay", "rivals", "machine_load", "cpu_quota"]
 
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -77,13 +77,23 @@ def _run_delay(path: str) -> float | None:
     return None if times is None else times[1]
 
 
+def _cpu(fields: list[str]) -> float:
+    return (int(fields[11]) + int(fields[12])) / _TICKS  # utime, stime: fields 14 and 15 of stat(5)
+
+
+def cpu_seconds(pid: int) -> float | None:
+    """CPU time (user + system) the process has used, all threads; None if it is gone."""
+    fields = _stat_fields(f"/proc/{pid}/stat")
+    return None if fields is None or len(fields) < 13 else _cpu(fields)
+
+
 def sample(pid: int) -> ProcSample | None:
     """Read ``pid``'s state, CPU time and its threads' run-queue waits; None if it is gone."""
     at = time.monotonic()
     fields = _stat_fields(f"/proc/{pid}/stat")
     if fields is None or len(fields) < 13:
         return None
-    cpu = (int(fields[11]) + int(fields[12])) / _TICKS  # utime, stime: fields 14 and 15 of stat(5)
+    cpu = _cpu(fields)
     waited: dict[int, float] = {}
     ran: dict[int, float] = {}
     slices: dict[int, int] = {}

@@ -27,6 +27,8 @@ import time
 from collections import deque
 from collections.abc import Callable
 
+from .procstat import cpu_seconds
+
 __all__ = ["Watchdog", "rt_throttling", "BUSY_SHARE", "prioritise_watcher", "WATCHER_PRIORITY"]
 
 WATCHER_PRIORITY = 1  # SCHED_FIFO: above every ordinary task, below every real-time group
@@ -45,17 +47,6 @@ def rt_throttling() -> str:
     if runtime < 0:
         return "off"
     return f"{runtime / period:.0%} of each {period / 1e6:g} s for real-time tasks"
-
-
-def cpu_seconds(pid: int) -> float | None:
-    """CPU time (user + system) the process has used, all threads."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            fields = f.read().rpartition(")")[2].split()
-    except OSError:
-        return None
-    ticks = os.sysconf("SC_CLK_TCK")
-    return (int(fields[11]) + int(fields[12])) / ticks  # utime, stime: fields 14 and 15
 
 
 def prioritise_watcher() -> tuple[str, Callable[[], None]]:

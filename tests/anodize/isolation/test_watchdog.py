@@ -7,7 +7,8 @@ import subprocess
 import sys
 from collections import deque
 
-from anodize._isolation.watchdog import Watchdog, cpu_seconds, rt_throttling
+from anodize._isolation.procstat import cpu_seconds
+from anodize._isolation.watchdog import Watchdog, rt_throttling
 
 
 def feed(dog: Watchdog, samples: list[tuple[float, float]], pid: int = 0) -> bool:
