@@ -20,7 +20,7 @@ each on TinMan (``anodize run tinman --world easy``) and on a minimal three-grou
 logger at 10). Columns: the control period's p99 and max (median over runs of each run's
 p99, and the largest max), bumps, waypoints and ATE (TinMan only), false liveness verdicts
 (groups failed as unresponsive in runs where nothing was frozen: every such verdict here
-is false), priority boosts (n/a until priority inheritance exists), and what the side work
+is false), priority boosts (episodes of priority inheritance, summed over runs), and what the side work
 dropped (live view: not shown; recording: gaps). Ratios are against the quiet row of the
 same system measured in the same run. The machine's load is recorded (bench/runs.LoadWatch).
 
@@ -238,7 +238,7 @@ def _tinman(seconds: float, out: Path, extra: list[str], preexec: Callable[[], N
     return {"exit": done.returncode, "p99_ms": period.get("p99"), "max_ms": period.get("max"),
             "bumps": robot.get("bumps"), "waypoints": robot.get("waypoints_reached"),
             "ate_percent": report.get("ate_percent"), "verdicts": _verdicts(report.get("groups") or {}),
-            **_side_work(report.get("notes") or [])}
+            "boosts": _boosts(report), **_side_work(report.get("notes") or [])}
 
 
 def _mini(seconds: float, out: Path, extra: list[str], preexec: Callable[[], None] | None,
@@ -258,7 +258,8 @@ def _mini(seconds: float, out: Path, extra: list[str], preexec: Callable[[], Non
     late = sum(1 for p in periods if p > measured["nominal_ms"] * criticality_roles.LATE)
     return {"exit": done.returncode, "p99_ms": _percentile(periods, 99), "max_ms": periods[-1] if periods else None,
             "late": late, "bumps": None, "waypoints": None, "ate_percent": None,
-            "verdicts": _verdicts(report.get("groups") or {}), **_side_work(report.get("notes") or [])}
+            "verdicts": _verdicts(report.get("groups") or {}), "boosts": _boosts(report),
+            **_side_work(report.get("notes") or [])}
 
 
 def _percentile(values: list[float], q: float) -> float | None:
@@ -276,6 +277,11 @@ def _verdicts(groups: dict[str, Any]) -> int:
         text = f"{error.get('type', '')} {error.get('message', '')}" if isinstance(error, dict) else str(error)
         found += bool(VERDICT.search(text))
     return found
+
+
+def _boosts(report: dict[str, Any]) -> int:
+    """Priority-inheritance episodes in one run, over every waiter->target pair."""
+    return sum(int(b.get("episodes", 0)) for b in (report.get("boosts") or {}).values())
 
 
 def _side_work(notes: list[str]) -> dict[str, Any]:
@@ -309,7 +315,8 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
             "max_ms": max(maxima) if maxima else None, "bumps": total("bumps"),
             "bumps_per_run": [r.get("bumps") for r in good], "waypoints": median("waypoints"),
             "waypoints_per_run": [r.get("waypoints") for r in good], "ate_percent": median("ate_percent"),
-            "verdicts": total("verdicts"), "late": total("late"), "recording_gap": total("recording_gap"),
+            "verdicts": total("verdicts"), "boosts": total("boosts"), "late": total("late"),
+            "recording_gap": total("recording_gap"),
             "live_shown": total("live_shown"), "live_not_shown": (total("live_thinned") or 0)
             + (total("live_dropped") or 0)}
 
@@ -345,7 +352,7 @@ def table(summary: dict[str, dict[str, dict[str, Any]]]) -> list[list[str]]:
                          "n/a" if system == "mini" else str(s["bumps"]),
                          "n/a" if system == "mini" else "/".join(str(w) for w in s["waypoints_per_run"]),
                          "n/a" if system == "mini" else number(s["ate_percent"]),
-                         str(s["verdicts"]), "n/a", "; ".join(side)])
+                         str(s["verdicts"]), str(s.get("boosts", "-")), "; ".join(side)])
     return rows
 
 
