@@ -16,10 +16,11 @@ import threading
 from ..errors import ConfigurationError
 
 __all__ = ["apply_thread_scheduling", "nice_for", "lower_thread_priority", "side_work_priority", "SIDE_WORK_NICE",
-           "SIDE_WORK_RT", "ThreadScheduling", "thread_scheduling", "restore_thread_scheduling"]
+           "SIDE_WORK_RT", "NICE_MIN", "NICE_MAX", "ThreadScheduling", "thread_scheduling", "restore_thread_scheduling"]
 
 SIDE_WORK_NICE = 19  # the weakest nice value: side work in a process that is not real time
 SIDE_WORK_RT = 1     # the lowest SCHED_FIFO priority: side work in a real-time group's process
+NICE_MIN, NICE_MAX = -20, 19  # a group's nice value (ordinary scheduling, no priority)
 
 
 def nice_for(priority: int) -> int:
@@ -31,11 +32,13 @@ def _reason(error: OSError) -> str:
     return errno.errorcode.get(error.errno or 0, str(error))
 
 
-def apply_thread_scheduling(priority: int | None, cpus: frozenset[int] | None = None) -> str:
-    """Apply ``priority`` and ``cpus`` to the calling thread; describe what was applied.
+def apply_thread_scheduling(priority: int | None, cpus: frozenset[int] | None = None,
+                            nice: int | None = None) -> str:
+    """Apply ``priority`` (or, with none, ``nice``) and ``cpus`` to the calling thread; describe
+    what was applied. Threads it starts afterwards inherit both.
 
     Raises:
-        ValueError: ``priority`` is outside 1..99.
+        ValueError: ``priority`` is outside 1..99, ``nice`` outside -20..19.
     """
     notes: list[str] = []
     if cpus:
@@ -44,13 +47,25 @@ def apply_thread_scheduling(priority: int | None, cpus: frozenset[int] | None = 
             notes.append(f"cpus {','.join(map(str, sorted(cpus)))}")
         except OSError as error:
             notes.append(f"cpus unchanged (affinity refused: {_reason(error)})")
-    if priority is None:
+    if priority is None and nice is None:
         described = "SCHED_OTHER (no priority asked)"
+    elif priority is None:
+        described = _apply_nice(nice)
     else:
         if not 1 <= priority <= 99:
             raise ConfigurationError(f"priority must be 1..99, got {priority}")
         described = _apply_priority(priority)
     return "; ".join([described, *notes])
+
+
+def _apply_nice(nice: int | None) -> str:
+    if nice is None or not NICE_MIN <= nice <= NICE_MAX:
+        raise ConfigurationError(f"nice must be {NICE_MIN}..{NICE_MAX}, got {nice}")
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+    except OSError as error:
+        return f"unchanged (nice {nice} refused: {_reason(error)})"
+    return f"SCHED_OTHER nice {nice}"
 
 
 def _apply_priority(priority: int) -> str:

@@ -41,7 +41,7 @@ LARGE_RATE = 10.0  # messages per second a large label is shown at, at most
 QUEUE = 4096       # small messages waiting to be forwarded, at most (<= 16 MiB)
 _SEND_EVERY = 0.02  # seconds: how often the forwarding thread looks when nothing woke it
 STATS_EVERY = 1.0  # seconds between the counts a tap sends the supervisor
-CLOSE_WITHIN = 0.5  # seconds a closing tap waits for its thread (the group sends no heartbeat meanwhile)
+CLOSE_WITHIN = 0.5  # seconds a closing tap waits for its thread (its group keeps beating meanwhile)
 
 
 @dataclass(frozen=True)

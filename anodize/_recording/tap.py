@@ -47,8 +47,8 @@ __all__ = ["GroupRecording", "Recorder", "RecordingChannel", "TappedChannel", "S
 FEATURE = "recording a run (--record)"
 BACKLOG = 64 * 2**20  # bytes a group's recorder may hold; beyond it, messages become a gap
 SEQUENCE_WRAP = 2**32 - 1  # the largest MCAP sequence number
-CLOSE_WITHIN = 1.0    # seconds the writer has, once its group ends, to write what is queued (well
-                      # within the supervisor's liveness limit, 2 s by default: no heartbeat meanwhile)
+CLOSE_WITHIN = 1.0    # seconds the writer has, once its group ends, to write what is queued (the
+                      # group keeps beating meanwhile, so a longer close is no liveness verdict)
 GAP_TOPIC = "/anodize/recording/gaps"  # where a part says which messages it could not record
 GAP_KEY = f"{META}.gaps"  # the gap channel's metadata key (its value: "1")
 _FLUSH_EVERY = 0.1    # seconds

@@ -77,6 +77,7 @@ __all__ = ["GroupSpec", "group_main", "EXIT_MEMORY", "HEARTBEAT"]
 
 EXIT_MEMORY = 87  # the exit status of a group stopped for exceeding its memory bound
 HEARTBEAT = 0.25  # seconds
+TAPS_CLOSE_WITHIN = 10.0  # seconds the group waits for its taps to close (each bounds its own close)
 _PR_SET_PDEATHSIG = 1  # prctl option (linux/prctl.h)
 _RESERVE = 4 * 2**20  # freed on MemoryError so that reporting it can allocate
 
@@ -95,6 +96,7 @@ class GroupSpec:
     dead: dict[str, str]                   # remote roles not reachable, and why
     monitors: bool = True
     priority: int | None = None
+    nice: int | None = None
     cpus: frozenset[int] | None = None
     memory: int | None = None
     sys_path: tuple[str, ...] = ()
@@ -153,7 +155,7 @@ class _GroupProcess:
 
     def run(self) -> None:
         spec = self.spec
-        scheduling = apply_thread_scheduling(spec.priority, spec.cpus)  # inherited by our threads
+        scheduling = apply_thread_scheduling(spec.priority, spec.cpus, spec.nice)  # inherited by our threads
         functions = {role: resolve_function(ref) for role, ref in spec.roles.items()}
         threading.excepthook = self._thread_failed
         network = self.network = self._network()
@@ -269,12 +271,29 @@ class _GroupProcess:
                                  where=report.where, traceback=report.traceback, detail=report.detail))
             if report.status is RoleStatus.FAILED:
                 self.network.fail(report.name, describe_error(report.error))
-        for tap in self.taps:  # every role has ended: nothing more will be sent
-            tap.close()
+        self._close_taps()  # every role has ended: nothing more will be sent
         self._heartbeat(final=True)
         close = getattr(self.network, "close", None)
         if close is not None:  # a DDS network: what was written reaches its readers before we exit
             close()
+
+    def _close_taps(self) -> None:
+        """Close every tap (a recording writes its tail), beating meanwhile: on a busy machine
+        that can take longer than the supervisor's liveness limit, and the group is not frozen.
+        Each tap bounds its own close; this waits at most :data:`TAPS_CLOSE_WITHIN` in all."""
+        if not self.taps:
+            return
+        def close_all() -> None:
+            for tap in self.taps:
+                tap.close()
+
+        closing = threading.Thread(target=close_all, name="anodize-close-taps",
+                                   daemon=True)  # inherits the group's scheduling: its own work now
+        closing.start()
+        deadline = time.monotonic() + TAPS_CLOSE_WITHIN
+        while closing.is_alive() and time.monotonic() < deadline:
+            closing.join(HEARTBEAT)
+            self._heartbeat()
 
     def _heartbeat(self, final: bool = False) -> None:
         used = max(0, (data_size() or self.baseline) - self.baseline)

@@ -139,7 +139,7 @@ class ProcessRunner:
             roles={role: reference_of(fn) for role, fn in group.roles.items()},
             machines={role: self.machines[role] for role in group.roles},
             channels=self.channels, dead=dead, monitors=self.monitors,
-            priority=group.priority, cpus=group.cpus, memory=group.memory,
+            priority=group.priority, nice=group.nice, cpus=group.cpus, memory=group.memory,
             sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
             taps=self.plan.taps, dds=dds,
             inheritance=None if self.inheritance is None else (self.inheritance.seats, self.inheritance.path))

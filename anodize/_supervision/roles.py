@@ -46,17 +46,18 @@ def where_raised(error: BaseException) -> tuple[str, tuple[str, ...]]:
 def run_role(group: str, priority: int | None, cpus: frozenset[int] | None, role: str,
              function: Callable[..., Any], endpoint: Endpoint,
              report: Callable[[RoleReport], None], schedule: bool = True,
-             inheritance: BoostTable | None = None) -> None:
+             inheritance: BoostTable | None = None, nice: int | None = None) -> None:
     """Run ``function`` for ``role`` on the calling thread and ``report`` how it ended.
 
     ``schedule`` False leaves the thread's scheduling alone (a group process has
     already applied it to the whole process). ``inheritance``: the run's priority
-    inheritance table, which learns this thread and forgets it when the role ends.
+    inheritance table, which learns this thread and forgets it when the role ends. ``nice``: the
+    group's nice value, applied where it asked no priority.
     """
     scheduling = ""
     try:
         if schedule:
-            scheduling = apply_thread_scheduling(priority, cpus)
+            scheduling = apply_thread_scheduling(priority, cpus, nice)
         if inheritance is not None:
             inheritance.enter(role)
         try:

@@ -102,7 +102,8 @@ class System:
 
     def group(self, name: str, priority: int | None = None, memory: int | str | None = None,
               cpus: set[int] | frozenset[int] | None = None, on_failure: str = FailurePolicy.STOP,
-              max_restarts: int = 3, host: str | None = None, priority_inheritance: bool = True) -> Group:
+              max_restarts: int = 3, host: str | None = None, priority_inheritance: bool = True,
+              nice: int | None = None) -> Group:
         """Declare a group; add its roles with ``.role(name, function)``.
 
         Args:
@@ -118,10 +119,14 @@ class System:
                 group's roles (a receive from it, a send to it on a full channel), that role's
                 thread runs at the waiter's priority (docs/guide/priority-inheritance.md).
                 False: this group always runs at its own priority.
+            nice: with no ``priority``, ordinary scheduling (SCHED_OTHER) at this nice value,
+                -20..19: below every real-time group, yet a larger share of the CPU than
+                ordinary work at nice 0 (TinMan's simulated world runs so: it must not be starved
+                by the machine's other work, nor run real time, as its renderer fills a CPU).
 
         Raises:
-            ConfigurationError: (a ``ValueError``) a duplicate name, a priority outside 1..99, a bad memory size,
-                CPU set or failure policy.
+            ConfigurationError: (a ``ValueError``) a duplicate name, a priority outside 1..99, a nice
+                value outside -20..19 or beside a priority, a bad memory size, CPU set or failure policy.
         """
         if name in self.groups:
             raise ConfigurationError(f"group {name} is declared twice")
@@ -131,6 +136,11 @@ class System:
         if priority is not None and (isinstance(priority, bool) or not isinstance(priority, int)
                                      or not 1 <= priority <= 99):
             raise ConfigurationError(f"group {name}: priority must be 1..99, got {priority!r}")
+        if nice is not None and (isinstance(nice, bool) or not isinstance(nice, int) or not -20 <= nice <= 19):
+            raise ConfigurationError(f"group {name}: nice must be an int -20..19, got {nice!r}")
+        if nice is not None and priority is not None:
+            raise ConfigurationError(f"group {name}: priority {priority} (SCHED_FIFO) and nice {nice} (ordinary "
+                                     "scheduling) exclude each other: give one")
         policy = FailurePolicy.parse(on_failure, name)
         if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < 0:
             raise ConfigurationError(f"group {name}: max_restarts must be an int >= 0, got {max_restarts!r}")
@@ -146,7 +156,7 @@ class System:
             raise ConfigurationError(f"group {name}: priority_inheritance must be True or False, "
                                      f"got {priority_inheritance!r}")
         group = Group(name, priority, parse_memory(memory), cpus or None, policy, max_restarts, host,
-                      priority_inheritance=priority_inheritance, _system=self)
+                      priority_inheritance=priority_inheritance, nice=nice, _system=self)
         self.groups[name] = group
         return group
 

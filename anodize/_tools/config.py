@@ -22,7 +22,8 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     capacity = 8
 
     [groups.control]                         # one table per group (at least one)
-    priority = 90                            # 1..99
+    priority = 90                            # 1..99: SCHED_FIFO
+    # nice = -10                             # instead of a priority: ordinary scheduling at this nice
     memory = "64MiB"                         # a bound: bytes, or a size such as "512KiB", "1GB"
     cpus = [0]                               # the CPUs the group may run on
     on_failure = "stop"                      # "stop" (default), "restart" or "stop-system"
@@ -67,7 +68,7 @@ _ROS_KEYS = ("topics", "external", "distro", "domain")
 _OLD_DDS_KEYS = ("domain", "run_id")  # top-level keys of the earlier form, now fields of [transport]
 _RUN_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 _GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host",
-               "priority_inheritance")
+               "priority_inheritance", "nice")
 _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
 _TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
 
@@ -120,6 +121,7 @@ class GroupConfig:
         host: ``transport = "dds"``: the host the group runs on, or None.
         priority_inheritance: whether a higher-priority role waiting on this group's roles
             raises their priority while it waits (default True).
+        nice: with no priority, the group's nice value under ordinary scheduling, or None.
     """
 
     name: str
@@ -132,6 +134,7 @@ class GroupConfig:
     location: str
     host: str | None = None
     priority_inheritance: bool = True
+    nice: int | None = None
 
 
 @dataclass(frozen=True)
@@ -411,9 +414,15 @@ class _Reader:
         inherit = table.get("priority_inheritance", True)
         if not isinstance(inherit, bool):
             raise self.error(f"{prefix}.priority_inheritance", f"expected true or false, got {_show(inherit)}")
+        nice = table.get("nice")
+        if nice is not None and (not _is_int(nice) or not -20 <= nice <= 19):
+            raise self.error(f"{prefix}.nice", f"expected an int -20..19, got {_show(nice)}")
+        if nice is not None and priority is not None:
+            raise self.error(f"{prefix}.nice", f"priority {priority} (SCHED_FIFO) and nice {nice} (ordinary "
+                                               "scheduling) exclude each other: give one")
         return GroupConfig(name, priority, memory_bytes, self.cpus(prefix, table.get("cpus")),
                            on_failure, max_restarts, self.roles(prefix, table),
-                           f"{self.shown}: {prefix}", host, inherit)
+                           f"{self.shown}: {prefix}", host, inherit, nice)
 
     def cpus(self, prefix: str, value: Any) -> tuple[int, ...] | None:
         if value is None:
@@ -500,7 +509,8 @@ def build_system(config: SystemConfig) -> System:
             declared = system.group(group.name, priority=group.priority, memory=group.memory,
                                     cpus=set(group.cpus) if group.cpus else None,
                                     on_failure=group.on_failure, max_restarts=group.max_restarts,
-                                    host=group.host, priority_inheritance=group.priority_inheritance)
+                                    host=group.host, priority_inheritance=group.priority_inheritance,
+                                    nice=group.nice)
             for role, reference in group.roles.items():
                 declared.role(role, reference)
         except (ValueError, AnodizeError) as error:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,17 +19,19 @@ class FileTapPlan:
     """Picklable: it crosses into group processes."""
 
     folder: str
+    close_seconds: float = 0.0  # how long closing takes (a recording's tail on a slow disk)
 
     def open(self, group: TapGroup) -> FileGroupTap:
-        return FileGroupTap(Path(self.folder) / f"{group.name}-{group.incarnation}.json", group)
+        return FileGroupTap(Path(self.folder) / f"{group.name}-{group.incarnation}.json", group, self.close_seconds)
 
 
 class FileGroupTap:
     """Counts what the group's roles put on the channels it was offered."""
 
-    def __init__(self, path: Path, group: TapGroup) -> None:
+    def __init__(self, path: Path, group: TapGroup, close_seconds: float = 0.0) -> None:
         self.path = path
         self.group = group
+        self.close_seconds = close_seconds
         self.sent: dict[str, int] = {}
 
     def attach(self, queues: dict[tuple[str, str], Channel]) -> None:
@@ -37,6 +40,7 @@ class FileGroupTap:
                 queues[pair] = _Counting(channel, self, f"{pair[0]}->{pair[1]}")  # type: ignore[assignment]
 
     def close(self) -> None:
+        time.sleep(self.close_seconds)
         self.path.write_text(json.dumps({"roles": sorted(self.group.machines), "sent": self.sent}))
 
 
@@ -56,14 +60,15 @@ class _Counting(TappedChannel):
 class FileTap:
     """The supervisor's half: a :class:`anodize.ChannelTap`."""
 
-    def __init__(self, folder: Path) -> None:
+    def __init__(self, folder: Path, close_seconds: float = 0.0) -> None:
         self.folder = folder
+        self.close_seconds = close_seconds
         self.runs: list[TapRun] = []
         self.statuses = 0
 
     def begin(self, run: TapRun) -> FileTapPlan:
         self.runs.append(run)
-        return FileTapPlan(str(self.folder))
+        return FileTapPlan(str(self.folder), self.close_seconds)
 
     def status(self, statuses: Mapping[str, Any]) -> None:
         self.statuses += 1

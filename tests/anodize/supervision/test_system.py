@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import threading
 
@@ -244,3 +245,32 @@ def test_recv_any_takes_whichever_branch_is_ready() -> None:
     report = run(PARALLEL, C=controller, M=mixer, P=planner, G=gazebo)
     assert report.ok, report.summary()
     assert sorted(labels) == [("C", "done"), ("C", "go"), ("P", "done"), ("P", "plan")]
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="a negative nice value needs root (CAP_SYS_NICE) here")
+@pytest.mark.parametrize("transport", [anodize.Inproc(), anodize.Processes()], ids=["inproc", "process"])
+def test_a_group_with_a_nice_value_runs_its_roles_at_it(transport: anodize.Transport, tmp_path, monkeypatch) -> None:
+    import json
+
+    import nice_roles
+
+    monkeypatch.setenv(nice_roles.VARIABLE, str(tmp_path / "seen.json"))
+    system = anodize.System(sessiontypes.loads(nice_roles.PROTOCOL, "told.proto").globals["Told"],
+                            transport=transport)
+    system.group("world", nice=-7).role("A", "nice_roles:measurer")
+    system.group("sink").role("B", "nice_roles:writer")
+    report = system.run(timeout=20)
+    assert report.ok, report.summary()
+    seen = json.loads((tmp_path / "seen.json").read_text())
+    assert seen == {"policy": os.SCHED_OTHER, "nice": -7}
+    assert report.groups["world"].scheduling == "SCHED_OTHER nice -7"
+
+
+@pytest.mark.parametrize(("settings", "message"), [
+    ({"nice": 20}, "nice must be an int -20..19, got 20"),
+    ({"nice": True}, "nice must be an int -20..19, got True"),
+    ({"nice": -5, "priority": 30}, "priority 30 .SCHED_FIFO. and nice -5 .ordinary scheduling. exclude each other"),
+])
+def test_a_nice_value_is_checked_where_the_group_is_declared(settings: dict, message: str) -> None:
+    with pytest.raises(anodize.ConfigurationError, match=message):
+        anodize.System(PING).group("g", **settings)

@@ -129,11 +129,17 @@ BAD = {
         "ros.domain: expected a DDS domain id 0..232, got 300"),
     "unknown_group_key": (
         MINIMAL + GROUP + "prio = 3\n",
-        ("groups.g.prio: unknown key; expected one of cpus, host, max_restarts, memory, on_failure, "
+        ("groups.g.prio: unknown key; expected one of cpus, host, max_restarts, memory, nice, on_failure, "
          "priority, priority_inheritance, roles")),
     "priority_inheritance_not_a_bool": (
         MINIMAL + GROUP + "priority_inheritance = 0\n",
         "groups.g.priority_inheritance: expected true or false, got 0"),
+    "nice_out_of_range": (
+        MINIMAL + GROUP + "nice = -21\n",
+        "groups.g.nice: expected an int -20..19, got -21"),
+    "nice_beside_a_priority": (
+        MINIMAL + GROUP + "nice = -10\npriority = 10\n",
+        "groups.g.nice: priority 10 (SCHED_FIFO) and nice -10 (ordinary scheduling) exclude each other: give one"),
     "missing_protocol": ('global = "G"\n' + GROUP, "protocol: missing (it is required)"),
     "missing_global": ('protocol = "p.proto"\n' + GROUP, "global: missing (it is required)"),
     "missing_groups": (MINIMAL, "groups: missing (it is required): add a table such as [groups.main]"),
@@ -264,6 +270,12 @@ def test_priority_inheritance_is_on_unless_a_group_turns_it_off(system_dir: Path
     assert [g.priority_inheritance for g in config.groups.values()] == [True, False]
     system = build_system(config)
     assert [g.priority_inheritance for g in system.groups.values()] == [True, False]
+
+
+def test_a_group_s_nice_value_reaches_the_system(system_dir: Path) -> None:
+    config = build(system_dir, TWO_GROUPS.replace("[groups.b]\n", "[groups.b]\nnice = -10\n"))
+    assert [g.nice for g in config.groups.values()] == [None, -10]
+    assert [g.nice for g in build_system(config).groups.values()] == [None, -10]
 
 
 def test_build_system_runs_an_inproc_system(system_dir: Path) -> None:
