@@ -121,6 +121,24 @@ def test_verify_without_importing_still_blames_a_payload_of_another_recorded_cla
     assert "blamed: A" in out
 
 
+def test_verify_without_importing_checks_a_record_s_fields_by_name(
+        capsys: pytest.CaptureFixture[str], folder: Path) -> None:
+    marker = folder / "imported.txt"
+    module = _side_effect_module(folder, marker)
+    protocol = f'type Thing = "{module}:Thing"\nglobal G(A, B) =\n  A -> B : go(item: Thing, n: int)\n'
+
+    def record(item: object) -> dict[str, object]:
+        return {"$dict": [["item", item], ["n", 2]]}
+    good = _craft(folder / "good.mcap", protocol, [("A", "B", "go", record(_thing(module)))],
+                  recorded_channels="A->B")
+    bad = _craft(folder / "bad.mcap", protocol, [("A", "B", "go", record(3))], recorded_channels="A->B")
+    assert _cli(capsys, "verify", str(good))[0] == 0
+    status, out, _ = _cli(capsys, "verify", str(bad))
+    assert not marker.exists()
+    assert status == 1
+    assert f"payload of the wrong sort: field item: a recorded int, the label carries Thing ({module}:Thing)" in out
+
+
 def test_verify_with_the_user_s_own_protocol_imports_and_checks_the_class(
         capsys: pytest.CaptureFixture[str], folder: Path) -> None:
     marker = folder / "imported.txt"
