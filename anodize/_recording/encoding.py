@@ -17,7 +17,8 @@ import dataclasses
 import json
 import math
 import sys
-from collections.abc import Callable
+import types
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,7 +26,8 @@ from sessiontypes import Sort
 
 from .._ros import RosType, ros_type
 
-__all__ = ["JSON_TYPE", "SortCodec", "codec_for_sort", "to_json", "from_json", "UnknownObject"]
+__all__ = ["JSON_TYPE", "SortCodec", "codec_for_sort", "to_json", "from_json", "UnknownObject", "imported_class",
+           "class_sorts"]
 
 JSON_TYPE = "std_msgs/msg/String"  # the ROS type that carries a JSON payload
 
@@ -170,7 +172,7 @@ def _read_dataclass(data: dict[str, Any]) -> object:
     if not isinstance(name, str) or not isinstance(fields, dict):
         raise ValueError("a recorded dataclass needs a class name and its fields")
     values = {field: from_json(v) for field, v in fields.items()}
-    kind = _imported_class(name)
+    kind = imported_class(name)
     if kind is None:
         return UnknownObject(name, json.dumps(fields)[:1000])
     if not dataclasses.is_dataclass(kind) or {f.name for f in dataclasses.fields(kind)} != set(values):
@@ -181,16 +183,37 @@ def _read_dataclass(data: dict[str, Any]) -> object:
     return instance
 
 
-def _imported_class(name: str) -> type | None:
-    """The class ``module:Qualified`` names, if its module is imported already: a recording
-    never makes anything be imported (importing runs a module's code)."""
+def imported_class(name: str) -> type | None:
+    """The class ``module:Qualified`` names, if its module is imported already (else None).
+
+    A recording never makes anything be imported (importing runs a module's code), and the
+    look-up runs none either: each name is looked up in its namespace's own dict, never
+    through ``getattr`` (a module's ``__getattr__`` may import, a metaclass's may do anything).
+    """
     module_name, _, qualified = name.partition(":")
     value: object = sys.modules.get(module_name)
     if value is None or not qualified:
         return None
     for part in qualified.split("."):
-        value = getattr(value, part, None)
+        namespace = getattr(value, "__dict__", None)  # a module's or a class's own: no code runs
+        if not isinstance(namespace, (dict, types.MappingProxyType)):
+            return None
+        value = namespace.get(part)
     return value if isinstance(value, type) else None
+
+
+def class_sorts(sorts: Iterable[Sort | None]) -> list[Sort]:
+    """The sorts among ``sorts`` (and their records' fields) bound to a class by import path
+    (``type X = "module:Name"``; not ROS 2 types, which name no code), each once."""
+    found: dict[str, Sort] = {}
+    pending = [sort for sort in sorts if sort is not None]
+    while pending:
+        sort = pending.pop()
+        if sort.fields is not None:
+            pending.extend(f.sort for f in sort.fields)
+        elif sort.target is not None and not sort.target.startswith("ros:"):
+            found.setdefault(sort.target, sort)
+    return [found[target] for target in sorted(found)]
 
 
 def _read_ndarray(data: dict[str, Any]) -> object:

@@ -16,19 +16,21 @@ receive there ends the replay, saying that the role cannot be replayed alone fro
 
 from __future__ import annotations
 
-import json
+import sys
 import threading
 import traceback
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from sessiontypes import GlobalType
+from sessiontypes import GlobalType, Transition
 
 from .._session.endpoint import Endpoint, peers_of
 from .._session.typed import argument_for
 from ..errors import ConfigurationError, ProtocolViolationError, RoleStopped
 from .compare import TopicCodecs, payload_difference
+from .encoding import class_sorts, imported_class
+from .metadata import group_of, recorded_channels
 from .plan import META
 from .reader import Recording
 from .replay_network import (
@@ -126,18 +128,27 @@ def _messages(count: int) -> str:
 
 
 def replay(recording: Recording, global_type: GlobalType, role: str, function: Callable[..., Any],
-           topics: Mapping[str, tuple[str, str, str]] | None = None, timeout: float = 60.0) -> ReplayReport:
+           topics: Mapping[str, tuple[str, str, str]] | None = None, timeout: float = 60.0,
+           import_classes: bool = True) -> ReplayReport:
     """Run ``function`` as ``role`` against ``recording`` (see the module docstring).
+
+    Nothing the recording names is imported or called: the code that runs is ``function``,
+    which the caller gives.
 
     Args:
         function: the role's function (taking an ``Endpoint`` or the typed initial state).
         topics: topic -> ``(sender, receiver, label)`` for topics without anodize's metadata.
         timeout: seconds the role may run; a role still running then is stopped at its
             next action, and the replay does not pass.
+        import_classes: whether the payload classes ``global_type`` names by import path may
+            be imported for the role's monitor: False when it is the protocol the recording
+            carries (untrusted data); each class must then be one a module imported already
+            (by ``function``'s own code) defines.
 
     Raises:
-        ConfigurationError: ``role`` is not a role of ``global_type``.
-        RecordingError: the recording cannot be read.
+        ConfigurationError: ``role`` is not a role of ``global_type``, or (``import_classes``
+            False) a payload class of the role's is not imported.
+        RecordingError: the recording cannot be read, or its metadata is not anodize's.
     """
     if role not in global_type.roles:
         raise ConfigurationError(f"global {global_type.name} has no role {role}; expected one of "
@@ -145,10 +156,13 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
     name = f"{getattr(function, '__module__', '?')}:{getattr(function, '__qualname__', repr(function))}"
     report = ReplayReport(str(recording.path), global_type.name, role, name)
     machine = global_type.project(role).fsm()
+    if not import_classes:
+        _require_imported(recording, machine.all_transitions())
     sends_to, receives_from = peers_of(machine)
+    listed, groups = recorded_channels(recording), group_of(recording)  # checked before anything runs
     streams = _streams(recording, role, topics or {}, report.notes)
-    recorded = _recorded_pairs(recording, streams)
-    why = _why_unrecorded(recording.info)
+    recorded = set(streams) if listed is None else listed
+    why = _why_unrecorded(groups)
     codecs = TopicCodecs()
 
     def decode(item: RecordedItem) -> object:
@@ -264,25 +278,31 @@ def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, st
     return streams
 
 
-def _recorded_pairs(recording: Recording, streams: Mapping[tuple[str, str], object]) -> set[tuple[str, str]]:
-    """The channels the recording holds (an anodize recording lists them; else those with messages)."""
-    listed = recording.info.get("recorded_channels")
-    if listed is None:
-        return set(streams)
-    return {(s, r) for s, _, r in (item.partition("->") for item in listed.split())}
-
-
-def _why_unrecorded(info: Mapping[str, str]) -> Callable[[str, str], str]:
-    try:
-        group_of = json.loads(info.get("group_of", "{}"))
-    except ValueError:
-        group_of = {}
-
+def _why_unrecorded(groups: Mapping[str, str]) -> Callable[[str, str], str]:
     def why(sender: str, receiver: str) -> str:
-        group = group_of.get(sender)
-        if group is not None and group == group_of.get(receiver):
+        group = groups.get(sender)
+        if group is not None and group == groups.get(receiver):
             return f"{sender} and {receiver} are both in group {group}, and only channels between groups are recorded"
         return "no message of it was recorded"
 
     return why
 
+
+def _require_imported(recording: Recording, transitions: Iterable[Transition]) -> None:
+    """Each payload class the role's transitions name by import path is one an imported module
+    defines: building the role's monitor then imports nothing (the protocol is the recording's).
+
+    Raises:
+        ConfigurationError: one is not (naming it, and how to give it).
+    """
+    for sort in class_sorts(t.sort for t in transitions):
+        assert sort.target is not None
+        if imported_class(sort.target) is not None:
+            continue
+        module = sort.target.partition(":")[0]
+        why = (f"module {module} is not imported by your code" if module not in sys.modules else
+               f"module {module} defines no class {sort.target.partition(':')[2]}")
+        raise ConfigurationError(
+            f"the protocol of {recording.path} names payload class {sort.target} (sort {sort.spelling}), and {why}: "
+            "a replay does not import what a recording names; import it in your role's module, or pass "
+            "--protocol FILE")

@@ -29,15 +29,19 @@ from sessiontypes import GlobalType, Sort, StateMachine, Transition
 from .._ros import ros_type
 from .._session.payloads import Validator, validator_for
 from ..errors import AnodizeError
+from .by_name import sort_text, validator_by_name
 from .channel_view import ChannelView, Node, sort_key
-from .encoding import JSON_TYPE, SortCodec, UnknownObject, codec_for_sort
+from .encoding import JSON_TYPE, SortCodec, UnknownObject, class_sorts, codec_for_sort
+from .metadata import recorded_channels
 from .plan import META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
 from .tap import GAP_KEY, SEQUENCE_WRAP
 
-__all__ = ["Violation", "ChannelResult", "VerifyReport", "verify", "RECORDING_FAULT", "Gap"]
+__all__ = ["Violation", "ChannelResult", "VerifyReport", "verify", "RECORDING_FAULT", "Gap", "NOT_IMPORTED"]
 
 RECORDING_FAULT = "the recording (no role: a message was lost or reordered after it was sent)"
+NOT_IMPORTED = ("payload types named by import path were not imported (the protocol came from the recording); "
+                "pass --protocol FILE to check them against your own code")
 
 
 @dataclass(frozen=True)
@@ -120,6 +124,7 @@ class VerifyReport:
         missing: channels of the protocol with no message in the recording.
         inside: channels an anodize recording leaves out by design (both ends in one group).
         gaps: messages the recorder marked as not recorded (the recording's, not a violation).
+        notes: what else the reader should know (payload classes checked by name only, ...).
     """
 
     recording: str
@@ -130,6 +135,7 @@ class VerifyReport:
     missing: list[str] = field(default_factory=list)
     inside: list[str] = field(default_factory=list)
     gaps: list[Gap] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
     messages: int = 0
     bytes: int = 0
     seconds: float = 0.0
@@ -152,6 +158,7 @@ class VerifyReport:
         lines.extend(f"gap: {gap}" for gap in self.gaps)
         if self.inside:
             lines.append(f"not recorded (both ends in one group): {', '.join(self.inside)}")
+        lines.extend(f"note: {note}" for note in self.notes)
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -160,7 +167,7 @@ class VerifyReport:
                                     "violation": None if r.violation is None else r.violation.__dict__}
                              for name, r in self.channels.items()},
                 "unknown": self.unknown, "unmapped": self.unmapped, "missing": self.missing, "inside": self.inside,
-                "gaps": [gap.__dict__ for gap in self.gaps],
+                "gaps": [gap.__dict__ for gap in self.gaps], "notes": self.notes,
                 "messages": self.messages, "bytes": self.bytes, "seconds": self.seconds}
 
 
@@ -264,10 +271,27 @@ def _actual(side: int, check: _ChannelCheck, label: str, topic: RecordedTopic) -
 
 
 class _Codecs:
-    """Decoders of the recorded types, made once each."""
+    """Decoders of the recorded types, and checks of the protocol's sorts, made once each.
 
-    def __init__(self) -> None:
+    ``import_classes`` False (the protocol came from the recording): a sort bound to a class
+    by import path is checked by the recorded class name (:mod:`.by_name`), never imported.
+    """
+
+    def __init__(self, import_classes: bool) -> None:
         self._found: dict[tuple[str, bool], SortCodec] = {}
+        self._checks: dict[Sort | None, Validator | str] = {}
+        self._import = import_classes
+
+    def check(self, sort: Sort | None) -> Validator | str:
+        """The payload check of ``sort``, or why there is none (its class cannot be imported here)."""
+        found = self._checks.get(sort)
+        if found is None:
+            try:
+                found = validator_for(sort) if self._import else validator_by_name(sort)
+            except AnodizeError as error:  # the sort's class cannot be imported, or its ROS type resolved
+                found = f"cannot check the payload: {error}"
+            self._checks[sort] = found
+        return found
 
     def decode(self, topic: RecordedTopic, data: bytes | memoryview) -> object:
         as_json = topic.type_name == JSON_TYPE and topic.metadata.get(f"{META}.encoding") == "json"
@@ -290,18 +314,15 @@ def _fitting_sorts(message: RecordedMessage, taken: list[Transition], codecs: _C
     for sort in {sort_key(t): t.sort for t in taken}.values():
         recorded = message.topic.type_name
         if recorded != codec_for_sort(sort).type_name:
-            reasons.append(f"payload of the wrong sort: recorded a {recorded}, the label carries {_sort_text(sort)}")
+            reasons.append(f"payload of the wrong sort: recorded a {recorded}, the label carries {sort_text(sort)}")
             continue
-        try:  # before decoding: it imports the class a declared sort names (the protocol's, not the recording's)
-            candidates.append((sort, validator_for(sort)))
-        except AnodizeError as error:  # the sort's class cannot be imported here
-            candidates.append((sort, f"cannot check the payload: {error}"))
+        candidates.append((sort, codecs.check(sort)))  # before decoding: the check may import the sort's class
     if not candidates:
         return frozenset(), "; ".join(reasons)
     try:
         payload = codecs.decode(message.topic, message.data)
     except (AnodizeError, ValueError, KeyError, TypeError) as error:
-        expected = " or ".join(_sort_text(sort) for sort, _ in candidates)
+        expected = " or ".join(sort_text(sort) for sort, _ in candidates)
         return frozenset(), "; ".join([*reasons, f"the payload does not decode as {expected}: {error}"])
     fits: set[str | None] = set()
     for sort, check in candidates:
@@ -319,32 +340,36 @@ def _payload_problem(payload: object, sort: Sort | None, check: Validator | str)
     if isinstance(payload, UnknownObject):
         target = sort.target if sort is not None else None
         return "" if payload.class_name == target else (
-            f"payload of the wrong sort: a recorded {payload.class_name}, the label carries {_sort_text(sort)}")
+            f"payload of the wrong sort: a recorded {payload.class_name}, the label carries {sort_text(sort)}")
     if isinstance(check, str):
         return check
     reason = check(payload)
     return f"payload of the wrong sort: {reason}" if reason else ""
 
 
-def _sort_text(sort: Sort | None) -> str:
-    if sort is None:
-        return "no payload"
-    return f"{sort.spelling} ({sort.target})" if sort.target else sort.spelling
-
-
-def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, tuple[str, str, str]] | None = None
-           ) -> VerifyReport:
+def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, tuple[str, str, str]] | None = None,
+           import_classes: bool = True) -> VerifyReport:
     """Check ``recording`` against ``global_type``.
 
     Args:
         topics: topic -> ``(sender, receiver, label)`` for topics without anodize's metadata
             (a recording made by another tool).
+        import_classes: whether the payload classes ``global_type`` names by import path may be
+            imported to check payloads: False when it is the protocol the recording carries
+            (untrusted data; the payloads are then checked by their recorded class names, and
+            the report says so).
+
+    Raises:
+        RecordingError: the recording cannot be read, or its metadata is not anodize's.
     """
     began = time.perf_counter()
     machines = {role: global_type.project(role).fsm() for role in global_type.roles}
     labels = channel_labels(machines)
     pairs = {(s, r) for s, r, _ in labels}
     report = VerifyReport(str(recording.path), global_type.name)
+    recorded = recorded_channels(recording)
+    if not import_classes and class_sorts(t.sort for m in machines.values() for t in m.all_transitions()):
+        report.notes.append(NOT_IMPORTED)
     keys: dict[int, tuple[str, str, str]] = {}
     gap_topics: set[int] = set()
     for topic in recording.topics:
@@ -359,7 +384,7 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
         else:
             keys[topic.id] = key
     checks = {pair: _ChannelCheck(*pair, machines) for pair in sorted({k[:2] for k in keys.values()})}
-    codecs = _Codecs()
+    codecs = _Codecs(import_classes)
     for message in recording.messages():
         report.messages += 1
         report.bytes += len(message.data)
@@ -369,10 +394,8 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
         elif message.topic.id in gap_topics:
             _note_gap(report, checks, message)
     report.channels = {check.name: check.result for check in checks.values()}
-    recorded = recording.info.get("recorded_channels")
     # An anodize recording says which channels it records: those inside one group it does not.
-    expected = sorted(pairs) if recorded is None else sorted(
-        pair for pair in pairs if f"{pair[0]}->{pair[1]}" in recorded.split())
+    expected = sorted(pairs) if recorded is None else sorted(pair for pair in pairs if pair in recorded)
     report.missing = [f"{s}->{r}" for s, r in expected
                       if f"{s}->{r}" not in report.channels or not report.channels[f"{s}->{r}"].messages]
     report.inside = [f"{s}->{r}" for s, r in sorted(pairs) if (s, r) not in expected]

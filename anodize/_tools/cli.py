@@ -171,7 +171,8 @@ def _parser() -> argparse.ArgumentParser:
     _add_recording_arguments(replay)
     replay.add_argument("--role", required=True, metavar="R", help="the role to replay")
     replay.add_argument("--function", metavar="MODULE:FUNCTION",
-                        help="the role's function (default: the one the recording names)")
+                        help="the role's function, your own code (needed: what a recording names is never "
+                             "imported; the error says which function the recording says ran)")
     replay.add_argument("--pythonpath", action="append", default=[], metavar="DIR",
                         help="import role functions from DIR too (repeatable; the current directory always)")
     replay.add_argument("--timeout", type=float, default=60.0, metavar="S",
@@ -439,7 +440,8 @@ def _verify(args: argparse.Namespace) -> int:
     with open_recording(args.recording) as recording:
         global_type = protocol_of(recording, args.protocol, args.global_name)
         topics = topic_map(args.topics, global_type) if args.topics else None
-        report = verify(recording, global_type, topics)
+        # The recording's own protocol is untrusted: its payload classes are not imported.
+        report = verify(recording, global_type, topics, import_classes=args.protocol is not None)
     print(report.text())
     if args.json:
         _write_json(Path(args.json), report.to_dict())
@@ -515,7 +517,8 @@ def _replay(args: argparse.Namespace) -> int:
                              f"{', '.join(global_type.roles)}")
         topics = topic_map(args.topics, global_type) if args.topics else None
         function = role_function(recording, args.role, args.function, [".", *args.pythonpath])
-        report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout)
+        report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout,
+                        import_classes=args.protocol is not None)
     print(report.text())
     if args.json:
         _write_json(Path(args.json), report.to_dict())

@@ -1,9 +1,14 @@
 """What ``anodize verify`` and ``anodize replay`` need besides the recording: the protocol, the topic map,
-the role's function."""
+the role's function.
+
+A recording is untrusted data: the protocol it carries is read for its structure only (the
+commands tell :func:`~anodize._recording.verify.verify` and :func:`~anodize._recording.replay.replay`
+not to import the payload classes it names), and the role functions it names are shown, never
+imported: the function to replay is always the user's (``--function``).
+"""
 
 from __future__ import annotations
 
-import json
 import sys
 import tomllib
 from collections.abc import Callable, Sequence
@@ -13,6 +18,7 @@ from typing import Any
 import sessiontypes
 from sessiontypes import GlobalType
 
+from .._recording.metadata import recorded_protocol, role_functions
 from .._recording.reader import Recording
 from .._supervision.group import resolve_function
 from .._transport.ros_lanes import ros_settings
@@ -30,10 +36,11 @@ def protocol_of(recording: Recording, path: str | None, name: str | None) -> Glo
         ProtocolError: the protocol does not parse or check.
     """
     info = recording.info
+    recorded = recorded_protocol(recording)
     if path is not None:
         module = sessiontypes.load(path)
-    elif info.get("protocol_source"):
-        module = sessiontypes.loads(info["protocol_source"], info.get("protocol_file") or "<recorded protocol>")
+    elif recorded is not None:
+        module = sessiontypes.loads(*recorded)  # parsed and checked: nothing it names is imported here
     else:
         raise ConfigurationError(f"{recording.path} was not recorded by anodize: give its protocol with "
                                  "--protocol FILE.proto (and --global G, and --topics MAP)")
@@ -78,25 +85,25 @@ def topic_map(path: str, global_type: GlobalType) -> dict[str, tuple[str, str, s
 
 def role_function(recording: Recording, role: str, reference: str | None,
                   pythonpath: Sequence[str] = ()) -> Callable[..., Any]:
-    """The function to replay ``role`` with: ``reference`` (``"module:function"``) if given, else the
-    one the recording names. The folders of ``pythonpath`` go to the front of ``sys.path`` first.
+    """The function to replay ``role`` with: ``reference`` (``"module:function"``), the user's own.
+    The folders of ``pythonpath`` go to the front of ``sys.path`` first.
+
+    A recording names the function each role ran (``role_functions``); that name is only shown,
+    in the error when no reference is given: importing it would run code a file chose.
 
     Raises:
-        ConfigurationError: no reference given and the recording names none for ``role``.
+        ConfigurationError: no reference given (naming the function the recording says ran).
+        RecordingError: (no reference given) the recording's ``role_functions`` is malformed.
         AnodizeError: the function cannot be imported.
     """
+    if reference is None:
+        named = role_functions(recording).get(role)
+        said = (f"the recording says role {role} ran `{named}`: pass --function {named} to replay it" if named
+                else f"the recording names no function for role {role}")
+        raise ConfigurationError(f"replaying role {role} needs --function module:function (code of your own: what "
+                                 f"a recording names is never imported); {said}")
     for folder in reversed(pythonpath):
         path = str(Path(folder).resolve())
         if path not in sys.path:
             sys.path.insert(0, path)
-    if reference is None:
-        try:
-            functions = json.loads(recording.info.get("role_functions") or "{}")
-        except ValueError:
-            functions = {}
-        reference = functions.get(role)
-        if reference is None:
-            named = ", ".join(sorted(functions)) or "none"
-            raise ConfigurationError(f"{recording.path} does not name the function of role {role} (it names "
-                                     f"those of: {named}): give it with --function module:function")
     return resolve_function(reference)

@@ -1,7 +1,7 @@
 """``anodize replay``: one role's code run against a recording.
 
 - every role of a recorded two-buyer run (process transport, through the CLI) replays
-  with its own function and matches;
+  with its own function (``--function``: the recording's names are never imported) and matches;
 - a function that sends another value diverges, naming the channel and the index; one
   that breaks the protocol gets the monitor's ``ProtocolViolationError``; one that stops
   sending early, or crashes, fails the replay;
@@ -87,11 +87,12 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
 # ---- the same code matches; other code does not -------------------------------------------
 
 @pytest.mark.parametrize("role", ["B1", "B2", "S"])
-def test_each_role_replays_with_the_function_the_recording_names_and_matches(
+def test_each_role_replays_with_the_function_it_ran_and_matches(
         capsys: pytest.CaptureFixture[str], recorded: Path, role: str) -> None:
     capsys.readouterr()
-    status, out = _cli(capsys, "replay", str(recorded), "--role", role, "--pythonpath", str(HERE))
     function = {"B1": "buyer1", "B2": "buyer2", "S": "seller"}[role]
+    status, out = _cli(capsys, "replay", str(recorded), "--role", role, "--function", f"replay_roles:{function}",
+                       "--pythonpath", str(HERE))
     assert out.splitlines()[0] == (f"replay of role {role} (replay_roles:{function}) from {recorded}, global TwoBuyer: "
                                    "matches the recording and follows the protocol")
     assert out.splitlines()[1] == f"  ended: {role} returned at the end of its local type"
@@ -100,7 +101,8 @@ def test_each_role_replays_with_the_function_the_recording_names_and_matches(
 
 def test_the_seller_s_lines_count_every_recorded_message(capsys: pytest.CaptureFixture[str], recorded: Path) -> None:
     capsys.readouterr()
-    status, out = _cli(capsys, "replay", str(recorded), "--role", "S", "--pythonpath", str(HERE))
+    status, out = _cli(capsys, "replay", str(recorded), "--role", "S", "--function", "replay_roles:seller",
+                       "--pythonpath", str(HERE))
     assert (status, out.splitlines()[2:]) == (0, [
         "  received on B1->S: 1 delivered of 1 recorded",
         "  received on B2->S: 1 delivered of 1 recorded",
@@ -260,6 +262,10 @@ def test_usage_errors(capsys: pytest.CaptureFixture[str], recorded: Path) -> Non
     capsys.readouterr()
     assert main(["replay", str(recorded), "--role", "X"]) == 2
     assert capsys.readouterr().err == "anodize replay: error: no role X in global TwoBuyer; expected one of B1, B2, S\n"
+    assert main(["replay", str(recorded), "--role", "S"]) == 1  # the recording's own name is only a hint
+    assert capsys.readouterr().err == ("error: replaying role S needs --function module:function (code of your own: "
+                                       "what a recording names is never imported); the recording says role S ran "
+                                       "`replay_roles:seller`: pass --function replay_roles:seller to replay it\n")
     assert main(["replay", str(recorded), "--role", "S", "--function", "replay_roles:nothing"]) == 1
     assert capsys.readouterr().err == ("error: role function 'replay_roles:nothing': module replay_roles has no "
                                        "nothing\n")
