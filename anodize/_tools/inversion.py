@@ -44,6 +44,7 @@ class Party:
             or the role is external.
         cpus: the CPUs the group may run on; None when it may run on any.
         host: the host the group runs on (``transport = "dds"``), None for this one.
+        nice: with no priority, the group's nice value (None: none given).
     """
 
     role: str
@@ -51,6 +52,7 @@ class Party:
     priority: int | None
     cpus: tuple[int, ...] | None
     host: str | None
+    nice: int | None = None
 
     @property
     def external(self) -> bool:
@@ -66,7 +68,7 @@ class Party:
         """``Move (group control, priority 90, CPUs any)``."""
         if self.external:
             return f"{self.role} (external ROS 2 node, priority unknown)"
-        return (f"{self.role} (group {self.group}, {_priority(self.priority)}, "
+        return (f"{self.role} (group {self.group}, {_priority(self.priority, self.nice)}, "
                 f"CPUs {_cpus(self.cpus)}{_host(self.host)})")
 
 
@@ -332,7 +334,7 @@ def _party(role: str, config: SystemConfig) -> Party:
     if name is None:
         return Party(role, None, None, None, None)
     group: GroupConfig = config.groups[name]
-    return Party(role, group.name, group.priority, group.cpus, group.host)
+    return Party(role, group.name, group.priority, group.cpus, group.host, group.nice)
 
 
 def _channel(key: str) -> tuple[str, str]:
@@ -340,8 +342,10 @@ def _channel(key: str) -> tuple[str, str]:
     return sender.strip(), receiver.strip()
 
 
-def _priority(priority: int | None) -> str:
-    return f"priority {priority}" if priority is not None else "no priority (normal scheduling)"
+def _priority(priority: int | None, nice: int | None = None) -> str:
+    if priority is not None:
+        return f"priority {priority}"
+    return "no priority (normal scheduling)" if nice is None else f"no priority (normal scheduling, nice {nice})"
 
 
 def _cpus(cpus: tuple[int, ...] | None) -> str:
