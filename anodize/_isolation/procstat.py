@@ -18,7 +18,8 @@ import threading
 import time
 from dataclasses import dataclass
 
-__all__ = ["ProcSample", "sample", "cpu_seconds", "own_run_delay", "rivals", "machine_load", "cpu_quota"]
+__all__ = ["ProcSample", "sample", "cpu_seconds", "thread_times", "own_run_delay", "rivals", "machine_load",
+           "cpu_quota"]
 
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -85,6 +86,21 @@ def cpu_seconds(pid: int) -> float | None:
     """CPU time (user + system) the process has used, all threads; None if it is gone."""
     fields = _stat_fields(f"/proc/{pid}/stat")
     return None if fields is None or len(fields) < 13 else _cpu(fields)
+
+
+def thread_times(pid: int) -> dict[int, tuple[float, bool]] | None:
+    """Per thread of ``pid``: the CPU time it has used and whether it runs under a real-time
+    policy (SCHED_FIFO or SCHED_RR) now; None if the process is gone."""
+    try:
+        tids = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
+    except OSError:
+        return None
+    times: dict[int, tuple[float, bool]] = {}
+    for tid in tids:
+        fields = _stat_fields(f"/proc/{pid}/task/{tid}/stat")
+        if fields is not None and len(fields) > 38:  # field 41, policy
+            times[tid] = (_cpu(fields), int(fields[38]) in (os.SCHED_FIFO, os.SCHED_RR))
+    return times
 
 
 def sample(pid: int) -> ProcSample | None:

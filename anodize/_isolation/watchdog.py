@@ -3,9 +3,12 @@
 Two layers. The kernel's RT throttling (``/proc/sys/kernel/sched_rt_runtime_us``)
 keeps a share of every period for ordinary tasks; where it is disabled (-1) a
 spinning FIFO thread owns its CPU for good. On top of it, :class:`Watchdog`
-samples the CPU time of every group process that runs at SCHED_FIFO and, when
-one has kept a CPU busy for ``limit`` seconds (on average over that window),
-demotes all of its threads to SCHED_OTHER and records why. The limit is kept
+samples the CPU time the real-time threads of every group process use (a thread
+counts while it runs at SCHED_FIFO: at its group's priority, or at one a waiter
+lent it by priority inheritance, so a group of no priority that spins while
+boosted is caught too) and, when they have kept a CPU busy for ``limit``
+seconds (on average over that window), demotes all of its threads to
+SCHED_OTHER and records why. The limit is kept
 below the kernel's throttling window: once RT tasks have used their share of a
 period, the kernel pauses *every* RT task on that CPU, the high-priority ones
 too, so a runaway must be demoted before that happens. The watchdog's own thread asks for
@@ -27,9 +30,9 @@ import time
 from collections import deque
 from collections.abc import Callable
 
-from .procstat import cpu_seconds
+from .procstat import thread_times
 
-__all__ = ["Watchdog", "rt_throttling", "BUSY_SHARE", "prioritise_watcher", "WATCHER_PRIORITY"]
+__all__ = ["Watchdog", "RealTimeMeter", "rt_throttling", "BUSY_SHARE", "prioritise_watcher", "WATCHER_PRIORITY"]
 
 WATCHER_PRIORITY = 1  # SCHED_FIFO: above every ordinary task, below every real-time group
 
@@ -95,6 +98,29 @@ def demote(pid: int) -> int:
     return moved
 
 
+class RealTimeMeter:
+    """The CPU seconds a process's threads have used while under a real-time policy, added
+    up from one reading to the next (a thread's time between two readings counts when it is
+    real time at the second: a boost that began a moment ago brings none of the thread's past)."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self.used = 0.0
+        self._last: dict[int, float] = {}
+
+    def read(self) -> float | None:
+        """The real-time CPU seconds so far; None once the process is gone."""
+        times = thread_times(self.pid)
+        if times is None:
+            return None
+        for tid, (cpu, realtime) in times.items():
+            before = self._last.get(tid)
+            if realtime and before is not None:
+                self.used += max(0.0, cpu - before)
+        self._last = {tid: cpu for tid, (cpu, _) in times.items()}
+        return self.used
+
+
 class Watchdog:
     """Demotes FIFO group processes that keep a CPU busy for ``limit`` seconds.
 
@@ -106,15 +132,17 @@ class Watchdog:
     def __init__(self, limit: float, on_demote: Callable[[str, str], None]) -> None:
         self.limit = limit
         self.on_demote = on_demote
-        self._watched: dict[str, tuple[int, deque[tuple[float, float]]]] = {}
+        self._watched: dict[str, tuple[RealTimeMeter, deque[tuple[float, float]]]] = {}
         self._lock = threading.Lock()
         self._stopped = threading.Event()
         self._thread = threading.Thread(target=self._run, name="anodize-watchdog", daemon=True)
         self.scheduling = ""
 
     def watch(self, group: str, pid: int) -> None:
+        """Watch ``pid``, group ``group``'s process, whatever its scheduling now: a boost can
+        make its threads real time later."""
         with self._lock:
-            self._watched[group] = (pid, deque())
+            self._watched[group] = (RealTimeMeter(pid), deque())
         if not self._thread.is_alive() and not self._stopped.is_set():
             self._thread.start()
 
@@ -134,12 +162,13 @@ class Watchdog:
         while not self._stopped.wait(_SAMPLE):
             with self._lock:
                 watched = list(self._watched.items())
-            for group, (pid, samples) in watched:
-                self.check(group, pid, samples, time.monotonic(), cpu_seconds(pid))
+            for group, (meter, samples) in watched:
+                self.check(group, meter.pid, samples, time.monotonic(), meter.read())
 
     def check(self, group: str, pid: int, samples: deque[tuple[float, float]], now: float,
               used: float | None) -> bool:
-        """Record one sample; demote and report when the window shows spinning."""
+        """Record one sample (``used``: the real-time CPU seconds so far, None once the
+        process is gone); demote and report when the window shows spinning."""
         if used is None:
             self.forget(group)
             return False

@@ -163,7 +163,7 @@ class ProcessRunner:
                      f"{_MEMORY_EVERY:g} s by the supervisor")
             if inc.cgroup is None:
                 note += " (with no cgroup, a burst faster than that can pass the bound before the group is stopped)"
-        if ready.scheduling.startswith("SCHED_FIFO") and inc.pid:
+        if inc.pid:  # every group: priority inheritance can make any group's threads real time
             self.watchdog.watch(inc.group.name, inc.pid)
         self.pending.append(Ready(group=inc.group.name, incarnation=inc.number, scheduling=ready.scheduling,
                                   memory_note=note, pid=inc.pid))
@@ -419,8 +419,9 @@ class ProcessRunner:
         self.pending.append(Note(group=group, text=description))
 
     def notes(self) -> list[str]:
-        notes = [(f"real-time guard: kernel RT throttling {rt_throttling()}; watchdog demotes a SCHED_FIFO "
-                  f"group that keeps a CPU busy for {WATCHDOG_LIMIT:g} s"), *self.watch.notes()]
+        notes = [(f"real-time guard: kernel RT throttling {rt_throttling()}; watchdog demotes a group whose "
+                  f"SCHED_FIFO threads (its own priority or a boost) keep a CPU busy for {WATCHDOG_LIMIT:g} s"),
+                 *self.watch.notes()]
         if self.inheritance_note:
             notes.append(self.inheritance_note)
         if self.transport == "process":

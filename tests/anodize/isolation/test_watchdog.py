@@ -5,7 +5,10 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import threading
 from collections import deque
+
+import pytest
 
 from anodize._isolation.procstat import cpu_seconds
 from anodize._isolation.watchdog import Watchdog, rt_throttling
@@ -42,3 +45,32 @@ def test_a_busy_spell_shorter_than_the_limit_or_a_loop_that_sleeps_is_left_alone
 def test_cpu_time_and_throttling_are_read_from_proc() -> None:
     assert cpu_seconds(os.getpid()) is not None and cpu_seconds(os.getpid()) > 0
     assert rt_throttling() == "off" or "real-time tasks" in rt_throttling() or rt_throttling() == "unknown"
+
+
+def test_the_meter_counts_only_time_spent_real_time_and_no_past_of_a_thread_just_boosted(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from anodize._isolation import watchdog
+
+    readings = iter([
+        {1: (10.0, True), 2: (50.0, False)},   # 1: the group's real-time thread; 2: ordinary, 50 s of past
+        {1: (10.4, True), 2: (50.3, False)},   # 2's 0.3 s is ordinary work: not counted
+        {1: (10.5, True), 2: (50.9, True)},    # 2 was boosted: its 0.6 s since the last reading counts, not its 50 s
+        {1: (10.5, True), 2: (51.0, False), 3: (7.0, True)},  # 3 is new: nothing of it yet
+        {1: (10.6, True), 3: (7.2, True)},     # 2 ended
+        None,                                  # the process is gone
+    ])
+    monkeypatch.setattr(watchdog, "thread_times", lambda pid: next(readings))
+    meter = watchdog.RealTimeMeter(1234)
+    used = [meter.read() for _ in range(6)]
+    assert used[:5] == pytest.approx([0.0, 0.4, 0.4 + 0.1 + 0.6, 1.1, 1.1 + 0.1 + 0.2])
+    assert used[5] is None
+
+
+def test_thread_times_reads_each_thread_s_policy() -> None:
+    from anodize._isolation.procstat import thread_times
+
+    times = thread_times(os.getpid())
+    assert times is not None and threading.get_native_id() in times
+    cpu, realtime = times[threading.get_native_id()]
+    assert cpu > 0 and realtime == (os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR))
+    assert thread_times(2**22 + 1) is None  # beyond pid_max: no such process
