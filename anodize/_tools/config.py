@@ -44,6 +44,7 @@ from __future__ import annotations
 import os
 import re
 import sys
+import threading
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -239,8 +240,7 @@ class _Reader:
         protocol = self.required_string(data, "protocol")
         global_name = self.required_string(data, "global")
         timeout = data.get("timeout")
-        if timeout is not None and (isinstance(timeout, bool) or not isinstance(timeout, int | float)
-                                    or not timeout > 0):
+        if timeout is not None and not _is_seconds(timeout):
             raise self.error("timeout", f"expected a number of seconds > 0, got {_show(timeout)}")
         monitors = data.get("monitors", True)
         if not isinstance(monitors, bool):
@@ -296,7 +296,7 @@ class _Reader:
         if key == "host" and (not isinstance(value, str) or not value.isidentifier()):
             raise self.error(dotted, f"expected a name such as \"robot\", got {_show(value)}")
         if key in ("wait", "liveness"):
-            if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+            if not _is_seconds(value):
                 raise self.error(dotted, f"expected a number of seconds > 0, got {_show(value)}")
             return float(value)
         return value
@@ -399,7 +399,7 @@ class _Reader:
             raise self.error(f"{prefix}.memory", "expected a size such as \"64MiB\", \"512KiB\" or a "
                                                  f"number of bytes, at most 8 EiB, got {_show(memory)}") from None
         on_failure = table.get("on_failure", "stop")
-        if on_failure not in {p.value for p in FailurePolicy}:
+        if not isinstance(on_failure, str) or on_failure not in {p.value for p in FailurePolicy}:
             raise self.error(f"{prefix}.on_failure", f"expected one of "
                              f"{', '.join(_show(p.value) for p in FailurePolicy)}, got {_show(on_failure)}")
         max_restarts = table.get("max_restarts", 3)
@@ -441,6 +441,14 @@ class _Reader:
 
 def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_seconds(value: Any) -> bool:
+    """A number > 0 that a wait can take (TOML has ``inf``, ``nan`` and 20-digit integers;
+    none is a timeout: a wait longer than ``threading.TIMEOUT_MAX`` raises OverflowError)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    return 0 < value <= threading.TIMEOUT_MAX  # False for nan
 
 
 def _show(value: Any) -> str:
