@@ -51,6 +51,7 @@ from pathlib import Path
 from typing import Any
 
 import sessiontypes
+from sessiontypes.limits import SYSTEM_FILE, read_limited
 
 from .._supervision.group import FailurePolicy, parse_memory
 from .._supervision.rosbridge import RosBridge
@@ -200,7 +201,7 @@ def load_config(path: str | Path) -> SystemConfig:
     path = Path(path)
     shown = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_limited(path, SYSTEM_FILE).decode("utf-8")
     except UnicodeDecodeError:
         raise ConfigError(shown, None, "expected UTF-8 text") from None
     except OSError as error:

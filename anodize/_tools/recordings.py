@@ -12,6 +12,7 @@ from typing import Any
 
 import sessiontypes
 from sessiontypes import GlobalType
+from sessiontypes.limits import SYSTEM_FILE, read_limited
 
 from .._recording.reader import Recording
 from .._supervision.group import resolve_function
@@ -58,10 +59,13 @@ def topic_map(path: str, global_type: GlobalType) -> dict[str, tuple[str, str, s
             ``global_type`` (naming the entry).
     """
     try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as error:
+        data = tomllib.loads(read_limited(path, SYSTEM_FILE).decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
         raise ConfigurationError(f"{path}: not a TOML file: {error}") from None
     table = data.get("ros", {}).get("topics", data) if isinstance(data.get("ros"), dict) else data
+    if not isinstance(table, dict):
+        raise ConfigurationError(f"{path}: ros.topics: expected a table of \"Sender->Receiver:label\" = "
+                                 f"\"/topic\" entries, got a {type(table).__name__}")
     entries = {key: value for key, value in table.items() if isinstance(value, str) and "->" in key}
     if not entries:
         raise ConfigurationError(f"{path}: no \"Sender->Receiver:label\" = \"/topic\" entries "
