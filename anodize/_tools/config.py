@@ -210,6 +210,8 @@ def load_config(path: str | Path) -> SystemConfig:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise _syntax_error(shown, text, str(error)) from None
+    except RecursionError:  # tomllib recurses once per level of nested arrays and tables
+        raise ConfigError(shown, None, "arrays or tables nested too deeply; expected at most a few levels") from None
     return _Reader(shown, path).system(data)
 
 

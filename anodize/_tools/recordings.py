@@ -60,7 +60,7 @@ def topic_map(path: str, global_type: GlobalType) -> dict[str, tuple[str, str, s
     """
     try:
         data = tomllib.loads(read_limited(path, SYSTEM_FILE).decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as error:
         raise ConfigurationError(f"{path}: not a TOML file: {error}") from None
     table = data.get("ros", {}).get("topics", data) if isinstance(data.get("ros"), dict) else data
     if not isinstance(table, dict):
