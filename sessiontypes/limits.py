@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["InputLimit", "InputLimitError", "PROTOCOL", "SYSTEM_FILE", "JSON", "SOURCE", "RECORDING",
-           "RECORDING_METADATA", "read_limited", "check_file"]
+           "RECORDING_METADATA", "read_limited", "check_text", "check_file"]
 
 
 class InputLimitError(OSError):
@@ -161,3 +161,16 @@ def _size(number: int) -> str:
         if number >= factor and number % factor == 0:
             return f"{number // factor} {unit}"
     return f"{number} bytes"
+
+
+def check_text(text: str, limit: InputLimit, where: str) -> str:
+    """``text`` itself, if its UTF-8 form is at most ``limit.bytes()``: for text that arrives
+    inside another file (a protocol embedded in a recording), bounded as if read from its own.
+
+    Raises:
+        InputLimitError: larger than the limit.
+    """
+    most = limit.bytes()
+    if len(text) > most or len(text.encode("utf-8", "surrogatepass")) > most:
+        raise _too_large(where, limit, most)
+    return text

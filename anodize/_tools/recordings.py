@@ -12,7 +12,7 @@ from typing import Any
 
 import sessiontypes
 from sessiontypes import GlobalType
-from sessiontypes.limits import SYSTEM_FILE, read_limited
+from sessiontypes.limits import PROTOCOL, SYSTEM_FILE, check_text, read_limited
 
 from .._recording.reader import Recording
 from .._supervision.group import resolve_function
@@ -34,7 +34,8 @@ def protocol_of(recording: Recording, path: str | None, name: str | None) -> Glo
     if path is not None:
         module = sessiontypes.load(path)
     elif info.get("protocol_source"):
-        module = sessiontypes.loads(info["protocol_source"], info.get("protocol_file") or "<recorded protocol>")
+        shown = info.get("protocol_file") or "<recorded protocol>"
+        module = sessiontypes.loads(check_text(info["protocol_source"], PROTOCOL, f"{recording.path}: {shown}"), shown)
     else:
         raise ConfigurationError(f"{recording.path} was not recorded by anodize: give its protocol with "
                                  "--protocol FILE.proto (and --global G, and --topics MAP)")
