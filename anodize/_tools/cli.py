@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, NoReturn, TextIO
 
 import sessiontypes
 from sessiontypes import ProtocolError, ProtocolModule
+from sessiontypes.limits import SOURCE, read_limited
 from sessiontypes.printer import PrintTooLongError, print_local
 
 from ..errors import AnodizeError
@@ -296,7 +297,7 @@ def _generate(args: argparse.Namespace, modules: list[GeneratedModule]) -> int:
     for generated in modules:
         path = directory / generated.filename
         try:
-            current = path.read_bytes()
+            current = read_limited(path, SOURCE)  # a FIFO or a device there is refused, not read
         except FileNotFoundError:
             outdated.append(f"{path}: missing")
             continue

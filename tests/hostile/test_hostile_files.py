@@ -87,6 +87,7 @@ def protocol_cases() -> list[Case]:
         Case("malformed-check-nul", lambda d: [*ANODIZE, "check", write(d, "p.proto", b"global G\x00(A, B)")]),
         Case("malformed-check-scr-noise", lambda d: [*ANODIZE, "check", write(d, "p.scr", noise(2, 4096))]),
         Case("malformed-check-nuscr-noise", lambda d: [*ANODIZE, "check", write(d, "p.nuscr", noise(3, 4096))]),
+        Case("infinite-project-check-generated-fifo", lambda d: _generated_fifo(d), NOT_REGULAR, slow=True),
         Case("lying-check-proto-in-scr", lambda d: [*ANODIZE, "check", write(d, "p.scr", GOOD_PROTOCOL)]),
         Case("malformed-check-unterminated", lambda d: [*ANODIZE, "check", write(d, "p.proto", 'type X = "abc')]),
     ]
@@ -105,6 +106,14 @@ def protocol_cases() -> list[Case]:
              lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_do_per_level(11))], slow=True),
     ]
     return cases
+
+
+def _generated_fifo(folder: Path) -> list[str]:
+    """``project -o gen --check`` where a generated module is a FIFO: it would block for ever."""
+    write(folder, "p.proto", GOOD_PROTOCOL)
+    (folder / "gen").mkdir()
+    fifo(folder / "gen", "g_a.py")
+    return [*ANODIZE, "project", "p.proto", "-o", "gen", "--check"]
 
 
 def _link(folder: Path, target: str, name: str) -> str:
