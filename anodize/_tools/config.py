@@ -465,6 +465,8 @@ def _show(value: Any) -> str:
     if isinstance(value, int | float):
         return repr(value)
     if isinstance(value, list):
+        if len(value) > 8:  # as for strings: a few items and the count, not ten thousand
+            return "[" + ", ".join(_show(v) for v in value[:3]) + f", ... ({len(value)} items)]"
         return "[" + ", ".join(_show(v) for v in value) + "]"
     if isinstance(value, dict):
         return "a table"

@@ -117,6 +117,8 @@ def test_any_value_at_any_key_is_read_or_refused_with_its_key(tmp_path: Path, pa
     ("on_failure", "{ a = 1 }", 'expected one of "stop", "restart", "stop-system", got a table'),
     ("memory", "[1]", 'expected a size such as "64MiB", "512KiB" or a number of bytes, at most 8 EiB, got [1]'),
     ("priority", "1979-05-27", "expected an int 1..99, got a date"),
+    ("cpus", "[" + ", ".join(["-1"] * 10000) + "]",
+     "expected a non-empty array of CPU numbers, got [-1, -1, -1, ... (10000 items)]"),
 ])
 def test_lint_names_the_key_and_what_it_expected(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                  key: str, value: str, expected: str) -> None:
