@@ -136,3 +136,17 @@ def test_seconds_must_be_finite(tmp_path: Path, key: str, value: str) -> None:
     file.write_text(f'protocol = "p.proto"\nglobal = "G"\n{key} = {value}\n[groups.g]\nroles = {{ A = "m:f" }}\n')
     with pytest.raises(ConfigError, match=re.escape("expected a number of seconds > 0")):
         load_config(file)
+
+
+@settings(max_examples=examples(100), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(path=st.sampled_from(KEY_PATHS), value=VALUES)
+def test_lint_of_any_value_at_any_key_is_a_result_or_a_clean_error(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                   path: tuple[str, ...], value: Any) -> None:
+    (tmp_path / "p.proto").write_text("global G(A, B) = A -> B : m(int). end\n", encoding="utf-8")
+    (tmp_path / "mod.py").write_text("def fn(ep):\n    pass\n", encoding="utf-8")
+    file = tmp_path / "s.toml"
+    file.write_text(document(replaced(BASE, path, value)), encoding="utf-8")
+    status = main(["lint", str(file)])
+    err = capsys.readouterr().err
+    assert status in {0, 1}, err
+    assert "internal error" not in err
