@@ -12,6 +12,8 @@ instead of crashing.
 from __future__ import annotations
 
 import gc
+import os
+import resource
 import sys
 import threading
 from collections.abc import Callable
@@ -26,6 +28,7 @@ T = TypeVar("T")
 MAX_DEPTH = 250_000              # nesting levels a pass may reach
 _STACK_BYTES = 2 << 30          # virtual reservation; only touched pages are used
 _RECURSION_LIMIT = MAX_DEPTH * 4  # a level costs a few frames (match arms, __eq__)
+_MIN_STACK_BYTES = 16 << 20     # below this a helper thread gains nothing over the caller's stack
 
 _state = threading.local()
 _guard = threading.Lock()
@@ -60,17 +63,28 @@ def run_deep(function: Callable[..., T], *args: object) -> T:
         except BaseException as error:  # handed to the caller below
             outcome.append((False, error))
 
-    _enter()
-    try:
-        previous = threading.stack_size(_STACK_BYTES)
+    stack = _stack_bytes()
+    if stack < _MIN_STACK_BYTES:
+        target()  # an address-space limit leaves no room: the caller's stack and recursion limit
+    else:
+        # Frames scale with the stack: the recursion limit must stop a pass before the stack ends.
+        _enter(_RECURSION_LIMIT * stack // _STACK_BYTES)
         try:
-            worker = threading.Thread(target=target, name="sessiontypes-deep", daemon=True)
-            worker.start()
+            previous = threading.stack_size(stack)
+            try:
+                worker = threading.Thread(target=target, name="sessiontypes-deep", daemon=True)
+                worker.start()
+            except RuntimeError:  # "can't start new thread": no room for its stack after all
+                worker = None
+            finally:
+                threading.stack_size(previous)
+            if worker is not None:
+                worker.join()
         finally:
-            threading.stack_size(previous)
-        worker.join()
-    finally:
-        _leave()
+            _leave()
+        if worker is None:
+            target()
+    _state.deep = False
     ok, value = outcome[0]
     if ok:
         return value  # type: ignore[return-value]
@@ -80,12 +94,28 @@ def run_deep(function: Callable[..., T], *args: object) -> T:
 _gc_was_enabled = False
 
 
-def _enter() -> None:
+def _stack_bytes() -> int:
+    """The helper thread's stack: ``_STACK_BYTES``, or less under an address-space limit
+    (``ulimit -v``, ``prlimit --as``), where a 2 GiB reservation would fail: half the room
+    left, so that the pass's own memory still fits."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY:
+        return _STACK_BYTES
+    try:
+        with open("/proc/self/statm") as statm:
+            used = int(statm.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        used = soft // 2
+    page = resource.getpagesize()
+    return max(0, min(_STACK_BYTES, (soft - used) // 2) // page * page)
+
+
+def _enter(recursion_limit: int) -> None:
     global _active, _saved_limit, _gc_was_enabled
     with _guard:
         if _active == 0:
             _saved_limit = sys.getrecursionlimit()
-            sys.setrecursionlimit(max(_saved_limit, _RECURSION_LIMIT))
+            sys.setrecursionlimit(max(_saved_limit, recursion_limit))
             # The passes build large acyclic trees: the cycle collector would
             # rescan them again and again for nothing (a third of the time on
             # 10,000-interaction protocols). Paused only while a pass runs.

@@ -7,6 +7,7 @@ from pathlib import Path, PurePath
 from .check import ProtocolModule, check_file
 from .errors import ProtocolCheckError, ProtocolEncodingError
 from .foreign import FOREIGN_SUFFIXES, parse_foreign
+from .limits import PROTOCOL, read_limited
 from .location import Location
 from .parse import parse_file
 
@@ -54,10 +55,12 @@ def read_source(path: str | Path) -> str:
 
     Raises:
         OSError: the file cannot be read.
+        InputLimitError: (an OSError) not a regular file, or larger than the limit
+            (:data:`sessiontypes.limits.PROTOCOL`).
         ProtocolEncodingError: the file is not UTF-8 text; located at the first
             byte that cannot be decoded.
     """
-    data = Path(path).read_bytes()
+    data = read_limited(path, PROTOCOL)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sessiontypes.limits import RECORDING, RECORDING_METADATA, InputLimit, check_file
+
 from .._extras import import_extra
 from ..errors import AnodizeError
 from .plan import META
@@ -54,9 +56,12 @@ class Recording:
             if not (path / "metadata.yaml").exists():
                 raise RecordingError(f"{path}: a folder without metadata.yaml is not a rosbag2 recording")
             self._files = sorted(path.glob("*.mcap"))
+            _check_sizes([path / "metadata.yaml"], RECORDING_METADATA)
+            _check_sizes(self._files or [f for f in path.iterdir() if f.suffix == ".db3"], RECORDING)
             if not self._files:  # SQLite storage: rosbags reads it (no channel metadata there)
                 self._open_bag(path)
-        elif path.is_file():
+        elif path.exists():
+            _check_sizes([path], RECORDING)  # a device or a FIFO is refused here, before it is read
             self._files = [path]
         else:
             raise RecordingError(f"{path}: no such file or folder")
@@ -136,6 +141,15 @@ class Recording:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _check_sizes(files: list[Path], limit: InputLimit) -> None:
+    """Refuse a file of the recording that is not regular or is larger than ``limit``."""
+    for file in files:
+        try:
+            check_file(file, limit)
+        except OSError as error:
+            raise RecordingError(f"{file}: {error.strerror or error}") from None
 
 
 def open_recording(path: str | Path) -> Recording:

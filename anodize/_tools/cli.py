@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, NoReturn, TextIO
 
 import sessiontypes
 from sessiontypes import ProtocolError, ProtocolModule
+from sessiontypes.limits import SOURCE, read_limited
 from sessiontypes.printer import PrintTooLongError, print_local
 
 from ..errors import AnodizeError
@@ -32,7 +33,12 @@ if TYPE_CHECKING:
     from .._supervision.report import GroupStatus
     from ..taps import ChannelTap
 
-EXIT_OK, EXIT_ERRORS, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_ERRORS, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Ctrl-C would be: a run stops its groups the same way, and the
+    command exits 143 (128 + SIGTERM), as shells report a process ended by it."""
 
 
 class UsageError(Exception):
@@ -68,8 +74,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AnodizeError as error:  # e.g. a system file's ConfigError: 'path: key: ...'
         print(f"error: {error}", file=sys.stderr)
         return EXIT_ERRORS
-    except KeyboardInterrupt:
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as interrupt:  # SIGINT or SIGTERM while reading or checking: one line
+        terminated = isinstance(interrupt, Terminated)
+        print(f"anodize {args.command}: {'terminated (SIGTERM)' if terminated else 'interrupted'}",
+              file=sys.stderr)
+        return EXIT_TERMINATED if terminated else EXIT_INTERRUPTED
+    except MemoryError:  # e.g. under 'ulimit -v' or 'prlimit --as': the input needs more than allowed
+        print(f"anodize {args.command}: error: out of memory (the input needs more memory than this process "
+              "may take)", file=sys.stderr)
+        return EXIT_ERRORS
     except Exception as error:  # a bug: one line, not a traceback, unless debugging
         if os.environ.get("ANODIZE_DEBUG"):
             raise
@@ -285,7 +298,7 @@ def _generate(args: argparse.Namespace, modules: list[GeneratedModule]) -> int:
     for generated in modules:
         path = directory / generated.filename
         try:
-            current = path.read_bytes()
+            current = read_limited(path, SOURCE)  # a FIFO or a device there is refused, not read
         except FileNotFoundError:
             outdated.append(f"{path}: missing")
             continue
@@ -668,11 +681,14 @@ def run() -> NoReturn:
     # SIGTERM (a service manager, a container stop) ends a run as Ctrl-C does: the groups
     # are stopped, cgroups and rings removed, and the report still printed and written.
     signal.signal(signal.SIGTERM, _terminated)
+    # Python installs its Ctrl-C handler only where SIGINT was not ignored at start (a job started
+    # with '&' by a script ignores it): install it anyway, so that SIGINT always ends a long read.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     sys.exit(main())
 
 
 def _terminated(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
+    raise Terminated
 
 
 if __name__ == "__main__":

@@ -45,12 +45,14 @@ from __future__ import annotations
 import os
 import re
 import sys
+import threading
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import sessiontypes
+from sessiontypes.limits import SYSTEM_FILE, read_limited
 
 from .._supervision.group import FailurePolicy, parse_memory
 from .._supervision.rosbridge import RosBridge
@@ -202,7 +204,7 @@ def load_config(path: str | Path) -> SystemConfig:
     path = Path(path)
     shown = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_limited(path, SYSTEM_FILE).decode("utf-8")
     except UnicodeDecodeError:
         raise ConfigError(shown, None, "expected UTF-8 text") from None
     except OSError as error:
@@ -211,6 +213,8 @@ def load_config(path: str | Path) -> SystemConfig:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise _syntax_error(shown, text, str(error)) from None
+    except RecursionError:  # tomllib recurses once per level of nested arrays and tables
+        raise ConfigError(shown, None, "arrays or tables nested too deeply; expected at most a few levels") from None
     return _Reader(shown, path).system(data)
 
 
@@ -242,8 +246,7 @@ class _Reader:
         protocol = self.required_string(data, "protocol")
         global_name = self.required_string(data, "global")
         timeout = data.get("timeout")
-        if timeout is not None and (isinstance(timeout, bool) or not isinstance(timeout, int | float)
-                                    or not timeout > 0):
+        if timeout is not None and not _is_seconds(timeout):
             raise self.error("timeout", f"expected a number of seconds > 0, got {_show(timeout)}")
         monitors = data.get("monitors", True)
         if not isinstance(monitors, bool):
@@ -299,7 +302,7 @@ class _Reader:
         if key == "host" and (not isinstance(value, str) or not value.isidentifier()):
             raise self.error(dotted, f"expected a name such as \"robot\", got {_show(value)}")
         if key in ("wait", "liveness"):
-            if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+            if not _is_seconds(value):
                 raise self.error(dotted, f"expected a number of seconds > 0, got {_show(value)}")
             return float(value)
         return value
@@ -402,7 +405,7 @@ class _Reader:
             raise self.error(f"{prefix}.memory", "expected a size such as \"64MiB\", \"512KiB\" or a "
                                                  f"number of bytes, at most 8 EiB, got {_show(memory)}") from None
         on_failure = table.get("on_failure", "stop")
-        if on_failure not in {p.value for p in FailurePolicy}:
+        if not isinstance(on_failure, str) or on_failure not in {p.value for p in FailurePolicy}:
             raise self.error(f"{prefix}.on_failure", f"expected one of "
                              f"{', '.join(_show(p.value) for p in FailurePolicy)}, got {_show(on_failure)}")
         max_restarts = table.get("max_restarts", 3)
@@ -452,6 +455,14 @@ def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
+def _is_seconds(value: Any) -> bool:
+    """A number > 0 that a wait can take (TOML has ``inf``, ``nan`` and 20-digit integers;
+    none is a timeout: a wait longer than ``threading.TIMEOUT_MAX`` raises OverflowError)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    return 0 < value <= threading.TIMEOUT_MAX  # False for nan
+
+
 def _show(value: Any) -> str:
     """A value as TOML would spell it, for 'got ...' in messages."""
     if isinstance(value, bool):
@@ -463,6 +474,8 @@ def _show(value: Any) -> str:
     if isinstance(value, int | float):
         return repr(value)
     if isinstance(value, list):
+        if len(value) > 8:  # as for strings: a few items and the count, not ten thousand
+            return "[" + ", ".join(_show(v) for v in value[:3]) + f", ... ({len(value)} items)]"
         return "[" + ", ".join(_show(v) for v in value) + "]"
     if isinstance(value, dict):
         return "a table"

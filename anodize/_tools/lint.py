@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 from itertools import combinations
 from pathlib import Path
 
+from sessiontypes.limits import SOURCE, read_limited
+
 from .config import ConfigError, SystemConfig
 
 __all__ = ["Finding", "LintReport", "lint_system", "lint_report"]
@@ -191,9 +193,10 @@ class _Library:
         if name in self.cache:
             return self.cache[name]
         try:
-            text = Path(origin).read_text(encoding="utf-8")
+            text = read_limited(origin, SOURCE).decode("utf-8")
             tree = ast.parse(text, origin)
-        except (OSError, UnicodeDecodeError, SyntaxError) as error:
+        # ValueError: a NUL byte; RecursionError: nesting deeper than the compiler takes
+        except (OSError, UnicodeDecodeError, SyntaxError, ValueError, RecursionError, MemoryError) as error:
             if key is None:
                 self.cache[name] = None
                 return None

@@ -17,6 +17,7 @@ from typing import Any
 
 import sessiontypes
 from sessiontypes import GlobalType
+from sessiontypes.limits import PROTOCOL, SYSTEM_FILE, check_text, read_limited
 
 from .._recording.metadata import recorded_protocol, role_functions
 from .._recording.reader import Recording
@@ -40,7 +41,8 @@ def protocol_of(recording: Recording, path: str | None, name: str | None) -> Glo
     if path is not None:
         module = sessiontypes.load(path)
     elif recorded is not None:
-        module = sessiontypes.loads(*recorded)  # parsed and checked: nothing it names is imported here
+        text, shown = recorded  # parsed and checked, bounded as a protocol file: nothing it names is imported
+        module = sessiontypes.loads(check_text(text, PROTOCOL, f"{recording.path}: {shown}"), shown)
     else:
         raise ConfigurationError(f"{recording.path} was not recorded by anodize: give its protocol with "
                                  "--protocol FILE.proto (and --global G, and --topics MAP)")
@@ -65,10 +67,13 @@ def topic_map(path: str, global_type: GlobalType) -> dict[str, tuple[str, str, s
             ``global_type`` (naming the entry).
     """
     try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as error:
+        data = tomllib.loads(read_limited(path, SYSTEM_FILE).decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as error:
         raise ConfigurationError(f"{path}: not a TOML file: {error}") from None
     table = data.get("ros", {}).get("topics", data) if isinstance(data.get("ros"), dict) else data
+    if not isinstance(table, dict):
+        raise ConfigurationError(f"{path}: ros.topics: expected a table of \"Sender->Receiver:label\" = "
+                                 f"\"/topic\" entries, got a {type(table).__name__}")
     entries = {key: value for key, value in table.items() if isinstance(value, str) and "->" in key}
     if not entries:
         raise ConfigurationError(f"{path}: no \"Sender->Receiver:label\" = \"/topic\" entries "

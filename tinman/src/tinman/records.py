@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,8 @@ import numpy as np
 from .settings import current
 
 __all__ = ["save_record", "load_records", "percentiles"]
+
+MAX_RECORD_BYTES = 64 * 2**20  # a role's record is kilobytes; a larger one is not read
 
 
 def save_record(name: str, data: dict[str, Any]) -> Path:
@@ -31,13 +34,22 @@ def save_record(name: str, data: dict[str, Any]) -> Path:
 
 
 def load_records(folder: str | Path) -> dict[str, dict[str, Any]]:
-    """Every record in ``folder``: name -> data (unreadable files are skipped, not fatal)."""
+    """Every record in ``folder``: name -> data (unreadable files are skipped, not fatal).
+
+    Roles write these, so they are read as untrusted input: a record that is not a regular
+    file, is larger than ``MAX_RECORD_BYTES``, is not a JSON object or nests too deeply is skipped.
+    """
     records: dict[str, dict[str, Any]] = {}
     for path in sorted(Path(folder).glob("*.json")):
         try:
-            records[path.stem] = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+            status = path.stat()
+            if not stat.S_ISREG(status.st_mode) or status.st_size > MAX_RECORD_BYTES:
+                continue
+            data = json.loads(path.read_bytes()[:MAX_RECORD_BYTES + 1])  # it may have grown since
+        except (OSError, ValueError, RecursionError):  # ValueError: not UTF-8, or not JSON
             continue
+        if isinstance(data, dict):
+            records[path.stem] = data
     return records
 
 

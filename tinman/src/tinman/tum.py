@@ -8,6 +8,7 @@ exactly as the benchmark's ``associate.py`` does (greedy by smallest difference)
 
 from __future__ import annotations
 
+import stat
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
@@ -17,9 +18,22 @@ from .geometry import pose_matrix, quaternion_from_matrix
 
 __all__ = ["read_file_list", "associate", "read_trajectory", "write_trajectory", "write_file_list"]
 
+MAX_TEXT_BYTES = 256 * 2**20  # the benchmark's longest lists are a few MB
+
 
 def read_file_list(path: str | Path) -> dict[float, list[str]]:
-    """``timestamp -> the rest of the line's fields``, as ``associate.read_file_list``."""
+    """``timestamp -> the rest of the line's fields``, as ``associate.read_file_list``.
+
+    Raises:
+        OSError: the file cannot be read.
+        ValueError: not a regular file (a device or a FIFO would be read for ever), larger than
+            ``MAX_TEXT_BYTES``, not UTF-8, or a line without a timestamp.
+    """
+    status = Path(path).stat()
+    if not stat.S_ISREG(status.st_mode):
+        raise ValueError(f"{path}: not a regular file; expected a TUM text file")
+    if status.st_size > MAX_TEXT_BYTES:
+        raise ValueError(f"{path}: larger than {MAX_TEXT_BYTES // 2**20} MiB; expected a TUM text file")
     text = Path(path).read_text(encoding="utf-8")
     entries: dict[float, list[str]] = {}
     for number, line in enumerate(text.replace(",", " ").replace("\t", " ").split("\n"), 1):
