@@ -73,7 +73,7 @@ class HostLink:
         topic = Topic(self.participant, topic_name(settings.run_id, "supervisors", "all"), Frame)
         identity = f"{_TAG};{settings.run_id};{settings.host};{os.getpid()}".encode()
         reliable = (Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepAll,
-                    Policy.Userdata(identity))
+                    Policy.Userdata(identity), Policy.Partition([settings.partition]))  # the run's alone
         self.writer: DataWriter[Frame] = DataWriter(self.participant, topic, qos=Qos(*reliable))
         self.reader: DataReader[Frame] = DataReader(self.participant, topic, qos=Qos(*reliable))
         self._rejected: set[int] = set()

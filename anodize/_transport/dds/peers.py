@@ -28,8 +28,10 @@ def find_peer(endpoints: Endpoints, role: str, channel: str, handles: Iterable[i
         data = data_of(handle)
         identity = parse_identity(userdata_of(data.qos)) if data is not None else None
         # A restart starts its batch of groups as one incarnation: an endpoint of an older
-        # one is the session we left, not a peer of this one.
-        if identity is not None and identity[:3] == (settings.run_id, expected, endpoints.incarnation):
+        # one is the session we left, not a peer of this one. The run's token (claim_run) is
+        # known only to the run's own processes: an endpoint that was there before the run
+        # started cannot claim a group of it, wherever it sits (even subscribed to "*").
+        if identity is not None and identity[:3] == (settings.claim_run, expected, endpoints.incarnation):
             claims.append((instance_handle(handle), str(data.key), identity))
     if len(claims) > 1:
         raise StartBarrierError(

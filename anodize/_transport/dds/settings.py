@@ -31,6 +31,10 @@ class DdsSettings:
         lease: seconds of liveliness lease (a silent peer is failed after about this).
         wait: seconds the start barrier waits for every peer.
         ros: the channels' labels that are ROS 2 topics, and the roles ROS 2 nodes play.
+        token: a secret of this run, fresh each run ("" for a run over several hosts, whose
+            supervisors share only the run id): part of the run's partition and of every
+            identity, so that an endpoint there before the run started can neither meet the
+            run's endpoints nor claim its groups (see :attr:`partition`).
     """
 
     domain: int
@@ -42,6 +46,20 @@ class DdsSettings:
     wait: float = 30.0
     extra_config: str = field(default="")
     ros: RosSettings | None = None
+    token: str = field(default="", repr=False)
+
+    @property
+    def claim_run(self) -> str:
+        """The run as identities name it: the run id, and the token if there is one (run ids have no ``/``)."""
+        return f"{self.run_id}/{self.token}" if self.token else self.run_id
+
+    @property
+    def partition(self) -> str:
+        """The DDS partition of every anodize endpoint of the run (not of its ROS topics, which
+        ROS 2 tools find in the default partition). DDS matches a writer and a reader only if
+        they share a partition, so the endpoints of other runs, and programs in the default
+        partition, never match ours: they can neither feed a channel nor hold it back."""
+        return f"anodize/{self.claim_run}"
 
     def where(self, role: str) -> str:
         """Where ``role`` runs, for messages."""

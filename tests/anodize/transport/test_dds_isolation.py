@@ -1,0 +1,89 @@
+"""Dds runs are isolated from other runs and from early forgers (issue 27, item 2): a stray reader of
+another run that never takes its samples does not hold a channel back; a forger that claims a
+group before the run starts never wins the start barrier, its samples are never delivered, and the
+honest sender is never blamed; a reader that subscribes to every partition and stalls a channel is
+named in the report. Each stranger is a second DDS participant, in its own process
+(tests/anodize/dds_strangers.py); every wait is bounded and the tests count messages, not time."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import dds_roles
+import pytest
+from dds_hosts import domain
+
+import anodize
+import sessiontypes
+from anodize._supervision.report import RoleStatus
+
+STREAM = sessiontypes.loads(dds_roles.STREAM, "stream.proto").globals["Stream"]
+STRANGERS = Path(__file__).resolve().parents[1] / "dds_strangers.py"
+
+
+@contextmanager
+def stranger(mode: str, run_id: str, tmp_path: Path) -> Iterator[None]:
+    """The stranger of ``mode`` on this test's domain, there before the run starts."""
+    ready = tmp_path / f"{mode}.ready"
+    process = subprocess.Popen([sys.executable, str(STRANGERS), mode, str(domain()), run_id, str(ready)])
+    try:
+        deadline = time.monotonic() + 30
+        while not ready.exists():
+            assert process.poll() is None, f"the {mode} stranger ended with {process.returncode}"
+            assert time.monotonic() < deadline, f"the {mode} stranger did not start in 30 s"
+            time.sleep(0.05)
+        time.sleep(0.5)  # its endpoints are announced on the domain before our groups join it
+        yield
+    finally:
+        process.kill()
+        process.wait()
+
+
+def stream_system(producer: object, consumer: object, run_id: str) -> anodize.System:
+    system = anodize.System(STREAM, transport=anodize.Dds(domain=domain(), run_id=run_id, wait=20))
+    system.group("producing").role("P", producer)
+    system.group("consuming").role("C", consumer)
+    return system
+
+
+def test_a_stray_reader_of_another_run_does_not_hold_a_channel_back(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Before the fix the stray readers matched the channel's writer and, never taking, held
+    # every write back: 3000 messages did not cross within the run's 30 s (they take well under
+    # a second alone).
+    monkeypatch.setenv("DDS_TEST_COUNT", "3000")
+    with stranger("stray", "isolated", tmp_path):
+        report = stream_system(dds_roles.producer, dds_roles.consumer, "isolated").run(timeout=30)
+    assert report.ok, report.summary()
+    assert report.groups["consuming"].received == 3001, report.summary()
+    notes = "; ".join((*report.groups["producing"].notes, *report.groups["consuming"].notes))
+    assert "another_run" not in notes, notes  # never matched: nothing to reject or name
+
+
+def test_a_forger_that_claims_the_groups_before_the_run_never_wins(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Before the fix the forger, there first, was accepted at the start barrier (its garbage
+    # reached C and P was blamed) or claimed alongside the honest group (the run did not start).
+    monkeypatch.setenv("DDS_TEST_COUNT", "300")
+    with stranger("forger", "claimed", tmp_path):
+        report = stream_system(dds_roles.slow_producer_of_count, dds_roles.consumer, "claimed").run(timeout=60)
+    assert report.ok, report.summary()  # C saw exactly 0..299 in order: no forged sample got in
+    assert report.groups["consuming"].received == 301, report.summary()
+    assert report.roles["P"].status == RoleStatus.DONE, report.summary()  # the honest sender is not blamed
+
+
+def test_a_reader_of_every_partition_that_holds_a_channel_back_is_named(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A reader subscribed to every partition is one of this run's as far as DDS is concerned:
+    # it can hold the channel back, and the report says which reader that is.
+    monkeypatch.setenv("DDS_TEST_COUNT", "2000")
+    with stranger("wildcard", "watched", tmp_path):
+        report = stream_system(dds_roles.producer, dds_roles.consumer, "watched").run(timeout=20)
+    notes = "; ".join(report.groups["producing"].notes)
+    assert "P->C: writes held back" in notes, report.summary()
+    assert "it claims 'anodize1;a_recorder;spy;0;X;1'" in notes, notes
