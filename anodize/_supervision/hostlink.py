@@ -41,6 +41,7 @@ from .._transport.dds.binding import (
     ref_of,
     take,
     userdata_of,
+    wait_for_acks,
     write,
 )
 from .._transport.dds.frame import Frame, cdr_sample
@@ -126,7 +127,7 @@ class HostLink:
     def close(self) -> None:
         """Let what was said reach the others (bounded), then leave the domain."""
         try:
-            self.writer.wait_for_acks(duration(seconds=1))
+            wait_for_acks(self.writer, 1.0)
         finally:
             delete(self.participant)
 

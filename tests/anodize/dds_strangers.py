@@ -45,9 +45,8 @@ def main(mode: str, domain: int, run_id: str, ready: Path) -> None:
     keep: list[object] = []
     writer = None
     if mode == "stray":
-        for partition in (None, "anodize/another_run"):
-            keep.append(DataReader(participant, topic, qos=_reader_qos(b"anodize1;another_run;consuming;0;X;1",
-                                                                        partition)))
+        keep.extend(DataReader(participant, topic, qos=_reader_qos(b"anodize1;another_run;consuming;0;X;1", partition))
+                    for partition in (None, "anodize/another_run"))
     elif mode == "wildcard":
         keep.append(DataReader(participant, topic, qos=_reader_qos(b"anodize1;a_recorder;spy;0;X;1", "*")))
     else:

@@ -14,7 +14,7 @@ from collections.abc import Callable, Collection, Iterable, Mapping
 from ..codec import Codec
 from ..links import LinkNetwork
 from .barrier import wait_for_peers
-from .binding import DDSException, delete, duration
+from .binding import DDSException, delete, wait_for_acks
 from .qos import Endpoints
 from .receiver import DdsReceiver
 from .sender import DdsSender
@@ -79,4 +79,4 @@ class DdsLinks:
         for sender in self.senders:
             for lane in sender.lanes:
                 with contextlib.suppress(DDSException):
-                    lane.writer.wait_for_acks(duration(seconds=linger))
+                    wait_for_acks(lane.writer, linger)

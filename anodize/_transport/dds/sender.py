@@ -5,6 +5,10 @@ A channel to a role of another group is written on its own topic (codec frames, 
 A write waits while the receiver's credits (:mod:`.flow`) say its window is full; a
 write that finds no room in Cyclone is retried in short sleeps that release the GIL.
 A receiver whose readers are gone (its group ended or was cut off) fails the send.
+A write that Cyclone holds back for over a lease while the receiver has room names,
+in the group's report, every other reader matched on that topic: a reliable reader
+that does not take its samples holds every write back, and only one of the run's
+partition (or one subscribed to every partition) can match (:mod:`.settings`).
 """
 
 from __future__ import annotations
@@ -30,12 +34,13 @@ from .binding import (
     duration,
     ref_of,
     take,
+    wait_for_acks,
     write,
 )
 from .flow import COUNT, CREDIT_EVERY, POLL, WINDOW_BYTES, window_for
 from .frame import Frame, cdr_sample, ros_sample
 from .identity import instance_handle
-from .peers import find_peer
+from .peers import describe, find_peer
 from .qos import Endpoints
 
 if TYPE_CHECKING:
@@ -68,6 +73,9 @@ class DdsSender:
         self.external = settings.is_external(receiver)  # a ROS node: only ROS topics, no credits
         self._lock = threading.Lock()  # a failure frame must not interleave with a message
         self._next_check = 0.0  # when to look again whether the receiver's readers are still there
+        self._held_since: float | None = None  # when this write began to find no room (None: it found it)
+        self._held = 0.0  # seconds earlier writes found no room, since the last holders were named
+        self._named: set[int] = set()  # the other readers already named as holding writes back
         self.frames: OutLane | None = None
         if not self.external:
             self.frames = OutLane(DataWriter(endpoints.participant, endpoints.topic((sender, receiver)),
@@ -144,7 +152,7 @@ class DdsSender:
         then finds it there before it reads of the failure on the channel's own topic."""
         for lane in self.ros.values():
             with contextlib.suppress(DDSException):
-                lane.writer.wait_for_acks(duration(seconds=seconds))
+                wait_for_acks(lane.writer, seconds)
 
     def _write(self, lane: OutLane, sample: bytes, give_up: float | None = None) -> None:
         pause = 0.0002
@@ -157,10 +165,19 @@ class DdsSender:
                 self._check_readers()
             ret = write(lane.ref, sample)
             if ret == 0:
+                if self._held_since is not None:
+                    self._held += now - self._held_since
+                    self._held_since = None
                 return
             if ret != RETCODE_TIMEOUT:
                 raise AnodizeError(f"DDS write on {self.sender}->{self.receiver} failed: {DDSException(ret)}")
             self._next_check = 0.0  # held back: is the receiver still there?
+            if self._held_since is None:
+                self._held_since = now
+            elif self._held + now - self._held_since > self.endpoints.settings.lease:
+                # A second of writes held back, in all: whoever else reads there is named.
+                self._held, self._held_since = 0.0, now
+                self._name_holders(lane)
             if self.network.stopping:
                 raise RoleStopped(f"interrupted sending to {self.receiver}")
             if self.receiver in self.network.failed:
@@ -180,6 +197,22 @@ class DdsSender:
                     raise self._peer_gone(f"no ROS 2 node subscribes {lane.topic} any more")
             elif lane.accepted not in {instance_handle(h) for h in matched}:
                 raise self._peer_gone()
+
+    def _name_holders(self, lane: OutLane) -> None:
+        """Name, once each, the readers matched on a lane besides the receiver's: writes have found
+        no room for over a lease in all although the receiver's window had room (the credits say
+        so), so one of them may not take what it is sent."""
+        where = f" ({lane.topic})" if lane.kind is not None else ""
+        owner = "" if lane.accepted is None else f" besides {self.endpoints.settings.where(self.receiver)}'s"
+        for handle in lane.writer.get_matched_subscriptions():
+            if instance_handle(handle) in self._named or instance_handle(handle) == lane.accepted:
+                continue
+            self._named.add(instance_handle(handle))
+            stranger = describe(handle, lane.writer.get_matched_subscription_data(handle))
+            self.endpoints.report(
+                f"{self.sender}->{self.receiver}{where}: writes held back for over "
+                f"{self.endpoints.settings.lease:g} s in all, with DDS readers matched there{owner}; one is "
+                f"{stranger}: a reliable reader that does not take its samples holds every write back")
 
     def _await_credit(self) -> None:
         """Until the receiver has taken enough for another sample to fit its window.

@@ -85,5 +85,5 @@ def test_a_reader_of_every_partition_that_holds_a_channel_back_is_named(
     with stranger("wildcard", "watched", tmp_path):
         report = stream_system(dds_roles.producer, dds_roles.consumer, "watched").run(timeout=20)
     notes = "; ".join(report.groups["producing"].notes)
-    assert "P->C: writes held back" in notes, report.summary()
+    assert "P->C: writes held back for over 1 s in all" in notes, report.summary()
     assert "it claims 'anodize1;a_recorder;spy;0;X;1'" in notes, notes
