@@ -11,11 +11,11 @@ them as running elsewhere.
 
 from __future__ import annotations
 
-import secrets
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 from .._transport.dds import DdsSettings
+from .._transport.dds.settings import run_token
 from . import processes
 from .hostlink import HostLink
 from .plan import RunPlan
@@ -42,11 +42,10 @@ class DdsRunner(ProcessRunner):
         everyone = dict(plan.groups)
         local = {name: g for name, g in everyone.items() if name not in elsewhere}
         super().__init__(replace(plan, groups=local), liveness)
-        if not elsewhere:
-            # Every group is ours: a fresh secret keeps endpoints that were there before the run
-            # out of its partition and its claims (DdsSettings.token). Over several hosts the
-            # supervisors share only the run id, so a fresh run id is the secret there.
-            settings = replace(settings, token=secrets.token_hex(8))
+        # A secret of the run keeps endpoints that were there before it started out of its
+        # partition and its claims (DdsSettings.token): fresh when every group is ours, else
+        # the one the user gave every host (none: the run id alone).
+        settings = replace(settings, token=run_token(several_hosts=bool(elsewhere)))
         self.settings = settings
         self.elsewhere = dict(elsewhere)
         # The supervisors of the other hosts: policies that reach beyond a group act there too.

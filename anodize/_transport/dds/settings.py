@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import os
 import re
+import secrets
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ...errors import AnodizeError
+from ...errors import AnodizeError, ConfigurationError
 from ..ros_lanes import RosSettings
 
-__all__ = ["DdsSettings", "DOMAIN_ENV", "StartBarrierError", "topic_name", "participant_config"]
+__all__ = ["DdsSettings", "DOMAIN_ENV", "TOKEN_ENV", "StartBarrierError", "topic_name", "participant_config",
+           "run_token"]
 
 DOMAIN_ENV = "ANODIZE_DDS_DOMAIN"  # overrides the system file's domain
+TOKEN_ENV = "ANODIZE_DDS_TOKEN"  # a run's secret token, the same on every host of the run
+_TOKEN = re.compile(r"[A-Za-z0-9_.-]{8,128}")
 
 
 class StartBarrierError(AnodizeError):
@@ -87,3 +92,21 @@ def participant_config(lease: float) -> str:
     participant (process killed, host cut off) is dropped, and its endpoints unmatched, that fast."""
     return (f"<CycloneDDS><Domain id=\"any\"><Discovery><LeaseDuration>{lease:g}s</LeaseDuration>"
             "</Discovery></Domain></CycloneDDS>")
+
+
+def run_token(several_hosts: bool) -> str:
+    """The run's token (:attr:`DdsSettings.token`): ``$ANODIZE_DDS_TOKEN`` if set; else a fresh
+    random one when this host runs every group, and none ("") for a run over several hosts
+    (their supervisors share nothing secret unless the user gives them the same token).
+
+    Raises:
+        ConfigurationError: the variable is set to something that is not a token.
+    """
+    given = os.environ.get(TOKEN_ENV, "")
+    if given:
+        if not _TOKEN.fullmatch(given):  # the value is a secret: say what is wrong, not what it is
+            raise ConfigurationError(f"{TOKEN_ENV}: expected 8 to 128 letters, digits, '_', '.' or '-', got "
+                                     f"{len(given)} characters" + ("" if given.isprintable() else
+                                                                   ", some not printable"))
+        return given
+    return "" if several_hosts else secrets.token_hex(8)
