@@ -203,7 +203,8 @@ class DdsSender:
         no room for over a lease in all although the receiver's window had room (the credits say
         so), so one of them may not take what it is sent."""
         where = f" ({lane.topic})" if lane.kind is not None else ""
-        owner = "" if lane.accepted is None else f" besides {self.endpoints.settings.where(self.receiver)}'s"
+        receiver = self.endpoints.settings.where(self.receiver)
+        owner = "" if lane.accepted is None else f" besides the reader of {receiver}"
         for handle in lane.writer.get_matched_subscriptions():
             if instance_handle(handle) in self._named or instance_handle(handle) == lane.accepted:
                 continue
