@@ -7,6 +7,7 @@ named in the report. Each stranger is a second DDS participant, in its own proce
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import time
@@ -16,7 +17,7 @@ from pathlib import Path
 
 import dds_roles
 import pytest
-from dds_hosts import domain
+from dds_hosts import domain, finish, start_host, write_system
 
 import anodize
 import sessiontypes
@@ -87,3 +88,35 @@ def test_a_reader_of_every_partition_that_holds_a_channel_back_is_named(
     notes = "; ".join(report.groups["producing"].notes)
     assert "P->C: writes held back for over 1 s in all" in notes, report.summary()
     assert "it claims 'anodize1;a_recorder;spy;0;X;1'" in notes, notes
+
+
+def test_over_two_hosts_a_token_both_are_given_keeps_an_early_forger_out(tmp_path: Path) -> None:
+    # Two `anodize run --host` processes share only what the user gives them: the run id, and
+    # here the token. The forger knows the run id and claims both groups before either starts.
+    system = write_system(tmp_path, "slow_producer_of_count", "claimed_hosts")
+    env = {"ANODIZE_DDS_TOKEN": "given_to_both_hosts", "DDS_TEST_COUNT": "300"}
+    with stranger("forger", "claimed_hosts", tmp_path):
+        consumer = start_host(system, "B", tmp_path / "b.json", env)
+        producer = start_host(system, "A", tmp_path / "a.json", env)
+        try:
+            outputs = [finish(producer, 90), finish(consumer, 90)]  # bounded: a hang fails here
+        finally:
+            for process in (producer, consumer):
+                process.kill()
+                process.wait()
+    consuming = json.loads((tmp_path / "b.json").read_text())
+    producing = json.loads((tmp_path / "a.json").read_text())
+    assert consuming["roles"]["C"]["status"] == RoleStatus.DONE, outputs
+    assert producing["roles"]["P"]["status"] == RoleStatus.DONE, outputs
+    assert consuming["groups"]["consuming"]["received"] == 301, outputs
+
+
+def test_a_token_that_is_not_one_is_a_configuration_error_that_does_not_show_it(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("ANODIZE_DDS_TOKEN", "secret;7")
+    system = stream_system(dds_roles.producer, dds_roles.consumer, "tokens")
+    with pytest.raises(anodize.ConfigurationError) as error:
+        system.run(timeout=30)
+    message = str(error.value)
+    assert "ANODIZE_DDS_TOKEN: expected 8 to 128 letters, digits, '_', '.' or '-', got 8 characters" in message
+    assert "secret" not in message
