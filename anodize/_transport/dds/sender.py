@@ -17,6 +17,7 @@ import contextlib
 import threading
 import time
 from collections import deque
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 from ..._session.channel import PeerFailure
@@ -73,8 +74,8 @@ class DdsSender:
         self.external = settings.is_external(receiver)  # a ROS node: only ROS topics, no credits
         self._lock = threading.Lock()  # a failure frame must not interleave with a message
         self._next_check = 0.0  # when to look again whether the receiver's readers are still there
-        self._held_since: float | None = None  # when this write began to find no room (None: it found it)
-        self._held = 0.0  # seconds earlier writes found no room, since the last holders were named
+        self._held_since: float | None = None  # when this write began to be held back (None: it is not)
+        self._held = 0.0  # seconds earlier writes were held back, since the last holders were named
         self._named: set[int] = set()  # the other readers already named as holding writes back
         self.frames: OutLane | None = None
         if not self.external:
@@ -165,19 +166,12 @@ class DdsSender:
                 self._check_readers()
             ret = write(lane.ref, sample)
             if ret == 0:
-                if self._held_since is not None:
-                    self._held += now - self._held_since
-                    self._held_since = None
+                self._released(now)
                 return
             if ret != RETCODE_TIMEOUT:
                 raise AnodizeError(f"DDS write on {self.sender}->{self.receiver} failed: {DDSException(ret)}")
             self._next_check = 0.0  # held back: is the receiver still there?
-            if self._held_since is None:
-                self._held_since = now
-            elif self._held + now - self._held_since > self.endpoints.settings.lease:
-                # A second of writes held back, in all: whoever else reads there is named.
-                self._held, self._held_since = 0.0, now
-                self._name_holders(lane)
+            self._held_back(now, (lane,))
             if self.network.stopping:
                 raise RoleStopped(f"interrupted sending to {self.receiver}")
             if self.receiver in self.network.failed:
@@ -198,10 +192,35 @@ class DdsSender:
             elif lane.accepted not in {instance_handle(h) for h in matched}:
                 raise self._peer_gone()
 
-    def _name_holders(self, lane: OutLane) -> None:
-        """Name, once each, the readers matched on a lane besides the receiver's: writes have found
-        no room for over a lease in all although the receiver's window had room (the credits say
-        so), so one of them may not take what it is sent."""
+    def _held_back(self, now: float, lanes: Iterable[OutLane]) -> None:
+        """A write is held back (no room in Cyclone, or no credit): once that has added up to
+        over a lease, name whoever else reads the lanes. A reliable reader that does not take
+        its samples holds every write back, and the receiver's credits with it (Cyclone sends
+        on only as fast as every reader acknowledges)."""
+        if self._held_since is None:
+            self._held_since = now
+        elif self._held + now - self._held_since > self.endpoints.settings.lease:
+            self._held, self._held_since = 0.0, now
+            for lane in lanes:
+                self._name_holders(lane, f"writes held back for over {self.endpoints.settings.lease:g} s in all")
+
+    def _released(self, now: float) -> None:
+        if self._held_since is not None:
+            self._held += now - self._held_since
+            self._held_since = None
+
+    def settle(self, linger: float) -> None:
+        """Wait (bounded by ``linger`` seconds a lane) until every reader has acknowledged what was
+        written, before the process ends; name the other readers of a lane where some did not."""
+        for lane in self.lanes:
+            with contextlib.suppress(DDSException):
+                if not wait_for_acks(lane.writer, linger):
+                    self._name_holders(lane, f"what was written was not all acknowledged within {linger:g} s "
+                                             "of the end")
+
+    def _name_holders(self, lane: OutLane, what: str) -> None:
+        """Name, once each, the readers matched on a lane besides the receiver's: ``what`` happened
+        to the writes, so one of them may not take what it is sent."""
         where = f" ({lane.topic})" if lane.kind is not None else ""
         receiver = self.endpoints.settings.where(self.receiver)
         owner = "" if lane.accepted is None else f" besides the reader of {receiver}"
@@ -211,8 +230,7 @@ class DdsSender:
             self._named.add(instance_handle(handle))
             stranger = describe(handle, lane.writer.get_matched_subscription_data(handle))
             self.endpoints.report(
-                f"{self.sender}->{self.receiver}{where}: writes held back for over "
-                f"{self.endpoints.settings.lease:g} s in all, with DDS readers matched there{owner}; one is "
+                f"{self.sender}->{self.receiver}{where}: {what}, with DDS readers matched there{owner}; one is "
                 f"{stranger}: a reliable reader that does not take its samples holds every write back")
 
     def _await_credit(self) -> None:
@@ -224,13 +242,15 @@ class DdsSender:
         """
         while True:
             self._take_credits()
+            now = time.monotonic()
             if self.written - self.taken < self.window and self._in_flight_bytes < WINDOW_BYTES:
+                self._released(now)
                 return
             if self.network.stopping:
                 raise RoleStopped(f"interrupted sending to {self.receiver}")
             if self.receiver in self.network.failed:
                 raise self._peer_gone()
-            now = time.monotonic()
+            self._held_back(now, self.lanes)
             if now >= self._next_check:
                 self._next_check = now + POLL
                 self._check_readers()

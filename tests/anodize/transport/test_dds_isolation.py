@@ -82,12 +82,19 @@ def test_a_reader_of_every_partition_that_holds_a_channel_back_is_named(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # A reader subscribed to every partition is one of this run's as far as DDS is concerned:
     # it can hold the channel back, and the report says which reader that is.
-    monkeypatch.setenv("DDS_TEST_COUNT", "2000")
+    monkeypatch.setenv("DDS_TEST_COUNT", "1000")
     with stranger("wildcard", "watched", tmp_path):
-        report = stream_system(dds_roles.producer, dds_roles.consumer, "watched").run(timeout=20)
+        report = stream_system(dds_roles.producer, dds_roles.consumer, "watched").run(timeout=15)
+    # Cyclone either holds the writes back all along (the run times out) or lets them through and
+    # waits at the end for acknowledgements that never come: either way the reader is named.
     notes = "; ".join(report.groups["producing"].notes)
-    assert "P->C: writes held back for over 1 s in all" in notes, report.summary()
+    assert ("P->C: writes held back for over 1 s in all, with DDS readers matched there besides the reader of "
+            "group consuming" in notes or "P->C: what was written was not all acknowledged within 2 s of the end, "
+            "with DDS readers matched there" in notes), report.summary()
     assert "it claims 'anodize1;a_recorder;spy;0;X;1'" in notes, notes
+    # Before the fix the sender's group failed at the end with "AttributeError", from the
+    # binding's wait_for_acks: the honest sender blamed.
+    assert report.roles["P"].status != RoleStatus.FAILED, report.summary()
 
 
 def test_over_two_hosts_a_token_both_are_given_keeps_an_early_forger_out(tmp_path: Path) -> None:
