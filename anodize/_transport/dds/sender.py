@@ -5,10 +5,10 @@ A channel to a role of another group is written on its own topic (codec frames, 
 A write waits while the receiver's credits (:mod:`.flow`) say its window is full; a
 write that finds no room in Cyclone is retried in short sleeps that release the GIL.
 A receiver whose readers are gone (its group ended or was cut off) fails the send.
-A write that Cyclone holds back for over a lease while the receiver has room names,
-in the group's report, every other reader matched on that topic: a reliable reader
-that does not take its samples holds every write back, and only one of the run's
-partition (or one subscribed to every partition) can match (:mod:`.settings`).
+Writes held back (no room in Cyclone, or no credit) for over a lease in all, or not all
+acknowledged at the end, name in the group's report every other reader matched on the
+topic: a reliable reader that does not take its samples holds every write back, and only
+one in the run's partition (or one subscribed to every partition) can match (:mod:`.settings`).
 """
 
 from __future__ import annotations
