@@ -11,9 +11,10 @@ import json
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import dds_roles
 import pytest
@@ -45,7 +46,7 @@ def stranger(mode: str, run_id: str, tmp_path: Path) -> Iterator[None]:
         process.wait()
 
 
-def stream_system(producer: object, consumer: object, run_id: str) -> anodize.System:
+def stream_system(producer: Callable[..., Any], consumer: Callable[..., Any], run_id: str) -> anodize.System:
     system = anodize.System(STREAM, transport=anodize.Dds(domain=domain(), run_id=run_id, wait=20))
     system.group("producing").role("P", producer)
     system.group("consuming").role("C", consumer)
