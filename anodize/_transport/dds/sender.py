@@ -166,7 +166,8 @@ class DdsSender:
                 self._check_readers()
             ret = write(lane.ref, sample)
             if ret == 0:
-                self._released(now)
+                if self._held_since is not None:
+                    self._released(now)
                 return
             if ret != RETCODE_TIMEOUT:
                 raise AnodizeError(f"DDS write on {self.sender}->{self.receiver} failed: {DDSException(ret)}")
