@@ -82,6 +82,9 @@ class DdsRunner(ProcessRunner):
                 for (sender, receiver, label), topic in sorted(ros.topics.items())) or "none"))
             if ros.external:
                 notes.append("external roles, played by ROS 2 nodes: " + ", ".join(sorted(ros.external)))
+        if not settings.token:
+            notes.append("no ANODIZE_DDS_TOKEN: the run's DDS partition and claims rest on its run id alone, so "
+                         "a program on the domain that knows the run id can claim a group before it starts")
         if self.elsewhere:
             notes.append("groups running elsewhere: " + ", ".join(
                 f"{name} on host {host}" for name, host in sorted(self.elsewhere.items())))

@@ -96,6 +96,9 @@ def test_peers_that_never_appear_are_named_with_their_host() -> None:
     error = str(report.groups["producing"].error)
     assert "no sign of group consuming on host base (for P->C)" in error, error
     assert any("groups running elsewhere: consuming on host base" in note for note in report.notes)
+    # Over several hosts without a shared token, the report says what the run's isolation rests on.
+    assert any("no ANODIZE_DDS_TOKEN: the run's DDS partition and claims rest on its run id alone" in note
+               for note in report.notes), report.notes
 
 
 def test_an_unknown_host_is_a_configuration_error() -> None:

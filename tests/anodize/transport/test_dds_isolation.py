@@ -117,6 +117,7 @@ def test_over_two_hosts_a_token_both_are_given_keeps_an_early_forger_out(tmp_pat
     assert consuming["roles"]["C"]["status"] == RoleStatus.DONE, outputs
     assert producing["roles"]["P"]["status"] == RoleStatus.DONE, outputs
     assert consuming["groups"]["consuming"]["received"] == 301, outputs
+    assert not any("no ANODIZE_DDS_TOKEN" in note for note in consuming["notes"]), consuming["notes"]
 
 
 def test_a_token_that_is_not_one_is_a_configuration_error_that_does_not_show_it(
