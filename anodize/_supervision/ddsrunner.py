@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 from .._transport.dds import DdsSettings
+from .._transport.dds.settings import run_token
 from . import processes
 from .hostlink import HostLink
 from .plan import RunPlan
@@ -41,6 +42,10 @@ class DdsRunner(ProcessRunner):
         everyone = dict(plan.groups)
         local = {name: g for name, g in everyone.items() if name not in elsewhere}
         super().__init__(replace(plan, groups=local), liveness)
+        # A secret of the run keeps endpoints that were there before it started out of its
+        # partition and its claims (DdsSettings.token): fresh when every group is ours, else
+        # the one the user gave every host (none: the run id alone).
+        settings = replace(settings, token=run_token(several_hosts=bool(elsewhere)))
         self.settings = settings
         self.elsewhere = dict(elsewhere)
         # The supervisors of the other hosts: policies that reach beyond a group act there too.
@@ -77,6 +82,9 @@ class DdsRunner(ProcessRunner):
                 for (sender, receiver, label), topic in sorted(ros.topics.items())) or "none"))
             if ros.external:
                 notes.append("external roles, played by ROS 2 nodes: " + ", ".join(sorted(ros.external)))
+        if not settings.token:
+            notes.append("no ANODIZE_DDS_TOKEN: the run's DDS partition and claims rest on its run id alone, so "
+                         "a program on the domain that knows the run id can claim a group before it starts")
         if self.elsewhere:
             notes.append("groups running elsewhere: " + ", ".join(
                 f"{name} on host {host}" for name, host in sorted(self.elsewhere.items())))

@@ -14,11 +14,11 @@ that reach beyond a group need the others:
   writers of that incarnation, and a channel to a group outside the set is gone to
   them, as with ``Processes``.
 
-Words travel on one DDS topic per run, ``anodize/<run id>/supervisors``, reliable
-and in order per host, JSON in an ``anodize::Frame``. A word is taken only from a
-writer whose USER_DATA claims this run and a host of the system other than ours;
-anything else is dropped and noted (the same check as the channels, with the same
-limits: see the README's threat model).
+Words travel on one DDS topic per run, ``anodize/<run id>/supervisors``, in the run's
+partition, reliable and in order per host, JSON in an ``anodize::Frame``. A word is
+taken only from a writer whose USER_DATA claims this run (with its token, if the hosts
+were given one) and a host of the system other than ours; anything else is dropped and
+noted (the same check as the channels, with the same limits: see docs/guide/dds.md).
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ from .._transport.dds.binding import (
     ref_of,
     take,
     userdata_of,
+    wait_for_acks,
     write,
 )
 from .._transport.dds.frame import Frame, cdr_sample
@@ -71,9 +72,9 @@ class HostLink:
         os.environ["CYCLONEDDS_URI"] = ",".join(p for p in (previous, participant_config(settings.lease)) if p)
         self.participant = DomainParticipant(settings.domain)
         topic = Topic(self.participant, topic_name(settings.run_id, "supervisors", "all"), Frame)
-        identity = f"{_TAG};{settings.run_id};{settings.host};{os.getpid()}".encode()
+        identity = f"{_TAG};{settings.claim_run};{settings.host};{os.getpid()}".encode()
         reliable = (Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepAll,
-                    Policy.Userdata(identity))
+                    Policy.Userdata(identity), Policy.Partition([settings.partition]))  # the run's alone
         self.writer: DataWriter[Frame] = DataWriter(self.participant, topic, qos=Qos(*reliable))
         self.reader: DataReader[Frame] = DataReader(self.participant, topic, qos=Qos(*reliable))
         self._rejected: set[int] = set()
@@ -114,7 +115,7 @@ class HostLink:
                 continue
             data = self.reader.get_matched_publication_data(matched)
             claim = userdata_of(data.qos if data is not None else None).decode(errors="replace").split(";")
-            if len(claim) == 4 and claim[0] == _TAG and claim[1] == self.settings.run_id and claim[2] in self.hosts:
+            if len(claim) == 4 and claim[0] == _TAG and claim[1] == self.settings.claim_run and claim[2] in self.hosts:
                 return claim[2]
             if instance_handle(handle) not in self._rejected:
                 self._rejected.add(instance_handle(handle))
@@ -126,7 +127,7 @@ class HostLink:
     def close(self) -> None:
         """Let what was said reach the others (bounded), then leave the domain."""
         try:
-            self.writer.wait_for_acks(duration(seconds=1))
+            wait_for_acks(self.writer, 1.0)
         finally:
             delete(self.participant)
 

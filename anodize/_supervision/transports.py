@@ -74,7 +74,8 @@ class Dds:
         domain: the DDS domain id (the environment variable ``ANODIZE_DDS_DOMAIN`` overrides it;
             with a :class:`~anodize.RosBridge` the run lives on the ROS domain instead).
         run_id: keeps two runs of the same system on one domain apart; every host of a run
-            must use the same one ("" = the global type's name).
+            must use the same one ("" = the global type's name). Over several hosts, give
+            every host the same secret in ``ANODIZE_DDS_TOKEN`` too (one host makes its own).
         host: run only the groups placed on this host (``group(..., host=...)``); the others
             are started on theirs, with the same run id and domain. None runs every group here.
         wait: seconds the groups wait for all their peers to appear on the domain before the

@@ -2,7 +2,7 @@
 
 Each group is still its own process (as with ``transport="process"``); channels
 inside it stay queues, and every channel between roles of different groups is
-one DDS topic, ``anodize/<run id>/<sender>/<receiver>``, with one writer (in the
+one DDS topic, ``anodize/<run id>/<sender>/<receiver>`` in the run's partition, with one writer (in the
 sender's group) and one reader (in the receiver's). The groups may run on other
 hosts: they find each other by DDS discovery on the run's domain.
 
@@ -20,12 +20,19 @@ hosts: they find each other by DDS discovery on the run's domain.
   frames of :mod:`anodize._transport.codec` are written as CDR built in :mod:`.frame` and
   taken as raw CDR, so a 900 KB array costs a copy, not the binding's element-by-element
   encoding.
+- **Who may listen**: every endpoint on anodize's own topics is in the run's DDS
+  partition, ``anodize/<run id>/<token>`` (the token a secret of the run: fresh
+  when one host runs every group, else ``$ANODIZE_DDS_TOKEN``), so no endpoint of
+  another run ever matches ours: none can hold a channel back or feed it. A reader
+  that does match (subscribed to every partition) and holds writes back is named
+  in the report. ROS 2 topics stay in the default partition, where ROS 2 looks.
 - **Who may speak**: every writer carries its identity in its USER_DATA QoS (run
-  id, group, incarnation, host, pid). A reader accepts samples only from the one
-  writer of the expected group, chosen at the start barrier; samples from any
-  other writer are dropped, counted and reported with the writer's GUID and
-  claimed identity. This keeps other runs and stray programs out; it is not
-  security: anyone on the network can claim an identity first (see the README).
+  id and token, group, incarnation, host, pid). A reader accepts samples only from
+  the one writer of the expected group, chosen at the start barrier; samples from
+  any other writer are dropped, counted and reported with the writer's GUID and
+  claimed identity. An endpoint there before the run cannot claim a group (it
+  cannot know the token); it is not security: anyone who reads the discovery
+  traffic can copy the token (see docs/guide/dds.md).
 - **Failures**: writers assert liveliness automatically with a lease of
   ``lease`` seconds and the participant's discovery lease is the same, so a group
   whose process dies, freezes or is cut off loses its writers and readers within

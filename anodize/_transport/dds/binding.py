@@ -11,6 +11,9 @@ functions here, so that a new binding release that moves them breaks this module
   when a lane is built, never per message.
 - :func:`delete` deletes an entity now (the binding deletes on garbage collection,
   too late for a reader whose writer must see it unmatched).
+- :func:`wait_for_acks` waits for a writer's acknowledgements (the binding's own method
+  raises AttributeError when they do not all come in time: it looks for
+  ``Exception.DDS_RETCODE_TIMEOUT``).
 
 ``cyclonedds`` is imported when this module is, through :func:`anodize._extras.import_extra`:
 only a DDS run, the ROS wire or a supervisor of several hosts imports it, and
@@ -53,8 +56,8 @@ else:
     Topic = import_extra("cyclonedds.topic", "dds", _FEATURE).Topic
     duration = import_extra("cyclonedds.util", "dds", _FEATURE).duration
 
-__all__ = ["write", "take", "ref_of", "delete", "userdata_of", "ANY_SAMPLE", "RETCODE_TIMEOUT", "XCDR1",
-           "DDSException", "Policy", "Qos", "ReadCondition", "WaitSet", "DomainParticipant", "IdlStruct",
+__all__ = ["write", "take", "ref_of", "delete", "wait_for_acks", "userdata_of", "ANY_SAMPLE", "RETCODE_TIMEOUT",
+           "XCDR1", "DDSException", "Policy", "Qos", "ReadCondition", "WaitSet", "DomainParticipant", "IdlStruct",
            "idl_types", "DataWriter", "DataReader", "Topic", "duration"]
 
 RETCODE_TIMEOUT = -10  # DDS_RETCODE_TIMEOUT, from write: no room within the writer's blocking time
@@ -72,6 +75,21 @@ def ref_of(entity: DataWriter[Any] | DataReader[Any]) -> int:
 def delete(entity: DataWriter[Any] | DataReader[Any] | DomainParticipant) -> None:
     """Delete ``entity`` now: its peers see it unmatched at once, not when Python collects it."""
     entity.__del__()
+
+
+def wait_for_acks(writer: DataWriter[Any], seconds: float) -> bool:
+    """Wait up to ``seconds`` until every matched reliable reader has acknowledged what ``writer``
+    wrote: True if they all did, False if the time ran out.
+
+    Raises:
+        DDSException: the writer is gone or the call failed.
+    """
+    ret: int = writer._wait_for_acks(writer._ref, duration(seconds=seconds))
+    if ret == 0:
+        return True
+    if ret == RETCODE_TIMEOUT:
+        return False
+    raise DDSException(ret, f"waiting for acknowledgements of {writer!r}")
 
 
 def userdata_of(qos: Qos | None) -> bytes:

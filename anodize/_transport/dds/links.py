@@ -14,7 +14,7 @@ from collections.abc import Callable, Collection, Iterable, Mapping
 from ..codec import Codec
 from ..links import LinkNetwork
 from .barrier import wait_for_peers
-from .binding import DDSException, delete, duration
+from .binding import DDSException, delete
 from .qos import Endpoints
 from .receiver import DdsReceiver
 from .sender import DdsSender
@@ -75,8 +75,7 @@ class DdsLinks:
         wait_for_peers(self.settings, self.senders, self.receivers)
 
     def close(self, linger: float) -> None:
-        """Wait (bounded) until every sample written has been acknowledged, before the process ends."""
+        """Wait (bounded) until every sample written has been acknowledged, before the process ends
+        (a lane where some reader did not acknowledge names the other readers in the report)."""
         for sender in self.senders:
-            for lane in sender.lanes:
-                with contextlib.suppress(DDSException):
-                    lane.writer.wait_for_acks(duration(seconds=linger))
+            sender.settle(linger)

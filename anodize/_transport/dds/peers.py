@@ -1,4 +1,5 @@
-"""Which matched endpoint is the peer a channel expects: the one that claims its group of our run and incarnation."""
+"""Which matched endpoint is the peer a channel expects (the one that claims its group of our run and
+incarnation), and who the others are, for a report that names them."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from .identity import instance_handle, parse_identity
 from .qos import Endpoints
 from .settings import StartBarrierError
 
-__all__ = ["find_peer"]
+__all__ = ["find_peer", "describe"]
 
 
 def find_peer(endpoints: Endpoints, role: str, channel: str, handles: Iterable[int],
@@ -28,8 +29,10 @@ def find_peer(endpoints: Endpoints, role: str, channel: str, handles: Iterable[i
         data = data_of(handle)
         identity = parse_identity(userdata_of(data.qos)) if data is not None else None
         # A restart starts its batch of groups as one incarnation: an endpoint of an older
-        # one is the session we left, not a peer of this one.
-        if identity is not None and identity[:3] == (settings.run_id, expected, endpoints.incarnation):
+        # one is the session we left, not a peer of this one. The run's token (claim_run) is
+        # known only to the run's own processes: an endpoint that was there before the run
+        # started cannot claim a group of it, wherever it sits (even subscribed to "*").
+        if identity is not None and identity[:3] == (settings.claim_run, expected, endpoints.incarnation):
             claims.append((instance_handle(handle), str(data.key), identity))
     if len(claims) > 1:
         raise StartBarrierError(
@@ -40,3 +43,10 @@ def find_peer(endpoints: Endpoints, role: str, channel: str, handles: Iterable[i
         handle, guid, _ = claims[0]
         return handle, guid
     return None, ""
+
+
+def describe(handle: int, data: Any) -> str:
+    """A matched endpoint for a report: its GUID and the identity it claims."""
+    guid = str(data.key) if data is not None else f"handle {instance_handle(handle)}"
+    claimed = userdata_of(data.qos).decode(errors="replace") if data is not None else ""
+    return f"{guid} (it claims {claimed or 'nothing'!r})"

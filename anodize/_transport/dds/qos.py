@@ -4,8 +4,10 @@ Every channel is reliable with keep-all history on both ends (nothing lost, dupl
 or reordered); writers assert liveliness automatically with a lease of the settings'
 ``lease`` seconds, and the participant's discovery lease is the same, so a group whose
 process dies, freezes or is cut off loses its endpoints within about one lease. Every
-endpoint carries its identity (:mod:`.identity`) in its USER_DATA. Endpoints on ROS
-topics use QoS that ROS 2's default and sensor-data profiles match.
+endpoint carries its identity (:mod:`.identity`) in its USER_DATA, and every endpoint
+on anodize's own topics is in the run's partition (:attr:`.settings.DdsSettings.partition`),
+so it never meets another run's. Endpoints on ROS topics use QoS that ROS 2's default and
+sensor-data profiles match, in the default partition, where ROS 2 tools look.
 """
 
 from __future__ import annotations
@@ -42,14 +44,16 @@ class Endpoints:
         os.environ["CYCLONEDDS_URI"] = ",".join(p for p in (previous, participant_config(settings.lease)) if p)
         self.participant = DomainParticipant(settings.domain)
         lease = duration(seconds=settings.lease)
-        self.identity = identity_of(settings.run_id, group, incarnation, settings.host)
+        self.identity = identity_of(settings.claim_run, group, incarnation, settings.host)
+        # Only endpoints in the run's partition ever match ours (see DdsSettings.partition).
+        partition = Policy.Partition([settings.partition])
         self.writer_qos = Qos(Policy.Reliability.Reliable(WRITE_BLOCK), Policy.History.KeepAll,
-                              Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
+                              Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity), partition)
         self.reader_qos = Qos(Policy.Reliability.Reliable(WRITE_BLOCK), Policy.History.KeepAll,
                               Policy.ResourceLimits(max_samples=READER_SAMPLES),
-                              Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
+                              Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity), partition)
         self.credit_qos = Qos(Policy.Reliability.Reliable(WRITE_BLOCK), Policy.History.KeepLast(1),
-                              Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity))
+                              Policy.Liveliness.Automatic(lease), Policy.Userdata(self.identity), partition)
         self.topics: dict[str, Topic[Any]] = {}
 
     def topic(self, pair: tuple[str, str], suffix: str = "") -> Topic[Frame]:

@@ -5,6 +5,10 @@ A channel to a role of another group is written on its own topic (codec frames, 
 A write waits while the receiver's credits (:mod:`.flow`) say its window is full; a
 write that finds no room in Cyclone is retried in short sleeps that release the GIL.
 A receiver whose readers are gone (its group ended or was cut off) fails the send.
+Writes held back (no room in Cyclone, or no credit) for over a lease in all, or not all
+acknowledged at the end, name in the group's report every other reader matched on the
+topic: a reliable reader that does not take its samples holds every write back, and only
+one in the run's partition (or one subscribed to every partition) can match (:mod:`.settings`).
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ import contextlib
 import threading
 import time
 from collections import deque
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 from ..._session.channel import PeerFailure
@@ -30,12 +35,13 @@ from .binding import (
     duration,
     ref_of,
     take,
+    wait_for_acks,
     write,
 )
 from .flow import COUNT, CREDIT_EVERY, POLL, WINDOW_BYTES, window_for
 from .frame import Frame, cdr_sample, ros_sample
 from .identity import instance_handle
-from .peers import find_peer
+from .peers import describe, find_peer
 from .qos import Endpoints
 
 if TYPE_CHECKING:
@@ -68,6 +74,9 @@ class DdsSender:
         self.external = settings.is_external(receiver)  # a ROS node: only ROS topics, no credits
         self._lock = threading.Lock()  # a failure frame must not interleave with a message
         self._next_check = 0.0  # when to look again whether the receiver's readers are still there
+        self._held_since: float | None = None  # when this write began to be held back (None: it is not)
+        self._held = 0.0  # seconds earlier writes were held back, since the last holders were named
+        self._named: set[int] = set()  # the other readers already named as holding writes back
         self.frames: OutLane | None = None
         if not self.external:
             self.frames = OutLane(DataWriter(endpoints.participant, endpoints.topic((sender, receiver)),
@@ -144,7 +153,7 @@ class DdsSender:
         then finds it there before it reads of the failure on the channel's own topic."""
         for lane in self.ros.values():
             with contextlib.suppress(DDSException):
-                lane.writer.wait_for_acks(duration(seconds=seconds))
+                wait_for_acks(lane.writer, seconds)
 
     def _write(self, lane: OutLane, sample: bytes, give_up: float | None = None) -> None:
         pause = 0.0002
@@ -157,10 +166,13 @@ class DdsSender:
                 self._check_readers()
             ret = write(lane.ref, sample)
             if ret == 0:
+                if self._held_since is not None:
+                    self._released(now)
                 return
             if ret != RETCODE_TIMEOUT:
                 raise AnodizeError(f"DDS write on {self.sender}->{self.receiver} failed: {DDSException(ret)}")
             self._next_check = 0.0  # held back: is the receiver still there?
+            self._held_back(now, (lane,))
             if self.network.stopping:
                 raise RoleStopped(f"interrupted sending to {self.receiver}")
             if self.receiver in self.network.failed:
@@ -181,6 +193,47 @@ class DdsSender:
             elif lane.accepted not in {instance_handle(h) for h in matched}:
                 raise self._peer_gone()
 
+    def _held_back(self, now: float, lanes: Iterable[OutLane]) -> None:
+        """A write is held back (no room in Cyclone, or no credit): once that has added up to
+        over a lease, name whoever else reads the lanes. A reliable reader that does not take
+        its samples holds every write back, and the receiver's credits with it (Cyclone sends
+        on only as fast as every reader acknowledges)."""
+        if self._held_since is None:
+            self._held_since = now
+        elif self._held + now - self._held_since > self.endpoints.settings.lease:
+            self._held, self._held_since = 0.0, now
+            for lane in lanes:
+                self._name_holders(lane, f"writes held back for over {self.endpoints.settings.lease:g} s in all")
+
+    def _released(self, now: float) -> None:
+        if self._held_since is not None:
+            self._held += now - self._held_since
+            self._held_since = None
+
+    def settle(self, linger: float) -> None:
+        """Wait (bounded by ``linger`` seconds a lane) until every reader has acknowledged what was
+        written, before the process ends; name the other readers of a lane where some did not."""
+        for lane in self.lanes:
+            with contextlib.suppress(DDSException):
+                if not wait_for_acks(lane.writer, linger):
+                    self._name_holders(lane, f"what was written was not all acknowledged within {linger:g} s "
+                                             "of the end")
+
+    def _name_holders(self, lane: OutLane, what: str) -> None:
+        """Name, once each, the readers matched on a lane besides the receiver's: ``what`` happened
+        to the writes, so one of them may not take what it is sent."""
+        where = f" ({lane.topic})" if lane.kind is not None else ""
+        receiver = self.endpoints.settings.where(self.receiver)
+        owner = "" if lane.accepted is None else f" besides the reader of {receiver}"
+        for handle in lane.writer.get_matched_subscriptions():
+            if instance_handle(handle) in self._named or instance_handle(handle) == lane.accepted:
+                continue
+            self._named.add(instance_handle(handle))
+            stranger = describe(handle, lane.writer.get_matched_subscription_data(handle))
+            self.endpoints.report(
+                f"{self.sender}->{self.receiver}{where}: {what}, with DDS readers matched there{owner}; one is "
+                f"{stranger}: a reliable reader that does not take its samples holds every write back")
+
     def _await_credit(self) -> None:
         """Until the receiver has taken enough for another sample to fit its window.
 
@@ -190,13 +243,15 @@ class DdsSender:
         """
         while True:
             self._take_credits()
+            now = time.monotonic()
             if self.written - self.taken < self.window and self._in_flight_bytes < WINDOW_BYTES:
+                self._released(now)
                 return
             if self.network.stopping:
                 raise RoleStopped(f"interrupted sending to {self.receiver}")
             if self.receiver in self.network.failed:
                 raise self._peer_gone()
-            now = time.monotonic()
+            self._held_back(now, self.lanes)
             if now >= self._next_check:
                 self._next_check = now + POLL
                 self._check_readers()

@@ -96,6 +96,9 @@ def test_peers_that_never_appear_are_named_with_their_host() -> None:
     error = str(report.groups["producing"].error)
     assert "no sign of group consuming on host base (for P->C)" in error, error
     assert any("groups running elsewhere: consuming on host base" in note for note in report.notes)
+    # Over several hosts without a shared token, the report says what the run's isolation rests on.
+    assert any("no ANODIZE_DDS_TOKEN: the run's DDS partition and claims rest on its run id alone" in note
+               for note in report.notes), report.notes
 
 
 def test_an_unknown_host_is_a_configuration_error() -> None:
@@ -140,7 +143,8 @@ FORGER = textwrap.dedent("""
     participant = DomainParticipant(int(sys.argv[1]))
     topic = Topic(participant, topic_name(sys.argv[2], "P", "C"), Frame)
     qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepAll,
-              Policy.Liveliness.Automatic(duration(seconds=1)), Policy.Userdata(b"anodize1;other;intruder;0;X;1"))
+              Policy.Liveliness.Automatic(duration(seconds=1)), Policy.Userdata(b"anodize1;other;intruder;0;X;1"),
+              Policy.Partition([sys.argv[3]]))
     writer = DataWriter(participant, topic, qos=qos)
     frame = Codec().message_frame("data", 10**9)
     for _ in range(200):
@@ -150,8 +154,12 @@ FORGER = textwrap.dedent("""
 
 
 def test_a_forged_writer_is_rejected_and_reported(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The forger knows the run's token (as one that read the discovery traffic of a run would),
+    # so it meets the run's reader in the run's partition; it claims some other identity.
     monkeypatch.setenv("DDS_TEST_COUNT", "300")
-    forger = subprocess.Popen([sys.executable, "-c", FORGER, str(domain()), "forged"])
+    monkeypatch.setenv("ANODIZE_DDS_TOKEN", "known_to_the_forger")
+    forger = subprocess.Popen([sys.executable, "-c", FORGER, str(domain()), "forged",
+                               "anodize/forged/known_to_the_forger"])
     try:
         system = stream_system(dds_roles.slow_producer_of_count, dds_roles.consumer, "forged")
         report = system.run(timeout=60)
