@@ -4,6 +4,10 @@ Every send is checked before anything leaves (the sender is to blame), every
 receive when it arrives (the peer is to blame). A check is one dictionary
 look-up in a table compiled once from the state machine, plus the payload
 check of the transition.
+
+A payload's type is looked up by identity (``id(type(payload))``), never hashed or compared:
+a metaclass may redefine ``__eq__`` and ``__hash__`` to pass for ``int`` (see payloads.py for
+the subclass policy, which the compiled core shares).
 """
 
 from __future__ import annotations
@@ -11,20 +15,21 @@ from __future__ import annotations
 from sessiontypes import StateMachine, Transition
 
 from ..errors import Action, ProtocolViolationError
-from .payloads import Validator, exact_types_for, validator_for
+from .payloads import Validator, exact_types_for, identities, real_name, validator_for
 
 __all__ = ["Monitor"]
 
-# (target state, types accepted at once, full payload check, the transition it came from)
-_Step = tuple[int, frozenset[type], Validator, Transition]
+# (target state, identities of the types accepted at once, full payload check, the transition it
+# came from, those types themselves: they keep the identities theirs, and the compiled core reads them)
+_Step = tuple[int, frozenset[int], Validator, Transition, tuple[type, ...]]
 
 
 class Monitor:
     """Enforces one state machine; ``state`` is the current state.
 
     ``sends[state]`` / ``recvs[state]`` map ``(peer, label)`` to a step
-    ``(target, exact types, validator, transition)``; the endpoint's hot path
-    reads them directly and calls :meth:`send` / :meth:`recv` only to raise.
+    ``(target, identities of the exact types, validator, transition, exact types)``; the
+    endpoint's hot path reads them directly and calls :meth:`send` / :meth:`recv` only to raise.
     """
 
     __slots__ = ("fork_states", "machine", "protocol", "recv_peers", "recvs", "role", "sends", "state")
@@ -34,7 +39,7 @@ class Monitor:
         self.role = role
         self.machine = machine
         self.state = machine.initial
-        validators: dict[int, tuple[frozenset[type], Validator]] = {}
+        validators: dict[int, tuple[frozenset[int], Validator, tuple[type, ...]]] = {}
         self.sends: list[dict[tuple[str | None, str], _Step]] = []
         self.recvs: list[dict[tuple[str | None, str], _Step]] = []
         for transitions in machine.table:
@@ -43,9 +48,10 @@ class Monitor:
             for (action, peer, label), t in transitions.items():
                 key = id(t.sort)
                 if key not in validators:
-                    validators[key] = (exact_types_for(t.sort), validator_for(t.sort))
-                exact, check = validators[key]
-                (sends if action == "send" else recvs)[(peer, label)] = (t.target, exact, check, t)
+                    exact = tuple(exact_types_for(t.sort))
+                    validators[key] = (identities(exact), validator_for(t.sort), exact)
+                ids, check, exact = validators[key]
+                (sends if action == "send" else recvs)[(peer, label)] = (t.target, ids, check, t, exact)
             self.sends.append(sends)
             self.recvs.append(recvs)
         # For each state, the peers it may receive from (checked before blocking).
@@ -57,7 +63,7 @@ class Monitor:
         step = self.sends[self.state].get((to, label))
         if step is None:
             raise self.violation(Action("send", to, label, _type_name(payload)), blame=self.role)
-        if type(payload) not in step[1]:
+        if id(type(payload)) not in step[1]:
             reason = step[2](payload)
             if reason is not None:
                 raise self.violation(Action("send", to, label, _type_name(payload)), self.role,
@@ -69,7 +75,7 @@ class Monitor:
         step = self.recvs[self.state].get((frm, label))
         if step is None:
             raise self.violation(Action("recv", frm, label, _type_name(payload)), blame=frm or "the peer")
-        if type(payload) not in step[1]:
+        if id(type(payload)) not in step[1]:
             reason = step[2](payload)
             if reason is not None:
                 raise self.violation(Action("recv", frm, label, _type_name(payload)), frm or "the peer",
@@ -102,4 +108,4 @@ class Monitor:
 
 
 def _type_name(payload: object) -> str | None:
-    return None if payload is None else type(payload).__name__
+    return None if payload is None else real_name(type(payload))
