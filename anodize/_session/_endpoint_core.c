@@ -427,7 +427,7 @@ static PyObject *recv_on(Core *self, RecvFields *f, PyObject *const *args, Py_ss
         }
     }
     PyObject *channel = PyDict_GetItemWithError(f->in, frm); /* borrowed */
-    if (channel == NULL) {
+    if (channel == NULL || channel == Py_None) { /* the Python core's `if channel is None` */
         return PyErr_Occurred() ? NULL : pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
     }
     Py_INCREF(channel);
