@@ -22,7 +22,6 @@ import sessiontypes
 from anodize import RoleStopped
 from anodize.errors import AnodizeError
 from anodize._session.endpoint import Endpoint
-from anodize._session.payloads import real_name
 from anodize._transport.inproc import InprocNetwork
 
 PROTOCOL = """
@@ -190,6 +189,7 @@ def _payloads() -> dict[str, tuple[str, Callable[[], object]]]:
 
 
 HOOKS = tuple(_payloads())
+_real_name = type.__dict__["__name__"].__get__  # not what a metaclass's __name__ says
 
 
 # ---- driving one case ------------------------------------------------------------------------
@@ -205,7 +205,7 @@ def _outcome(call: Callable[..., object], *args: object) -> list[str]:
     try:
         result = call(*args)
         if isinstance(result, tuple):  # a Message: its label and its payload's class (not its address)
-            return ["returned", repr(result[0]), real_name(type(result[1]))]
+            return ["returned", repr(result[0]), _real_name(type(result[1]))]
         return ["returned", repr(result)]
     except (Exception, RoleStopped) as error:  # compared, not handled
         return [type(error).__name__, str(error), "anodize" if isinstance(error, AnodizeError) else "other"]
