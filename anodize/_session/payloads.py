@@ -2,10 +2,11 @@
 
 Builtin sorts map to Python types (``nat`` is an ``int >= 0``; ``float``
 also takes an ``int``); a declared sort ``"module:QualifiedName"`` is checked
-against that class, imported once when a monitor is built. A ROS 2 sort (``"ros:pkg/msg/Name"``) is the message type of that name in
-ROS 2 Jazzy, resolved through rosbags (:mod:`anodize._ros`): a payload must be an
-instance of its rosbags class whose fields fit the definition, checked field by
-field (ranges, array lengths, bounds, nested messages).
+against that class, imported once when a monitor is built. A ROS 2 sort
+(``"ros:pkg/msg/Name"``) is the message type of that name in ROS 2 Jazzy,
+resolved through rosbags (:mod:`anodize._ros`): a payload must be an instance
+of its rosbags class whose fields fit the definition, checked field by field
+(ranges, array lengths, bounds, nested messages).
 
 A dataclass payload is also checked field by field against its annotations
 (see :func:`check_fields`), so a ``Point`` whose ``x: int`` holds a string is
@@ -81,8 +82,8 @@ def _of(*types: type, name: str) -> Validator:
 def _nat(payload: object) -> str | None:
     kind = type(payload)
     if issubclass(kind, int) and kind is not bool:
-        # int's own comparison and text: a subclass may redefine both
-        return None if int.__ge__(payload, 0) else f"expected a payload of sort nat (>= 0), got {int.__repr__(payload)}"
+        number = typing.cast("int", payload)  # int's own comparison and text: a subclass may redefine both
+        return None if int.__ge__(number, 0) else f"expected a payload of sort nat (>= 0), got {int.__repr__(number)}"
     return f"expected a payload of sort nat, got {real_name(kind)}"
 
 
@@ -576,10 +577,13 @@ def _fixed_tuple(items: list[_Compiled]) -> _Compiled:
     steps = tuple((identities(item.exact), item.check) for item in items)
 
     def check(value: object) -> _Failure | None:
-        if not is_a(value, tuple) or len(value) != size:
+        if not is_a(value, tuple):
+            return ("", name, value)
+        elements = typing.cast("tuple[object, ...]", value)  # tuple's own length and items: a subclass may lie
+        if tuple.__len__(elements) != size:
             return ("", name, value)
         for index, (exact, item_check) in enumerate(steps):
-            element = value[index]
+            element = tuple.__getitem__(elements, index)
             if item_check is not None and id(type(element)) not in exact and (failure := item_check(element)):
                 return (f"[{index}]{failure[0]}", failure[1], failure[2])
         return None
@@ -617,7 +621,7 @@ def _array(np: typing.Any, args: tuple[object, ...]) -> _Compiled:
     name = f"ndarray of {kind.__name__}"
 
     def check(value: object) -> _Failure | None:
-        if is_a(value, ndarray) and issubclass(value.dtype.type, kind):
+        if is_a(value, ndarray) and issubclass(typing.cast("typing.Any", value).dtype.type, kind):
             return None
         return ("", name, value)
     return _Compiled(frozenset(), check, name, False)
@@ -642,5 +646,5 @@ def _describe(value: object) -> str:
         return f"{kind.__name__} {reprlib.repr(value)}"
     np = sys.modules.get("numpy")
     if np is not None and is_a(value, np.ndarray):
-        return f"ndarray of {value.dtype}"
+        return f"ndarray of {typing.cast('typing.Any', value).dtype}"
     return _name_of(kind)

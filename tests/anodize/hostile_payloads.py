@@ -18,11 +18,10 @@ from collections.abc import Callable
 from typing import Any
 
 import sessiontypes
-
 from anodize import RoleStopped
-from anodize.errors import AnodizeError
 from anodize._session.endpoint import Endpoint
 from anodize._transport.inproc import InprocNetwork
+from anodize.errors import AnodizeError
 
 PROTOCOL = """
 type Record = "hostile_payloads:Record"

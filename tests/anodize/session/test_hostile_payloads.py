@@ -138,7 +138,6 @@ def _one_message(core: str, direction: str, label: str, payload: object) -> list
     hostile_payloads.PLAN.clear()
     cls = Endpoint if core == "compiled" else PythonEndpoint
     import sessiontypes
-
     from anodize._transport.inproc import InprocNetwork
     protocol = sessiontypes.loads(hostile_payloads.PROTOCOL, "hostile.proto").globals["G"]
     network = InprocNetwork([("A", "B"), ("B", "A")])
