@@ -122,8 +122,14 @@ class Endpoint(_Core):
             PeerFailedError: ``to`` has failed.
         """
         try:  # what this send uses, read once: whatever a payload's code does to them counts from the next call
-            plain, monitor, network, outbox = self._plain, self._monitor, self._network, self._out
-            sent, waiting, high_water, role = self.sent, self._waiting, self.high_water, self.role
+            plain = self._plain  # one statement each: a tuple assignment builds and unpacks a tuple
+            monitor = self._monitor
+            network = self._network
+            outbox = self._out
+            sent = self.sent
+            waiting = self._waiting
+            high_water = self.high_water
+            role = self.role
         except AttributeError as error:
             raise self._missing(error) from None
         if not plain and self._forked_now():
@@ -133,7 +139,7 @@ class Endpoint(_Core):
             # The monitor's step inlined for an allowed send of an exact type (one look-up);
             # anything else goes through Monitor.send, which checks in full or raises.
             step = monitor.sends[monitor.state].get((to, label))
-            if step is not None and id(type(payload)) in step[1]:
+            if step is not None and ((kind := type(payload)) is step[1] or id(kind) in step[5]):
                 monitor.state = step[0]
             else:
                 monitor.send(to, label, payload)
@@ -184,7 +190,7 @@ class Endpoint(_Core):
                     if state in monitor.fork_states:  # the rest is a parallel branch's: send these, go on there
                         break
                     step = monitor.sends[state].get((to, label))
-                if step is not None and id(type(payload)) in step[1]:
+                if step is not None and ((kind := type(payload)) is step[1] or id(kind) in step[5]):
                     monitor.state = step[0]
                 else:
                     try:
@@ -286,8 +292,13 @@ class Endpoint(_Core):
             TimeoutError: nothing arrived within ``timeout`` seconds.
         """
         try:  # what this receive uses, read once: whatever code runs meanwhile does to them counts from the next call
-            plain, monitor, inbox, lending = self._plain, self._monitor, self._in, self._lending
-            doorbell, received, role = self._doorbell, self.received, self.role
+            plain = self._plain
+            monitor = self._monitor
+            inbox = self._in
+            lending = self._lending
+            doorbell = self._doorbell
+            received = self.received
+            role = self.role
         except AttributeError as error:
             raise self._missing(error) from None
         if not plain and self._forked_now():
@@ -307,7 +318,7 @@ class Endpoint(_Core):
         if type(item) is tuple:  # a message, not a signal: the fast path
             if monitor is not None:  # Monitor.recv inlined for an allowed message of an exact type
                 step = monitor.recvs[monitor.state].get((frm, item[0]))
-                if step is not None and id(type(item[1])) in step[1]:
+                if step is not None and ((kind := type(item[1])) is step[1] or id(kind) in step[5]):
                     monitor.state = step[0]
                 else:
                     monitor.recv(frm, item[0], item[1])
@@ -349,7 +360,7 @@ class Endpoint(_Core):
                 if item[0] != label:  # a stream repeats its label: looked up again when it changes
                     label = item[0]
                     step = table.get((frm, label))
-                if step is None or id(type(item[1])) not in step[1]:  # the next recv checks it in full
+                if step is None or id(type(item[1])) not in step[5]:  # the next recv checks it in full
                     self._in[frm].give_back(batch[index:])  # type: ignore[attr-defined]
                     break
                 if step[0] != state:
@@ -673,7 +684,7 @@ def _looping_sends(monitor: Monitor, to: str, label: str, payloads: list[object]
     if state in monitor.fork_states:
         return 0
     step = monitor.sends[state].get((to, label))
-    if step is None or step[0] != state or not set(map(id, map(type, payloads))) <= step[1]:
+    if step is None or step[0] != state or not set(map(id, map(type, payloads))) <= step[5]:
         return 0
     return len(payloads)
 
@@ -687,7 +698,7 @@ def _loops_on_all(monitor: Monitor, frm: str, batch: list[tuple[str, object]]) -
     label = batch[0][0]
     step = monitor.recvs[state].get((frm, label))
     return (step is not None and step[0] == state and {item[0] for item in batch} == {label}
-            and {id(type(item[1])) for item in batch} <= step[1])
+            and {id(type(item[1])) for item in batch} <= step[5])
 
 
 def peers_of(machine: StateMachine) -> tuple[set[str], set[str]]:

@@ -19,16 +19,18 @@ from .payloads import Validator, exact_types_for, identities, real_name, validat
 
 __all__ = ["Monitor"]
 
-# (target state, identities of the types accepted at once, full payload check, the transition it
-# came from, those types themselves: they keep the identities theirs, and the compiled core reads them)
-_Step = tuple[int, frozenset[int], Validator, Transition, tuple[type, ...]]
+# (target state, the first type accepted at once (None: none is), full payload check, the transition
+# it came from, all the types accepted at once (the compiled core reads them; they also keep the
+# identities that follow theirs), their identities). A payload of type `kind` fits at once when
+# `kind is step[1] or id(kind) in step[5]`: one `is` for the common case, no hashing of `kind`.
+_Step = tuple[int, type | None, Validator, Transition, tuple[type, ...], frozenset[int]]
 
 
 class Monitor:
     """Enforces one state machine; ``state`` is the current state.
 
     ``sends[state]`` / ``recvs[state]`` map ``(peer, label)`` to a step
-    ``(target, identities of the exact types, validator, transition, exact types)``; the
+    ``(target, first exact type, validator, transition, exact types, their identities)``; the
     endpoint's hot path reads them directly and calls :meth:`send` / :meth:`recv` only to raise.
     """
 
@@ -39,7 +41,7 @@ class Monitor:
         self.role = role
         self.machine = machine
         self.state = machine.initial
-        validators: dict[int, tuple[frozenset[int], Validator, tuple[type, ...]]] = {}
+        validators: dict[int, tuple[Validator, tuple[type, ...], frozenset[int]]] = {}
         self.sends: list[dict[tuple[str | None, str], _Step]] = []
         self.recvs: list[dict[tuple[str | None, str], _Step]] = []
         for transitions in machine.table:
@@ -48,10 +50,12 @@ class Monitor:
             for (action, peer, label), t in transitions.items():
                 key = id(t.sort)
                 if key not in validators:
-                    exact = tuple(exact_types_for(t.sort))
-                    validators[key] = (identities(exact), validator_for(t.sort), exact)
-                ids, check, exact = validators[key]
-                (sends if action == "send" else recvs)[(peer, label)] = (t.target, ids, check, t, exact)
+                    # An int fits a float sort too, but floats are what it mostly carries: first.
+                    exact = tuple(sorted(exact_types_for(t.sort), key=lambda kind: kind is int))
+                    validators[key] = (validator_for(t.sort), exact, identities(exact))
+                check, exact, ids = validators[key]
+                (sends if action == "send" else recvs)[(peer, label)] = (
+                    t.target, exact[0] if exact else None, check, t, exact, ids)
             self.sends.append(sends)
             self.recvs.append(recvs)
         # For each state, the peers it may receive from (checked before blocking).
@@ -63,7 +67,7 @@ class Monitor:
         step = self.sends[self.state].get((to, label))
         if step is None:
             raise self.violation(Action("send", to, label, _type_name(payload)), blame=self.role)
-        if id(type(payload)) not in step[1]:
+        if (kind := type(payload)) is not step[1] and id(kind) not in step[5]:
             reason = step[2](payload)
             if reason is not None:
                 raise self.violation(Action("send", to, label, _type_name(payload)), self.role,
@@ -75,7 +79,7 @@ class Monitor:
         step = self.recvs[self.state].get((frm, label))
         if step is None:
             raise self.violation(Action("recv", frm, label, _type_name(payload)), blame=frm or "the peer")
-        if id(type(payload)) not in step[1]:
+        if (kind := type(payload)) is not step[1] and id(kind) not in step[5]:
             reason = step[2](payload)
             if reason is not None:
                 raise self.violation(Action("recv", frm, label, _type_name(payload)), frm or "the peer",

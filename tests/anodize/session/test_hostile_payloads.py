@@ -168,7 +168,7 @@ def test_the_monitor_looks_payload_types_up_by_identity_never_by_hash() -> None:
     protocol = sessiontypes.loads(hostile_payloads.PROTOCOL, "hostile.proto").globals["G"]
     machine = protocol.project("A").fsm()
     step = Monitor(machine, "G", "A").sends[machine.initial][("B", "num")]
-    assert step[1] == frozenset({id(int)}) and step[4] == (int,)
+    assert step[1] is int and step[4] == (int,) and step[5] == frozenset({id(int)})
     hostile_payloads.FIRED.clear()
     monitor = Monitor(machine, "G", "A")
     with pytest.raises(Exception, match="got ClaimsInt"):
