@@ -8,8 +8,17 @@
  * the network, and for recv no timeout and no doorbell. Anything else goes to the Python
  * core's send or recv (_send_python / _recv_python) before anything has happened, or, after
  * the monitor has stepped, to the same Python helpers the Python core calls at that point,
- * so both cores raise the same errors at the same moments. tests/anodize/test_endpoint_core.py
+ * so both cores raise the same errors at the same moments. tests/anodize/session/test_endpoint_core.py
  * runs the endpoint tests on both.
+ *
+ * Code of the user's may run inside either call (a payload's methods in the full check, its
+ * pickling in a channel's put or get, a stand-in monitor's attributes), and it may delete or
+ * replace any attribute of the endpoint or of its monitor. So: every field a call uses is read
+ * once when it starts and held by a strong reference until it ends (as the Python core reads
+ * them into locals), nothing borrowed is used across a call that may run code, and a field
+ * missing or not of the exact type expected sends the call to the Python core, which raises an
+ * AnodizeError naming the role and the attribute (tests/anodize/session/test_hostile_payloads.py).
+ * A payload's exact type is found by identity in the step's tuple of types, never hashed.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -47,19 +56,20 @@ static PyObject *empty_error; /* queue.Empty */
 static PyObject *str_get_nowait;
 static PyObject *str_state, *str_sends, *str_recvs, *str_recv_peers, *str_alarm, *str_put, *str_get,
     *str_send, *str_recv, *str_send_python, *str_recv_python, *str_refuse_if_down, *str_no_channel,
-    *str_accept, *kw_timeout;
+    *str_accept, *str_route, *kw_timeout;
 static PyTypeObject *message_type; /* anodize._session.endpoint.Message, set by configure() */
 static PyObject *one;
 
-/* The monitor's tables, cached; -1 with an exception set if they are not what they should be. */
-static int cache_tables(Core *self)
+/* The monitor's tables, cached for `monitor`; -1 with an exception set if they are not what they
+ * should be. Getting them may run code (a stand-in monitor's attributes): the caller holds `monitor`. */
+static int cache_tables(Core *self, PyObject *monitor)
 {
-    if (self->cached == self->monitor) {
+    if (self->cached == monitor) {
         return 0;
     }
-    PyObject *sends = PyObject_GetAttr(self->monitor, str_sends);
-    PyObject *recvs = sends ? PyObject_GetAttr(self->monitor, str_recvs) : NULL;
-    PyObject *peers = recvs ? PyObject_GetAttr(self->monitor, str_recv_peers) : NULL;
+    PyObject *sends = PyObject_GetAttr(monitor, str_sends);
+    PyObject *recvs = sends ? PyObject_GetAttr(monitor, str_recvs) : NULL;
+    PyObject *peers = recvs ? PyObject_GetAttr(monitor, str_recv_peers) : NULL;
     if (peers == NULL || !PyList_CheckExact(sends) || !PyList_CheckExact(recvs) || !PyList_CheckExact(peers)) {
         if (peers != NULL) {
             PyErr_SetString(PyExc_TypeError, "EndpointCore: the monitor's tables must be lists");
@@ -72,7 +82,7 @@ static int cache_tables(Core *self)
     Py_XSETREF(self->sends, sends);
     Py_XSETREF(self->recvs, recvs);
     Py_XSETREF(self->recv_peers, peers);
-    Py_XSETREF(self->cached, Py_NewRef(self->monitor));
+    Py_XSETREF(self->cached, Py_NewRef(monitor));
     Py_CLEAR(self->send_peer);
     Py_CLEAR(self->send_label);
     Py_CLEAR(self->send_step);
@@ -82,9 +92,9 @@ static int cache_tables(Core *self)
     /* Monitor declares __slots__: its `state` is then a member descriptor holding an object at
      * a fixed offset, read and written there as the descriptor itself does. */
     self->state_offset = -1;
-    PyObject *descriptor = _PyType_Lookup(Py_TYPE(self->monitor), str_state); /* borrowed */
+    PyObject *descriptor = _PyType_Lookup(Py_TYPE(monitor), str_state); /* borrowed */
     if (descriptor != NULL && Py_IS_TYPE(descriptor, &PyMemberDescr_Type)
-            && PyObject_TypeCheck(self->monitor, ((PyDescrObject *)descriptor)->d_type)) {
+            && PyObject_TypeCheck(monitor, ((PyDescrObject *)descriptor)->d_type)) {
         PyMemberDef *member = ((PyMemberDescrObject *)descriptor)->d_member;
         if (member->type == T_OBJECT_EX && !(member->flags & READONLY)) {
             self->state_offset = member->offset;
@@ -94,31 +104,31 @@ static int cache_tables(Core *self)
 }
 
 /* The monitor's state object (a new reference), or NULL with an exception set. */
-static PyObject *get_state(Core *self)
+static PyObject *get_state(Core *self, PyObject *monitor)
 {
-    if (self->state_offset >= 0 && self->cached == self->monitor) { /* the offset is this monitor's */
-        PyObject *state = *(PyObject **)((char *)self->monitor + self->state_offset);
+    if (self->state_offset >= 0 && self->cached == monitor) { /* the offset is this monitor's */
+        PyObject *state = *(PyObject **)((char *)monitor + self->state_offset);
         if (state != NULL) {
             return Py_NewRef(state);
         }
     }
-    return PyObject_GetAttr(self->monitor, str_state); /* raises as Python would, if unset */
+    return PyObject_GetAttr(monitor, str_state); /* raises as Python would, if unset */
 }
 
-static int set_state(Core *self, PyObject *state)
+static int set_state(Core *self, PyObject *monitor, PyObject *state)
 {
-    if (self->state_offset < 0 || self->cached != self->monitor) {
-        return PyObject_SetAttr(self->monitor, str_state, state);
+    if (self->state_offset < 0 || self->cached != monitor) {
+        return PyObject_SetAttr(monitor, str_state, state);
     }
-    PyObject **slot = (PyObject **)((char *)self->monitor + self->state_offset);
+    PyObject **slot = (PyObject **)((char *)monitor + self->state_offset);
     Py_XSETREF(*slot, Py_NewRef(state));
     return 0;
 }
 
-/* The monitor's state, checked to index `table`; -1 with an exception set otherwise. */
-static Py_ssize_t current_state(Core *self, PyObject *table)
+/* The monitor's state, checked to index `table` (held by the caller); -1 with an exception set otherwise. */
+static Py_ssize_t current_state(Core *self, PyObject *monitor, PyObject *table)
 {
-    PyObject *state = get_state(self);
+    PyObject *state = get_state(self, monitor);
     if (state == NULL) {
         return -1;
     }
@@ -134,72 +144,87 @@ static Py_ssize_t current_state(Core *self, PyObject *table)
     return index;
 }
 
-static int try_step_in(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
-                       Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step);
+/* Whether `kind` is one of the step's exact types (a tuple): by identity, as the Python core's
+ * `id(type(payload)) in step[1]` does. A set of types would call a metaclass's __hash__ and
+ * __eq__, which may say anything and run any code. */
+static int exact_type(PyObject *types, PyObject *kind)
+{
+    for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(types); i++) {
+        if (PyTuple_GET_ITEM(types, i) == kind) {
+            return 1;
+        }
+    }
+    return 0;
+}
 
-/* The step the monitor takes on (peer, label) with `payload`, in `tables` (sends or recvs, with
- * the last step taken that way in *last_*), taken at once if allowed with an exact payload type:
- * 1 taken, 0 not found or needs the full check, -1 error. */
-static int try_step(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
-                    Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step)
+/* The step `monitor` takes on (peer, label) with `payload`, sending or receiving, taken at once
+ * if allowed with an exact payload type: 1 taken, 0 not found or needs the full check, -1 error.
+ * Every object used across a call that may run code is held here; the last step taken each way
+ * is reused only while the tables cached are this monitor's. */
+static int try_step(Core *self, PyObject *monitor, int sending, PyObject *peer, PyObject *label, PyObject *payload)
 {
     if (!PyUnicode_CheckExact(peer) || !PyUnicode_CheckExact(label)) {
         return 0; /* a str subclass may run code as a key: the full check, in Python */
     }
-    Py_INCREF(tables); /* a payload type's metaclass may run code and replace it */
-    int result = try_step_in(self, tables, peer, label, payload, last_state, last_peer, last_label, last_step);
-    Py_DECREF(tables);
-    return result;
-}
-
-static int try_step_in(Core *self, PyObject *tables, PyObject *peer, PyObject *label, PyObject *payload,
-                       Py_ssize_t *last_state, PyObject **last_peer, PyObject **last_label, PyObject **last_step)
-{
-    Py_ssize_t state = current_state(self, tables);
-    if (state < 0) {
+    if (cache_tables(self, monitor) < 0) {
         return -1;
     }
-    PyObject *step = *last_step; /* borrowed */
-    if (step == NULL || state != *last_state || peer != *last_peer || label != *last_label) {
-        PyObject *table = PyList_GET_ITEM(tables, state);
+    PyObject *tables = Py_NewRef(sending ? self->sends : self->recvs);
+    Py_ssize_t state = current_state(self, monitor, tables); /* may run code: a stand-in's `state` */
+    if (state < 0) {
+        Py_DECREF(tables);
+        return -1;
+    }
+    Py_ssize_t *last_state = sending ? &self->send_state : &self->recv_state;
+    PyObject **last_peer = sending ? &self->send_peer : &self->recv_peer;
+    PyObject **last_label = sending ? &self->send_label : &self->recv_label;
+    PyObject **last_step = sending ? &self->send_step : &self->recv_step;
+    int reuse = self->cached == monitor && *last_step != NULL && state == *last_state && peer == *last_peer
+        && label == *last_label && (sending ? self->sends : self->recvs) == tables;
+    PyObject *step;
+    if (reuse) {
+        step = Py_NewRef(*last_step);
+    } else {
+        PyObject *table = Py_NewRef(PyList_GET_ITEM(tables, state)); /* nothing ran since the range check */
         if (!PyDict_CheckExact(table)) {
+            Py_DECREF(table);
+            Py_DECREF(tables);
             PyErr_SetString(PyExc_TypeError, "EndpointCore: a monitor table must be a dict");
             return -1;
         }
         PyObject *key = PyTuple_Pack(2, peer, label);
-        if (key == NULL) {
-            return -1;
-        }
-        step = PyDict_GetItemWithError(table, key); /* borrowed */
-        Py_DECREF(key);
+        step = key ? PyDict_GetItemWithError(table, key) : NULL; /* borrowed */
+        Py_XINCREF(step);
+        Py_XDECREF(key);
+        Py_DECREF(table);
         if (step == NULL) {
+            Py_DECREF(tables);
             return PyErr_Occurred() ? -1 : 0;
         }
-        if (!PyTuple_CheckExact(step) || PyTuple_GET_SIZE(step) < 2
-                || !PyAnySet_Check(PyTuple_GET_ITEM(step, 1))) {
+        if (!PyTuple_CheckExact(step) || PyTuple_GET_SIZE(step) < 5 || !PyTuple_CheckExact(PyTuple_GET_ITEM(step, 4))) {
+            Py_DECREF(step);
+            Py_DECREF(tables);
             return 0;
         }
-        *last_state = state;
-        Py_XSETREF(*last_peer, Py_NewRef(peer));
-        Py_XSETREF(*last_label, Py_NewRef(label));
-        Py_XSETREF(*last_step, Py_NewRef(step));
+        if (self->cached == monitor && (sending ? self->sends : self->recvs) == tables) {
+            *last_state = state;
+            Py_XSETREF(*last_peer, Py_NewRef(peer));
+            Py_XSETREF(*last_label, Py_NewRef(label));
+            Py_XSETREF(*last_step, Py_NewRef(step));
+        }
     }
-    Py_INCREF(step);
-    int exact = PySet_Contains(PyTuple_GET_ITEM(step, 1), (PyObject *)Py_TYPE(payload));
-    if (exact > 0) {
-        exact = set_state(self, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
+    Py_DECREF(tables);
+    int exact = exact_type(PyTuple_GET_ITEM(step, 4), (PyObject *)Py_TYPE(payload));
+    if (exact) {
+        exact = set_state(self, monitor, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
     }
     Py_DECREF(step);
     return exact;
 }
 
-/* counts[peer] += 1 */
+/* counts[peer] += 1, on an exact dict the caller holds (the Python core's `sent[to] += 1`). */
 static int count_one(PyObject *counts, PyObject *peer)
 {
-    if (counts == NULL || !PyDict_Check(counts)) { /* deleted or replaced while a put or get ran */
-        PyErr_SetString(PyExc_AttributeError, "EndpointCore: the endpoint's counts are gone");
-        return -1;
-    }
     PyObject *count = PyDict_GetItemWithError(counts, peer);
     if (count == NULL) {
         if (!PyErr_Occurred()) {
@@ -207,7 +232,9 @@ static int count_one(PyObject *counts, PyObject *peer)
         }
         return -1;
     }
-    PyObject *more = PyNumber_Add(count, one);
+    Py_INCREF(count); /* its __iadd__ may run code and empty the dict */
+    PyObject *more = PyNumber_InPlaceAdd(count, one);
+    Py_DECREF(count);
     if (more == NULL) {
         return -1;
     }
@@ -235,34 +262,17 @@ static PyObject *call_method(PyObject *obj, PyObject *name, PyObject *a, PyObjec
     return PyObject_VectorcallMethod(name, args + 1, (size_t)(n + 1) | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
 }
 
-static PyObject *core_send(Core *self, PyObject *const *args, Py_ssize_t nargsf, PyObject *kwnames)
+/* What send uses of the endpoint, read once when it starts and held (strong references) to the
+ * end, as the Python core reads them into locals: code that runs meanwhile (a payload's methods,
+ * a channel's put) may delete or replace the endpoint's attributes; that counts from the next call. */
+typedef struct {
+    PyObject *role, *monitor, *network, *out, *sent, *waiting, *high_water;
+} SendFields;
+
+/* The rest of send, on `f`, once the monitor has allowed it. */
+static PyObject *send_out(Core *self, SendFields *f, PyObject *to, PyObject *label, PyObject *payload)
 {
-    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
-    /* Role names of exact type str: no code of theirs runs in the look-ups below. */
-    if (kwnames != NULL || nargs < 2 || nargs > 3 || !PyUnicode_CheckExact(args[0]) || self->plain != Py_True
-            || self->out == NULL
-            || self->sent == NULL || self->waiting == NULL || self->high_water == NULL || self->network == NULL) {
-        return pass_on(self, str_send_python, args, (size_t)nargsf, kwnames);
-    }
-    PyObject *to = args[0], *label = args[1], *payload = nargs == 3 ? args[2] : Py_None;
-    if (self->monitor != NULL && self->monitor != Py_None) { /* first: a forbidden send is a violation */
-        if (cache_tables(self) < 0) {
-            return NULL;
-        }
-        int stepped = try_step(self, self->sends, to, label, payload, &self->send_state, &self->send_peer,
-                               &self->send_label, &self->send_step);
-        if (stepped < 0) {
-            return NULL;
-        }
-        if (stepped == 0) { /* the full check, which raises or steps */
-            PyObject *done = call_method(self->monitor, str_send, to, label, payload, 3);
-            if (done == NULL) {
-                return NULL;
-            }
-            Py_DECREF(done);
-        }
-    }
-    PyObject *alarm = PyObject_GetAttr(self->network, str_alarm);
+    PyObject *alarm = PyObject_GetAttr(f->network, str_alarm);
     if (alarm == NULL) {
         return NULL;
     }
@@ -278,40 +288,41 @@ static PyObject *core_send(Core *self, PyObject *const *args, Py_ssize_t nargsf,
         }
         Py_DECREF(done);
     }
-    PyObject *route = PyDict_GetItemWithError(self->out, to); /* borrowed: (channel, doorbell) */
-    if (route == NULL || !PyTuple_CheckExact(route) || PyTuple_GET_SIZE(route) != 2) {
+    PyObject *route = PyDict_GetItemWithError(f->out, to); /* borrowed: (channel, doorbell) */
+    if (route == NULL || route == Py_None) {
         return PyErr_Occurred() ? NULL : call_method((PyObject *)self, str_no_channel, to, NULL, NULL, 1);
     }
-    PyObject *channel = PyTuple_GET_ITEM(route, 0), *doorbell = PyTuple_GET_ITEM(route, 1);
-    Py_INCREF(channel);
-    Py_INCREF(doorbell);
+    Py_INCREF(route);
+    if (!PyTuple_CheckExact(route) || PyTuple_GET_SIZE(route) != 2) { /* unpacked as Python unpacks it */
+        PyObject *pair = call_method((PyObject *)self, str_route, route, NULL, NULL, 1);
+        Py_SETREF(route, pair);
+        if (route == NULL) {
+            return NULL;
+        }
+    }
+    PyObject *channel = Py_NewRef(PyTuple_GET_ITEM(route, 0)), *doorbell = Py_NewRef(PyTuple_GET_ITEM(route, 1));
+    Py_DECREF(route);
     PyObject *item = PyTuple_Pack(2, label, payload);
     PyObject *put = item ? call_method(channel, str_put, item, NULL, NULL, 1) : NULL;
     Py_XDECREF(item);
     Py_DECREF(channel);
-    if (put == NULL) {
+    if (put == NULL || count_one(f->sent, to) < 0) {
+        Py_XDECREF(put);
         Py_DECREF(doorbell);
         return NULL;
     }
     Py_DECREF(put);
-    if (count_one(self->sent, to) < 0) {
-        Py_DECREF(doorbell);
-        return NULL;
-    }
-    if (self->waiting == NULL || self->high_water == NULL) { /* deleted while the put ran */
-        Py_DECREF(doorbell);
-        PyErr_SetString(PyExc_AttributeError, "EndpointCore: the endpoint's high-water marks are gone");
-        return NULL;
-    }
-    PyObject *size_of = PyDict_GetItemWithError(self->waiting, to); /* borrowed */
+    PyObject *size_of = PyDict_GetItemWithError(f->waiting, to); /* borrowed */
     if (size_of != NULL) { /* the channel's high-water mark */
         Py_INCREF(size_of);
         PyObject *size = PyObject_CallNoArgs(size_of);
         Py_DECREF(size_of);
-        PyObject *mark = size && self->high_water != NULL ? PyDict_GetItemWithError(self->high_water, to) : NULL;
+        PyObject *mark = size ? PyDict_GetItemWithError(f->high_water, to) : NULL;
+        Py_XINCREF(mark); /* comparing may run code that empties the dict */
         int higher = mark ? PyObject_RichCompareBool(size, mark, Py_GT) : -1;
+        Py_XDECREF(mark);
         if (higher > 0) {
-            higher = PyDict_SetItem(self->high_water, to, size);
+            higher = PyDict_SetItem(f->high_water, to, size);
         }
         Py_XDECREF(size);
         if (higher < 0) {
@@ -326,7 +337,7 @@ static PyObject *core_send(Core *self, PyObject *const *args, Py_ssize_t nargsf,
         return NULL;
     }
     if (doorbell != Py_None) {
-        PyObject *rung = call_method(doorbell, str_put, self->role, NULL, NULL, 1);
+        PyObject *rung = call_method(doorbell, str_put, f->role, NULL, NULL, 1);
         Py_DECREF(doorbell);
         if (rung == NULL) {
             return NULL;
@@ -336,6 +347,45 @@ static PyObject *core_send(Core *self, PyObject *const *args, Py_ssize_t nargsf,
         Py_DECREF(doorbell);
     }
     Py_RETURN_NONE;
+}
+
+static PyObject *core_send(Core *self, PyObject *const *args, Py_ssize_t nargsf, PyObject *kwnames)
+{
+    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
+    /* Role names of exact type str, and the endpoint's tables exact dicts: no code of theirs runs
+     * in the look-ups below. Anything missing or else is the Python core's to raise or to do. */
+    if (kwnames != NULL || nargs < 2 || nargs > 3 || !PyUnicode_CheckExact(args[0]) || self->plain != Py_True
+            || self->role == NULL || self->monitor == NULL || self->network == NULL
+            || self->out == NULL || !PyDict_CheckExact(self->out) || self->sent == NULL || !PyDict_CheckExact(self->sent)
+            || self->waiting == NULL || !PyDict_CheckExact(self->waiting)
+            || self->high_water == NULL || !PyDict_CheckExact(self->high_water)) {
+        return pass_on(self, str_send_python, args, (size_t)nargsf, kwnames);
+    }
+    PyObject *to = args[0], *label = args[1], *payload = nargs == 3 ? args[2] : Py_None;
+    SendFields f = {Py_NewRef(self->role), Py_NewRef(self->monitor), Py_NewRef(self->network), Py_NewRef(self->out),
+                    Py_NewRef(self->sent), Py_NewRef(self->waiting), Py_NewRef(self->high_water)};
+    PyObject *result = NULL;
+    if (f.monitor != Py_None) { /* first: a forbidden send is a violation */
+        int stepped = try_step(self, f.monitor, 1, to, label, payload);
+        if (stepped == 0) { /* the full check, which raises or steps */
+            PyObject *done = call_method(f.monitor, str_send, to, label, payload, 3);
+            stepped = done == NULL ? -1 : 1;
+            Py_XDECREF(done);
+        }
+        if (stepped < 0) {
+            goto done;
+        }
+    }
+    result = send_out(self, &f, to, label, payload);
+done:
+    Py_DECREF(f.role);
+    Py_DECREF(f.monitor);
+    Py_DECREF(f.network);
+    Py_DECREF(f.out);
+    Py_DECREF(f.sent);
+    Py_DECREF(f.waiting);
+    Py_DECREF(f.high_water);
+    return result;
 }
 
 static PyObject *as_message(PyObject *item)
@@ -349,23 +399,22 @@ static PyObject *as_message(PyObject *item)
     return message;
 }
 
-static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf, PyObject *kwnames)
+/* What recv uses of the endpoint, read once when it starts and held to the end (see SendFields). */
+typedef struct {
+    PyObject *monitor, *in, *received, *lending;
+} RecvFields;
+
+/* recv on `f`: NULL with an exception set, or the message. */
+static PyObject *recv_on(Core *self, RecvFields *f, PyObject *const *args, Py_ssize_t nargsf, PyObject *kwnames)
 {
-    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
-    if (kwnames != NULL || nargs < 1 || nargs > 2 || (nargs == 2 && args[1] != Py_None) || message_type == NULL
-            || !PyUnicode_CheckExact(args[0])
-            || self->plain != Py_True || self->doorbell != Py_None || self->in == NULL || self->received == NULL) {
-        return pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
-    }
     PyObject *frm = args[0];
-    int monitored = self->monitor != NULL && self->monitor != Py_None;
-    PyObject *monitor = NULL; /* the monitor read before get(), as the Python core reads it */
+    int monitored = f->monitor != Py_None;
     if (monitored) {
-        if (cache_tables(self) < 0) {
+        if (cache_tables(self, f->monitor) < 0) {
             return NULL;
         }
         PyObject *table = Py_NewRef(self->recv_peers); /* what reading the state may run cannot free it */
-        Py_ssize_t state = current_state(self, table);
+        Py_ssize_t state = current_state(self, f->monitor, table);
         PyObject *peers = state < 0 ? NULL : Py_NewRef(PyList_GET_ITEM(table, state)); /* nor frm's __eq__ */
         Py_DECREF(table);
         if (peers == NULL) {
@@ -376,17 +425,14 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
         if (allowed <= 0) { /* not now: the Python core raises the violation */
             return allowed < 0 ? NULL : pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
         }
-        monitor = Py_NewRef(self->monitor);
     }
-    PyObject *channel = PyDict_GetItemWithError(self->in, frm); /* borrowed */
-    if (channel == NULL) {
-        Py_XDECREF(monitor);
+    PyObject *channel = PyDict_GetItemWithError(f->in, frm); /* borrowed */
+    if (channel == NULL || channel == Py_None) { /* the Python core's `if channel is None` */
         return PyErr_Occurred() ? NULL : pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
     }
     Py_INCREF(channel);
     PyObject *item;
-    PyObject *lend = self->lending != NULL && PyDict_CheckExact(self->lending) && PyDict_GET_SIZE(self->lending) > 0
-        ? PyDict_GetItemWithError(self->lending, frm) : NULL; /* borrowed */
+    PyObject *lend = PyDict_GET_SIZE(f->lending) > 0 ? PyDict_GetItemWithError(f->lending, frm) : NULL;
     if (lend != NULL) {
         /* Priority inheritance: a message already there is taken without a scheduling call; if none
          * is, the Python core lends while it waits (nothing has happened yet: it checks again). */
@@ -394,7 +440,6 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
         if (item == NULL && PyErr_ExceptionMatches(empty_error)) {
             PyErr_Clear();
             Py_DECREF(channel);
-            Py_XDECREF(monitor);
             return pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
         }
     } else if (PyErr_Occurred()) {
@@ -405,37 +450,23 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
     }
     if (item == NULL) {
         Py_DECREF(channel);
-        Py_XDECREF(monitor);
         return NULL;
     }
     if (!PyTuple_CheckExact(item) || PyTuple_GET_SIZE(item) != 2) { /* a signal, or not a message */
-        Py_XDECREF(monitor);
         PyObject *accepted = call_method((PyObject *)self, str_accept, frm, item, channel, 3);
         Py_DECREF(item);
         Py_DECREF(channel);
         return accepted;
     }
     Py_DECREF(channel);
-    PyObject *label = PyTuple_GET_ITEM(item, 0), *payload = PyTuple_GET_ITEM(item, 1);
-    if (monitored && (self->monitor != monitor || self->cached != monitor)) {
-        /* The monitor was replaced while get() ran (any code can run there): the full check on
-         * the one read before, as the Python core does. */
-        PyObject *done = call_method(monitor, str_recv, frm, label, payload, 3);
-        Py_DECREF(monitor);
-        if (done == NULL) {
-            Py_DECREF(item);
-            return NULL;
-        }
-        Py_DECREF(done);
-        monitored = 0;
-    } else if (monitored) {
-        Py_DECREF(monitor);
-    }
+    /* Any code may have run in get() (unpickling a payload, say): the message is checked by the
+     * monitor read before, as the Python core checks it; the tables are cached again if the
+     * endpoint's monitor was replaced meanwhile. */
+    PyObject *label = PyTuple_GET_ITEM(item, 0), *payload = PyTuple_GET_ITEM(item, 1); /* item holds them */
     if (monitored) {
-        int stepped = try_step(self, self->recvs, frm, label, payload, &self->recv_state, &self->recv_peer,
-                               &self->recv_label, &self->recv_step);
+        int stepped = try_step(self, f->monitor, 0, frm, label, payload);
         if (stepped == 0) { /* the full check, which raises (blaming the sender) or steps */
-            PyObject *done = call_method(self->monitor, str_recv, frm, label, payload, 3);
+            PyObject *done = call_method(f->monitor, str_recv, frm, label, payload, 3);
             stepped = done == NULL ? -1 : 1;
             Py_XDECREF(done);
         }
@@ -444,13 +475,33 @@ static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf,
             return NULL;
         }
     }
-    if (count_one(self->received, frm) < 0) {
+    if (count_one(f->received, frm) < 0) {
         Py_DECREF(item);
         return NULL;
     }
     PyObject *message = as_message(item);
     Py_DECREF(item);
     return message;
+}
+
+static PyObject *core_recv(Core *self, PyObject *const *args, Py_ssize_t nargsf, PyObject *kwnames)
+{
+    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
+    if (kwnames != NULL || nargs < 1 || nargs > 2 || (nargs == 2 && args[1] != Py_None) || message_type == NULL
+            || !PyUnicode_CheckExact(args[0]) || self->plain != Py_True || self->doorbell != Py_None
+            || self->role == NULL || self->monitor == NULL || self->in == NULL || !PyDict_CheckExact(self->in)
+            || self->received == NULL || !PyDict_CheckExact(self->received)
+            || self->lending == NULL || !PyDict_CheckExact(self->lending)) {
+        return pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
+    }
+    RecvFields f = {Py_NewRef(self->monitor), Py_NewRef(self->in), Py_NewRef(self->received),
+                    Py_NewRef(self->lending)};
+    PyObject *result = recv_on(self, &f, args, nargsf, kwnames);
+    Py_DECREF(f.monitor);
+    Py_DECREF(f.in);
+    Py_DECREF(f.received);
+    Py_DECREF(f.lending);
+    return result;
 }
 
 /* Every object field of Core, once: what traverse visits and clear clears. */
@@ -588,6 +639,7 @@ PyMODINIT_FUNC PyInit__endpoint_core(void)
     INTERN(str_refuse_if_down, "_refuse_if_down");
     INTERN(str_no_channel, "_no_channel");
     INTERN(str_accept, "_accept");
+    INTERN(str_route, "_route");
     if ((one = PyLong_FromLong(1)) == NULL || (kw_timeout = Py_BuildValue("(s)", "timeout")) == NULL) {
         return NULL;
     }

@@ -121,33 +121,43 @@ class Endpoint(_Core):
             ProtocolViolationError: the local type does not allow it now (nothing is sent).
             PeerFailedError: ``to`` has failed.
         """
-        if not self._plain and self._forked_now():
+        try:  # what this send uses, read once: whatever a payload's code does to them counts from the next call
+            plain = self._plain  # one statement each: a tuple assignment builds and unpacks a tuple
+            monitor = self._monitor
+            network = self._network
+            outbox = self._out
+            sent = self.sent
+            waiting = self._waiting
+            high_water = self.high_water
+            role = self.role
+        except AttributeError as error:
+            raise self._missing(error) from None
+        if not plain and self._forked_now():
             self._branch_for(self._send_route, to, "send", label).send(to, label, payload)
             return
-        monitor = self._monitor
         if monitor is not None:  # first: a forbidden send is a violation, whatever the peer
             # The monitor's step inlined for an allowed send of an exact type (one look-up);
             # anything else goes through Monitor.send, which checks in full or raises.
             step = monitor.sends[monitor.state].get((to, label))
-            if step is not None and type(payload) in step[1]:
+            if step is not None and ((kind := type(payload)) is step[1] or id(kind) in step[5]):
                 monitor.state = step[0]
             else:
                 monitor.send(to, label, payload)
-        if self._network.alarm:
+        if network.alarm:
             self._refuse_if_down(to, label)
-        out = self._out.get(to)
+        out = outbox.get(to)
         if out is None:
             self._no_channel(to)
         channel, doorbell = out
         # A plain tuple: the garbage collector stops tracking those, not tuple subclasses,
         # and a backlog of tracked objects slows every collection.
         channel.put((label, payload))
-        self.sent[to] += 1
-        waiting = self._waiting.get(to)
-        if waiting is not None and (size := waiting()) > self.high_water[to]:
-            self.high_water[to] = size
+        sent[to] += 1
+        size_of = waiting.get(to)
+        if size_of is not None and (size := size_of()) > high_water[to]:
+            high_water[to] = size
         if doorbell is not None:
-            doorbell.put(self.role)
+            doorbell.put(role)
 
     def send_many(self, to: str, label: str, payloads: Iterable[object]) -> int:
         """Send ``label`` once per payload, in order, to role ``to``: ``send`` in a loop, but
@@ -180,7 +190,7 @@ class Endpoint(_Core):
                     if state in monitor.fork_states:  # the rest is a parallel branch's: send these, go on there
                         break
                     step = monitor.sends[state].get((to, label))
-                if step is not None and type(payload) in step[1]:
+                if step is not None and ((kind := type(payload)) is step[1] or id(kind) in step[5]):
                     monitor.state = step[0]
                 else:
                     try:
@@ -224,15 +234,35 @@ class Endpoint(_Core):
 
     def _no_channel(self, to: str) -> NoReturn:
         """Raise for a send to a role this one has no channel to (only reachable without a monitor)."""
-        raise AnodizeError(f"role {self.role} has no channel to {to}")
+        raise AnodizeError(f"role {_role_of(self)} has no channel to {to}")
 
     def _refuse_if_down(self, to: str, label: str) -> None:
         """Raise if ``to`` has failed or this role must stop (checked only once an alarm is up)."""
-        failed = self._network.failed.get(to)
+        try:
+            network, stop, role = self._network, self._stop_event, self.role
+        except AttributeError as error:
+            raise self._missing(error) from None
+        failed = network.failed.get(to)
         if failed is not None:
-            raise PeerFailedError(self.role, to, failed)
-        if self._stop_event.is_set():
+            raise PeerFailedError(role, to, failed)
+        if stop.is_set():
             raise RoleStopped(f"interrupted sending {label} to {to}, in state {self._state_number()}")
+
+    def _route(self, out: tuple[Channel, Any]) -> tuple[Channel, Any]:
+        """``channel, doorbell = out``, as send unpacks it (the compiled core calls this for
+        anything but a pair, so that both raise the same)."""
+        channel, doorbell = out
+        return channel, doorbell
+
+    def _missing(self, error: AttributeError) -> AnodizeError:
+        """The error for a send or receive that finds one of the endpoint's own attributes gone
+        (code that ran inside an earlier call deleted it: a payload's methods, say)."""
+        name = error.name if error.obj is self and isinstance(error.name, str) else None
+        if name is None:
+            name = next((field for field in _FIELDS if not hasattr(self, field)), "?")
+        return AnodizeError(f"role {_role_of(self)}: the endpoint's attribute {name} is missing (deleted by code "
+                            "that ran during one of its sends or receives, such as a payload's own methods); "
+                            "this endpoint cannot send or receive any more")
 
     def buffer(self, to: str, shape: tuple[int, ...], dtype: object = "uint8") -> Any:
         """A numpy array to fill and then send to ``to``, with no copy on the way.
@@ -261,29 +291,38 @@ class Endpoint(_Core):
             PeerFailedError: ``frm`` failed before sending.
             TimeoutError: nothing arrived within ``timeout`` seconds.
         """
-        if not self._plain and self._forked_now():
+        try:  # what this receive uses, read once: whatever code runs meanwhile does to them counts from the next call
+            plain = self._plain
+            monitor = self._monitor
+            inbox = self._in
+            lending = self._lending
+            doorbell = self._doorbell
+            received = self.received
+            role = self.role
+        except AttributeError as error:
+            raise self._missing(error) from None
+        if not plain and self._forked_now():
             return self._branch_for(self._recv_route, frm, "recv", "").recv(frm, timeout)
-        monitor = self._monitor
         if monitor is not None and frm not in monitor.recv_peers[monitor.state]:
-            raise monitor.violation(Action("recv", frm, "*"), blame=self.role)
-        channel = self._in.get(frm)
+            raise monitor.violation(Action("recv", frm, "*"), blame=role)
+        channel = inbox.get(frm)
         if channel is None:
-            raise AnodizeError(f"role {self.role} has no channel from {frm}")
-        lend = self._lending.get(frm) if self._lending else None
+            raise AnodizeError(f"role {role} has no channel from {frm}")
+        lend = lending.get(frm) if lending else None
         try:
             item = channel.get(timeout=timeout) if lend is None else get_lending(channel, timeout, lend)
         except queue.Empty:
-            raise TimeoutError(f"role {self.role}: no message from {frm} within {timeout} s") from None
-        if self._doorbell is not None and self._doorbell.qsize() > _DRAIN_AT:
+            raise TimeoutError(f"role {role}: no message from {frm} within {timeout} s") from None
+        if doorbell is not None and doorbell.qsize() > _DRAIN_AT:
             self._drain_doorbell()
         if type(item) is tuple:  # a message, not a signal: the fast path
             if monitor is not None:  # Monitor.recv inlined for an allowed message of an exact type
                 step = monitor.recvs[monitor.state].get((frm, item[0]))
-                if step is not None and type(item[1]) in step[1]:
+                if step is not None and ((kind := type(item[1])) is step[1] or id(kind) in step[5]):
                     monitor.state = step[0]
                 else:
                     monitor.recv(frm, item[0], item[1])
-            self.received[frm] += 1
+            received[frm] += 1
             return _new_tuple(Message, item)
         return self._accept(frm, item, channel)
 
@@ -321,7 +360,7 @@ class Endpoint(_Core):
                 if item[0] != label:  # a stream repeats its label: looked up again when it changes
                     label = item[0]
                     step = table.get((frm, label))
-                if step is None or type(item[1]) not in step[1]:  # the next recv checks it in full
+                if step is None or id(type(item[1])) not in step[5]:  # the next recv checks it in full
                     self._in[frm].give_back(batch[index:])  # type: ignore[attr-defined]
                     break
                 if step[0] != state:
@@ -489,6 +528,14 @@ class Endpoint(_Core):
 
     # ---- internals ---------------------------------------------------------------------
     def _accept(self, frm: str, item: object, channel: Channel) -> Message:
+        try:
+            return self._accept_as_is(frm, item, channel)
+        except AttributeError as error:
+            if error.obj is not self:
+                raise
+            raise self._missing(error) from None
+
+    def _accept_as_is(self, frm: str, item: object, channel: Channel) -> Message:
         if type(item) is tuple:
             if self._monitor is not None:
                 self._monitor.recv(frm, item[0], item[1])
@@ -618,6 +665,17 @@ if COMPILED_CORE is not None:  # the compiled core's send and recv (same calls, 
     del Endpoint.send, Endpoint.recv
 
 
+# What the endpoint's own code reads from it (the error for one gone names the first missing).
+_FIELDS = ("role", "_plain", "_monitor", "_network", "_out", "_in", "sent", "received", "_waiting", "high_water",
+           "_doorbell", "_lending")
+
+
+def _role_of(endpoint: Endpoint) -> str:
+    """The endpoint's role for an error's text (it may be the attribute that is gone)."""
+    role = getattr(endpoint, "role", None)
+    return role if type(role) is str else "?"
+
+
 def _looping_sends(monitor: Monitor, to: str, label: str, payloads: list[object]) -> int:
     """How many of ``payloads`` the monitor allows at once, sent as ``label`` to ``to``: all of them
     when the current state sends that message and stays (a loop) and every payload's type is one
@@ -626,7 +684,7 @@ def _looping_sends(monitor: Monitor, to: str, label: str, payloads: list[object]
     if state in monitor.fork_states:
         return 0
     step = monitor.sends[state].get((to, label))
-    if step is None or step[0] != state or not set(map(type, payloads)) <= step[1]:
+    if step is None or step[0] != state or not set(map(id, map(type, payloads))) <= step[5]:
         return 0
     return len(payloads)
 
@@ -640,7 +698,7 @@ def _loops_on_all(monitor: Monitor, frm: str, batch: list[tuple[str, object]]) -
     label = batch[0][0]
     step = monitor.recvs[state].get((frm, label))
     return (step is not None and step[0] == state and {item[0] for item in batch} == {label}
-            and {type(item[1]) for item in batch} <= step[1])
+            and {id(type(item[1])) for item in batch} <= step[5])
 
 
 def peers_of(machine: StateMachine) -> tuple[set[str], set[str]]:

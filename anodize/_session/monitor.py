@@ -4,6 +4,10 @@ Every send is checked before anything leaves (the sender is to blame), every
 receive when it arrives (the peer is to blame). A check is one dictionary
 look-up in a table compiled once from the state machine, plus the payload
 check of the transition.
+
+A payload's type is looked up by identity (``id(type(payload))``), never hashed or compared:
+a metaclass may redefine ``__eq__`` and ``__hash__`` to pass for ``int`` (see payloads.py for
+the subclass policy, which the compiled core shares).
 """
 
 from __future__ import annotations
@@ -11,20 +15,23 @@ from __future__ import annotations
 from sessiontypes import StateMachine, Transition
 
 from ..errors import Action, ProtocolViolationError
-from .payloads import Validator, exact_types_for, validator_for
+from .payloads import Validator, exact_types_for, identities, real_name, validator_for
 
 __all__ = ["Monitor"]
 
-# (target state, types accepted at once, full payload check, the transition it came from)
-_Step = tuple[int, frozenset[type], Validator, Transition]
+# (target state, the first type accepted at once (None: none is), full payload check, the transition
+# it came from, all the types accepted at once (the compiled core reads them; they also keep the
+# identities that follow theirs), their identities). A payload of type `kind` fits at once when
+# `kind is step[1] or id(kind) in step[5]`: one `is` for the common case, no hashing of `kind`.
+_Step = tuple[int, type | None, Validator, Transition, tuple[type, ...], frozenset[int]]
 
 
 class Monitor:
     """Enforces one state machine; ``state`` is the current state.
 
     ``sends[state]`` / ``recvs[state]`` map ``(peer, label)`` to a step
-    ``(target, exact types, validator, transition)``; the endpoint's hot path
-    reads them directly and calls :meth:`send` / :meth:`recv` only to raise.
+    ``(target, first exact type, validator, transition, exact types, their identities)``; the
+    endpoint's hot path reads them directly and calls :meth:`send` / :meth:`recv` only to raise.
     """
 
     __slots__ = ("fork_states", "machine", "protocol", "recv_peers", "recvs", "role", "sends", "state")
@@ -34,7 +41,7 @@ class Monitor:
         self.role = role
         self.machine = machine
         self.state = machine.initial
-        validators: dict[int, tuple[frozenset[type], Validator]] = {}
+        validators: dict[int, tuple[Validator, tuple[type, ...], frozenset[int]]] = {}
         self.sends: list[dict[tuple[str | None, str], _Step]] = []
         self.recvs: list[dict[tuple[str | None, str], _Step]] = []
         for transitions in machine.table:
@@ -43,9 +50,12 @@ class Monitor:
             for (action, peer, label), t in transitions.items():
                 key = id(t.sort)
                 if key not in validators:
-                    validators[key] = (exact_types_for(t.sort), validator_for(t.sort))
-                exact, check = validators[key]
-                (sends if action == "send" else recvs)[(peer, label)] = (t.target, exact, check, t)
+                    # An int fits a float sort too, but floats are what it mostly carries: first.
+                    exact = tuple(sorted(exact_types_for(t.sort), key=lambda kind: kind is int))
+                    validators[key] = (validator_for(t.sort), exact, identities(exact))
+                check, exact, ids = validators[key]
+                (sends if action == "send" else recvs)[(peer, label)] = (
+                    t.target, exact[0] if exact else None, check, t, exact, ids)
             self.sends.append(sends)
             self.recvs.append(recvs)
         # For each state, the peers it may receive from (checked before blocking).
@@ -57,7 +67,7 @@ class Monitor:
         step = self.sends[self.state].get((to, label))
         if step is None:
             raise self.violation(Action("send", to, label, _type_name(payload)), blame=self.role)
-        if type(payload) not in step[1]:
+        if (kind := type(payload)) is not step[1] and id(kind) not in step[5]:
             reason = step[2](payload)
             if reason is not None:
                 raise self.violation(Action("send", to, label, _type_name(payload)), self.role,
@@ -69,7 +79,7 @@ class Monitor:
         step = self.recvs[self.state].get((frm, label))
         if step is None:
             raise self.violation(Action("recv", frm, label, _type_name(payload)), blame=frm or "the peer")
-        if type(payload) not in step[1]:
+        if (kind := type(payload)) is not step[1] and id(kind) not in step[5]:
             reason = step[2](payload)
             if reason is not None:
                 raise self.violation(Action("recv", frm, label, _type_name(payload)), frm or "the peer",
@@ -102,4 +112,4 @@ class Monitor:
 
 
 def _type_name(payload: object) -> str | None:
-    return None if payload is None else type(payload).__name__
+    return None if payload is None else real_name(type(payload))

@@ -2,15 +2,23 @@
 
 Builtin sorts map to Python types (``nat`` is an ``int >= 0``; ``float``
 also takes an ``int``); a declared sort ``"module:QualifiedName"`` is checked
-with ``isinstance`` against that class, imported once when a monitor is
-built. A ROS 2 sort (``"ros:pkg/msg/Name"``) is the message type of that name in
-ROS 2 Jazzy, resolved through rosbags (:mod:`anodize._ros`): a payload must be an
-instance of its rosbags class whose fields fit the definition, checked field by
-field (ranges, array lengths, bounds, nested messages).
+against that class, imported once when a monitor is built. A ROS 2 sort
+(``"ros:pkg/msg/Name"``) is the message type of that name in ROS 2 Jazzy,
+resolved through rosbags (:mod:`anodize._ros`): a payload must be an instance
+of its rosbags class whose fields fit the definition, checked field by field
+(ranges, array lengths, bounds, nested messages).
 
 A dataclass payload is also checked field by field against its annotations
 (see :func:`check_fields`), so a ``Point`` whose ``x: int`` holds a string is
 the sender's violation, not a crash of the receiver later.
+
+What a payload *is* comes from its real type, ``type(payload)``, compared by identity, never
+from what the payload or its class says: ``__class__``, and a metaclass's ``__eq__`` and
+``__hash__``, are not consulted (a class whose metaclass says it equals ``int`` is not an
+``int``). The subclass policy, the same in both endpoint cores: a payload of exactly the
+sort's class passes at once (the fast path, by identity); a real subclass (by the C-level
+MRO) passes the full check; a sort's class may widen that with its own ``__subclasscheck__``
+(an ABC's registered classes), which is the protocol's code, not the payload's.
 """
 
 from __future__ import annotations
@@ -30,28 +38,53 @@ from sessiontypes import Sort
 from .._ros import ros_type  # rosbags itself is imported only when a ROS sort is resolved
 from ..errors import AnodizeError
 
-__all__ = ["Validator", "validator_for", "exact_types_for", "resolve_class", "with_field_classes", "check_fields"]
+__all__ = ["Validator", "validator_for", "exact_types_for", "identities", "is_a", "real_name", "resolve_class",
+           "with_field_classes", "check_fields"]
 
 # A validator returns None when the payload fits, or why it does not.
 Validator = Callable[[object], "str | None"]
 
 
+def identities(types: Iterable[type]) -> frozenset[int]:
+    """The identities of ``types``, for ``id(type(value)) in identities(...)``: a set of the types
+    themselves would hash and compare them, and a metaclass may redefine both to pass for another
+    class. Whoever keeps the set keeps the types alive too (an identity is only one while it lives)."""
+    return frozenset(map(id, types))
+
+
+def is_a(value: object, classes: type | tuple[type, ...]) -> bool:
+    """Whether ``value``'s real type is one of ``classes`` or a subclass of one: ``isinstance``
+    without consulting ``value.__class__`` (a property may say anything there)."""
+    return issubclass(type(value), classes)
+
+
+def real_name(cls: type) -> str:
+    """A class's own ``__name__``, not what a metaclass's ``__name__`` property says."""
+    return _type_name(cls)
+
+
+_type_name: Callable[[type], str] = type.__dict__["__name__"].__get__
+
+
 def _no_payload(payload: object) -> str | None:
-    return None if payload is None else f"this label carries no payload, got {type(payload).__name__}"
+    return None if payload is None else f"this label carries no payload, got {real_name(type(payload))}"
 
 
 def _of(*types: type, name: str) -> Validator:
     def check(payload: object) -> str | None:
-        if isinstance(payload, types) and not (isinstance(payload, bool) and bool not in types):
+        kind = type(payload)
+        if issubclass(kind, types) and not (kind is bool and bool not in types):
             return None
-        return f"expected a payload of sort {name}, got {type(payload).__name__}"
+        return f"expected a payload of sort {name}, got {real_name(kind)}"
     return check
 
 
 def _nat(payload: object) -> str | None:
-    if isinstance(payload, int) and not isinstance(payload, bool):
-        return None if payload >= 0 else f"expected a payload of sort nat (>= 0), got {payload}"
-    return f"expected a payload of sort nat, got {type(payload).__name__}"
+    kind = type(payload)
+    if issubclass(kind, int) and kind is not bool:
+        number = typing.cast("int", payload)  # int's own comparison and text: a subclass may redefine both
+        return None if int.__ge__(number, 0) else f"expected a payload of sort nat (>= 0), got {int.__repr__(number)}"
+    return f"expected a payload of sort nat, got {real_name(kind)}"
 
 
 _BUILTIN: dict[str, Validator] = {
@@ -160,7 +193,7 @@ def _record(sort: Sort) -> Validator:
 
     def check(payload: object) -> str | None:
         if type(payload) is not dict:  # exactly a dict: what the transports carry as a dict
-            return f"expected {wanted}, got {type(payload).__name__}"
+            return f"expected {wanted}, got {real_name(type(payload))}"
         for name, field_check in fields:
             if name not in payload:
                 return f"field {name} is missing (expected {wanted})"
@@ -234,14 +267,15 @@ _CLASS_CHECKS: dict[type, _Check | None] = {}
 # reading the class instance as ``value``) and the names the chain uses.
 _CHAINS: dict[type, tuple[str, dict[str, object]]] = {}
 _NONE_TYPE = type(None)
-_REPR_TYPES = frozenset({bool, int, float, complex, str, bytes, bytearray, list, tuple, dict, set, frozenset})
+_REPR_TYPES = (bool, int, float, complex, str, bytes, bytearray, list, tuple, dict, set, frozenset)
+_REPR_TYPE_IDS = identities(_REPR_TYPES)
 
 
 def check_fields(value: object) -> str | None:
     """Why the fields of dataclass instance ``value`` do not fit their annotations (None: they do).
 
     Checked: builtin classes (an ``int`` fits ``float`` and ``complex``, a ``bool`` fits only
-    ``bool``, as for the builtin sorts; a subclass fits its base), any other class (``isinstance``),
+    ``bool``, as for the builtin sorts; a subclass fits its base), any other class (:func:`is_a`),
     ``X | None`` and other unions, ``Literal[...]``, ``list[T]``, ``tuple[T, ...]``, ``tuple[A, B]``,
     ``set[T]``, ``frozenset[T]``, ``dict[K, V]`` (and their ``collections.abc`` counterparts),
     nested dataclasses (recursively), ``np.ndarray`` and ``npt.NDArray[dtype]`` (an ndarray, and
@@ -308,8 +342,8 @@ def _compile_class(cls: type) -> _Check | None:
             namespace[f"_t{index}"] = next(iter(exact))
             tests.append(f"type(value.{name}) is _t{index}")
         else:
-            namespace[f"_e{index}"] = exact
-            tests.append(f"type(value.{name}) in _e{index}")
+            namespace[f"_e{index}"] = identities(exact)
+            tests.append(f"id(type(value.{name})) in _e{index}")
     for index, (name, field_check) in enumerate(deep):
         namespace[f"_d{index}"] = field_check
         tests.append(f"_d{index}(value.{name}) is None")
@@ -338,10 +372,12 @@ def _generate(title: str, test: str, namespace: dict[str, object], otherwise: Ca
 
 def _field_by_field(shallow: tuple[tuple[str, frozenset[type], _Check], ...],
                     deep: tuple[tuple[str, _Check], ...]) -> _Check:
+    known = tuple((name, identities(exact), field_check) for name, exact, field_check in shallow)
+
     def check(value: object) -> _Failure | None:
-        for name, exact, field_check in shallow:
+        for name, exact, field_check in known:
             item = getattr(value, name, _UNSET)
-            if type(item) not in exact and (failure := field_check(item)) is not None:
+            if id(type(item)) not in exact and (failure := field_check(item)) is not None:
                 return (f".{name}{failure[0]}", failure[1], failure[2])
         for name, field_check in deep:
             failure = field_check(getattr(value, name, _UNSET))
@@ -417,12 +453,12 @@ def _class(cls: type) -> _Compiled:
     accepted: tuple[type, ...] = _NUMERIC_TOWER.get(cls, (cls,))
     if cls in _NUMERIC_TOWER:  # a bool is an int to Python, not to a protocol (as for the builtin sorts)
         def check(value: object) -> _Failure | None:
-            if isinstance(value, accepted) and not isinstance(value, bool):
+            if issubclass(type(value), accepted) and type(value) is not bool:
                 return None
             return ("", name, value)
     else:
         def check(value: object) -> _Failure | None:
-            return None if isinstance(value, accepted) else ("", name, value)
+            return None if is_a(value, accepted) else ("", name, value)
     return _Compiled(frozenset(accepted), check, name, True)
 
 
@@ -439,7 +475,7 @@ def _nested(cls: type) -> _Check:
             if not own:
                 own.append(_fields_check(cls))
             fields = own[0]
-        elif isinstance(value, cls):
+        elif is_a(value, cls):
             fields = _fields_check(type(value))
         else:
             return ("", name, value)
@@ -452,10 +488,11 @@ def _union(options: list[_Compiled]) -> _Compiled:
         return _ANYTHING
     name = " | ".join(option.name for option in options)
     exact = frozenset().union(*(option.exact for option in options))
+    exact_ids = identities(exact)
     checks = tuple(option.check for option in options if option.check is not None)
 
     def check(value: object) -> _Failure | None:
-        if type(value) in exact:
+        if id(type(value)) in exact_ids:
             return None
         deeper = None
         for option in checks:
@@ -505,7 +542,7 @@ def _generic(origin: object, args: tuple[object, ...]) -> _Compiled:
         name = _name_of(kind)
 
         def check(value: object) -> _Failure | None:
-            return None if isinstance(value, kind) else ("", name, value)
+            return None if is_a(value, kind) else ("", name, value)
         return _Compiled(frozenset({kind}), check, name, True)
     return _ANYTHING
 
@@ -514,19 +551,20 @@ def _items(kind: type, item: _Compiled, name: str, indexed: bool) -> _Compiled:
     item_exact, item_check = item.exact, item.check
     if item_check is None:
         def whole(value: object) -> _Failure | None:
-            return None if isinstance(value, kind) else ("", name, value)
+            return None if is_a(value, kind) else ("", name, value)
         return _Compiled(frozenset({kind}) if kind in (list, tuple, set, frozenset) else frozenset(),
                          whole, name, True)
-    fits = item_exact.__contains__
+    item_ids = identities(item_exact)
+    fits = item_ids.__contains__
 
     def check(value: object) -> _Failure | None:
-        if not isinstance(value, kind):
+        if not is_a(value, kind):
             return ("", name, value)
         elements = typing.cast("Iterable[object]", value)  # ``kind`` is an iterable class
-        if all(map(fits, map(type, elements))):
+        if all(map(fits, map(id, map(type, elements)))):
             return None
         for index, element in enumerate(elements):
-            if type(element) not in item_exact and (failure := item_check(element)) is not None:
+            if id(type(element)) not in item_ids and (failure := item_check(element)) is not None:
                 # A set has no index to show: the whole set is what did not fit.
                 return (f"[{index}]{failure[0]}", failure[1], failure[2]) if indexed else ("", name, value)
         return None
@@ -536,14 +574,17 @@ def _items(kind: type, item: _Compiled, name: str, indexed: bool) -> _Compiled:
 def _fixed_tuple(items: list[_Compiled]) -> _Compiled:
     name = f"tuple[{', '.join(item.name for item in items) or '()'}]"
     size = len(items)
-    steps = tuple((item.exact, item.check) for item in items)
+    steps = tuple((identities(item.exact), item.check) for item in items)
 
     def check(value: object) -> _Failure | None:
-        if not isinstance(value, tuple) or len(value) != size:
+        if not is_a(value, tuple):
+            return ("", name, value)
+        elements = typing.cast("tuple[object, ...]", value)  # tuple's own length and items: a subclass may lie
+        if tuple.__len__(elements) != size:
             return ("", name, value)
         for index, (exact, item_check) in enumerate(steps):
-            element = value[index]
-            if item_check is not None and type(element) not in exact and (failure := item_check(element)):
+            element = tuple.__getitem__(elements, index)
+            if item_check is not None and id(type(element)) not in exact and (failure := item_check(element)):
                 return (f"[{index}]{failure[0]}", failure[1], failure[2])
         return None
     return _Compiled(frozenset(), check, name, False)
@@ -551,16 +592,16 @@ def _fixed_tuple(items: list[_Compiled]) -> _Compiled:
 
 def _mapping(kind: type, key: _Compiled, item: _Compiled) -> _Compiled:
     name = f"{kind.__name__}[{key.name}, {item.name}]"
-    key_exact, key_check = key.exact, key.check
-    item_exact, item_check = item.exact, item.check
+    key_exact, key_check = identities(key.exact), key.check
+    item_exact, item_check = identities(item.exact), item.check
 
     def check(value: object) -> _Failure | None:
-        if not isinstance(value, kind):
+        if not is_a(value, kind):
             return ("", name, value)
         for k, v in value.items():  # type: ignore[attr-defined]
-            if key_check is not None and type(k) not in key_exact and key_check(k) is not None:
+            if key_check is not None and id(type(k)) not in key_exact and key_check(k) is not None:
                 return ("", name, value)  # a key that does not fit: the whole mapping is shown
-            if item_check is not None and type(v) not in item_exact and (failure := item_check(v)):
+            if item_check is not None and id(type(v)) not in item_exact and (failure := item_check(v)):
                 return (f"[{k!r}]{failure[0]}", failure[1], failure[2])
         return None
     return _Compiled(frozenset(), check, name, False)
@@ -574,13 +615,13 @@ def _array(np: typing.Any, args: tuple[object, ...]) -> _Compiled:
         scalar = typing.get_origin(scalar) or scalar  # np.floating[Any] -> np.floating
     if not isinstance(scalar, type):  # no dtype given (Any, a type variable): any ndarray fits
         def any_array(value: object) -> _Failure | None:
-            return None if isinstance(value, ndarray) else ("", "ndarray", value)
+            return None if is_a(value, ndarray) else ("", "ndarray", value)
         return _Compiled(frozenset({ndarray}), any_array, "ndarray", True)
     kind = scalar
     name = f"ndarray of {kind.__name__}"
 
     def check(value: object) -> _Failure | None:
-        if isinstance(value, ndarray) and issubclass(value.dtype.type, kind):
+        if is_a(value, ndarray) and issubclass(typing.cast("typing.Any", value).dtype.type, kind):
             return None
         return ("", name, value)
     return _Compiled(frozenset(), check, name, False)
@@ -588,7 +629,10 @@ def _array(np: typing.Any, args: tuple[object, ...]) -> _Compiled:
 
 def _name_of(cls: type) -> str:
     """``cls``'s qualified name, without the ``f.<locals>.`` of a class made in a function."""
-    return cls.__qualname__.rpartition("<locals>.")[2]
+    return _real_qualname(cls).rpartition("<locals>.")[2]
+
+
+_real_qualname: Callable[[type], str] = type.__dict__["__qualname__"].__get__
 
 
 def _describe(value: object) -> str:
@@ -598,9 +642,9 @@ def _describe(value: object) -> str:
     if value is None:
         return "None"
     kind = type(value)
-    if kind in _REPR_TYPES:
+    if id(kind) in _REPR_TYPE_IDS:
         return f"{kind.__name__} {reprlib.repr(value)}"
     np = sys.modules.get("numpy")
-    if np is not None and isinstance(value, np.ndarray):
-        return f"ndarray of {value.dtype}"
+    if np is not None and is_a(value, np.ndarray):
+        return f"ndarray of {typing.cast('typing.Any', value).dtype}"
     return _name_of(kind)
