@@ -38,6 +38,7 @@ __all__ = ["Supervisor", "Runner", "RunState", "Event", "Ready", "Counts", "Role
 TICK = 0.1           # seconds between two looks at the clock when nothing happens
 STATUS_EVERY = 0.5   # seconds between two on_status calls
 RATE_WINDOW = 1.0    # seconds per window of the reported message rates
+KILL_BOUND = 5.0     # seconds an ended group has to be gone before the supervisor stops waiting for it
 
 
 class RunState(StrEnum):
@@ -245,6 +246,7 @@ class _GroupRecord:
     ended: bool = True
     why: _Why = _Why.NONE
     killed: bool = False  # the supervisor ended it: its death is no failure of its own
+    killed_at: float = 0.0
     error: BaseException | None = None
     reports: dict[str, RoleReport] = field(default_factory=dict)
     scheduling: str = ""
@@ -332,6 +334,10 @@ class Supervisor:
         if self.state is RunState.STOPPING and time.monotonic() - self.stop_since > self.grace:
             for name in self._running():
                 self._end(name, _Why.STOP)
+        for record in self.records.values():  # every wait for a group is bounded, the last one too
+            if record.killed and not record.ended and time.monotonic() - record.killed_at > KILL_BOUND:
+                self._exited(record, f"it did not end within {KILL_BOUND:g} s of being killed; "
+                                     "the run stopped waiting for it")
 
     def _live(self) -> bool:
         return any(not r.ended for r in self.records.values())
@@ -353,6 +359,7 @@ class Supervisor:
             record.state = GroupState.STARTING if incarnation == 0 else GroupState.RESTARTING
             record.ready = record.ended = False
             record.why, record.killed, record.error, record.reports = _Why.NONE, False, None, {}
+            record.killed_at = 0.0
             record.steady = False
         self.runner.start(names, incarnation)
 
@@ -566,6 +573,7 @@ class Supervisor:
             record.why = why
         if not record.ended and not record.killed:
             record.killed = True
+            record.killed_at = time.monotonic()
             self.runner.kill(name)
 
     def _stop_all(self, why: str, tell: bool = True) -> None:
