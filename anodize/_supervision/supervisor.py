@@ -105,6 +105,7 @@ class GroupExited:
     group: str
     incarnation: int
     unreported: str = ""
+    details: dict[str, str] = field(default_factory=dict)  # per role, where it says more than ``unreported``
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -403,7 +404,7 @@ class Supervisor:
                 if not record.killed:
                     self._group_failed(record, event.error)
             case GroupExited():
-                self._exited(record, event.unreported)
+                self._exited(record, event.unreported, event.details)
 
     def _counts(self, record: _GroupRecord, counts: Counts) -> None:
         if counts.memory is not None:
@@ -445,7 +446,7 @@ class Supervisor:
         self._broadcast_failure(record.group.name, dict.fromkeys(missing, describe_error(error)))
         self._apply_policy(record, describe_error(error), whole_group=True)
 
-    def _exited(self, record: _GroupRecord, unreported: str) -> None:
+    def _exited(self, record: _GroupRecord, unreported: str, details: dict[str, str] | None = None) -> None:
         record.ended = True
         record.steady = False
         missing = [r for r in record.group.roles if r not in record.reports]
@@ -459,7 +460,7 @@ class Supervisor:
                 name=role, group=record.group.name,
                 status=RoleStatus.STOPPED if stopped else RoleStatus.FAILED,
                 error=None if stopped else record.error, scheduling=record.scheduling,
-                detail=unreported if stopped else "")
+                detail=(details or {}).get(role, unreported) if stopped else "")
         record.state = self._final_state(record)
         if record.why is _Why.RESTART:
             self._restart_when_ready()

@@ -126,3 +126,12 @@ def grow_past_the_bound(ep: Endpoint) -> None:
         for offset in range(0, len(block), 4096):
             block[offset] = 1
         blocks.append(block)
+
+
+def hold_the_gil_in_stretches(ep: Endpoint) -> None:
+    """Never reaches its endpoint again: a backtracking regular expression (about a second of
+    CPU, holding the GIL all along), again and again."""
+    import re
+
+    while True:
+        re.match("(a+)+b", "a" * 23)

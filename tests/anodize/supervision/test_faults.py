@@ -181,3 +181,28 @@ def test_a_memory_errors_peak_is_the_group_lines_peak(cgroups: str, monkeypatch:
     group = report.groups["a"]
     assert isinstance(group.error, anodize.MemoryBoundError), report.summary()
     assert group.error.peak == group.peak_memory, report.summary()
+
+
+def test_an_inproc_role_holding_the_gil_is_named_still_running_and_the_interpreter_exits(tmp_path: Path) -> None:
+    """Issue 27 item 11: the run returns once the GIL comes back, the report names the stuck role,
+    where it runs and that it still runs, the notes say the supervisor was held up, and the
+    interpreter exits with the role's thread still running (a subprocess: the thread never ends)."""
+    script = tmp_path / "gil.py"
+    script.write_text(textwrap.dedent(f"""
+        import sys
+        sys.path[:0] = {[str(Path(__file__).parents[1])]!r}
+        import anodize, sessiontypes, fault_roles
+        gt = sessiontypes.loads("global P(A, B) = mu t. A -> B : {{ping(nat). B -> A : pong(nat). t, stop}}",
+                                "p.proto").globals["P"]
+        system = anodize.System(gt, transport=anodize.Inproc())
+        system.group("a").role("A", fault_roles.hold_the_gil_in_stretches)
+        system.group("b").role("B", fault_roles.server)
+        report = system.run(timeout=1.0, grace=0.5)
+        sys.stdout.write(report.roles["A"].detail + "\\n" + "\\n".join(report.notes) + "\\n")
+    """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    detail, *notes = done.stdout.splitlines()
+    assert "still running" in detail and "fault_roles.py:" in detail and "hold_the_gil_in_stretches" in detail
+    assert "transport=Processes()" in detail
+    assert any("held up" in note and "GIL" in note for note in notes), done.stdout
