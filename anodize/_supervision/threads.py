@@ -186,10 +186,10 @@ class ThreadRunner:
     def notes(self) -> list[str]:
         if not self.held_up:
             return []
-        return [f"the supervisor was held up {len(self.held_up)} times (longest {max(self.held_up):.1f} s) by a "
+        return [(f"the supervisor was held up {len(self.held_up)} times (longest {max(self.held_up):.1f} s) by a "
                 "role in a call that holds the GIL: the timeout and the grace period were late by as much, "
                 "and a call that never gives the GIL back keeps the run from returning at all "
-                "(transport=Processes() fails and kills such a group)"]
+                "(transport=Processes() fails and kills such a group)")]
 
     def close(self) -> None:
         for name in self.current:
