@@ -26,6 +26,7 @@ from queue import Empty, SimpleQueue
 from typing import Any
 
 from .._isolation.inherit import Boosts, inheritance_table
+from .._isolation.procstat import own_run_delay
 from .._session.endpoint import Endpoint
 from .._transport.inproc import InprocNetwork
 from ..taps import GroupTap
@@ -129,6 +130,7 @@ class ThreadRunner:
     def events(self, timeout: float) -> list[Event]:
         found: list[Event] = []
         asked = time.monotonic() + timeout
+        queued = own_run_delay()
         try:
             found.append(self.inbox.get(timeout=timeout))
             while True:
@@ -136,8 +138,12 @@ class ThreadRunner:
         except Empty:
             pass
         late = time.monotonic() - asked
-        if not found and late >= HELD_UP:  # no event woke it, and it could not run when it asked to
-            self.held_up.append(late)
+        if not found and late >= HELD_UP:  # no event woke it, and it did not run when it asked to
+            after = own_run_delay()
+            if queued is not None and after is not None:
+                late -= after - queued  # waiting for a CPU is the machine's doing; what is left, the GIL's
+            if late >= HELD_UP:
+                self.held_up.append(late)
         for event in found:
             if isinstance(event, RoleEnded):
                 inc = self.current[event.group]
