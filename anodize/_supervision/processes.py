@@ -292,7 +292,10 @@ class ProcessRunner:
         for inc in self.current.values():
             if inc.ended or inc.pid is None:
                 continue
-            inc.tree = snapshot(inc.pid)  # what dies with it if it dies (it adopts what they orphan)
+            tree = snapshot(inc.pid)  # what dies with it if it dies (it adopts what they orphan)
+            if self._has_ended(inc):
+                continue  # a dead process has no children left to read: the last look stands
+            inc.tree = tree
             if not inc.ready or inc.failed:  # a failed group's peak is the one its error names
                 continue
             self._measure(inc, now)
