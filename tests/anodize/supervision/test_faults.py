@@ -67,12 +67,13 @@ def test_a_fork_holding_the_pipe_does_not_delay_the_peer_and_dies_with_its_group
         assert gone_within(pid, 5.0), f"the {name} process {pid} outlived its group"
 
 
+@pytest.mark.parametrize("liveness", [2.0, 30.0])  # the issue's default limit; one no silence reaches
 def test_a_sigkilled_group_whose_children_hold_its_pipes_is_blamed_at_once(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+        liveness: float, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Issue 27 item 10: the supervisor learns of the death from the process (pidfd), not from
     the end of a pipe the group's children still hold; the children die with their group."""
     monkeypatch.setenv("ANODIZE_TEST_DIR", str(tmp_path))
-    report = run(roles.fork_then_sigkilled, transport=anodize.Processes(liveness=30.0), timeout=20)
+    report = run(roles.fork_then_sigkilled, transport=anodize.Processes(liveness=liveness), timeout=20)
     group = report.groups["a"]
     assert isinstance(group.error, RoleError) and group.error.type_name == "ProcessDied", report.summary()
     assert "killed by SIGKILL" in str(group.error)
