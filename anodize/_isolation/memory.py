@@ -12,6 +12,15 @@ Two mechanisms, both where available:
   (v2 ``memory.max`` or v1 ``memory.limit_in_bytes``): a backstop that also
   counts memory ``RLIMIT_DATA`` does not (shared mappings, kernel buffers); the
   kernel kills the process if it is crossed.
+
+Without a cgroup (none writable, or ``ANODIZE_NO_CGROUP=1``), pages of a tmpfs
+file (``/dev/shm``, a ``/tmp`` on tmpfs) belong to the file system, not to any
+process: neither ``RLIMIT_DATA`` nor resident memory sees them. The supervisor
+then also counts the tmpfs files a group's processes hold open
+(:func:`open_tmpfs_bytes`); a tmpfs file written and closed, or left to a process
+outside the group, is not bounded, and the report says so. ``RLIMIT_FSIZE`` is
+not used: it would bound every file the group writes, on disk too (a recording),
+and kill the writer with SIGXFSZ.
 """
 
 from __future__ import annotations
@@ -20,10 +29,11 @@ import contextlib
 import os
 import resource
 import signal
+import stat
 from dataclasses import dataclass
 
 __all__ = ["data_size", "peak_rss", "rss", "limit_data", "Cgroup", "make_cgroup", "remove_stale_cgroups",
-           "CGROUP_SLACK"]
+           "CGROUP_SLACK", "open_tmpfs_bytes", "tmpfs_devices"]
 
 # On top of baseline + bound: kernel buffers charged to the cgroup, and room for the group to
 # report its MemoryError (or the supervisor its measurement) before the kernel kills it.
@@ -155,7 +165,10 @@ def remove_stale_cgroups() -> int:
 
 
 def make_cgroup(name: str) -> tuple[Cgroup | None, str]:
-    """A fresh memory cgroup under this process's own, or None and why not."""
+    """A fresh memory cgroup under this process's own, or None and why not
+    (``ANODIZE_NO_CGROUP=1`` makes none: the fallback, on purpose)."""
+    if os.environ.get("ANODIZE_NO_CGROUP"):
+        return None, "cgroups off: ANODIZE_NO_CGROUP is set"
     for version, parent in _parents():
         path = os.path.join(parent, name)
         try:
@@ -200,3 +213,54 @@ def _memory_hierarchies() -> list[tuple[int, str, str]]:
             except OSError:
                 pass
     return found
+
+
+def tmpfs_devices() -> frozenset[int]:
+    """The device numbers of the tmpfs file systems mounted here (read once per run)."""
+    found: set[int] = set()
+    try:
+        with open("/proc/self/mounts") as f:
+            mounts = [line.split() for line in f]
+    except OSError:
+        return frozenset()
+    for fields in mounts:
+        if len(fields) > 2 and fields[2] == "tmpfs":
+            with contextlib.suppress(OSError):
+                found.add(os.stat(fields[1].replace("\\040", " ")).st_dev)
+    return frozenset(found)
+
+
+def _mapped(pid: int) -> set[tuple[str, int]]:
+    """(device "maj:min", inode) of every file ``pid`` maps: their resident pages are in its VmRSS."""
+    found: set[tuple[str, int]] = set()
+    with contextlib.suppress(OSError, ValueError), open(f"/proc/{pid}/maps") as maps:
+        for line in maps:
+            fields = line.split(maxsplit=5)
+            if len(fields) > 4 and fields[4] != "0":
+                found.add((fields[3], int(fields[4])))
+    return found
+
+
+def open_tmpfs_bytes(pids: list[int], devices: frozenset[int]) -> int:
+    """The bytes of the tmpfs files (on ``devices``) that ``pids`` hold open and do not map,
+    each file counted once (a mapped one is already in resident memory)."""
+    seen: set[tuple[int, int]] = set()
+    total = 0
+    for pid in pids:
+        mapped = _mapped(pid)
+        try:
+            fds = os.listdir(f"/proc/{pid}/fd")
+        except OSError:
+            continue
+        for fd in fds:
+            try:
+                info = os.stat(f"/proc/{pid}/fd/{fd}")
+            except OSError:
+                continue
+            key = (info.st_dev, info.st_ino)
+            if info.st_dev not in devices or not stat.S_ISREG(info.st_mode) or key in seen:
+                continue
+            seen.add(key)
+            if (f"{os.major(info.st_dev):02x}:{os.minor(info.st_dev):02x}", info.st_ino) not in mapped:
+                total += info.st_blocks * 512
+    return total

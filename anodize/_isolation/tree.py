@@ -6,6 +6,14 @@ re-parented to the group process instead of to init, so the group's tree, read
 from ``/proc/<pid>/task/*/children``, holds every process the group started.
 (A process group would not do: a group reading the terminal, as TinMan's
 keyboard teleop does, must stay in the terminal's foreground process group.)
+
+A subreaper adopts nothing once it is dead: when a group process is SIGKILLed,
+its children go to init. So the supervisor keeps a :func:`snapshot` of each
+group's tree (pids with their start times, so a reused pid is never killed) and,
+when the group dies, :func:`kill_remembered` ends every remembered process still
+alive and whatever it started since. Where the group has a cgroup, the cgroup is
+the whole answer; without one, a process started in the last look's interval
+before the group died can escape.
 """
 
 from __future__ import annotations
@@ -15,7 +23,7 @@ import ctypes
 import os
 import signal
 
-__all__ = ["become_subreaper", "descendants", "kill_tree"]
+__all__ = ["become_subreaper", "descendants", "kill_tree", "snapshot", "kill_remembered", "start_time"]
 
 _PR_SET_CHILD_SUBREAPER = 36  # linux/prctl.h
 
@@ -68,3 +76,36 @@ def kill_tree(pid: int, include_root: bool = True) -> None:
     if include_root:
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.kill(pid, signal.SIGKILL)
+
+
+def start_time(pid: int) -> int | None:
+    """When ``pid`` started (clock ticks since boot, field 22 of ``/proc/<pid>/stat``); None if gone."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(") ", 1)[1].split()
+        return int(fields[19])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def snapshot(pid: int) -> dict[int, int]:
+    """``pid``'s living descendants, each with its start time (see :func:`kill_remembered`)."""
+    found: dict[int, int] = {}
+    for kid in descendants(pid):
+        started = start_time(kid)
+        if started is not None:
+            found[kid] = started
+    return found
+
+
+def kill_remembered(remembered: dict[int, int]) -> int:
+    """SIGKILL each process of ``remembered`` (pid -> start time) that is still the same process,
+    with everything it started; returns how many were killed. Used once a group's process is
+    dead and its orphans were re-parented away from it."""
+    killed = 0
+    for pid, started in remembered.items():
+        if start_time(pid) != started:
+            continue  # gone, or the pid now belongs to another process
+        kill_tree(pid)
+        killed += 1
+    return killed

@@ -22,8 +22,17 @@ from multiprocessing.connection import Connection, wait
 from typing import TYPE_CHECKING, Any
 
 from .._isolation.inherit import Boosts, inheritance_table
-from .._isolation.memory import CGROUP_SLACK, Cgroup, make_cgroup, peak_rss, remove_stale_cgroups, rss
-from .._isolation.tree import descendants, kill_tree
+from .._isolation.memory import (
+    CGROUP_SLACK,
+    Cgroup,
+    make_cgroup,
+    open_tmpfs_bytes,
+    peak_rss,
+    remove_stale_cgroups,
+    rss,
+    tmpfs_devices,
+)
+from .._isolation.tree import kill_remembered, kill_tree, snapshot
 from .._isolation.watchdog import Watchdog, rt_throttling
 from .._transport.codec import DecodeError
 from .._transport.shm import remove_run_segments, remove_stale_segments, segment_dir
@@ -45,6 +54,7 @@ __all__ = ["ProcessRunner", "WATCHDOG_LIMIT"]
 WATCHDOG_LIMIT = 0.5  # seconds a FIFO group may keep a CPU busy before it is demoted (< RT throttling's 0.95 s)
 _MEMORY_EVERY = 0.1  # seconds between two measurements of every group's memory
 _START_TIMEOUT = 60.0  # seconds for a group's process to import its roles and report ready
+_CLOSE_WAIT = 5.0  # seconds, in all, for killed group processes to be reaped at the end of a run
 
 
 class _Incarnation:
@@ -58,11 +68,16 @@ class _Incarnation:
         self.reader: control.FrameReader | None = control.FrameReader(control_end.fileno())
         self.last_heard = time.monotonic()
         self.pid: int | None = process.pid
+        # Readable when the process ends, whoever else holds its pipes (multiprocessing's sentinel
+        # is a pipe its children inherit: a forked child kept it open, and the death unseen).
+        self.pidfd: int | None = _pidfd(process.pid)
+        self.tree: dict[int, int] = {}  # its descendants at the last look (pid -> start time)
         self.baseline = 0
         self.baseline_resident = 0
         self.resident = 0
         self.peak = 0
         self.cgroup: Cgroup | None = None
+        self.files_baseline: int | None = None  # without a cgroup: the open tmpfs files at "ready"
         self.started_at = time.monotonic()
         self.ready = False
         self.ended = False
@@ -91,6 +106,7 @@ class ProcessRunner:
         self.current: dict[str, _Incarnation] = {}
         self.pending: list[Event] = []
         self.next_memory_check = 0.0
+        self.tmpfs = tmpfs_devices()
         self.watchdog = Watchdog(WATCHDOG_LIMIT, self._demoted)
         self.watch = LivenessWatch(liveness)  # the liveness rule's samples (see .liveness)
         self.start_timeout = _START_TIMEOUT
@@ -162,7 +178,10 @@ class ProcessRunner:
                      f"baseline (heap, mappings, shared-memory rings, its children), checked every "
                      f"{_MEMORY_EVERY:g} s by the supervisor")
             if inc.cgroup is None:
-                note += " (with no cgroup, a burst faster than that can pass the bound before the group is stopped)"
+                inc.files_baseline = open_tmpfs_bytes([inc.pid or 0, *inc.tree], self.tmpfs)
+                note += (" (with no cgroup, a burst faster than that can pass the bound before the group is "
+                         "stopped; tmpfs files (/dev/shm) count only while its processes hold them open: "
+                         "one it wrote and closed, or handed to a process outside the group, is not bounded)")
         if inc.pid:  # every group: priority inheritance can make any group's threads real time
             self.watchdog.watch(inc.group.name, inc.pid)
         self.pending.append(Ready(group=inc.group.name, incarnation=inc.number, scheduling=ready.scheduling,
@@ -193,7 +212,7 @@ class ProcessRunner:
                 continue
             if inc.control is not None:
                 by_object[inc.control] = inc
-            by_object[inc.process.sentinel] = inc
+            by_object[inc.process.sentinel if inc.pidfd is None else inc.pidfd] = inc
         self.watch.begin()
         started = time.monotonic()
         if by_object and not self.pending:
@@ -251,8 +270,10 @@ class ProcessRunner:
                                            memory=inc.resident, peak=inc.peak))
             case control.RoleEnded():
                 self.pending.append(RoleEnded(group=name, incarnation=number, report=_role_report(name, message)))
-            case control.MemoryExceeded():
-                self._fail(inc, error_from_data(message.error))
+            case control.MemoryExceeded():  # the peak is measured here, as for the group's line
+                if not inc.failed and inc.ready and inc.pid is not None:
+                    self._measure(inc, time.monotonic())
+                self._fail(inc, MemoryBoundError(name, inc.group.memory or 0, inc.peak))
             case control.Crash():
                 self._fail(inc, error_from_data(message.error))
             case control.Notice():  # the group's own words: shown as what it says, not as a finding
@@ -269,22 +290,36 @@ class ProcessRunner:
             return
         self.next_memory_check = now + _MEMORY_EVERY
         for inc in self.current.values():
-            if inc.ended or not inc.ready or inc.pid is None:
+            if inc.ended or inc.pid is None:
                 continue
-            tree = [inc.pid, *descendants(inc.pid)]
-            resident = sum(rss(pid) or 0 for pid in tree) - inc.baseline_resident
-            kernel_peak = (peak_rss(inc.pid) or 0) - inc.baseline_resident  # the root's high-water mark
-            # Not the cgroup's peak: it counts the page cache of the files the group read (a camera
-            # replaying a sequence from a cold cache showed a 508 MiB "peak" at 25 MiB resident).
-            # It is the peak only when the kernel killed the group at its limit (_death_cause).
-            inc.resident = max(0, resident)
-            inc.peak = max(inc.peak, inc.resident, kernel_peak)
-            self.pending.append(Counts(group=inc.group.name, incarnation=inc.number, at=now,
-                                       memory=inc.resident, peak=inc.peak))
+            tree = snapshot(inc.pid)  # what dies with it if it dies (it adopts what they orphan)
+            if self._has_ended(inc):
+                continue  # a dead process has no children left to read: the last look stands
+            inc.tree = tree
+            if not inc.ready or inc.failed:  # a failed group's peak is the one its error names
+                continue
+            self._measure(inc, now)
             bound = inc.group.memory
-            if bound is not None and inc.resident > bound and not inc.failed:
+            if bound is not None and inc.resident > bound:
                 self._fail(inc, MemoryBoundError(inc.group.name, bound, inc.peak))
                 self.kill(inc.group.name)
+
+    def _measure(self, inc: _Incarnation, now: float) -> None:
+        """The group's memory now and its peak: the one source of both the group's line and any
+        MemoryBoundError it gets."""
+        assert inc.pid is not None
+        tree = [inc.pid, *inc.tree]
+        resident = sum(rss(pid) or 0 for pid in tree) - inc.baseline_resident
+        if inc.files_baseline is not None:  # no cgroup: tmpfs pages it holds are no process's RSS
+            resident += open_tmpfs_bytes(tree, self.tmpfs) - inc.files_baseline
+        kernel_peak = (peak_rss(inc.pid) or 0) - inc.baseline_resident  # the root's high-water mark
+        # Not the cgroup's peak: it counts the page cache of the files the group read (a camera
+        # replaying a sequence from a cold cache showed a 508 MiB "peak" at 25 MiB resident).
+        # It is the peak only when the kernel killed the group at its limit (_death_cause).
+        inc.resident = max(0, resident)
+        inc.peak = max(inc.peak, inc.resident, kernel_peak)
+        self.pending.append(Counts(group=inc.group.name, incarnation=inc.number, at=now,
+                                   memory=inc.resident, peak=inc.peak))
 
     def _check_liveness(self) -> None:
         """A group silent past the limit *in time it could run* is failed: stopped (SIGSTOP), a
@@ -298,6 +333,10 @@ class ProcessRunner:
             if inc.ended or inc.failed or not inc.ready or inc.pid is None:
                 continue
             name = inc.group.name
+            if self._has_ended(inc):  # dead, not silent: its exit status says what happened
+                self._drain(inc)
+                self._exited(inc)
+                continue
             if now - inc.last_heard > self.liveness and inc.control is not None and inc.control.poll(0):
                 self._read(inc)  # what it sent while this loop did not run is not silence
             verdict, notes = self.watch.check(name, inc.pid, inc.last_heard, now)
@@ -329,12 +368,31 @@ class ProcessRunner:
         while inc.control is not None and inc.control.poll(0):
             self._read(inc)
 
+    @staticmethod
+    def _has_ended(inc: _Incarnation) -> bool:
+        """Whether the process has exited (without reaping it: :meth:`_exited` does)."""
+        if inc.pidfd is None:
+            return False  # its sentinel tells, in events()
+        return bool(wait([inc.pidfd], 0))
+
+    @staticmethod
+    def _reap(inc: _Incarnation, timeout: float) -> None:
+        """Wait up to ``timeout`` for the process to end, and reap it. Not ``Process.join``: that
+        waits on the sentinel pipe, which a child of the group may hold open after its death."""
+        if inc.process is None:
+            return
+        if inc.pidfd is None:
+            inc.process.join(timeout)
+        elif wait([inc.pidfd], timeout):
+            _ = inc.process.exitcode  # waitpid, at once: the process has exited
+
     def _exited(self, inc: _Incarnation) -> None:
-        inc.process.join(1.0)
+        self._reap(inc, 1.0)
         code = inc.process.exitcode
         inc.ended = True
         if inc.cgroup is not None:
             inc.cgroup.kill_all()
+        kill_remembered(inc.tree)  # its orphans went to init: a group's children do not outlive it
         self.watchdog.forget(inc.group.name)
         self.pending.extend(Note(group=inc.group.name, text=text) for text in self.watch.forget(inc.group.name))
         if code != 0:
@@ -385,6 +443,9 @@ class ProcessRunner:
         if inc.control is not None:
             inc.control.close()
             inc.control = None
+        if inc.pidfd is not None:
+            os.close(inc.pidfd)
+            inc.pidfd = None
         if inc.process is not None and not inc.process.is_alive():
             inc.process.close()
             inc.process = None
@@ -437,8 +498,10 @@ class ProcessRunner:
         for name, inc in self.current.items():
             if inc.process is not None and inc.process.is_alive():
                 self.kill(name)
-                inc.process.join(5.0)
-
+        deadline = time.monotonic() + _CLOSE_WAIT  # one bound for all of them, not one each
+        for inc in self.current.values():
+            self._reap(inc, max(0.0, deadline - time.monotonic()))
+            kill_remembered(inc.tree)
             if inc.cgroup is not None:
                 inc.cgroup.remove()
             self._close(inc)
@@ -472,6 +535,16 @@ def _sent_at(messages: Sequence[object], now: float) -> float:
     if len(beats) < len(messages) or not all(isinstance(at, float) and math.isfinite(at) for at in beats):
         return now
     return min(now, max(beats))
+
+
+def _pidfd(pid: int | None) -> int | None:
+    """A descriptor that becomes readable when process ``pid`` exits (Linux 5.3+), else None."""
+    if pid is None or not hasattr(os, "pidfd_open"):
+        return None
+    try:
+        return os.pidfd_open(pid)
+    except OSError:  # an older kernel, or seccomp: the sentinel it is
+        return None
 
 
 def _sys_path() -> list[str]:

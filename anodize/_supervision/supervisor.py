@@ -38,6 +38,7 @@ __all__ = ["Supervisor", "Runner", "RunState", "Event", "Ready", "Counts", "Role
 TICK = 0.1           # seconds between two looks at the clock when nothing happens
 STATUS_EVERY = 0.5   # seconds between two on_status calls
 RATE_WINDOW = 1.0    # seconds per window of the reported message rates
+KILL_BOUND = 5.0     # seconds an ended group has to be gone before the supervisor stops waiting for it
 
 
 class RunState(StrEnum):
@@ -104,6 +105,7 @@ class GroupExited:
     group: str
     incarnation: int
     unreported: str = ""
+    details: dict[str, str] = field(default_factory=dict)  # per role, where it says more than ``unreported``
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -245,6 +247,7 @@ class _GroupRecord:
     ended: bool = True
     why: _Why = _Why.NONE
     killed: bool = False  # the supervisor ended it: its death is no failure of its own
+    killed_at: float = 0.0
     error: BaseException | None = None
     reports: dict[str, RoleReport] = field(default_factory=dict)
     scheduling: str = ""
@@ -332,6 +335,10 @@ class Supervisor:
         if self.state is RunState.STOPPING and time.monotonic() - self.stop_since > self.grace:
             for name in self._running():
                 self._end(name, _Why.STOP)
+        for record in self.records.values():  # every wait for a group is bounded, the last one too
+            if record.killed and not record.ended and time.monotonic() - record.killed_at > KILL_BOUND:
+                self._exited(record, f"it did not end within {KILL_BOUND:g} s of being killed; "
+                                     "the run stopped waiting for it")
 
     def _live(self) -> bool:
         return any(not r.ended for r in self.records.values())
@@ -353,6 +360,7 @@ class Supervisor:
             record.state = GroupState.STARTING if incarnation == 0 else GroupState.RESTARTING
             record.ready = record.ended = False
             record.why, record.killed, record.error, record.reports = _Why.NONE, False, None, {}
+            record.killed_at = 0.0
             record.steady = False
         self.runner.start(names, incarnation)
 
@@ -396,7 +404,7 @@ class Supervisor:
                 if not record.killed:
                     self._group_failed(record, event.error)
             case GroupExited():
-                self._exited(record, event.unreported)
+                self._exited(record, event.unreported, event.details)
 
     def _counts(self, record: _GroupRecord, counts: Counts) -> None:
         if counts.memory is not None:
@@ -438,7 +446,7 @@ class Supervisor:
         self._broadcast_failure(record.group.name, dict.fromkeys(missing, describe_error(error)))
         self._apply_policy(record, describe_error(error), whole_group=True)
 
-    def _exited(self, record: _GroupRecord, unreported: str) -> None:
+    def _exited(self, record: _GroupRecord, unreported: str, details: dict[str, str] | None = None) -> None:
         record.ended = True
         record.steady = False
         missing = [r for r in record.group.roles if r not in record.reports]
@@ -452,7 +460,7 @@ class Supervisor:
                 name=role, group=record.group.name,
                 status=RoleStatus.STOPPED if stopped else RoleStatus.FAILED,
                 error=None if stopped else record.error, scheduling=record.scheduling,
-                detail=unreported if stopped else "")
+                detail=(details or {}).get(role, unreported) if stopped else "")
         record.state = self._final_state(record)
         if record.why is _Why.RESTART:
             self._restart_when_ready()
@@ -566,6 +574,7 @@ class Supervisor:
             record.why = why
         if not record.ended and not record.killed:
             record.killed = True
+            record.killed_at = time.monotonic()
             self.runner.kill(name)
 
     def _stop_all(self, why: str, tell: bool = True) -> None:

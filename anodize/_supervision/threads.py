@@ -5,11 +5,20 @@ a group restarted later gets a fresh network with the groups restarted with it,
 where roles of the others are dead. Threads cannot be killed: a group the
 supervisor ends is told to stop, and a role that does not reach its endpoint
 within the grace period is abandoned (its thread runs on as a daemon, and the
-report says so).
+report says where it still runs).
+
+A role in a call that holds the GIL (a C extension, a backtracking regular
+expression) keeps every other thread of the process from running, the
+supervisor's included: the run returns once the call gives the GIL back, and
+no sooner. The runner measures how long its own loop was held up that way and
+says so in the run's notes; only ``Processes()`` can end such a call.
 """
 
 from __future__ import annotations
 
+import os
+import sys
+import sysconfig
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -17,6 +26,7 @@ from queue import Empty, SimpleQueue
 from typing import Any
 
 from .._isolation.inherit import Boosts, inheritance_table
+from .._isolation.procstat import own_run_delay
 from .._session.endpoint import Endpoint
 from .._transport.inproc import InprocNetwork
 from ..taps import GroupTap
@@ -28,8 +38,12 @@ from .supervisor import Counts, Event, GroupExited, Ready, RoleEnded, Scope
 
 __all__ = ["ThreadRunner"]
 
-_ABANDONED = ("did not stop within the grace period; its thread was abandoned (a thread cannot be "
-              "killed: it may be busy outside its endpoint, e.g. in a C call)")
+_ABANDONED = ("did not stop within the grace period and is still running{where}, abandoned in its daemon "
+              "thread: a thread cannot be killed, and a call that holds the GIL cannot even be interrupted "
+              "in-process (transport=Processes() kills such a role's process)")
+HELD_UP = 0.5  # seconds the runner's loop may wake late before it counts as held up by a role
+# The standard library's and anodize's own files: where a role is stuck is the role's code that called them.
+_NOT_THE_ROLES = (sysconfig.get_paths()["stdlib"] + os.sep, os.path.dirname(os.path.dirname(__file__)) + os.sep)
 
 
 class _Incarnation:
@@ -43,6 +57,7 @@ class _Incarnation:
         self.endpoints = endpoints
         self.gate = threading.Event()
         self.reported: set[str] = set()
+        self.threads: dict[str, threading.Thread] = {}
         self.over = False
 
 
@@ -67,6 +82,7 @@ class ThreadRunner:
         self.inheritance = inheritance_table(self.groups.values())
         self.boosts: dict[tuple[str, str], Boosts] = {}
         self.inactive: list[str] = []
+        self.held_up: list[float] = []  # each time the loop woke HELD_UP late or more: by how much
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         batch = set(groups)
@@ -89,8 +105,9 @@ class ThreadRunner:
             inc = self.current[name] = _Incarnation(group, incarnation, network, endpoints)
             for role, function in group.roles.items():
                 target = resolve_function(function) if isinstance(function, str) else function
-                threading.Thread(target=self._role_thread, name=f"anodize:{name}/{role}", daemon=True,
-                                 args=(inc, role, target)).start()
+                thread = inc.threads[role] = threading.Thread(
+                    target=self._role_thread, name=f"anodize:{name}/{role}", daemon=True, args=(inc, role, target))
+                thread.start()
             self.inbox.put(Ready(group=name, incarnation=incarnation))
 
     def _role_thread(self, inc: _Incarnation, role: str, function: Callable[..., Any]) -> None:
@@ -112,12 +129,21 @@ class ThreadRunner:
 
     def events(self, timeout: float) -> list[Event]:
         found: list[Event] = []
+        asked = time.monotonic() + timeout
+        queued = own_run_delay()
         try:
             found.append(self.inbox.get(timeout=timeout))
             while True:
                 found.append(self.inbox.get_nowait())
         except Empty:
             pass
+        late = time.monotonic() - asked
+        if not found and late >= HELD_UP:  # no event woke it, and it did not run when it asked to
+            after = own_run_delay()
+            if queued is not None and after is not None:
+                late -= after - queued  # waiting for a CPU is the machine's doing; what is left, the GIL's
+            if late >= HELD_UP:
+                self.held_up.append(late)
         for event in found:
             if isinstance(event, RoleEnded):
                 inc = self.current[event.group]
@@ -158,11 +184,18 @@ class ThreadRunner:
             return
         self.stop(group)
         inc.over = True
-        self.inbox.put(GroupExited(group=group, incarnation=inc.number,
-                                   unreported="" if len(inc.reported) == len(inc.group.roles) else _ABANDONED))
+        stuck = {role: _ABANDONED.format(where=_where(thread)) for role, thread in inc.threads.items()
+                 if role not in inc.reported}
+        self.inbox.put(GroupExited(group=group, incarnation=inc.number, details=stuck,
+                                   unreported=_ABANDONED.format(where="") if stuck else ""))
 
     def notes(self) -> list[str]:
-        return []
+        if not self.held_up:
+            return []
+        return [(f"the supervisor was held up {len(self.held_up)} times (longest {max(self.held_up):.1f} s) by a "
+                "role in a call that holds the GIL: the timeout and the grace period were late by as much, "
+                "and a call that never gives the GIL back keeps the run from returning at all "
+                "(transport=Processes() fails and kills such a group)")]
 
     def close(self) -> None:
         for name in self.current:
@@ -175,3 +208,16 @@ class ThreadRunner:
     def inheritance_report(self) -> tuple[dict[tuple[str, str], Boosts], list[str]]:
         """What priority inheritance did (per waiter->target), and the roles it was inactive for."""
         return self.boosts, self.inactive
+
+
+def _where(thread: threading.Thread) -> str:
+    """Where ``thread`` runs now: its innermost frame in the role's own code (not the standard
+    library's, not anodize's), else its innermost frame; "" if it has ended."""
+    frame = sys._current_frames().get(thread.ident or -1)
+    innermost = frame
+    while frame is not None and frame.f_code.co_filename.startswith(_NOT_THE_ROLES):
+        frame = frame.f_back
+    frame = frame or innermost
+    if frame is None:
+        return ""
+    return f" (at {frame.f_code.co_filename}:{frame.f_lineno} in {frame.f_code.co_name})"

@@ -89,3 +89,49 @@ def map_past_the_bound(ep: Endpoint) -> None:
 
     mmap.mmap(-1, 512 * 2**20, flags=mmap.MAP_PRIVATE)
     ep.sleep(math.inf)
+
+
+def fork_then_sigkilled(ep: Endpoint) -> None:
+    """Leaves a forked child and a shell's background job holding every descriptor the group
+    inherited, then its process is SIGKILLed (nothing of the group runs after that)."""
+    ep.send("B", "ping", 0)
+    ep.recv("B")
+    child = os.fork()
+    if child == 0:
+        time.sleep(90)
+        os._exit(0)
+    Path(os.environ["ANODIZE_TEST_DIR"], "child").write_text(str(child))
+    os.system(f"sleep 90 & echo $! > {os.environ['ANODIZE_TEST_DIR']}/background")
+    time.sleep(0.3)  # its children are seen by the supervisor (it reads the tree ten times a second)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def fill_a_tmpfs_file(ep: Endpoint) -> None:
+    """Writes 256 MiB, 1 MiB at a time, to a file on tmpfs (/dev/shm) and keeps it open: pages
+    of the file system, not of the process (RLIMIT_DATA and VmRSS do not see them)."""
+    with open(f"/dev/shm/anodize-test-{os.getpid()}", "wb") as file:
+        os.unlink(file.name)  # open, unnamed: the kernel frees it with the process
+        chunk = b"x" * 2**20
+        for _ in range(256):
+            file.write(chunk)
+            file.flush()
+        ep.sleep(math.inf)
+
+
+def grow_past_the_bound(ep: Endpoint) -> None:
+    """Allocates 1 MiB blocks, touching each page, until the bound refuses one (MemoryError)."""
+    blocks = []
+    while True:
+        block = bytearray(2**20)
+        for offset in range(0, len(block), 4096):
+            block[offset] = 1
+        blocks.append(block)
+
+
+def hold_the_gil_in_stretches(ep: Endpoint) -> None:
+    """Never reaches its endpoint again: a backtracking regular expression (about a second of
+    CPU, holding the GIL all along), again and again."""
+    import re
+
+    while True:
+        re.match("(a+)+b", "a" * 23)

@@ -67,6 +67,24 @@ def test_a_fork_holding_the_pipe_does_not_delay_the_peer_and_dies_with_its_group
         assert gone_within(pid, 5.0), f"the {name} process {pid} outlived its group"
 
 
+@pytest.mark.parametrize("liveness", [2.0, 30.0])  # the issue's default limit; one no silence reaches
+def test_a_sigkilled_group_whose_children_hold_its_pipes_is_blamed_at_once(
+        liveness: float, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 27 item 10: the supervisor learns of the death from the process (pidfd), not from
+    the end of a pipe the group's children still hold; the children die with their group."""
+    monkeypatch.setenv("ANODIZE_TEST_DIR", str(tmp_path))
+    report = run(roles.fork_then_sigkilled, transport=anodize.Processes(liveness=liveness), timeout=20)
+    group = report.groups["a"]
+    assert isinstance(group.error, RoleError) and group.error.type_name == "ProcessDied", report.summary()
+    assert "killed by SIGKILL" in str(group.error)
+    error = report.roles["B"].error
+    assert isinstance(error, PeerFailedError), report.summary()
+    assert "killed by SIGKILL" in error.cause
+    for name in ("child", "background"):
+        pid = int((tmp_path / name).read_text())
+        assert gone_within(pid, 5.0), f"the {name} process {pid} outlived its group"
+
+
 def test_a_frozen_group_is_failed_after_missing_its_heartbeats() -> None:
     report = run(roles.freezing_client, transport=anodize.Processes(liveness=1.0))
     group = report.groups["a"]
@@ -136,3 +154,56 @@ def test_memory_the_data_limit_misses_is_still_bounded_and_reported(hog: object)
         assert group.peak_memory is not None and group.peak_memory > 64 * 2**20
     assert "the bound covers resident memory" in group.memory_note
     assert isinstance(report.roles["B"].error, PeerFailedError)
+
+
+def test_without_a_cgroup_a_tmpfs_file_counts_against_the_bound(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 27 item 12: tmpfs pages are no process's RSS; the fallback counts the group's open
+    tmpfs files (and the report says what it cannot see)."""
+    monkeypatch.setenv("ANODIZE_NO_CGROUP", "1")
+    system = anodize.System(PING, transport=anodize.Processes())
+    system.group("a", memory="64MiB").role("A", roles.fill_a_tmpfs_file)
+    system.group("b").role("B", roles.server)
+    report = system.run(timeout=30, grace=1.0)
+    group = report.groups["a"]
+    assert "no cgroup backstop (cgroups off: ANODIZE_NO_CGROUP is set)" in group.memory_note, report.summary()
+    assert isinstance(group.error, anodize.MemoryBoundError), report.summary()
+    assert "tmpfs" in group.memory_note
+
+
+@pytest.mark.parametrize("cgroups", ["on", "off"])
+def test_a_memory_errors_peak_is_the_group_lines_peak(cgroups: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 27 item 12: one source for the peak, whichever mechanism stopped the group."""
+    if cgroups == "off":
+        monkeypatch.setenv("ANODIZE_NO_CGROUP", "1")
+    system = anodize.System(PING, transport=anodize.Processes())
+    system.group("a", memory="64MiB").role("A", roles.grow_past_the_bound)
+    system.group("b").role("B", roles.server)
+    report = system.run(timeout=30, grace=1.0)
+    group = report.groups["a"]
+    assert isinstance(group.error, anodize.MemoryBoundError), report.summary()
+    assert group.error.peak == group.peak_memory, report.summary()
+
+
+def test_an_inproc_role_holding_the_gil_is_named_still_running_and_the_interpreter_exits(tmp_path: Path) -> None:
+    """Issue 27 item 11: the run returns once the GIL comes back, the report names the stuck role,
+    where it runs and that it still runs, the notes say the supervisor was held up, and the
+    interpreter exits with the role's thread still running (a subprocess: the thread never ends)."""
+    script = tmp_path / "gil.py"
+    script.write_text(textwrap.dedent(f"""
+        import sys
+        sys.path[:0] = {[str(Path(__file__).parents[1])]!r}
+        import anodize, sessiontypes, fault_roles
+        gt = sessiontypes.loads("global P(A, B) = mu t. A -> B : {{ping(nat). B -> A : pong(nat). t, stop}}",
+                                "p.proto").globals["P"]
+        system = anodize.System(gt, transport=anodize.Inproc())
+        system.group("a").role("A", fault_roles.hold_the_gil_in_stretches)
+        system.group("b").role("B", fault_roles.server)
+        report = system.run(timeout=1.0, grace=0.5)
+        sys.stdout.write(report.roles["A"].detail + "\\n" + "\\n".join(report.notes) + "\\n")
+    """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    detail, *notes = done.stdout.splitlines()
+    assert "still running" in detail and "fault_roles.py:" in detail and "hold_the_gil_in_stretches" in detail
+    assert "transport=Processes()" in detail
+    assert any("held up" in note and "GIL" in note for note in notes), done.stdout
