@@ -492,6 +492,9 @@ class ProcessRunner:
                              "is a pipe, and its kernel buffer (64 KiB) is what bounds it")
         return notes
 
+    def bound(self, seconds: float) -> None:
+        """Nothing to arm: the roles run in other processes, which the supervisor can always kill."""
+
     def close(self) -> None:
         self.watchdog.stop()
         self.watch.end()

@@ -222,6 +222,11 @@ class Runner(Protocol):
     def notes(self) -> list[str]:
         """System-wide facts for the report."""
 
+    def bound(self, seconds: float) -> None:
+        """The run will end within ``seconds`` from now (its timeout and grace): a runner whose
+        roles share the supervisor's process arms a last resort for a role that never lets the
+        supervisor run again; others need nothing."""
+
     def close(self) -> None:
         """Release everything (processes, cgroups, rings); called once, at the end."""
 
@@ -378,6 +383,8 @@ class Supervisor:
                 if self.went is None:
                     self.went = time.monotonic()
                     self.state = RunState.RUNNING
+                    if self.timeout is not None:
+                        self.runner.bound(self.timeout + self.grace)
 
     # ---- events ----------------------------------------------------------------------------
     def _handle(self, event: Event) -> None:

@@ -11,11 +11,15 @@ A role in a call that holds the GIL (a C extension, a backtracking regular
 expression) keeps every other thread of the process from running, the
 supervisor's included: the run returns once the call gives the GIL back, and
 no sooner. The runner measures how long its own loop was held up that way and
-says so in the run's notes; only ``Processes()`` can end such a call.
+says so in the run's notes; only ``Processes()`` can end such a call. A call that
+never gives it back meets the last resort (:meth:`ThreadRunner.bound`): the
+process exits with every thread's stack on stderr, 10 s after the run's timeout
+and grace, rather than hang.
 """
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import sys
 import sysconfig
@@ -42,6 +46,7 @@ _ABANDONED = ("did not stop within the grace period and is still running{where},
               "thread: a thread cannot be killed, and a call that holds the GIL cannot even be interrupted "
               "in-process (transport=Processes() kills such a role's process)")
 HELD_UP = 0.5  # seconds the runner's loop may wake late before it counts as held up by a role
+LAST_RESORT = 10.0  # seconds past a run's timeout and grace before a process held by the GIL is ended
 # The standard library's and anodize's own files: where a role is stuck is the role's code that called them.
 _NOT_THE_ROLES = (sysconfig.get_paths()["stdlib"] + os.sep, os.path.dirname(os.path.dirname(__file__)) + os.sep)
 
@@ -83,6 +88,7 @@ class ThreadRunner:
         self.boosts: dict[tuple[str, str], Boosts] = {}
         self.inactive: list[str] = []
         self.held_up: list[float] = []  # each time the loop woke HELD_UP late or more: by how much
+        self.armed = False  # the last resort's timer (see bound)
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         batch = set(groups)
@@ -197,7 +203,20 @@ class ThreadRunner:
                 "and a call that never gives the GIL back keeps the run from returning at all "
                 "(transport=Processes() fails and kills such a group)")]
 
+    def bound(self, seconds: float) -> None:
+        """Arm the last resort: a role in a call that never gives the GIL back keeps every
+        thread of this process from running, the supervisor's too, so nothing written in
+        Python can end the run. ``faulthandler``'s timer is a thread of C that needs no GIL:
+        if the run has not ended :data:`LAST_RESORT` seconds after its timeout and grace, it
+        prints every thread's stack (the stuck role's frame among them) to stderr and exits
+        the process with status 1. A run that ends disarms it."""
+        faulthandler.dump_traceback_later(seconds + LAST_RESORT, exit=True)
+        self.armed = True
+
     def close(self) -> None:
+        if self.armed:
+            faulthandler.cancel_dump_traceback_later()
+            self.armed = False
         for name in self.current:
             self.kill(name)
         for tap in self.taps:

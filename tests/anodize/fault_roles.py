@@ -128,6 +128,14 @@ def grow_past_the_bound(ep: Endpoint) -> None:
         blocks.append(block)
 
 
+def hold_the_gil_for_good(ep: Endpoint) -> None:
+    """A backtracking regular expression of 2**40 steps: it holds the GIL for longer than any
+    test lasts (issue 27's example)."""
+    import re
+
+    re.match("(a+)+b", "a" * 40)
+
+
 def hold_the_gil_in_stretches(ep: Endpoint) -> None:
     """Never reaches its endpoint again: a backtracking regular expression (about a second of
     CPU, holding the GIL all along), again and again."""

@@ -184,6 +184,29 @@ def test_a_memory_errors_peak_is_the_group_lines_peak(cgroups: str, monkeypatch:
     assert group.error.peak == group.peak_memory, report.summary()
 
 
+@pytest.mark.slow
+def test_an_inproc_role_that_never_gives_the_gil_back_ends_the_process_within_a_bound(tmp_path: Path) -> None:
+    """Issue 27 item 11's own case: nothing in Python can run again, so the last resort (a
+    timer of C, faulthandler's) ends the process 10 s after the timeout and grace, with the
+    stuck role's frame on stderr, rather than let it hang."""
+    script = tmp_path / "gil.py"
+    script.write_text(textwrap.dedent(f"""
+        import sys
+        sys.path[:0] = {[str(Path(__file__).parents[1])]!r}
+        import anodize, sessiontypes, fault_roles
+        gt = sessiontypes.loads("global P(A, B) = mu t. A -> B : {{ping(nat). B -> A : pong(nat). t, stop}}",
+                                "p.proto").globals["P"]
+        system = anodize.System(gt, transport=anodize.Inproc())
+        system.group("a").role("A", fault_roles.hold_the_gil_for_good)
+        system.group("b").role("B", fault_roles.server)
+        system.run(timeout=1.0, grace=0.5)
+        print("the run returned")
+    """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=90)
+    assert done.returncode == 1 and "the run returned" not in done.stdout
+    assert "hold_the_gil_for_good" in done.stderr and "fault_roles.py" in done.stderr
+
+
 def test_an_inproc_role_holding_the_gil_is_named_still_running_and_the_interpreter_exits(tmp_path: Path) -> None:
     """Issue 27 item 11: the run returns once the GIL comes back, the report names the stuck role,
     where it runs and that it still runs, the notes say the supervisor was held up, and the
