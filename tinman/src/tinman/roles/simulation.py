@@ -15,7 +15,7 @@ from ..faults import blinded, start_faults
 from ..messages import PoseStamped, Twist, seconds
 from ..outcome import CAMERA_TRUTH
 from ..picture import draw_run
-from ..records import save_record
+from ..records import records_folder, save_record
 from ..settings import Settings, current
 from ..sim import DiffDrive
 from ..tum import write_trajectory
@@ -138,7 +138,7 @@ class _Film:
             self.skipped += 1
 
     def save(self, settings: Settings) -> None:
-        if self.stamps:
+        if self.stamps and records_folder() is not None:  # a launched run (a replay writes nothing)
             settings.records.mkdir(parents=True, exist_ok=True)
             write_trajectory(settings.records / CAMERA_TRUTH, self.stamps, self.poses,
                              comment="TinMan Gazebo: the simulated camera's true path")
@@ -201,6 +201,8 @@ class _Painter:
 
     def _paint(self) -> None:
         lower_thread_priority()
+        if records_folder() is None:  # not a launched run (a replay): no live picture
+            return
         live = self._settings.records / "live.png"
         while True:
             time.sleep(REDRAW_PERIOD)  # a plain thread, not a role: it takes no step of the protocol
