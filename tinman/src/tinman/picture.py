@@ -393,7 +393,7 @@ def _draw_mission(axes: Axes, run: _Run, world: World) -> list[Any]:
         places = [world.waypoints[w.number - 1] for w in found.waypoints]
         marks.append(axes.scatter([x for x, _ in places], [y for _, y in places], marker="o", s=520,
                                   facecolor="none", edgecolor=COLOURS["truth"], lw=2.2, zorder=7.5,
-                                  label=f"waypoints reached ({len(found.waypoints)}), with when"))
+                                  label=f"waypoints reached ({len(found.waypoints)}), each with its time"))
         for w, (x, y) in zip(found.waypoints, places, strict=True):
             axes.annotate(f"{w.t:.1f} s", (x, y), xytext=(7, -12 - 9 * (w.lap - 1)), textcoords="offset points",
                           fontsize=8, color=COLOURS["truth"], zorder=7.5)
