@@ -84,11 +84,22 @@ class ReplayReport:
 
     @property
     def ok(self) -> bool:
-        """The role sent what the recording says, followed the protocol, and did not fail."""
-        return self.divergence is None and self.error is None and self.outcome not in (TIMED_OUT, _FAILED)
+        """The role sent what the recording says (at least one message was compared: a replay that
+        compared nothing has shown nothing), followed the protocol, and did not fail."""
+        return (self.divergence is None and self.error is None and self.outcome not in (TIMED_OUT, _FAILED)
+                and self.messages_compared > 0)
+
+    @property
+    def messages_compared(self) -> int:
+        """Messages the role sent that were compared with the recorded ones."""
+        return sum(done for done, _ in self.compared.values())
 
     def text(self) -> str:
-        verdict = ("matches the recording and follows the protocol, as far as the role can be replayed alone "
+        nothing = (self.divergence is None and self.error is None and self.outcome not in (TIMED_OUT, _FAILED)
+                   and not self.messages_compared)
+        verdict = ("COMPARED NOTHING: the role sent no message on a recorded channel, so the replay shows "
+                   "nothing (not a pass)" if nothing else
+                   "matches the recording and follows the protocol, as far as the role can be replayed alone "
                    "(INCOMPLETE: see 'ended')" if self.ok and self.outcome == NOT_RECORDED else
                    "matches the recording and follows the protocol" if self.ok else
                    "DIVERGES from the recording" if self.divergence is not None else
@@ -117,6 +128,7 @@ class ReplayReport:
     def to_dict(self) -> dict[str, Any]:
         return {"recording": self.recording, "protocol": self.protocol, "role": self.role,
                 "function": self.function, "ok": self.ok, "outcome": self.outcome, "detail": self.detail,
+                "messages_compared": self.messages_compared,
                 "divergence": None if self.divergence is None else self.divergence.__dict__,
                 "error": None if self.error is None else f"{type(self.error).__name__}: {self.error}",
                 "received": self.received, "compared": self.compared, "uncompared": self.uncompared,

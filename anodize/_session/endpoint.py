@@ -559,14 +559,19 @@ class Endpoint(_Core):
         return "unmonitored" if self._monitor is None else str(self._monitor.state)
 
     def _blocked_on(self, frm: str | None) -> str:
-        """``blocked in state 3 waiting for ?Cam(Frame)``: what a stopped receive was waiting for."""
+        """What a stopped receive was waiting for: ``blocked in state 3 waiting for ?Cam(Frame)``,
+        or at the first state of a recursive local type (where a loop waits for its next round,
+        not a deadlock) ``waiting at the head of its loop (state 0) for ?Cam(Frame)``."""
         monitor = self._monitor
         if monitor is None:
             return f"blocked waiting for a message from {frm or 'any peer'}"
         waits = [str(Action("recv", t.peer, t.label, t.sort.spelling if t.sort else None))
                  for t in self._machine.expected(monitor.state)
                  if t.action == "recv" and (frm is None or t.peer == frm)]
-        return f"blocked in state {monitor.state} waiting for {' or '.join(waits) or 'a message from ' + str(frm)}"
+        what = " or ".join(waits) or f"a message from {frm}"
+        if _loop_head(self._machine, monitor.state):
+            return f"waiting at the head of its loop (state {monitor.state}) for {what}"
+        return f"blocked in state {monitor.state} waiting for {what}"
 
     def _forked_now(self) -> bool:
         """``_forked()``, having first registered a branch's thread for priority inheritance."""
@@ -719,3 +724,8 @@ def put_each(channel: Channel, items: list[tuple[str, object]]) -> None:
         except BaseException as error:
             error.sent_in_batch = sent  # type: ignore[attr-defined]
             raise
+
+
+def _loop_head(machine: StateMachine, state: int) -> bool:
+    """``state`` is the first state of a recursive local type: its start, which some action leads back to."""
+    return state == machine.initial and any(t.target == state for row in machine.table for t in row.values())

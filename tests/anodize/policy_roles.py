@@ -46,6 +46,11 @@ def ping_then_sleep(ep: Endpoint) -> None:
     ep.sleep(math.inf)
 
 
+def ping_without_pong(ep: Endpoint) -> None:
+    ep.recv("A")
+    ep.sleep(math.inf)
+
+
 def ticker(ep: Endpoint) -> None:
     for i in range(TICKS):
         ep.send("D", "tick", i)

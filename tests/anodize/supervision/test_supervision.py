@@ -96,11 +96,21 @@ def test_a_timeout_names_every_blocked_role_and_what_it_waited_for(transport: Tr
     machine = POLICIES.project("B").fsm()
     waiting = [t for t in machine.expected(machine.initial) if t.action == "recv"]
     assert [t.label for t in waiting] == ["ping", "stop"]  # B is back at its loop's start
-    assert report.roles["B"].detail == (f"blocked in state {machine.initial} waiting for "
+    # Waiting for the loop's next round is not a deadlock: the report says where B waits.
+    assert report.roles["B"].detail == (f"waiting at the head of its loop (state {machine.initial}) for "
                                         "?A(ping(nat)) or ?A(stop)")
     assert re.fullmatch(r"sleeping in state \d+ \(Endpoint\.sleep\)", report.roles["A"].detail)
-    assert "  role B: stopped, blocked in state" in report.summary()
+    assert "  role B: stopped, waiting at the head of its loop (state 0) for ?A(ping(nat))" in report.summary()
     assert report.to_dict()["roles"]["B"]["detail"] == report.roles["B"].detail
+
+
+def test_a_role_blocked_inside_its_loop_is_not_said_to_wait_at_its_head() -> None:
+    report = run(anodize.Inproc(), roles.client, server=roles.ping_without_pong, timeout=1.0)
+    machine = POLICIES.project("A").fsm()
+    state = machine.step(machine.initial, "send", "B", "ping")
+    assert state is not None  # A sent its ping and waits for the pong, in the loop's body
+    assert report.roles["A"].detail == f"blocked in state {state.target} waiting for ?B(pong(nat))"
+    assert report.roles["B"].detail.startswith("sleeping in state")
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)

@@ -463,7 +463,7 @@ def test_run_stops_roles_at_the_timeout_of_the_command_line(
     assert out.startswith("protocol Stream: stopped, no failures in ")
     assert "  group a: stopped (" in out
     # Every role still running is named, with what it was doing when the timeout came.
-    assert "  role C: stopped, blocked in state 0 waiting for ?P(data(int)) or ?P(stop)\n" in out
+    assert "  role C: stopped, waiting at the head of its loop (state 0) for ?P(data(int)) or ?P(stop)\n" in out
     assert re.search(r"^  role P: stopped, (interrupted sending data to C, in state 0|sleeping.*)$", out, re.M)
 
 
@@ -619,7 +619,7 @@ def test_ctrl_c_stops_the_run_and_still_prints_and_writes_the_report(
     data = json.loads(report.read_text(encoding="utf-8"))
     assert (data["outcome"], data["interrupted"], data["ok"]) == ("interrupted", True, False)
     assert data["roles"]["C"]["status"] == "stopped"
-    assert data["roles"]["C"]["detail"].startswith("blocked in state 0 waiting for ?P(data(int))")
+    assert data["roles"]["C"]["detail"].startswith("waiting at the head of its loop (state 0) for ?P(data(int))")
 
 
 @pytest.mark.parametrize("command", ["check", "project", "fsm"])

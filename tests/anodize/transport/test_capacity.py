@@ -82,4 +82,4 @@ def test_a_receiver_waiting_on_its_groups_own_channel_is_stopped_by_the_timeout(
     consumer = report.roles["C"]
     assert consumer.status is RoleStatus.STOPPED, report.summary()
     # Woken by the stop, not killed with its group after the grace period ("its process ended").
-    assert "blocked in state 0 waiting for ?P" in report.summary(), report.summary()
+    assert "waiting at the head of its loop (state 0) for ?P" in report.summary(), report.summary()

@@ -28,6 +28,7 @@ from anodize import (
     load_config,
 )
 
+from .mission_outcome import counted, mission_line
 from .outcome import build_report
 from .settings import FAULTS, Settings, export
 from .worlds import DEFAULT_LOOK, WORLDS
@@ -230,7 +231,7 @@ def _judge(data: dict[str, Any], settings: Settings) -> tuple[bool, list[str]]:
     """Whether the run did what TinMan is for; the problems if not."""
     problems = []
     if data["violations"]:
-        problems.append(f"{data['violations']} protocol violation(s)")
+        problems.append(counted(data["violations"], "protocol violation"))
     for name, group in data["groups"].items():
         if group["status"] == "failed" and name not in settings.inject:
             errors = [group["error"]] + [role["error"] for role in data["roles"].values() if role["group"] == name]
@@ -238,8 +239,7 @@ def _judge(data: dict[str, Any], settings: Settings) -> tuple[bool, list[str]]:
             problems.append(f"group {name} failed: {first['type']}: {first['message']}")
         if group["status"] != "failed" and settings.inject.get(name) == "memory-hog":
             problems.append(f"group {name} was injected with {settings.inject[name]} but did not fail")
-    if data["robot"].get("bumps"):
-        problems.append(f"the robot bumped into the room {data['robot']['bumps']} times")
+    problems.extend(f"mission failed: {failure}" for failure in data["mission"]["failures"])
     if not data["frames_processed"] and "perception" not in settings.inject:
         problems.append("visual odometry tracked no frame")
     if data["control_period_ms"].get("p50") is None and "control" not in settings.inject:
@@ -248,27 +248,30 @@ def _judge(data: dict[str, Any], settings: Settings) -> tuple[bool, list[str]]:
 
 
 def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
-    lines = []
+    """The printed report under the run's summary: the mission's outcome first (the summary's first
+    line is the system's), then what each part of the robot did."""
+    lines = [mission_line(data["mission"])]
     if data["ate_rmse_m"] is not None:
         lines.append(f"visual odometry: ATE RMSE {data['ate_rmse_m']:.3f} m over {data['trajectory_length_m']:.2f} m "
-                     f"({data['ate_percent']:.2f}%), {data['frames_processed']} frames tracked, "
+                     f"({data['ate_percent']:.2f}%), {counted(data['frames_processed'] or 0, 'frame')} tracked, "
                      f"{data['frames_dropped']} dropped")
     period = data["control_period_ms"]
     if period.get("p50") is not None:
         lines.append(f"control loop: period p50 {period['p50']:.1f} ms, p99 {period['p99']:.1f} ms "
-                     f"over {data['control']['commands']} commands")
+                     f"over {counted(data['control']['commands'] or 0, 'command')}")
     robot = data["robot"]
     if data.get("final_position_error_m") is not None and robot.get("distance_m") is not None:
         drift = data.get("drift_per_m")  # None when the robot did not travel (e.g. turned on the spot)
         lines.append(f"robot (steered by the odometry): drove {robot['distance_m']:.2f} m, "
-                     f"{robot['waypoints_reached']} waypoints reached, {robot['bumps']} bumps; "
+                     f"{counted(robot['waypoints_reached'], 'waypoint')} reached, "
+                     f"{counted(robot['bumps'] or 0, 'bump')}; "
                      f"odometry's final position error {data['final_position_error_m']:.3f} m"
                      + (f" ({drift * 100:.2f} cm per metre)" if drift is not None else ""))
     control = data["control"]
     if data.get("vo_lost_frames") or control.get("stops_for_lost_tracking"):
-        lines.append(f"odometry lost track on {data['vo_lost_frames']} frames: the robot stopped "
-                     f"{control['stops_for_lost_tracking']} times, then drove on "
-                     f"({control['path_commands_after_a_stop']} path commands after)")
+        lines.append(f"odometry lost track on {counted(data['vo_lost_frames'] or 0, 'frame')}: the robot stopped "
+                     f"{counted(control['stops_for_lost_tracking'] or 0, 'time')}, then drove on "
+                     f"({counted(control['path_commands_after_a_stop'] or 0, 'path command')} after)")
     lost = data["control"].get("planner_lost")
     if lost:
         lines.append(f"planner lost during the run; teleop commands after that: "

@@ -10,11 +10,10 @@ import numpy as np
 from anodize import ProtocolViolationError, RunReport
 
 from .ate import evaluate_ate
-from .mission import WAYPOINT_TOLERANCE
+from .mission_outcome import mission_outcome
 from .records import load_records
 from .settings import Settings
 from .tum import read_trajectory
-from .world import DEFAULT_WORLD
 
 __all__ = ["build_report", "violations_in", "truth_path", "CAMERA_TRUTH"]
 
@@ -41,11 +40,13 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
     ate = _ate(settings)
     violations = violations_in(report)
     run = report.to_dict()
+    mission = mission_outcome(records)
     return {
         "system": "tinman",
         "global": report.protocol,
         "transport": report.transport,
-        "outcome": report.outcome,
+        "outcome": report.outcome,  # the system's: how the groups ended (the robot's is "mission")
+        "mission": mission,
         "duration_s": round(report.duration, 3),
         "requested_duration_s": settings.duration,
         "dataset": settings.dataset,
@@ -79,7 +80,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
                     "held_back_near_obstacles": move.get("held_back")},
         "vo_lost_frames": vo.get("lost_frames"),
         "robot": {"distance_m": _round(gazebo.get("odometer_m")), "bumps": gazebo.get("bumps"),
-                  "waypoints_reached": _waypoints_reached(gazebo.get("trajectory") or [])},
+                  "waypoints_reached": len(mission["waypoints_reached"])},
         "planner": {"method": planner.get("method"), "plans": planner.get("plans"),
                     "failures": planner.get("failure_count"),
                     "plan_ms_p50": _round(float(np.median(planner["plan_ms"])) if planner.get("plan_ms") else None)},
@@ -108,17 +109,6 @@ def _ate(settings: Settings) -> dict[str, Any]:
             "ate_percent": round(result.percent, 4), "ate_pairs": result.pairs,
             "final_position_error_m": round(final, 4),
             "drift_per_m": round(final / result.length, 5) if result.length > 0 else None}
-
-
-def _waypoints_reached(trajectory: list[list[float]]) -> int:
-    """How many waypoints of the patrol the robot really passed, in order (rows ``t, x, y, ...``)."""
-    waypoints = DEFAULT_WORLD.waypoints
-    reached = 0
-    for row in trajectory:
-        x, y = waypoints[reached % len(waypoints)]
-        if (row[1] - x) ** 2 + (row[2] - y) ** 2 <= WAYPOINT_TOLERANCE ** 2:
-            reached += 1
-    return reached
 
 
 def truth_path(settings: Settings) -> Path:

@@ -11,7 +11,9 @@ Layout (about 1600 x 1000 px):
   ``groundtruth.txt``, or the simulated camera's true path that Gazebo records), the
   simulated robot's true path (the Gazebo record), the VO estimate aligned to the
   ground truth as TUM's ``evaluate_ate.py`` aligns it, the latest and earlier plans,
-  start and end markers, and letters where the camera frames below were taken;
+  start and end markers, letters where the camera frames below were taken, the waypoints the
+  robot reached (ringed, with the time it reached each) and where it bumped into the room
+  (crosses; both from :func:`tinman.mission_outcome.mission_marks`, as the report counts them);
 - the VO estimate's position error over time (after that alignment) and its RMSE;
 - a row of camera frames along the run, each with its time (a recording's images, or the
   simulated camera's view rendered again from its true pose: its images are not saved);
@@ -47,6 +49,8 @@ from matplotlib.transforms import Affine2D
 from .ate import AteResult, evaluate_ate
 from .dataset import DatasetError, TumSequence
 from .geometry import FR1
+from .mission import WAYPOINT_TOLERANCE
+from .mission_outcome import counted, mission_marks
 from .outcome import truth_path
 from .records import load_records
 from .settings import Settings
@@ -348,6 +352,7 @@ def _draw_room(axes: Axes, run: _Run, world: World, moments: list[tuple[float, i
     marks.append(axes.scatter([world.start[0]], [world.start[1]], marker="s", s=90, facecolor="white",
                               edgecolor="black", lw=1.6, zorder=8, label="start (the robot's dock)"))
     marks += _draw_ends(axes, run, robot)
+    marks += _draw_mission(axes, run, world)
     marks += _draw_moment_marks(axes, run, moments)
 
     xs = [0.0, world.width]
@@ -378,6 +383,28 @@ def _robot_path(record: dict[str, Any]) -> np.ndarray:
         return np.empty((0, 3))
     finite: np.ndarray = picked[np.isfinite(picked).all(axis=1)]
     return finite
+
+
+def _draw_mission(axes: Axes, run: _Run, world: World) -> list[Any]:
+    """The waypoints reached (a ring on each, its time beside it) and the contacts (a cross each)."""
+    found = mission_marks(run.records, world.waypoints, WAYPOINT_TOLERANCE)
+    marks: list[Any] = []
+    if found.waypoints:
+        places = [world.waypoints[w.number - 1] for w in found.waypoints]
+        marks.append(axes.scatter([x for x, _ in places], [y for _, y in places], marker="o", s=520,
+                                  facecolor="none", edgecolor=COLOURS["truth"], lw=2.2, zorder=7.5,
+                                  label=f"waypoints reached ({len(found.waypoints)}), each with its time"))
+        for w, (x, y) in zip(found.waypoints, places, strict=True):
+            axes.annotate(f"{w.t:.1f} s", (x, y), xytext=(7, -12 - 9 * (w.lap - 1)), textcoords="offset points",
+                          fontsize=8, color=COLOURS["truth"], zorder=7.5)
+    if found.contacts:
+        recorded = run.records.get("Gazebo", {}).get("bumps")  # events are kept up to a bound; the count is whole
+        bumps = recorded if isinstance(recorded, int) else sum(c.bumps for c in found.contacts)
+        marks.append(axes.scatter([c.x for c in found.contacts], [c.y for c in found.contacts], marker="X", s=140,
+                                  facecolor="#E00000", edgecolor="black", lw=0.8, zorder=9.5,
+                                  label=f"bumps: {counted(bumps, 'bump')} in "
+                                        f"{counted(len(found.contacts), 'contact')}"))
+    return marks
 
 
 def _draw_plans(axes: Axes, record: dict[str, Any] | None) -> list[Any]:
@@ -563,28 +590,35 @@ def _headline(run: _Run) -> list[str]:
     move = records.get("Move", {})
     parts: list[str] = []
     if report is not None:
-        parts.append(f"{report.get('outcome', '?')} after {_number(report.get('duration_s'), '.1f')} s")
+        parts.append(f"system {report.get('outcome', '?')} after {_number(report.get('duration_s'), '.1f')} s")
+        mission = report.get("mission") or {}
+        if mission:
+            reached = mission.get("waypoints_reached") or []
+            parts.append(f"mission {mission.get('outcome', '?')}: {len(reached)} of "
+                         f"{_count(mission.get('patrol_waypoints'), 'waypoint')} reached")
         failed = [name for name, group in (report.get("groups") or {}).items() if group.get("status") == "failed"]
         injected = report.get("injected") or {}
         if failed:
             parts.append("failed: " + ", ".join(
                 f"{name} ({injected[name]} injected)" if name in injected else name for name in failed))
-        parts.append(f"VO {report['frames_processed']} frames tracked, {_number(report.get('frames_dropped'))} "
+        parts.append(f"VO {_count(report['frames_processed'], 'frame')} tracked, "
+                     f"{_number(report.get('frames_dropped'))} "
                      f"dropped, {_number(vo.get('lost_frames'))} lost" if report.get("frames_processed") is not None
                      else "no VO record")
         period = report.get("control_period_ms") or {}
         parts.append(f"control period p50 {_number(period.get('p50'), '.1f')} ms, "
                      f"p99 {_number(period.get('p99'), '.1f')} ms")
         robot = report.get("robot") or {}
-        parts.append(f"robot drove {_number(robot.get('distance_m'), '.2f')} m, {_number(robot.get('bumps'))} bumps")
+        parts.append(f"robot drove {_number(robot.get('distance_m'), '.2f')} m, {_count(robot.get('bumps'), 'bump')}")
         plans = report.get("planner") or {}
-        parts.append(f"{plans['plans']} plans ({plans.get('method') or '?'}), {_number(plans.get('failures'))} failed"
+        parts.append(f"{_count(plans['plans'], 'plan')} ({plans.get('method') or '?'}), "
+                     f"{_number(plans.get('failures'))} failed"
                      if plans.get("plans") is not None else "no planner record")
-        parts.append(f"{_number(report.get('violations'))} protocol violations")
+        parts.append(_count(report.get("violations"), "protocol violation"))
     else:
         parts.append("live: the run is not over (numbers from the records so far)")
         tracked = len(run.estimate[0]) if run.estimate is not None else vo.get("frames_processed")
-        parts.append(f"VO {tracked} frames tracked" if tracked is not None else "no VO estimate yet")
+        parts.append(f"VO {_count(tracked, 'frame')} tracked" if tracked is not None else "no VO estimate yet")
         if vo:
             parts.append(f"{_number(vo.get('frames_dropped'))} dropped, {_number(vo.get('lost_frames'))} lost")
         period = move.get("period_ms") or {}
@@ -592,9 +626,9 @@ def _headline(run: _Run) -> list[str]:
             parts.append(f"control period p50 {period['p50']:.1f} ms, p99 {_number(period.get('p99'), '.1f')} ms")
         if gazebo:
             parts.append(f"robot drove {_number(gazebo.get('odometer_m'), '.2f')} m, "
-                         f"{_number(gazebo.get('bumps'))} bumps")
+                         f"{_count(gazebo.get('bumps'), 'bump')}")
         if planner:
-            parts.append(f"{_number(planner.get('plans'))} plans ({planner.get('method') or '?'})")
+            parts.append(f"{_count(planner.get('plans'), 'plan')} ({planner.get('method') or '?'})")
     return parts
 
 
@@ -616,6 +650,11 @@ def _number(value: Any, spec: str = "") -> str:
         return format(value, spec)
     except (TypeError, ValueError):
         return str(value)
+
+
+def _count(value: Any, noun: str) -> str:
+    """``1 bump``, ``3 bumps``; ``n/a bumps`` when not measured."""
+    return counted(value, noun) if isinstance(value, int) and not isinstance(value, bool) else f"n/a {noun}s"
 
 
 def _letters(count: int) -> list[str]:

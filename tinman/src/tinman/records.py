@@ -3,6 +3,11 @@
 Group processes cannot hand the launcher Python objects, and a group stopped by
 its memory bound cannot hand over anything at all; so roles write their records
 as they go (atomically: write, then rename) and the report reads what is there.
+
+Only a launched run keeps records (:func:`records_folder`): a role function run on
+its own, as ``anodize replay`` runs it against a recording, writes none, so that a
+replay never overwrites the records of the run it replays (the default settings'
+folder, ``out/tinman/records``, is that run's).
 """
 
 from __future__ import annotations
@@ -15,16 +20,25 @@ from typing import Any
 
 import numpy as np
 
-from .settings import current
+from .settings import current, launched
 
-__all__ = ["save_record", "load_records", "percentiles"]
+__all__ = ["save_record", "load_records", "percentiles", "records_folder"]
 
 MAX_RECORD_BYTES = 64 * 2**20  # a role's record is kilobytes; a larger one is not read
 
 
-def save_record(name: str, data: dict[str, Any]) -> Path:
-    """Write ``data`` as ``<records>/<name>.json``, replacing an older record whole."""
-    folder = current().records
+def records_folder() -> Path | None:
+    """Where this run's roles leave their records; None when no launcher exported settings
+    (a role replayed at a desk): then nothing is written."""
+    return current().records if launched() else None
+
+
+def save_record(name: str, data: dict[str, Any]) -> Path | None:
+    """Write ``data`` as ``<records>/<name>.json``, replacing an older record whole (nothing,
+    and None, outside a launched run: see :func:`records_folder`)."""
+    folder = records_folder()
+    if folder is None:
+        return None
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}.json"
     partial = folder / f".{name}.{os.getpid()}.partial"

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 
-__all__ = ["Settings", "ENVIRONMENT_VARIABLE", "current", "export", "FAULTS"]
+__all__ = ["Settings", "ENVIRONMENT_VARIABLE", "current", "export", "launched", "FAULTS"]
 
 ENVIRONMENT_VARIABLE = "TINMAN_SETTINGS"
 FAULTS = ("memory-hog", "blind-camera")  # what --inject can put into a group
@@ -74,6 +74,12 @@ def export(settings: Settings) -> None:
     """Make ``settings`` what :func:`current` returns here and in processes started after."""
     os.environ[ENVIRONMENT_VARIABLE] = json.dumps(asdict(settings))
     current.cache_clear()
+
+
+def launched() -> bool:
+    """Whether a launcher exported this run's settings (``anodize run tinman`` does; a role
+    function called on its own, as ``anodize replay`` calls it, has none)."""
+    return bool(os.environ.get(ENVIRONMENT_VARIABLE))
 
 
 @lru_cache(maxsize=1)

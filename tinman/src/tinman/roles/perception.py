@@ -15,7 +15,7 @@ from ..dataset import TumSequence
 from ..faults import start_faults
 from ..geometry import FR1, camera_pose, depth_metres
 from ..messages import Header, Image, PoseStamped, image_array, pose_from_matrix, seconds
-from ..records import percentiles, save_record
+from ..records import percentiles, records_folder, save_record
 from ..settings import current
 from ..tum import write_trajectory
 from ..vo import VisualOdometry
@@ -96,9 +96,10 @@ def visodom(ep: Endpoint) -> None:
                 ep.send("Planner", "Pose", last)
             ep.send("Move", "Pose", last)
     finally:
-        out = settings.records
-        out.mkdir(parents=True, exist_ok=True)
-        write_trajectory(out / "vo_estimate.txt", stamps, poses, comment="TinMan VisOdom estimate")
+        out = records_folder()
+        if out is not None:  # a launched run (a replay writes nothing)
+            out.mkdir(parents=True, exist_ok=True)
+            write_trajectory(out / "vo_estimate.txt", stamps, poses, comment="TinMan VisOdom estimate")
         save_record("VisOdom", {
             "frames_processed": len(stamps), "frames_dropped": dropped, "track_ms": percentiles(track_ms),
             "lost_frames": odometry.failures, "lost_stamps": lost})

@@ -8,7 +8,7 @@ from anodize import Endpoint
 
 from ..faults import start_faults
 from ..geometry import robot_pose
-from ..messages import Header, Path, PoseStamped, path_through, pose_matrix, seconds, stamp_now
+from ..messages import Header, Path, PoseStamped, path_through, pose_matrix, seconds
 from ..mission import WAYPOINT_TOLERANCE
 from ..planning import NoPathError, Patrol, Planner
 from ..records import save_record
@@ -23,20 +23,28 @@ def planner(ep: Endpoint) -> None:
 
     A Path goes back for every Pose (the protocol's loop); a new plan is made at
     most every ``replan_period`` seconds, and the latest one is sent in between.
+
+    Time is the poses' own (their stamps, as a ROS node follows message time), never
+    this process's clock: what the Planner sends depends on what it received and
+    nothing else, so ``anodize replay`` of a recorded run reproduces it message for
+    message. (The planning time measured for the record is not sent.)
     """
     settings = current()
     start_faults("Planner")
     planning = Planner(DEFAULT_WORLD, method=settings.planner, seed=settings.seed)
     patrol = Patrol(DEFAULT_WORLD, tolerance=WAYPOINT_TOLERANCE)
-    path = Path(header=Header(stamp=stamp_now(), frame_id="map"), poses=[])  # no plan yet: Move stays idle
-    planned_at = -float("inf")
+    path: Path | None = None
+    planned_at = -float("inf")  # the stamp of the pose the last plan started from
     plans: list[dict[str, object]] = []
     failures: list[str] = []
     plan_ms: list[float] = []
     while True:
         pose: PoseStamped = ep.recv("VisOdom").payload
-        if time.monotonic() - planned_at >= settings.replan_period:
-            planned_at = time.monotonic()
+        now = seconds(pose.header.stamp)
+        if path is None:  # no plan yet: an empty path, and Move stays idle
+            path = Path(header=Header(stamp=pose.header.stamp, frame_id="map"), poses=[])
+        if now - planned_at >= settings.replan_period:
+            planned_at = now
             x, y, _ = robot_pose(pose_matrix(pose.pose))
             goal = patrol.goal_for(x, y)
             began = time.perf_counter()

@@ -15,7 +15,7 @@ from ..faults import blinded, start_faults
 from ..messages import PoseStamped, Twist, seconds
 from ..outcome import CAMERA_TRUTH
 from ..picture import draw_run
-from ..records import save_record
+from ..records import records_folder, save_record
 from ..settings import Settings, current
 from ..sim import DiffDrive
 from ..tum import write_trajectory
@@ -24,6 +24,7 @@ from ..world import DEFAULT_WORLD
 __all__ = ["gazebo", "visualizer", "REDRAW_PERIOD"]
 
 REDRAW_PERIOD = 5.0  # seconds between two live pictures
+MAX_BUMP_EVENTS = 1000  # bumps whose place the Gazebo record keeps (the count is kept whole)
 
 
 def gazebo(ep: Endpoint) -> None:
@@ -46,17 +47,23 @@ def gazebo(ep: Endpoint) -> None:
     period = 1.0 / settings.control_rate
     start = time.monotonic()
     trace: list[list[float]] = []
+    bumped: list[list[float]] = []  # [t, x, y] of each refused step, for the map (the first MAX_BUMP_EVENTS)
     try:
         while True:
             if settings.paper and not film.shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
             twist: Twist = ep.recv("Move").payload
+            bumps = robot.drive.bumps
             x, y, theta = robot.step(twist.linear.x, twist.angular.z, period)
-            trace.append([round(time.monotonic() - start, 3), round(x, 4), round(y, 4), round(theta, 4),
+            t = round(time.monotonic() - start, 3)
+            trace.append([t, round(x, 4), round(y, 4), round(theta, 4),
                           round(robot.drive.velocity[0], 3), round(robot.drive.velocity[1], 3)])
+            if robot.drive.bumps > bumps and len(bumped) < MAX_BUMP_EVENTS:
+                bumped.append([t, round(x, 4), round(y, 4)])
     finally:
         film.save(settings)
         save_record("Gazebo", {"trajectory": trace, "odometer_m": robot.drive.odometer, "bumps": robot.drive.bumps,
+                               "bump_events": bumped,
                                "columns": ["t", "x", "y", "theta", "v", "w"], **film.record()})
 
 
@@ -131,7 +138,7 @@ class _Film:
             self.skipped += 1
 
     def save(self, settings: Settings) -> None:
-        if self.stamps:
+        if self.stamps and records_folder() is not None:  # a launched run (a replay writes nothing)
             settings.records.mkdir(parents=True, exist_ok=True)
             write_trajectory(settings.records / CAMERA_TRUTH, self.stamps, self.poses,
                              comment="TinMan Gazebo: the simulated camera's true path")
@@ -194,6 +201,8 @@ class _Painter:
 
     def _paint(self) -> None:
         lower_thread_priority()
+        if records_folder() is None:  # not a launched run (a replay): no live picture
+            return
         live = self._settings.records / "live.png"
         while True:
             time.sleep(REDRAW_PERIOD)  # a plain thread, not a role: it takes no step of the protocol
