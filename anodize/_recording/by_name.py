@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from sessiontypes import Sort
 
-from .._session.payloads import Validator, validator_for
+from .._session.payloads import Validator, record_validator, validator_for
 from .encoding import UnknownObject
 
 __all__ = ["validator_by_name", "sort_text"]
@@ -37,24 +37,7 @@ def validator_by_name(sort: Sort | None) -> Validator:
 
 def _record(sort: Sort) -> Validator:
     """Named payloads: a ``dict`` with exactly the record's field names, each checked by name."""
-    assert sort.fields is not None
-    fields = tuple([(f.name, validator_by_name(f.sort)) for f in sort.fields])
-    wanted = f"a dict with the fields {sort.spelling}"
-
-    def check(payload: object) -> str | None:
-        if type(payload) is not dict:
-            return f"expected {wanted}, got {type(payload).__name__}"
-        for name, field_check in fields:
-            if name not in payload:
-                return f"field {name} is missing (expected {wanted})"
-            reason = field_check(payload[name])
-            if reason is not None:
-                return f"field {name}: {reason}"
-        if len(payload) != len(fields):
-            extra = sorted(repr(key) for key in payload if key not in {name for name, _ in fields})
-            return f"unexpected field{'s' if len(extra) > 1 else ''} {', '.join(extra)} (expected {wanted})"
-        return None
-    return check
+    return record_validator(sort, validator_by_name)
 
 
 def sort_text(sort: Sort | None) -> str:

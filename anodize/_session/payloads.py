@@ -38,8 +38,8 @@ from sessiontypes import Sort
 from .._ros import ros_type  # rosbags itself is imported only when a ROS sort is resolved
 from ..errors import AnodizeError
 
-__all__ = ["Validator", "validator_for", "exact_types_for", "identities", "is_a", "real_name", "resolve_class",
-           "with_field_classes", "check_fields"]
+__all__ = ["Validator", "validator_for", "record_validator", "exact_types_for", "identities", "is_a", "real_name",
+           "resolve_class", "with_field_classes", "check_fields"]
 
 # A validator returns None when the payload fits, or why it does not.
 Validator = Callable[[object], "str | None"]
@@ -186,8 +186,14 @@ def validator_for(sort: Sort | None) -> Validator:
 
 def _record(sort: Sort) -> Validator:
     """Named payloads: a ``dict`` with exactly the record's field names, each value of its field's sort."""
+    return record_validator(sort, validator_for)
+
+
+def record_validator(sort: Sort, field_validator: Callable[[Sort], Validator]) -> Validator:
+    """A record sort's check: a ``dict`` with exactly its field names, each value checked by
+    ``field_validator`` of its field's sort (the monitors' checks, or a recording's by name)."""
     assert sort.fields is not None
-    fields = tuple([(f.name, validator_for(f.sort)) for f in sort.fields])
+    fields = tuple([(f.name, field_validator(f.sort)) for f in sort.fields])
     names = frozenset([name for name, _ in fields])
     wanted = f"a dict with the fields {sort.spelling}"
 
