@@ -184,11 +184,9 @@ def test_a_memory_errors_peak_is_the_group_lines_peak(cgroups: str, monkeypatch:
     assert group.error.peak == group.peak_memory, report.summary()
 
 
-@pytest.mark.slow
-def test_an_inproc_role_that_never_gives_the_gil_back_ends_the_process_within_a_bound(tmp_path: Path) -> None:
-    """Issue 27 item 11's own case: nothing in Python can run again, so the last resort (a
-    timer of C, faulthandler's) ends the process 10 s after the timeout and grace, with the
-    stuck role's frame on stderr, rather than let it hang."""
+def _run_inproc_in_a_child(tmp_path: Path, role_a: str, after: str, timeout: float) -> subprocess.CompletedProcess[str]:
+    """A two-role Inproc run in a subprocess (a thread that never ends cannot be left in pytest):
+    A is ``fault_roles.<role_a>``, B a server; ``after`` is run on the report."""
     script = tmp_path / "gil.py"
     script.write_text(textwrap.dedent(f"""
         import sys
@@ -197,12 +195,19 @@ def test_an_inproc_role_that_never_gives_the_gil_back_ends_the_process_within_a_
         gt = sessiontypes.loads("global P(A, B) = mu t. A -> B : {{ping(nat). B -> A : pong(nat). t, stop}}",
                                 "p.proto").globals["P"]
         system = anodize.System(gt, transport=anodize.Inproc())
-        system.group("a").role("A", fault_roles.hold_the_gil_for_good)
+        system.group("a").role("A", fault_roles.{role_a})
         system.group("b").role("B", fault_roles.server)
-        system.run(timeout=1.0, grace=0.5)
-        print("the run returned")
-    """))
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=90)
+        report = system.run(timeout=1.0, grace=0.5)
+    """) + after + "\n")
+    return subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.slow
+def test_an_inproc_role_that_never_gives_the_gil_back_ends_the_process_within_a_bound(tmp_path: Path) -> None:
+    """Issue 27 item 11's own case: nothing in Python can run again, so the last resort (a
+    timer of C, faulthandler's) ends the process 10 s after the timeout and grace, with the
+    stuck role's frame on stderr, rather than let it hang."""
+    done = _run_inproc_in_a_child(tmp_path, "hold_the_gil_for_good", 'print("the run returned")', 90)
     assert done.returncode == 1 and "the run returned" not in done.stdout
     assert "hold_the_gil_for_good" in done.stderr and "fault_roles.py" in done.stderr
 
@@ -211,20 +216,8 @@ def test_an_inproc_role_holding_the_gil_is_named_still_running_and_the_interpret
     """Issue 27 item 11: the run returns once the GIL comes back, the report names the stuck role,
     where it runs and that it still runs, the notes say the supervisor was held up, and the
     interpreter exits with the role's thread still running (a subprocess: the thread never ends)."""
-    script = tmp_path / "gil.py"
-    script.write_text(textwrap.dedent(f"""
-        import sys
-        sys.path[:0] = {[str(Path(__file__).parents[1])]!r}
-        import anodize, sessiontypes, fault_roles
-        gt = sessiontypes.loads("global P(A, B) = mu t. A -> B : {{ping(nat). B -> A : pong(nat). t, stop}}",
-                                "p.proto").globals["P"]
-        system = anodize.System(gt, transport=anodize.Inproc())
-        system.group("a").role("A", fault_roles.hold_the_gil_in_stretches)
-        system.group("b").role("B", fault_roles.server)
-        report = system.run(timeout=1.0, grace=0.5)
-        sys.stdout.write(report.roles["A"].detail + "\\n" + "\\n".join(report.notes) + "\\n")
-    """))
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    show = 'sys.stdout.write(report.roles["A"].detail + "\\n" + "\\n".join(report.notes) + "\\n")'
+    done = _run_inproc_in_a_child(tmp_path, "hold_the_gil_in_stretches", show, 120)
     assert done.returncode == 0, done.stderr
     detail, *notes = done.stdout.splitlines()
     assert "still running" in detail and "fault_roles.py:" in detail and "hold_the_gil_in_stretches" in detail
