@@ -210,8 +210,11 @@ class ThreadRunner:
         if the run has not ended :data:`LAST_RESORT` seconds after its timeout and grace, it
         prints every thread's stack (the stuck role's frame among them) to stderr and exits
         the process with status 1. A run that ends disarms it."""
-        faulthandler.dump_traceback_later(seconds + LAST_RESORT, exit=True)
-        self.armed = True
+        try:  # to the process's own stderr (descriptor 2), whatever sys.stderr was replaced with
+            faulthandler.dump_traceback_later(seconds + LAST_RESORT, exit=True, file=2)
+            self.armed = True
+        except (OSError, ValueError):  # no descriptor 2: the run is still bounded by its own loop
+            pass
 
     def close(self) -> None:
         if self.armed:

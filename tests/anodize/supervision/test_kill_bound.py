@@ -51,6 +51,9 @@ class Undying:
     def notes(self) -> list[str]:
         return []
 
+    def bound(self, seconds: float) -> None:
+        pass
+
     def close(self) -> None:
         pass
 

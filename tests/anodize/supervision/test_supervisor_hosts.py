@@ -68,6 +68,9 @@ class Script:
     def notes(self) -> list[str]:
         return []
 
+    def bound(self, seconds: float) -> None:
+        pass
+
     def close(self) -> None:
         pass
 
