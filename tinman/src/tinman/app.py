@@ -238,8 +238,8 @@ def _judge(data: dict[str, Any], settings: Settings) -> tuple[bool, list[str]]:
             problems.append(f"group {name} failed: {first['type']}: {first['message']}")
         if group["status"] != "failed" and settings.inject.get(name) == "memory-hog":
             problems.append(f"group {name} was injected with {settings.inject[name]} but did not fail")
-    if data["robot"].get("bumps"):
-        problems.append(f"the robot bumped into the room {data['robot']['bumps']} times")
+    if data["robot"].get("bumps"):  # the safety layer is there to stop every one
+        problems.append(f"the robot bumped into the room {data['robot']['bumps']} times: the safety layer failed")
     if not data["frames_processed"] and "perception" not in settings.inject:
         problems.append("visual odometry tracked no frame")
     if data["control_period_ms"].get("p50") is None and "control" not in settings.inject:
@@ -265,6 +265,9 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
                      f"odometry's final position error {data['final_position_error_m']:.3f} m"
                      + (f" ({drift * 100:.2f} cm per metre)" if drift is not None else ""))
     control = data["control"]
+    if control.get("safety_stops") is not None:
+        lines.append(f"safety layer (range scan): {control['safety_stops']} safety stops, "
+                     f"{control['safety_slowed']} commands slowed near an obstacle")
     if data.get("vo_lost_frames") or control.get("stops_for_lost_tracking"):
         lines.append(f"odometry lost track on {data['vo_lost_frames']} frames: the robot stopped "
                      f"{control['stops_for_lost_tracking']} times, then drove on "

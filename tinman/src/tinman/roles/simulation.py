@@ -12,10 +12,11 @@ from anodize import Endpoint, PeerFailedError, RoleStopped, lower_thread_priorit
 
 from ..cameras import LiveCamera, RecordedCamera
 from ..faults import blinded, start_faults
-from ..messages import PoseStamped, Twist, seconds
+from ..messages import Header, PoseStamped, Twist, seconds, stamp_now
 from ..outcome import CAMERA_TRUTH
 from ..picture import draw_run
 from ..records import save_record
+from ..scanner import beam_angles, cast, scan_message
 from ..settings import Settings, current
 from ..sim import DiffDrive
 from ..tum import write_trajectory
@@ -27,9 +28,12 @@ REDRAW_PERIOD = 5.0  # seconds between two live pictures
 
 
 def gazebo(ep: Endpoint) -> None:
-    """The robot in the room, and the camera on it.
+    """The robot in the room, the camera on it, and its range scanner.
 
-    Each command drives the robot for one control period (lockstep). The camera takes
+    Each command drives the robot for one control period (lockstep). Before each, the
+    scanner's ray sensor reads the room from the robot's true pose and Gazebo hands Move
+    the scan (``sensor_msgs/LaserScan``): the command that follows is checked against
+    the world it will move in (:mod:`tinman.safety`). The camera takes
     frames at its own rate: rendered from the robot's true pose (or a recording played
     back, with ``--dataset``) and handed to the Camera role's driver. In
     ``TinManParallel`` the two run side by side (the camera in a thread of its own); in
@@ -46,10 +50,15 @@ def gazebo(ep: Endpoint) -> None:
     period = 1.0 / settings.control_rate
     start = time.monotonic()
     trace: list[list[float]] = []
+    angles = beam_angles()
+    noise = np.random.default_rng(settings.seed)
     try:
         while True:
             if settings.paper and not film.shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
+            pose, _ = robot.state()
+            ep.send("Move", "LaserScan", scan_message(cast(DEFAULT_WORLD, pose, angles, noise),
+                                                      Header(stamp=stamp_now(), frame_id="base_scan"), period))
             twist: Twist = ep.recv("Move").payload
             x, y, theta = robot.step(twist.linear.x, twist.angular.z, period)
             trace.append([round(time.monotonic() - start, 3), round(x, 4), round(y, 4), round(theta, 4),
