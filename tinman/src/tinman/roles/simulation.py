@@ -42,10 +42,14 @@ def gazebo(ep: Endpoint) -> None:
     settings = current()
     start_faults("Gazebo")
     robot = _Robot(DiffDrive(DEFAULT_WORLD))
-    film = _Film(settings)
-    if not settings.paper:
+    # The camera is set up in its own thread: building the room's look takes seconds, and Move
+    # waits for the first scan before it sends a command.
+    films: list[_Film] = []
+    if settings.paper:
+        films.append(_Film(settings))
+    else:
         ep.fork()
-        threading.Thread(target=_run_camera, args=(ep, robot, film, settings), name="Gazebo-camera",
+        threading.Thread(target=_run_camera, args=(ep, robot, films, settings), name="Gazebo-camera",
                          daemon=True).start()
     period = 1.0 / settings.control_rate
     start = time.monotonic()
@@ -54,7 +58,7 @@ def gazebo(ep: Endpoint) -> None:
     noise = np.random.default_rng(settings.seed)
     try:
         while True:
-            if settings.paper and not film.shoot(ep, *robot.state()):
+            if settings.paper and not films[0].shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
             pose, _ = robot.state()
             ep.send("Move", "LaserScan", scan_message(cast(DEFAULT_WORLD, pose, angles, noise),
@@ -64,9 +68,12 @@ def gazebo(ep: Endpoint) -> None:
             trace.append([round(time.monotonic() - start, 3), round(x, 4), round(y, 4), round(theta, 4),
                           round(robot.drive.velocity[0], 3), round(robot.drive.velocity[1], 3)])
     finally:
-        film.save(settings)
+        film = films[0] if films else None  # None: the run stopped before the camera was set up
+        if film is not None:
+            film.save(settings)
         save_record("Gazebo", {"trajectory": trace, "odometer_m": robot.drive.odometer, "bumps": robot.drive.bumps,
-                               "columns": ["t", "x", "y", "theta", "v", "w"], **film.record()})
+                               "columns": ["t", "x", "y", "theta", "v", "w"],
+                               **(film.record() if film is not None else {})})
 
 
 class _Robot:
@@ -151,7 +158,9 @@ class _Film:
                 "world": self.live.look.name if self.live is not None else None}
 
 
-def _run_camera(ep: Endpoint, robot: _Robot, film: _Film, settings: Settings) -> None:
+def _run_camera(ep: Endpoint, robot: _Robot, films: list[_Film], settings: Settings) -> None:
+    film = _Film(settings)
+    films.append(film)
     try:
         while True:
             film.skip_late()
