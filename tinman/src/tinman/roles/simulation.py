@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 
@@ -25,6 +26,7 @@ from ..world import DEFAULT_WORLD
 __all__ = ["gazebo", "visualizer", "REDRAW_PERIOD"]
 
 REDRAW_PERIOD = 5.0  # seconds between two live pictures
+SWITCH_INTERVAL = 0.001  # seconds a thread of Gazebo's process may hold the interpreter while another waits
 
 
 def gazebo(ep: Endpoint) -> None:
@@ -41,6 +43,10 @@ def gazebo(ep: Endpoint) -> None:
     """
     settings = current()
     start_faults("Gazebo")
+    # Move waits each period for the scan this thread sends, while the camera thread renders in
+    # the same process: hand the interpreter over every millisecond, not every 5 ms (Python's
+    # default), so a step and its scan are not held up several times 5 ms behind a rendering.
+    sys.setswitchinterval(SWITCH_INTERVAL)
     robot = _Robot(DiffDrive(DEFAULT_WORLD))
     # The camera is set up in its own thread: building the room's look takes seconds, and Move
     # waits for the first scan before it sends a command.
