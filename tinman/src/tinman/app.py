@@ -266,8 +266,9 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
                      + (f" ({drift * 100:.2f} cm per metre)" if drift is not None else ""))
     control = data["control"]
     if control.get("safety_stops") is not None:
-        lines.append(f"safety layer (range scan): {control['safety_stops']} safety stops, "
-                     f"{control['safety_slowed']} commands slowed near an obstacle")
+        stops, slowed = control["safety_stops"], control["safety_slowed"]
+        lines.append(f"safety layer (range scan): {stops} safety stop{'' if stops == 1 else 's'}, "
+                     f"{slowed} command{'' if slowed == 1 else 's'} slowed near an obstacle")
     if data.get("vo_lost_frames") or control.get("stops_for_lost_tracking"):
         lines.append(f"odometry lost track on {data['vo_lost_frames']} frames: the robot stopped "
                      f"{control['stops_for_lost_tracking']} times, then drove on "
