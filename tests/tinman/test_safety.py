@@ -113,3 +113,17 @@ def test_with_the_scan_the_robot_stops_short_of_the_wall_whatever_the_estimate_s
     assert mixer.safety.stops >= 1 and mixer.sources["path"] > 100  # it kept trying, and was held
     assert ROBOT_RADIUS < nearest < 0.5  # it drove at the wall, and stopped short of it
     assert nearest >= ROBOT_RADIUS + STOP_MARGIN / 2
+
+
+def test_a_bump_is_the_safety_layers_failure_and_the_report_counts_safety_stops() -> None:
+    from tinman.app import _judge, _lines
+    from tinman.settings import Settings
+
+    data = {"violations": 0, "groups": {}, "roles": {}, "frames_processed": 10, "ate_rmse_m": None,
+            "control_period_ms": {"p50": 20.0, "p99": 20.5},
+            "control": {"commands": 500, "safety_stops": 1, "safety_slowed": 2, "planner_lost": None},
+            "robot": {"distance_m": 1.0, "bumps": 0, "waypoints_reached": 0}}
+    assert _judge(data, Settings()) == (True, [])
+    assert "safety layer (range scan): 1 safety stop, 2 commands slowed near an obstacle" in _lines(data, [])
+    ok, problems = _judge({**data, "robot": {**data["robot"], "bumps": 3}}, Settings())
+    assert not ok and problems == ["the robot bumped into the room 3 times: the safety layer failed"]
