@@ -116,3 +116,22 @@ def test_the_robot_stops_when_the_camera_is_blinded_and_drives_on_after(
     assert report["control"]["stops_for_lost_tracking"] >= 1
     assert report["control"]["sources"]["lost"] > 10  # stopped for a while, for want of an estimate
     assert report["control"]["path_commands_after_a_stop"] > 10  # and drove on once it tracked again
+
+
+def test_a_lying_pose_estimate_does_not_drive_the_robot_into_a_wall(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """The odometry's map is turned 90 degrees about the dock: steering east by it drives the robot
+    south, at the wall 0.8 m away. The safety layer's scan, which does not go through the estimate,
+    stops it short."""
+    # 10 s: time for the groups to start and the odometry to fix the robot, on a busy machine too.
+    report = run_tinman(monkeypatch, tmp_path, None, "--duration", "10", "--world", "easy",
+                        "--inject", "lying-pose=perception")
+    assert report["violations"] == 0
+    assert report["robot"]["bumps"] == 0, report["problems"]
+    assert report["control"]["safety_stops"] >= 1
+    assert report["ok"], report["problems"]
+    # It did drive at the wall (south of the dock), and stopped short of it.
+    trajectory = json.loads((tmp_path / "records" / "Gazebo.json").read_text())["trajectory"]
+    nearest = min(row[2] for row in trajectory)  # y: the south wall is y = 0
+    assert nearest < 0.6
+    assert nearest > 0.18  # the robot's radius: never touched

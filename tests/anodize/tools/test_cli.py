@@ -163,7 +163,8 @@ S = ?B1(title(str)).!B1(quote(int)).!B2(quote(int)).&B2{ok(str).!B2(date(str)), 
 
 def test_project_role_filter(capsys: pytest.CaptureFixture[str]) -> None:
     assert run(capsys, "project", "protocols/tinman.proto", "--global", "TinManParallel", "--role", "Move") == (
-        0, "Move = (mu c.?Control(Twist).!Gazebo(Twist).c || mu v.?VisOdom(Pose).v || mu p.?Planner(Path).p)\n", "")
+        0, ("Move = (mu c.?Control(Twist).?Gazebo(LaserScan).!Gazebo(Twist).c || mu v.?VisOdom(Pose).v"
+            " || mu p.?Planner(Path).p)\n"), "")
     assert run(capsys, "project", "protocols/ring.proto", "--role", "B") == (0, """\
 # Ring
 B = mu t.?A(token(int)).!C(token(int)).t

@@ -281,10 +281,12 @@ def test_fork_wraps_each_branch_endpoint(tmp_path: Path) -> None:
                                                                  move.Branch3State0)
     control_endpoint, estimates_endpoint, planning_endpoint = endpoint.branches
     control_endpoint.incoming.append(Message("Twist", "forward"))
+    control_endpoint.incoming.append(Message("LaserScan", "clear ahead"))
     estimates_endpoint.incoming.append(Message("Pose", "here"))
     planning_endpoint.incoming.append(Message("Path", ["a", "b"]))
-    twist, driving = control.recv_twist()
-    assert type(driving.send_twist(twist)) is move.Branch1State0
+    twist, scanning = control.recv_twist()
+    scan, driving = scanning.recv_laser_scan()
+    assert scan == "clear ahead" and type(driving.send_twist(twist)) is move.Branch1State0
     pose, estimating = estimates.recv_pose()
     assert (type(estimating), pose) == (move.Branch2State0, "here")
     path, planning_again = planning.recv_path()

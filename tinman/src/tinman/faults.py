@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 
-from .settings import current
+import numpy as np
 
-__all__ = ["start_faults", "memory_hog", "blinded", "BLIND_FROM", "BLIND_UNTIL"]
+from .settings import current
+from .world import DEFAULT_WORLD
+
+__all__ = ["start_faults", "memory_hog", "blinded", "BLIND_FROM", "BLIND_UNTIL", "lied", "LIE_TURN"]
 
 HOG_STEP = 16 * 2**20  # bytes kept per step
 HOG_PERIOD = 0.1       # seconds between steps: 160 MiB/s
 HOG_DELAY = 3.0        # seconds of normal running first, so the report shows the group before and after
 BLIND_FROM, BLIND_UNTIL = 3.0, 5.0  # seconds into the run: "blind-camera" covers the lens then
+LIE_TURN = math.pi / 2  # "lying-pose": the estimate's whole map is turned this far about the dock
 
 
 def start_faults(role: str) -> None:
@@ -25,6 +30,25 @@ def blinded(role: str, elapsed: float) -> bool:
     """Whether ``role``'s camera is blinded ``elapsed`` seconds into the run ("blind-camera": its
     frames are black and read no depth, as with a covered lens, from 3 s to 5 s)."""
     return current().fault_for(role) == "blind-camera" and BLIND_FROM <= elapsed < BLIND_UNTIL
+
+
+def lied(role: str, t_wc: np.ndarray) -> np.ndarray:
+    """The camera pose ``t_wc`` as ``role`` reports it: unchanged, or with "lying-pose" injected
+    into its group, turned ``LIE_TURN`` (counter-clockwise) about the dock.
+
+    The lie is self-consistent, as a wrong map alignment or a false loop closure is: every motion
+    the estimate reports is a real one, turned. The robot leaves its dock facing east and believes
+    it faces north; steering east by that belief drives it south, at the wall 0.8 m away. Only a
+    sensor that does not go through the estimate (the safety layer's scan) can stop it.
+    """
+    if current().fault_for(role) != "lying-pose":
+        return t_wc
+    x, y, _ = DEFAULT_WORLD.start
+    c, s = math.cos(LIE_TURN), math.sin(LIE_TURN)
+    turn = np.array([[c, -s, 0.0, x - c * x + s * y], [s, c, 0.0, y - s * x - c * y],
+                     [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    turned: np.ndarray = turn @ t_wc
+    return turned
 
 
 def memory_hog() -> None:

@@ -40,10 +40,11 @@ from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Vector3 as Vec
 from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Path as Path
 from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
 from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Joy as Joy
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__LaserScan as LaserScan
 from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
 
 __all__ = ["Time", "Header", "Vector3", "Twist", "Point", "Quaternion", "Pose", "PoseStamped", "Path",
-           "Joy", "Image",
+           "Joy", "Image", "LaserScan",
            "stamp_now", "stamp_from_seconds", "seconds", "twist_planar", "pose_planar", "pose_from_matrix",
            "pose_matrix", "yaw", "path_through", "path_points", "image_of", "image_array", "image_layout", "joy"]
 

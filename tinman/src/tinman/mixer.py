@@ -1,11 +1,11 @@
 """Move's logic: teleop wins when it commands anything, else pure pursuit on the latest path.
 
-Move has no sensor of its own: a real robot knows only its estimate. It steers by
-the visual odometry's pose (each fresh estimate resets its model of the drive, which
-carries the pose forward between estimates with every command sent), so the
-odometry's error moves the real robot. When no fresh estimate has come for
-``LOST_AFTER`` seconds (VisOdom lost track, or perception is gone), path following
-stops the robot and counts the stop; it resumes with the next fresh estimate.
+Move steers by the robot's estimate of its place, the visual odometry's pose (each
+fresh estimate resets its model of the drive, which carries the pose forward between
+estimates with every command sent), so the odometry's error moves the real robot.
+When no fresh estimate has come for ``LOST_AFTER`` seconds (VisOdom lost track, or
+perception is gone), path following stops the robot and counts the stop; it resumes
+with the next fresh estimate.
 
 The drive model also bridges what the odometry cannot see, as a real robot's wheel
 odometry does. After a gap of more than ``BRIDGE_GAP`` seconds between two estimates
@@ -25,7 +25,12 @@ when that has drifted far from Move's, the way onto its path is not one the plan
 checked. Teleop
 is "active" while Control's twist is not zero: Control sends a twist every cycle, so
 a centred stick means "no command" (as with ROS's twist_mux, where a silent teleop
-topic yields to navigation); a person driving is not stopped.
+topic yields to navigation); a person driving is not stopped by the map.
+
+Last, every command, teleop's too, passes the safety layer (:mod:`tinman.safety`)
+with the scanner's latest scan, when Move has one: that sees the room as it is, not
+as the estimate places the robot in the map, and slows or stops the robot before
+contact. Nothing above can override it.
 """
 
 from __future__ import annotations
@@ -35,8 +40,9 @@ import threading
 import time
 from collections.abc import Callable
 
-from .messages import Path, Twist, path_points, twist_planar
+from .messages import LaserScan, Path, Twist, path_points, twist_planar
 from .pursuit import PurePursuit
+from .safety import SafetyLayer
 from .sim import DiffDrive, arc_pose
 from .world import ROBOT_RADIUS, World
 
@@ -83,6 +89,7 @@ class Mixer:
         bridged: how often the drive model's pose was kept over the odometry's (a gap, or a jump).
         held_back: path commands whose forward motion was dropped: it led too near a wall or box.
         offset: the odometry's frame in Move's, ``(x, y, theta)`` (zero until the first bridge).
+        safety: the safety layer every command passes (its ``stops`` and ``slowed`` count what it did).
     """
 
     def __init__(self, world: World, period: float, pursuit: PurePursuit | None = None,
@@ -98,6 +105,7 @@ class Mixer:
         self.bridged = 0
         self.held_back = 0  # path commands that would have driven too near a wall or box
         self.offset: Pose = (0.0, 0.0, 0.0)
+        self.safety = SafetyLayer(period)
         self._path: list[tuple[float, float]] = []
         self._stamp: float | None = None
         self._clock = clock
@@ -152,8 +160,10 @@ class Mixer:
         return not any(world.collides(*arc_pose(*pose, v, w, t)[:2], ROBOT_RADIUS + CLEAR_MARGIN)
                        for t in (CLEAR_AHEAD / 2, CLEAR_AHEAD))
 
-    def step(self, teleop: Twist) -> tuple[Twist, str]:
-        """The command for this period and where it came from; advances the drive model."""
+    def step(self, teleop: Twist, scan: LaserScan | None = None) -> tuple[Twist, str]:
+        """The command for this period and where it came from; advances the drive model.
+
+        With a ``scan`` (the scanner's latest), the safety layer limits the command first."""
         v, w = teleop.linear.x, teleop.angular.z
         if abs(v) > IDLE_EPSILON or abs(w) > IDLE_EPSILON:
             source = "teleop"
@@ -174,6 +184,8 @@ class Mixer:
                 source = "path"
                 self.resumed += self.stops > 0
             self._lost = source == "lost"
+        if scan is not None:
+            v, w = self.safety.limit(v, w, scan)
         with self._lock:
             self.model.step(v, w, self.period)
         self.sources[source] += 1

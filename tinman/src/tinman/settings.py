@@ -16,7 +16,7 @@ from pathlib import Path
 __all__ = ["Settings", "ENVIRONMENT_VARIABLE", "current", "export", "launched", "FAULTS"]
 
 ENVIRONMENT_VARIABLE = "TINMAN_SETTINGS"
-FAULTS = ("memory-hog", "blind-camera")  # what --inject can put into a group
+FAULTS = ("memory-hog", "blind-camera", "lying-pose")  # what --inject can put into a group
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,7 @@ class Settings:
         duration: seconds the run lasts.
         paper: whether the run follows Fig. 16's single loop (``TinMan``).
         teleop: keyboard driving from the terminal instead of the scripted joystick.
-        inject: group -> fault to inject (``"memory-hog"``).
+        inject: group -> fault to inject (one of :data:`FAULTS`).
         groups: role -> the group that runs it (so a role knows whether a fault is its own).
         planner: ``"rrt"`` (RRT-Connect with shortcut smoothing) or ``"astar"``.
         control_rate: Hz of the joystick, hence of the whole control loop.

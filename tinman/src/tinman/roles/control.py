@@ -13,7 +13,7 @@ from ..faults import start_faults
 from ..geometry import robot_pose
 from ..joystick import AXES, BUTTONS, scripted_joy, twist_from_joy
 from ..keyboard import Keyboard
-from ..messages import Header, Joy, Path, PoseStamped, Twist, pose_matrix, seconds, stamp_now, twist_planar
+from ..messages import Header, Joy, LaserScan, Path, PoseStamped, Twist, pose_matrix, seconds, stamp_now, twist_planar
 from ..messages import joy as joy_message
 from ..mission import patrol_pursuit
 from ..mixer import Mixer
@@ -78,7 +78,8 @@ def control(ep: Endpoint) -> None:
 
 def move(ep: Endpoint) -> None:
     """The mixer: a command to the robot for every command from Control, steering by the
-    odometry's estimate (VisOdom's Pose)."""
+    odometry's estimate (VisOdom's Pose), each checked by the safety layer against the range
+    scanner's latest scan (Gazebo's LaserScan) before it goes to the robot."""
     settings = current()
     start_faults("Move")
     mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate, patrol_pursuit())  # as the mission drives
@@ -99,7 +100,8 @@ def move(ep: Endpoint) -> None:
                 _estimate(mixer, ep.recv("VisOdom").payload)
                 path: Path = ep.recv("Planner").payload
                 mixer.set_path(path)
-            command, source = mixer.step(teleop)
+            scan: LaserScan = ep.recv("Gazebo").payload
+            command, source = mixer.step(teleop, scan)
             ep.send("Gazebo", "Twist", command)
             sent.append(time.monotonic())
             if planner_lost and source == "teleop":
@@ -113,7 +115,8 @@ def move(ep: Endpoint) -> None:
             "estimates": mixer.estimates, "stops_for_lost_tracking": mixer.stops,
             "path_commands_after_a_stop": mixer.resumed, "bridged": mixer.bridged, "held_back": mixer.held_back,
             "perception_lost": perception_lost[0] if perception_lost else None,
-            "odometry_pose": list(mixer.model.pose)})
+            "odometry_pose": list(mixer.model.pose),
+            "safety_stops": mixer.safety.stops, "safety_slowed": mixer.safety.slowed})
 
 
 def _estimate(mixer: Mixer, pose: PoseStamped) -> None:

@@ -12,7 +12,7 @@ import numpy as np
 from anodize import Endpoint, PeerFailedError, RoleStopped
 
 from ..dataset import TumSequence
-from ..faults import start_faults
+from ..faults import lied, start_faults
 from ..geometry import FR1, camera_pose, depth_metres
 from ..messages import Header, Image, PoseStamped, image_array, pose_from_matrix, seconds
 from ..records import percentiles, records_folder, save_record
@@ -79,7 +79,8 @@ def visodom(ep: Endpoint) -> None:
             else:
                 began = time.perf_counter()
                 failures = odometry.failures
-                pose = odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")), captured)
+                pose = lied("VisOdom", odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")),
+                                                     captured))
                 track_ms.append((time.perf_counter() - began) * 1000.0)
                 stamps.append(captured)
                 poses.append(pose)

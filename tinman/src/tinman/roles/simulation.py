@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 
@@ -12,10 +13,11 @@ from anodize import Endpoint, PeerFailedError, RoleStopped, lower_thread_priorit
 
 from ..cameras import LiveCamera, RecordedCamera
 from ..faults import blinded, start_faults
-from ..messages import PoseStamped, Twist, seconds
+from ..messages import Header, PoseStamped, Twist, seconds, stamp_now
 from ..outcome import CAMERA_TRUTH
 from ..picture import draw_run
 from ..records import records_folder, save_record
+from ..scanner import beam_angles, cast, scan_message
 from ..settings import Settings, current
 from ..sim import DiffDrive
 from ..tum import write_trajectory
@@ -25,12 +27,16 @@ __all__ = ["gazebo", "visualizer", "REDRAW_PERIOD"]
 
 REDRAW_PERIOD = 5.0  # seconds between two live pictures
 MAX_BUMP_EVENTS = 1000  # bumps whose place the Gazebo record keeps (the count is kept whole)
+SWITCH_INTERVAL = 0.001  # seconds a thread of Gazebo's process may hold the interpreter while another waits
 
 
 def gazebo(ep: Endpoint) -> None:
-    """The robot in the room, and the camera on it.
+    """The robot in the room, the camera on it, and its range scanner.
 
-    Each command drives the robot for one control period (lockstep). The camera takes
+    Each command drives the robot for one control period (lockstep). Before each, the
+    scanner's ray sensor reads the room from the robot's true pose and Gazebo hands Move
+    the scan (``sensor_msgs/LaserScan``): the command that follows is checked against
+    the world it will move in (:mod:`tinman.safety`). The camera takes
     frames at its own rate: rendered from the robot's true pose (or a recording played
     back, with ``--dataset``) and handed to the Camera role's driver. In
     ``TinManParallel`` the two run side by side (the camera in a thread of its own); in
@@ -38,20 +44,33 @@ def gazebo(ep: Endpoint) -> None:
     """
     settings = current()
     start_faults("Gazebo")
+    # Move waits each period for the scan this thread sends, while the camera thread renders in
+    # the same process: hand the interpreter over every millisecond, not every 5 ms (Python's
+    # default), so a step and its scan are not held up several times 5 ms behind a rendering.
+    sys.setswitchinterval(SWITCH_INTERVAL)
     robot = _Robot(DiffDrive(DEFAULT_WORLD))
-    film = _Film(settings)
-    if not settings.paper:
+    # The camera is set up in its own thread: building the room's look takes seconds, and Move
+    # waits for the first scan before it sends a command.
+    films: list[_Film] = []
+    if settings.paper:
+        films.append(_Film(settings))
+    else:
         ep.fork()
-        threading.Thread(target=_run_camera, args=(ep, robot, film, settings), name="Gazebo-camera",
+        threading.Thread(target=_run_camera, args=(ep, robot, films, settings), name="Gazebo-camera",
                          daemon=True).start()
     period = 1.0 / settings.control_rate
     start = time.monotonic()
     trace: list[list[float]] = []
     bumped: list[list[float]] = []  # [t, x, y] of each refused step, for the map (the first MAX_BUMP_EVENTS)
+    angles = beam_angles()
+    noise = np.random.default_rng(settings.seed)
     try:
         while True:
-            if settings.paper and not film.shoot(ep, *robot.state()):
+            if settings.paper and not films[0].shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
+            pose, _ = robot.state()
+            ep.send("Move", "LaserScan", scan_message(cast(DEFAULT_WORLD, pose, angles, noise),
+                                                      Header(stamp=stamp_now(), frame_id="base_scan"), period))
             twist: Twist = ep.recv("Move").payload
             bumps = robot.drive.bumps
             x, y, theta = robot.step(twist.linear.x, twist.angular.z, period)
@@ -61,10 +80,13 @@ def gazebo(ep: Endpoint) -> None:
             if robot.drive.bumps > bumps and len(bumped) < MAX_BUMP_EVENTS:
                 bumped.append([t, round(x, 4), round(y, 4)])
     finally:
-        film.save(settings)
+        film = films[0] if films else None  # None: the run stopped before the camera was set up
+        if film is not None:
+            film.save(settings)
         save_record("Gazebo", {"trajectory": trace, "odometer_m": robot.drive.odometer, "bumps": robot.drive.bumps,
                                "bump_events": bumped,
-                               "columns": ["t", "x", "y", "theta", "v", "w"], **film.record()})
+                               "columns": ["t", "x", "y", "theta", "v", "w"],
+                               **(film.record() if film is not None else {})})
 
 
 class _Robot:
@@ -149,7 +171,9 @@ class _Film:
                 "world": self.live.look.name if self.live is not None else None}
 
 
-def _run_camera(ep: Endpoint, robot: _Robot, film: _Film, settings: Settings) -> None:
+def _run_camera(ep: Endpoint, robot: _Robot, films: list[_Film], settings: Settings) -> None:
+    film = _Film(settings)
+    films.append(film)
     try:
         while True:
             film.skip_late()
