@@ -33,7 +33,7 @@ def test_fig16_projects_to_fig17() -> None:
 def test_parallel_tinman_separates_the_loops() -> None:
     parallel = sessiontypes.load(ROOT / "protocols" / "tinman.proto").globals["TinManParallel"]
     assert str(parallel.project("Move")) == (
-        "(mu c.?Control(Twist).?Gazebo(LaserScan).!Gazebo(Twist).c || mu v.?VisOdom(Pose).v"
+        "(mu c.?Control(Twist).!Gazebo(Twist).c || mu s.?Gazebo(LaserScan).s || mu v.?VisOdom(Pose).v"
         " || mu p.?Planner(Path).p)")
     assert str(parallel.project("Joy")) == "mu c.!Control(Joy).c"
 

@@ -117,13 +117,51 @@ def test_with_the_scan_the_robot_stops_short_of_the_wall_whatever_the_estimate_s
 
 def test_a_bump_is_the_safety_layers_failure_and_the_report_counts_safety_stops() -> None:
     from tinman.app import _judge, _lines
+    from tinman.mission_outcome import mission_outcome
     from tinman.settings import Settings
 
-    data = {"violations": 0, "groups": {}, "roles": {}, "frames_processed": 10, "ate_rmse_m": None,
-            "control_period_ms": {"p50": 20.0, "p99": 20.5},
-            "control": {"commands": 500, "safety_stops": 1, "safety_slowed": 2, "planner_lost": None},
-            "robot": {"distance_m": 1.0, "bumps": 0, "waypoints_reached": 0}}
-    assert _judge(data, Settings()) == (True, [])
-    assert "safety layer (range scan): 1 safety stop, 2 commands slowed near an obstacle" in _lines(data, [])
-    ok, problems = _judge({**data, "robot": {**data["robot"], "bumps": 3}}, Settings())
-    assert not ok and problems == ["the robot bumped into the room 3 times: the safety layer failed"]
+    def data(bumps: int) -> dict[str, object]:
+        records = {"Gazebo": {"bumps": bumps, "trajectory": [], "bump_events": [[1.0, 0.5, 0.5]] * bool(bumps)},
+                   "Move": {"safety_stops": 1}}
+        return {"violations": 0, "groups": {}, "roles": {}, "frames_processed": 10, "ate_rmse_m": None,
+                "control_period_ms": {"p50": 20.0, "p99": 20.5},
+                "control": {"commands": 500, "safety_stops": 1, "safety_slowed": 2, "safety_blind": 3,
+                            "planner_lost": None},
+                "robot": {"distance_m": 1.0, "bumps": bumps, "waypoints_reached": 0},
+                "mission": mission_outcome(records)}
+
+    assert _judge(data(0), Settings()) == (True, [])
+    assert ("safety layer (range scan): 1 safety stop, 2 commands slowed near an obstacle, 3 commands held "
+            "for want of a fresh scan") in _lines(data(0), [])
+    ok, problems = _judge(data(3), Settings())
+    assert not ok and problems == ["mission failed: the robot bumped into the room (3 bumps in 1 contact): "
+                                   "the safety layer did not stop it"]
+
+
+def test_an_old_scan_leaves_less_room_and_no_scan_or_a_stale_one_lets_the_robot_turn_but_not_drive() -> None:
+    from tinman.safety import STALE_SCAN
+
+    scan = scan_at((2.0, 3.0, 0.0))  # the cabinet 0.6 m ahead
+    fresh = SafetyLayer(PERIOD)
+    assert fresh.limit(0.3, 0.0, scan) == (0.3, 0.0)
+    # The same scan 0.2 s old, the robot last let through at 0.3 m/s: 6 cm of the free distance are gone.
+    aged = SafetyLayer(PERIOD)
+    aged.limit(0.3, 0.0, scan)
+    aged.limit(0.3, 0.0, scan, age=0.2)
+    assert aged.free == pytest.approx(fresh.free - 0.3 * 0.2)
+    blind = SafetyLayer(PERIOD)
+    assert blind.limit(0.3, 0.5, None) == (0.0, 0.5)  # no scan yet: turning only
+    assert blind.limit(0.3, 0.5, scan, age=STALE_SCAN + 0.01) == (0.0, 0.5)
+    assert blind.limit(0.0, 0.5, None) == (0.0, 0.5)  # a command to stand still is no blind stop
+    assert (blind.blind, blind.stops) == (2, 0)
+
+
+def test_a_scanned_mixer_drives_by_the_latest_scan_and_its_age() -> None:
+    now = [100.0]
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, patrol_pursuit(), clock=lambda: now[0], scanned=True)
+    ahead = twist_planar(0.3, 0.0)
+    assert mixer.step(ahead)[0].linear.x == 0.0 and mixer.safety.blind == 1  # no scan has come
+    mixer.set_scan(scan_at((1.0, 1.0, 0.0)))  # open room ahead of the dock
+    assert mixer.step(ahead)[0].linear.x == pytest.approx(0.3)
+    now[0] += 1.0  # the scanner went silent for a second
+    assert mixer.step(ahead)[0].linear.x == 0.0 and mixer.safety.blind == 2

@@ -163,8 +163,8 @@ S = ?B1(title(str)).!B1(quote(int)).!B2(quote(int)).&B2{ok(str).!B2(date(str)), 
 
 def test_project_role_filter(capsys: pytest.CaptureFixture[str]) -> None:
     assert run(capsys, "project", "protocols/tinman.proto", "--global", "TinManParallel", "--role", "Move") == (
-        0, ("Move = (mu c.?Control(Twist).?Gazebo(LaserScan).!Gazebo(Twist).c || mu v.?VisOdom(Pose).v"
-            " || mu p.?Planner(Path).p)\n"), "")
+        0, ("Move = (mu c.?Control(Twist).!Gazebo(Twist).c || mu s.?Gazebo(LaserScan).s"
+            " || mu v.?VisOdom(Pose).v || mu p.?Planner(Path).p)\n"), "")
     assert run(capsys, "project", "protocols/ring.proto", "--role", "B") == (0, """\
 # Ring
 B = mu t.?A(token(int)).!C(token(int)).t
@@ -227,7 +227,7 @@ def test_fsm_of_a_parallel_role_has_a_fork(capsys: pytest.CaptureFixture[str]) -
     assert status == 0
     machine = json.loads(out)
     forks = [state["fork"] for state in machine["states"] if "fork" in state]
-    assert len(forks) == 1 and len(forks[0]) == 3  # control, the odometry's estimates, the plans
+    assert len(forks) == 1 and len(forks[0]) == 4  # control, the scans, the odometry's estimates, the plans
 
 
 def test_fsm_of_a_local_declaration(capsys: pytest.CaptureFixture[str]) -> None:

@@ -273,26 +273,27 @@ def test_an_unmonitored_endpoint_delivering_another_label_is_reported(tmp_path: 
 
 def test_fork_wraps_each_branch_endpoint(tmp_path: Path) -> None:
     move = load_module(tmp_path, generated("protocols/tinman.proto", "tinmanparallel_move.py"))
-    endpoint = FakeEndpoint(branches=3)
+    endpoint = FakeEndpoint(branches=4)
     start = move.Initial(endpoint)
     assert actions(type(start)) == {"fork"}
-    control, estimates, planning = start.fork()
-    assert (type(control), type(estimates), type(planning)) == (move.Branch1State0, move.Branch2State0,
-                                                                 move.Branch3State0)
-    control_endpoint, estimates_endpoint, planning_endpoint = endpoint.branches
+    control, scans, estimates, planning = start.fork()
+    assert (type(control), type(scans), type(estimates), type(planning)) == (
+        move.Branch1State0, move.Branch2State0, move.Branch3State0, move.Branch4State0)
+    control_endpoint, scans_endpoint, estimates_endpoint, planning_endpoint = endpoint.branches
     control_endpoint.incoming.append(Message("Twist", "forward"))
-    control_endpoint.incoming.append(Message("LaserScan", "clear ahead"))
+    scans_endpoint.incoming.append(Message("LaserScan", "clear ahead"))
     estimates_endpoint.incoming.append(Message("Pose", "here"))
     planning_endpoint.incoming.append(Message("Path", ["a", "b"]))
-    twist, scanning = control.recv_twist()
-    scan, driving = scanning.recv_laser_scan()
-    assert scan == "clear ahead" and type(driving.send_twist(twist)) is move.Branch1State0
+    twist, driving = control.recv_twist()
+    assert type(driving.send_twist(twist)) is move.Branch1State0
+    scan, scanning = scans.recv_laser_scan()
+    assert (type(scanning), scan) == (move.Branch2State0, "clear ahead")
     pose, estimating = estimates.recv_pose()
-    assert (type(estimating), pose) == (move.Branch2State0, "here")
+    assert (type(estimating), pose) == (move.Branch3State0, "here")
     path, planning_again = planning.recv_path()
-    assert (type(planning_again), path) == (move.Branch3State0, ["a", "b"])
+    assert (type(planning_again), path) == (move.Branch4State0, ["a", "b"])
     assert control_endpoint.sent == [("Gazebo", "Twist", "forward")]
-    assert "parallel branch 3" in move.Branch3State0.__doc__
+    assert "parallel branch 4" in move.Branch4State0.__doc__
     with pytest.raises(LinearityError, match=r"^state State0 was already used"):
         start.fork()
 

@@ -269,9 +269,10 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
                      + (f" ({drift * 100:.2f} cm per metre)" if drift is not None else ""))
     control = data["control"]
     if control.get("safety_stops") is not None:
-        stops, slowed = control["safety_stops"], control["safety_slowed"]
-        lines.append(f"safety layer (range scan): {stops} safety stop{'' if stops == 1 else 's'}, "
-                     f"{slowed} command{'' if slowed == 1 else 's'} slowed near an obstacle")
+        stops, slowed, blind = control["safety_stops"], control["safety_slowed"], control.get("safety_blind") or 0
+        lines.append(f"safety layer (range scan): {counted(stops, 'safety stop')}, "
+                     f"{counted(slowed, 'command')} slowed near an obstacle"
+                     + (f", {counted(blind, 'command')} held for want of a fresh scan" if blind else ""))
     if data.get("vo_lost_frames") or control.get("stops_for_lost_tracking"):
         lines.append(f"odometry lost track on {counted(data['vo_lost_frames'] or 0, 'frame')}: the robot stopped "
                      f"{counted(control['stops_for_lost_tracking'] or 0, 'time')}, then drove on "

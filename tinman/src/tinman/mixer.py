@@ -79,7 +79,9 @@ class Mixer:
     Args:
         world: the room (for the drive model).
         period: the control period in seconds (each command drives that long).
-        clock: seconds, for how fresh the estimate is (``time.monotonic``).
+        clock: seconds, for how fresh the estimate and the latest scan are (``time.monotonic``).
+        scanned: the robot has a scanner whose scans come through :meth:`set_scan`: a step
+            with no fresh one may turn, not drive (the safety layer's ``blind``).
 
     Attributes:
         sources: how many commands came from each source (``teleop``, ``path``, ``idle``,
@@ -93,8 +95,9 @@ class Mixer:
     """
 
     def __init__(self, world: World, period: float, pursuit: PurePursuit | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, scanned: bool = False) -> None:
         self.model = DiffDrive(world)
+        self.scanned = scanned
         self.period = period
         self.pursuit = pursuit or PurePursuit()
         self.sources = {"teleop": 0, "path": 0, "idle": 0, "lost": 0}
@@ -111,7 +114,13 @@ class Mixer:
         self._clock = clock
         self._fresh_at = clock()  # the robot starts knowing its pose: its dock
         self._lost = False
+        self._scan: tuple[LaserScan, float] | None = None  # the latest scan, and when it came (clock)
         self._lock = threading.Lock()  # the planning and perception branches' threads hand over
+
+    def set_scan(self, scan: LaserScan) -> None:
+        """The scanner's latest scan (the scan branch's thread hands it over as it comes)."""
+        with self._lock:
+            self._scan = (scan, self._clock())
 
     def set_path(self, path: Path) -> None:
         """Follow ``path`` from now on (the latest plan always wins)."""
@@ -163,7 +172,9 @@ class Mixer:
     def step(self, teleop: Twist, scan: LaserScan | None = None) -> tuple[Twist, str]:
         """The command for this period and where it came from; advances the drive model.
 
-        With a ``scan`` (the scanner's latest), the safety layer limits the command first."""
+        The safety layer limits the command first: against ``scan`` when given (Fig. 16's
+        single loop hands over this step's), else against the latest :meth:`set_scan` gave,
+        as old as it is."""
         v, w = teleop.linear.x, teleop.angular.z
         if abs(v) > IDLE_EPSILON or abs(w) > IDLE_EPSILON:
             source = "teleop"
@@ -186,6 +197,11 @@ class Mixer:
             self._lost = source == "lost"
         if scan is not None:
             v, w = self.safety.limit(v, w, scan)
+        elif self.scanned:
+            with self._lock:
+                latest = self._scan
+            v, w = (self.safety.limit(v, w, None) if latest is None
+                    else self.safety.limit(v, w, latest[0], self._clock() - latest[1]))
         with self._lock:
             self.model.step(v, w, self.period)
         self.sources[source] += 1

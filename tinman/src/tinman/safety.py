@@ -2,7 +2,10 @@
 
 Every command Move sends, the teleop's as the path follower's, passes through
 ``SafetyLayer.limit`` with the latest scan (:mod:`tinman.scanner`, taken from the
-robot's true pose after the previous command). The scan is the robot's own sensing:
+robot's true pose) and its age. The robot has moved since the scan was taken: at
+most at the speed last commanded, so that much less of the free distance is left.
+With no scan, or one older than ``STALE_SCAN``, the robot may turn but not drive
+(counted in ``blind``): a scanner that stopped is no licence to move. The scan is the robot's own sensing:
 it does not go through visual odometry, the map or the planner, so no failure of
 those can drive the robot into a wall or a box. Only the linear speed is limited;
 turning on the spot is always allowed (it moves the disc-shaped footprint nowhere).
@@ -33,12 +36,13 @@ from .messages import LaserScan
 from .scanner import scan_points
 from .world import ROBOT_RADIUS
 
-__all__ = ["SafetyLayer", "BRAKE_DECEL", "STOP_MARGIN", "FOOTPRINT_MARGIN", "MOVING"]
+__all__ = ["SafetyLayer", "BRAKE_DECEL", "STOP_MARGIN", "FOOTPRINT_MARGIN", "MOVING", "STALE_SCAN"]
 
 BRAKE_DECEL = 0.8        # m/s^2: 80% of the base's 1.0 m/s^2 limit (tinman.sim.DiffDrive)
 STOP_MARGIN = 0.05       # metres left between the footprint and the nearest reading once stopped
 FOOTPRINT_MARGIN = 0.02  # metres the corridor is wider than the robot on each side
 MOVING = 1e-3            # m/s: a command this slow asks for no motion (tinman.mixer.IDLE_EPSILON)
+STALE_SCAN = 0.25        # seconds: a scan older than this is none (six scanner periods at 25 Hz)
 
 
 class SafetyLayer:
@@ -51,6 +55,8 @@ class SafetyLayer:
         stops: safety stops: how often a command to move was cut to standing still (one
             per stop, however many periods it lasts, until the layer lets the robot move).
         slowed: commands whose speed was reduced, but not to zero.
+        blind: commands to move held to standing still for want of a scan younger than
+            ``STALE_SCAN``.
         free: the free distance ahead (or behind) at the last command that moved (metres).
     """
 
@@ -60,15 +66,28 @@ class SafetyLayer:
         self.period = period
         self.stops = 0
         self.slowed = 0
+        self.blind = 0
         self.free = math.inf
         self._holding = False
+        self._speed = 0.0  # the last command's linear speed let through (m/s, magnitude)
 
-    def limit(self, v: float, w: float, scan: LaserScan) -> tuple[float, float]:
-        """The command ``(v, w)`` (m/s, rad/s) as the scan allows it to be driven."""
+    def limit(self, v: float, w: float, scan: LaserScan | None, age: float = 0.0) -> tuple[float, float]:
+        """The command ``(v, w)`` (m/s, rad/s) as the scan, taken ``age`` seconds ago, allows it
+        to be driven (None: no scan yet)."""
+        v, w = self._limit(v, w, scan, age)
+        self._speed = abs(v)
+        return v, w
+
+    def _limit(self, v: float, w: float, scan: LaserScan | None, age: float) -> tuple[float, float]:
         if abs(v) <= MOVING:
+            self._holding = False
             return v, w
+        if scan is None or age > STALE_SCAN:
+            self.blind += 1
+            return 0.0, w
         forward, left = scan_points(scan)
-        self.free = free_distance(forward if v > 0 else -forward, left)
+        # Since the scan the robot drove on, at most at the speed last let through.
+        self.free = free_distance(forward if v > 0 else -forward, left) - self._speed * max(0.0, age)
         allowed = safe_speed(self.free, self.period)
         if abs(v) <= allowed:
             self._holding = False

@@ -82,11 +82,15 @@ def move(ep: Endpoint) -> None:
     scanner's latest scan (Gazebo's LaserScan) before it goes to the robot."""
     settings = current()
     start_faults("Move")
-    mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate, patrol_pursuit())  # as the mission drives
+    mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate, patrol_pursuit(),  # as the mission drives
+                  scanned=True)
     planner_lost: list[str] = []
     perception_lost: list[str] = []
-    if not settings.paper:  # the planning and perception loops run beside the control loop: threads
+    scanner_lost: list[str] = []
+    if not settings.paper:  # the scan, planning and perception loops run beside the control loop: threads
         ep.fork()
+        threading.Thread(target=_take_scans, args=(ep, mixer, scanner_lost), name="Move-scans",
+                         daemon=True).start()
         threading.Thread(target=_take_paths, args=(ep, mixer, planner_lost), name="Move-paths",
                          daemon=True).start()
         threading.Thread(target=_take_estimates, args=(ep, mixer, perception_lost), name="Move-estimates",
@@ -100,7 +104,7 @@ def move(ep: Endpoint) -> None:
                 _estimate(mixer, ep.recv("VisOdom").payload)
                 path: Path = ep.recv("Planner").payload
                 mixer.set_path(path)
-            scan: LaserScan = ep.recv("Gazebo").payload
+            scan: LaserScan | None = ep.recv("Gazebo").payload if settings.paper else None  # else the latest
             command, source = mixer.step(teleop, scan)
             ep.send("Gazebo", "Twist", command)
             sent.append(time.monotonic())
@@ -116,7 +120,8 @@ def move(ep: Endpoint) -> None:
             "path_commands_after_a_stop": mixer.resumed, "bridged": mixer.bridged, "held_back": mixer.held_back,
             "perception_lost": perception_lost[0] if perception_lost else None,
             "odometry_pose": list(mixer.model.pose),
-            "safety_stops": mixer.safety.stops, "safety_slowed": mixer.safety.slowed})
+            "safety_stops": mixer.safety.stops, "safety_slowed": mixer.safety.slowed,
+            "safety_blind": mixer.safety.blind, "scanner_lost": scanner_lost[0] if scanner_lost else None})
 
 
 def _estimate(mixer: Mixer, pose: PoseStamped) -> None:
@@ -129,6 +134,16 @@ def _take_estimates(ep: Endpoint, mixer: Mixer, perception_lost: list[str]) -> N
             _estimate(mixer, ep.recv("VisOdom").payload)
     except PeerFailedError as error:  # no more estimates: path following stops, teleop goes on
         perception_lost.append(str(error))
+    except RoleStopped:
+        pass
+
+
+def _take_scans(ep: Endpoint, mixer: Mixer, scanner_lost: list[str]) -> None:
+    try:
+        while True:
+            mixer.set_scan(ep.recv("Gazebo").payload)
+    except PeerFailedError as error:  # no more scans: the safety layer lets the robot turn, not drive
+        scanner_lost.append(str(error))
     except RoleStopped:
         pass
 

@@ -23,20 +23,22 @@ from ..sim import DiffDrive
 from ..tum import write_trajectory
 from ..world import DEFAULT_WORLD
 
-__all__ = ["gazebo", "visualizer", "REDRAW_PERIOD"]
+__all__ = ["gazebo", "visualizer", "REDRAW_PERIOD", "SCAN_RATE"]
 
 REDRAW_PERIOD = 5.0  # seconds between two live pictures
 MAX_BUMP_EVENTS = 1000  # bumps whose place the Gazebo record keeps (the count is kept whole)
+SCAN_RATE = 25.0  # Hz: the range scanner's (a 2-D lidar's 10 to 40 Hz)
 SWITCH_INTERVAL = 0.001  # seconds a thread of Gazebo's process may hold the interpreter while another waits
 
 
 def gazebo(ep: Endpoint) -> None:
     """The robot in the room, the camera on it, and its range scanner.
 
-    Each command drives the robot for one control period (lockstep). Before each, the
-    scanner's ray sensor reads the room from the robot's true pose and Gazebo hands Move
-    the scan (``sensor_msgs/LaserScan``): the command that follows is checked against
-    the world it will move in (:mod:`tinman.safety`). The camera takes
+    Each command drives the robot for one control period (lockstep). The range scanner's
+    ray sensor reads the room from the robot's true pose and Gazebo hands Move each scan
+    (``sensor_msgs/LaserScan``), which the safety layer checks commands against
+    (:mod:`tinman.safety`): in ``TinManParallel`` at the scanner's own rate, ``SCAN_RATE``,
+    in a thread of its own; in Fig. 16's single loop, one before each step. The camera takes
     frames at its own rate: rendered from the robot's true pose (or a recording played
     back, with ``--dataset``) and handed to the Camera role's driver. In
     ``TinManParallel`` the two run side by side (the camera in a thread of its own); in
@@ -44,9 +46,9 @@ def gazebo(ep: Endpoint) -> None:
     """
     settings = current()
     start_faults("Gazebo")
-    # Move waits each period for the scan this thread sends, while the camera thread renders in
-    # the same process: hand the interpreter over every millisecond, not every 5 ms (Python's
-    # default), so a step and its scan are not held up several times 5 ms behind a rendering.
+    # The scanner and the steps run while the camera thread renders in the same process: hand
+    # the interpreter over every millisecond, not every 5 ms (Python's default), so a scan or a
+    # step is not held up several times 5 ms behind a rendering.
     sys.setswitchinterval(SWITCH_INTERVAL)
     robot = _Robot(DiffDrive(DEFAULT_WORLD))
     # The camera is set up in its own thread: building the room's look takes seconds, and Move
@@ -58,6 +60,8 @@ def gazebo(ep: Endpoint) -> None:
         ep.fork()
         threading.Thread(target=_run_camera, args=(ep, robot, films, settings), name="Gazebo-camera",
                          daemon=True).start()
+        threading.Thread(target=_run_scanner, args=(ep, robot, settings.seed), name="Gazebo-scanner",
+                         daemon=True).start()
     period = 1.0 / settings.control_rate
     start = time.monotonic()
     trace: list[list[float]] = []
@@ -68,9 +72,8 @@ def gazebo(ep: Endpoint) -> None:
         while True:
             if settings.paper and not films[0].shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
-            pose, _ = robot.state()
-            ep.send("Move", "LaserScan", scan_message(cast(DEFAULT_WORLD, pose, angles, noise),
-                                                      Header(stamp=stamp_now(), frame_id="base_scan"), period))
+            if settings.paper:
+                _scan(ep, robot, angles, noise, period)
             twist: Twist = ep.recv("Move").payload
             bumps = robot.drive.bumps
             x, y, theta = robot.step(twist.linear.x, twist.angular.z, period)
@@ -169,6 +172,30 @@ class _Film:
         return {"camera_frames": self.taken, "camera_frames_skipped": self.skipped,
                 "camera": "live" if self.live is not None else "recorded", "camera_rate": 1.0 / self.period,
                 "world": self.live.look.name if self.live is not None else None}
+
+
+def _scan(ep: Endpoint, robot: _Robot, angles: np.ndarray, noise: np.random.Generator, period: float) -> None:
+    """One scan from the robot's true pose, to Move."""
+    pose, _ = robot.state()
+    ep.send("Move", "LaserScan", scan_message(cast(DEFAULT_WORLD, pose, angles, noise),
+                                              Header(stamp=stamp_now(), frame_id="base_scan"), period))
+
+
+def _run_scanner(ep: Endpoint, robot: _Robot, seed: int) -> None:
+    """The range scanner at ``SCAN_RATE``, as a lidar's driver publishes: due times on a fixed
+    grid, and a scan that fell behind is skipped rather than sent late."""
+    angles, noise, period = beam_angles(), np.random.default_rng(seed), 1.0 / SCAN_RATE
+    due = time.monotonic()
+    try:
+        while True:
+            _scan(ep, robot, angles, noise, period)
+            due += period
+            now = time.monotonic()
+            if now - due > period:  # behind by more than a scan: start again from now
+                due = now
+            ep.sleep(due - now)
+    except (RoleStopped, PeerFailedError):  # the run stops, or Move is gone
+        pass
 
 
 def _run_camera(ep: Endpoint, robot: _Robot, films: list[_Film], settings: Settings) -> None:
