@@ -55,11 +55,29 @@ class Diagnostic:
 _LINE_BREAKS = str.maketrans(dict.fromkeys("\r\v\f\x1c\x1d\x1e\x85\u2028\u2029", " "))
 
 
+SHOWN_WIDTH = 160  # characters of a source line shown around the caret (a line of megabytes is a hostile file's)
+
+
 def caret_block(source_line: str, column: int) -> str:
-    """Return ``source_line`` and below it a ``^`` under ``column`` (1-based)."""
+    """Return ``source_line`` and below it a ``^`` under ``column`` (1-based); a line longer
+    than ``SHOWN_WIDTH`` is shown as the window around the column, cut ends marked ``...``."""
     line = source_line.rstrip("\n").expandtabs(1).translate(_LINE_BREAKS)
-    pad = " " * max(column - 1, 0)
-    return f"    {line}\n    {pad}^"
+    at = max(column - 1, 0)
+    if len(line) > SHOWN_WIDTH:
+        start = max(0, min(at - SHOWN_WIDTH // 2, len(line) - SHOWN_WIDTH))
+        window = line[start:start + SHOWN_WIDTH]
+        before, after = ("..." if start > 0 else ""), ("..." if start + SHOWN_WIDTH < len(line) else "")
+        line, at = before + window + after, at - start + len(before)
+    return f"    {line}\n    {' ' * at}^"
+
+
+def shortened(text: str, width: int = 60) -> str:
+    """``text``, or its start and end around ``...`` when longer than ``width`` (a token in a
+    message: one of a hostile file's can be megabytes long)."""
+    if len(text) <= width:
+        return text
+    half = (width - 3) // 2
+    return f"{text[:half]}...{text[-half:]}"
 
 
 class ProtocolError(Exception):

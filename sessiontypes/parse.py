@@ -20,7 +20,7 @@ from lark.lexer import Lexer
 
 from . import syntax as s
 from .deep import run_deep
-from .errors import ProtocolSyntaxError
+from .errors import ProtocolSyntaxError, shortened
 from .location import Location
 
 __all__ = ["parse_file"]
@@ -411,7 +411,7 @@ def _syntax_error(
         got = "end of file"
     else:
         location = _location(path, token)
-        got = f"'{token}'"
+        got = f"'{shortened(str(token))}'"
     return ProtocolSyntaxError(location, got, _describe(acceptable), line_of(location.line),
                                _hint(token, acceptable))
 

@@ -62,9 +62,10 @@ def test_parallel_is_a_fork_with_one_machine_per_branch() -> None:
     tinman = sessiontypes.load(ROOT / "protocols" / "tinman.proto").globals["TinManParallel"]
     m = tinman.project("Move").fsm()
     forks = m.forks[m.initial]
-    assert len(forks) == 3
-    control, estimates, planning = forks
+    assert len(forks) == 4
+    control, scans, estimates, planning = forks
     assert run(control, [("recv", "Control", "Twist"), ("send", "Gazebo", "Twist")]) == control.initial
+    assert run(scans, [("recv", "Gazebo", "LaserScan")]) == scans.initial
     assert run(estimates, [("recv", "VisOdom", "Pose")]) == estimates.initial
     assert run(planning, [("recv", "Planner", "Path")]) == planning.initial
     assert not m.is_final(m.initial)
