@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from . import local_types as lt
 from .recursion import equivalent, free_vars, unfold
 from .sorts import Interaction
+from .work import METER
 
 __all__ = ["merge", "MergeError"]
 
@@ -40,13 +41,18 @@ def merge(left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
     Raises:
         MergeError: they do not merge; ``reason`` says why.
     """
-    return _Merger().merge(left, right)
+    merger = _Merger()
+    try:
+        return merger.merge(left, right)
+    finally:
+        METER.add("merge", merger.steps)
 
 
 @dataclass
 class _Merger:
     # pairs being merged -> the variable that stands for their merge, and whether it was used
     in_progress: dict[tuple[lt.LocalTerm, lt.LocalTerm], list[object]] = field(default_factory=dict)
+    steps: int = 0  # messages and choices walked, for the work meter
 
     def merge(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
         # The messages both sides start with are walked in a loop, not compared as
@@ -58,6 +64,7 @@ class _Merger:
                and left.peer == right.peer and left.message == right.message):
             prefix.append(left)
             left, right = left.continuation, right.continuation
+        self.steps += len(prefix) + 1
         merged = self._merge_node(left, right)
         if merged is left:  # nothing new: keep the original term (and its sharing)
             return start

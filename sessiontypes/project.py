@@ -23,6 +23,7 @@ from .merge import MergeError, merge
 from .races import check_races, has_offer_among
 from .recursion import free_vars, substitute, unfold  # re-exported
 from .sharing import Sharing, find_shared
+from .work import METER
 
 __all__ = ["project_declared", "project", "merge", "MergeError", "unfold", "substitute", "free_vars"]
 
@@ -44,8 +45,11 @@ def project_declared(protocol: str, roles: tuple[str, ...], body: g.GlobalTerm, 
     if role not in roles:
         raise UnknownRoleError(protocol, role, roles)
     projector = _Projector(protocol, role, source_lines, shared)
-    local = run_deep(projector.project, body)
-    if has_offer_among(local):
+    try:
+        local = run_deep(projector.project, body)
+    finally:
+        METER.add("project", projector.work)
+    if has_offer_among(local, shared):
         check_races(protocol, role, body, local, projector.project, source_lines)
     return local
 
@@ -79,28 +83,49 @@ class _Projector:
     # every global of the module (see sessiontypes.sharing).
     shared: Sharing
     _occurs: dict[int, bool] = field(default_factory=dict)
+    work: int = 0  # nodes projected, for the work meter
 
     def project(self, term: g.GlobalTerm) -> lt.LocalTerm:
         role = self.role
         shared = self.shared.nodes
         passed: list[g.GlobalTerm] | None = None  # shared nodes that project to the same
-        while True:
-            if shared and id(term) in shared:
-                known: lt.LocalTerm | None = self.shared.get(("project", role), term)
-                if known is not None:
+        try:
+            while True:
+                if shared and id(term) in shared:
+                    known: lt.LocalTerm | None = self.shared.get(("project", role), term)
+                    if known is not None:
+                        break
+                    failed: ProjectionError | None = self.shared.get(("unprojectable", role), term)
+                    if failed is not None:
+                        raise self._renamed(failed)
+                    if passed is None:
+                        passed = []
+                    passed.append(term)
+                # Fast path: most interactions of a large protocol do not involve the role.
+                self.work += 1
+                if not (isinstance(term, g.Choice) and len(term.branches) == 1
+                        and term.sender != role and term.receiver != role):
+                    known = self._project_node(term)
                     break
-                if passed is None:
-                    passed = []
-                passed.append(term)
-            # Fast path: most interactions of a large protocol do not involve the role.
-            if not (isinstance(term, g.Choice) and len(term.branches) == 1
-                    and term.sender != role and term.receiver != role):
-                known = self._project_node(term)
-                break
-            term = term.branches[0].continuation
+                term = term.branches[0].continuation
+        except ProjectionError as error:
+            # A shared node that does not project fails the same way wherever it is
+            # used: remember it, so each global that uses it (a chain of declarations
+            # ending in an unmergeable choice) fails at once instead of projecting
+            # the chain again.
+            for node in passed or ():
+                self.shared.put(("unprojectable", role), node, error)
+            raise
         for node in passed or ():
             self.shared.put(("project", role), node, known)
         return known
+
+    def _renamed(self, error: ProjectionError) -> ProjectionError:
+        """``error``, found while projecting another global, as this global's (without its traceback)."""
+        if type(error) is not ProjectionError or error.protocol == self.protocol:
+            return error.with_traceback(None)
+        return ProjectionError(self.protocol, error.role, error.location, error.labels, error.left,
+                               error.right, error.reason, error.source_line)
 
     def _project_node(self, term: g.GlobalTerm) -> lt.LocalTerm:
         role = self.role
@@ -191,7 +216,8 @@ class _Projector:
         return ProjectionError(
             self.protocol, self.role, location,
             (branches[other].message.label, branches[index].message.label),
-            str(projections[other]), str(projections[index]), reason, line)
+            # Bounded: the behaviours can be long, or exponential written out.
+            lt.describe_local(projections[other]), lt.describe_local(projections[index]), reason, line)
 
     def _absent_loop(self, loop: g.Rec) -> lt.LocalTerm:
         """Project a loop the role takes no part in.
