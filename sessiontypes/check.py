@@ -20,6 +20,7 @@ from .location import Location
 from .resolve import Reporter, SortTable, global_walk, local_walk, resolve_global, resolve_local
 from .sharing import Sharing
 from .sorts import BUILTIN_SORTS, Sort
+from .work import METER
 
 __all__ = ["ProtocolModule", "check_file"]
 
@@ -60,7 +61,7 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
     sorts = SortTable(types, reporter)
     names = {kind: set(decls) for kind, decls in by_kind.items()}
 
-    globals_walk = global_walk(reporter, sorts, globals_, names["local"] | names["type"])
+    globals_walk = global_walk(reporter, sorts, globals_, names["local"] | names["type"], source.shared)
     # The declaration bodies resolution shares between uses (it adds to them as
     # it goes); every pass below memoises on them, across all the globals.
     shared = Sharing(globals_walk.shared)
@@ -87,6 +88,7 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
         role = ldecl.role.text if ldecl.role else None
         local_types[ldecl.name.text] = LocalType(ldecl.name.text, role, body_l, "", ldecl.location)
 
+    METER.add("resolve", globals_walk.visits)
     for name, type_decl in types.items():
         if name not in sorts.used:
             reporter.warning(type_decl.name.location, f"type {name} is declared but never used")
