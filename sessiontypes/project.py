@@ -19,7 +19,7 @@ from . import local_types as lt
 from .deep import run_deep
 from .errors import ProjectionError, UnknownRoleError
 from .location import Location
-from .merge import MergeError, merge
+from .merge import MergeError, merge, merge_all
 from .races import check_races, has_offer_among
 from .recursion import free_vars, substitute, unfold  # re-exported
 from .sharing import Sharing, find_shared
@@ -172,13 +172,10 @@ class _Projector:
 
     def _merge_branches(self, branches: tuple[g.Branch, ...], location: Location) -> lt.LocalTerm:
         projections = [self.project(b.continuation) for b in branches]
-        merged = projections[0]
-        for index in range(1, len(projections)):
-            try:
-                merged = merge(merged, projections[index])
-            except MergeError:
-                raise self._blame(branches, projections, index, location) from None
-        return merged
+        try:
+            return merge_all(projections)
+        except MergeError as error:
+            raise self._blame(branches, projections, error.index, location) from None
 
     def _merge_routes(self, term: g.Routed) -> lt.LocalTerm:
         """Onto a role other than the sender: its view of each branch, merged."""
@@ -188,16 +185,13 @@ class _Projector:
             if route.receiver == self.role:
                 rest = lt.Recv(term.sender, route.message, rest, route.location)
             projections.append(rest)
-        merged = projections[0]
-        # the branches as the error names them: 'B:m1' and 'C:m2'
-        branches = tuple([g.Branch(replace(r.message, label=f"{r.receiver}:{r.message.label}"), r.continuation)
-                          for r in term.branches])
-        for index in range(1, len(projections)):
-            try:
-                merged = merge(merged, projections[index])
-            except MergeError:
-                raise self._blame(branches, projections, index, term.location) from None
-        return merged
+        try:
+            return merge_all(projections)
+        except MergeError as error:
+            # the branches as the error names them: 'B:m1' and 'C:m2'
+            branches = tuple([g.Branch(replace(r.message, label=f"{r.receiver}:{r.message.label}"),
+                                       r.continuation) for r in term.branches])
+            raise self._blame(branches, projections, error.index, term.location) from None
 
     def _blame(self, branches: tuple[g.Branch, ...], projections: list[lt.LocalTerm],
                index: int, location: Location) -> ProjectionError:

@@ -125,6 +125,12 @@ class _Walk:
         root: _Env = {}
         self.keep.append(root)
         stack: list[_Config] = [(body, root, machine, machine.initial, frozenset())]
+        try:
+            self.walk(stack, seen)
+        finally:
+            METER.add("races", len(seen))
+
+    def walk(self, stack: list[_Config], seen: set[tuple[int, int, int, int, frozenset[_Watch]]]) -> None:
         while stack:
             node, env, machine_, state, watches = stack.pop()
             key = (id(node), id(env), id(machine_), state, watches)

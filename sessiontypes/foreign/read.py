@@ -85,6 +85,8 @@ def _check_nesting(root: lark.Tree[Any], path: str, lines: tuple[str, ...]) -> N
                     "error", location, f"blocks nested more than {MAX_NESTING} deep (a choice, rec or "
                     f"par inside another, {MAX_NESTING} times); at most {MAX_NESTING} levels are read",
                     line)])
+        if node.data in ("protocol", "nested"):
+            depth -= 1  # its own body is not nested in anything
         stack.extend((child, depth) for child in node.children if isinstance(child, lark.Tree))
 
 
