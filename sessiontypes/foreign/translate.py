@@ -187,6 +187,9 @@ class _Translator:
                     self._check_reached(item.body, rest)
                     result = s.GRec(s.Name(var, item.var.location), body, item.location)
                 case t.Choice():
+                    if len(item.blocks) > 1 and not isinstance(result, (s.GEnd, s.GRef)):
+                        # Every branch goes on with what follows: one node in several places.
+                        self._shared[id(result)] = (result, self._free(result))
                     choice = self._choice(item, result, scope)
                     self._check_reached_any(item.blocks, rest)
                     result = choice

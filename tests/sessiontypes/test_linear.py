@@ -12,6 +12,7 @@ causes of their failures) are those each global gets on its own.
 
 from __future__ import annotations
 
+import contextlib
 import re
 import sys
 from collections.abc import Callable
@@ -78,20 +79,20 @@ def long_sequence(n: int) -> str:
 def scribble_do_per_branch(n: int) -> str:
     """Each level is a choice with a ``do`` of the next level in each branch: 2**n written out."""
     out = ["global protocol P0(role A, role B) { do P1(A, B); do P1(B, A); }"]
-    for i in range(1, n):
-        out.append(f"aux global protocol P{i}(role A, role B) {{ choice at A "
-                   f"{{ l() from A to B; do P{i + 1}(A, B); }} or {{ r() from A to B; do P{i + 1}(B, A); }} }}")
+    out.extend(f"aux global protocol P{i}(role A, role B) {{ choice at A "
+               f"{{ l() from A to B; do P{i + 1}(A, B); }} or {{ r() from A to B; do P{i + 1}(B, A); }} }}"
+               for i in range(1, n))
     out.append(f"aux global protocol P{n}(role A, role B) {{ e() from A to B; }}")
     return "\n".join(out) + "\n"
 
 
 def scribble_do_in_a_loop(n: int) -> str:
     """The same inside a loop: the continuation after each ``do`` is ``continue Loop``."""
-    out = ["global protocol P0(role A, role B) { rec Loop { choice at A { go() from A to B; "
-           "do P1(A, B); continue Loop; } or { stop() from A to B; } } }"]
-    for i in range(1, n):
-        out.append(f"aux global protocol P{i}(role A, role B) {{ choice at A "
-                   f"{{ l() from A to B; do P{i + 1}(A, B); }} or {{ r() from A to B; do P{i + 1}(A, B); }} }}")
+    out = [("global protocol P0(role A, role B) { rec Loop { choice at A { go() from A to B; "
+            "do P1(A, B); continue Loop; } or { stop() from A to B; } } }")]
+    out.extend(f"aux global protocol P{i}(role A, role B) {{ choice at A "
+               f"{{ l() from A to B; do P{i + 1}(A, B); }} or {{ r() from A to B; do P{i + 1}(A, B); }} }}"
+               for i in range(1, n))
     out.append(f"aux global protocol P{n}(role A, role B) {{ e() from A to B; }}")
     return "\n".join(out) + "\n"
 
@@ -110,10 +111,8 @@ def scribble_nesting(n: int) -> str:
 def work(text: str, path: str) -> int:
     """The units of work reading and checking ``text`` takes (rejected or not)."""
     before = METER.total()
-    try:
+    with contextlib.suppress(ProtocolError):
         sessiontypes.loads(text, path)
-    except ProtocolError:
-        pass
     return METER.total() - before
 
 
@@ -215,6 +214,8 @@ def test_blocks_nested_beyond_the_real_limit_are_refused_cleanly(path: str) -> N
 
 
 def _cause(message: str) -> str:
+    """A message without the global's name and the positions it quotes (copies differ in those)."""
+    message = re.sub(r"\(at \d+:\d+\)", "(at _)", message)
     return re.sub(r"^global \S+ is not projectable", "global _ is not projectable", message)
 
 
@@ -354,8 +355,10 @@ def _scribble(protocols: list[tuple[object, ...]], inline: bool) -> str:
 def _meaning(text: str) -> object:
     try:
         module = sessiontypes.loads(text, "p.nuscr")
+    except ProtocolCheckError as error:  # locations differ: the written-out text is longer
+        return ("rejected", sorted(_cause(d.message) for d in error.diagnostics))
     except ProtocolError as error:
-        return ("rejected", type(error).__name__, _cause(getattr(error, "message", "")))
+        return ("rejected", type(error).__name__)
     glob = module.globals["P0"]
     return {role: print_local(glob.project(role).body) for role in glob.roles}
 
