@@ -20,6 +20,7 @@ from .location import Location
 from .resolve import Reporter, SortTable, global_walk, local_walk, resolve_global, resolve_local
 from .sharing import Sharing
 from .sorts import BUILTIN_SORTS, Sort
+from .work import METER
 
 __all__ = ["ProtocolModule", "check_file"]
 
@@ -60,11 +61,12 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
     sorts = SortTable(types, reporter)
     names = {kind: set(decls) for kind, decls in by_kind.items()}
 
-    globals_walk = global_walk(reporter, sorts, globals_, names["local"] | names["type"])
+    globals_walk = global_walk(reporter, sorts, globals_, names["local"] | names["type"], source.shared)
     # The declaration bodies resolution shares between uses (it adds to them as
     # it goes); every pass below memoises on them, across all the globals.
     shared = Sharing(globals_walk.shared)
     global_types: dict[str, GlobalType] = {}
+    unprojectable: set[tuple[object, ...]] = set()
     for decl in globals_.values():
         before = len(reporter.diagnostics)
         body = resolve_global(decl, globals_walk)
@@ -74,7 +76,7 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
                                    source.lines, shared)
         global_types[decl.name.text] = global_type
         if not _has_error(reporter.diagnostics[before:]):
-            _check_projectable(global_type, reporter)
+            _check_projectable(global_type, reporter, unprojectable)
 
     locals_walk = local_walk(reporter, sorts, locals_, names["global"] | names["type"])
     shared_l = Sharing(locals_walk.shared)
@@ -86,6 +88,7 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
         role = ldecl.role.text if ldecl.role else None
         local_types[ldecl.name.text] = LocalType(ldecl.name.text, role, body_l, "", ldecl.location)
 
+    METER.add("resolve", globals_walk.visits)
     for name, type_decl in types.items():
         if name not in sorts.used:
             reporter.warning(type_decl.name.location, f"type {name} is declared but never used")
@@ -316,12 +319,23 @@ def _check_local_forms(decl: s.LocalDecl, body: lt.LocalTerm, reporter: Reporter
                        "with the multiparty form (!Peer(msg)); use one of them")
 
 
-def _check_projectable(global_type: GlobalType, reporter: Reporter) -> None:
+def _check_projectable(global_type: GlobalType, reporter: Reporter,
+                       reported: set[tuple[object, ...]]) -> None:
+    """Report each role ``global_type`` does not project onto.
+
+    A cause is reported once for the file (``reported``): the globals of a
+    chain of declarations that all use one unmergeable choice fail for the
+    same reason, at the same place, and one message says it.
+    """
     for role in global_type.roles:
         try:
             global_type.project(role)
         except ProjectionError as error:
-            reporter.error(error.location, error.message)
+            cause = (type(error), error.location, error.role, error.labels, error.left, error.right,
+                     error.reason)
+            if cause not in reported:
+                reported.add(cause)
+                reporter.error(error.location, error.message)
 
 
 def _has_error(diagnostics: Iterable[Diagnostic]) -> bool:

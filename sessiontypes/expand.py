@@ -181,6 +181,12 @@ class Walk(Generic[Decl, Term]):
     _referenced: set[str] = field(default_factory=set)  # declarations another one refers to
     _renames: int = 0
     resolutions: int = 0               # declaration bodies resolved (not reused); for tests
+    visits: int = 0                    # syntax nodes resolved, for the work meter
+    # Syntax nodes that occur in several places (see SourceFile.shared) with their
+    # free names, and what each resolved to, by node and meaning of those names.
+    shared_syntax: Mapping[int, tuple[object, frozenset[str]]] = field(default_factory=dict)
+    _syntax_memo: dict[tuple[object, ...], tuple[Term, tuple[Diagnostic, ...], list[Binder]]] = field(
+        default_factory=dict)
     # The bodies that may be used in more than one place (every remembered
     # expansion of a declaration that is referred to), by id: the passes over
     # the resolved types memoise on them.
@@ -267,6 +273,41 @@ class Walk(Generic[Decl, Term]):
                 self.shared[id(body)] = body
         return body, recursive
 
+    def shared_node(self, node: object, scope: Scope, depth: int, parallel_depth: int,
+                    resolve: Callable[[], Term]) -> Term:
+        """Resolve a syntax node that occurs in several places once per meaning of its free names.
+
+        What a node resolves to depends on its context only through the
+        binders its free names see, whether each was bound at the current
+        depth (guardedness) and outside the current parallel composition.
+        Such nodes come from Scribble ``do`` (no declaration references), so
+        no capture or renaming can make the result depend on more.
+        """
+        _, free = self.shared_syntax[id(node)]
+        key: list[object] = [id(node)]
+        binders: list[Binder] = []
+        for name in sorted(free):
+            binder = scope.top.get(name)
+            while binder is not None and not (binder.declaration or binder.level == scope.level):
+                binder = binder.shadowed
+            if binder is None:
+                key.append((name, None))
+                continue
+            binders.append(binder)  # held, so that its id stays its own
+            key.append((name, id(binder), binder.depth == depth, binder.parallel_depth < parallel_depth))
+        memo_key = tuple(key)
+        known = self._syntax_memo.get(memo_key)
+        if known is not None:
+            self.reporter.diagnostics.extend(known[1])
+            return known[0]
+        mark, renames = len(self.reporter.diagnostics), self._renames
+        result = resolve()
+        if renames == self._renames:
+            diagnostics = tuple(dict.fromkeys(self.reporter.diagnostics[mark:]))
+            self._syntax_memo[memo_key] = (result, diagnostics, binders)
+            self.shared[id(result)] = result
+        return result
+
     def with_mu(self, var: str, body: s.GSyntax | s.LSyntax, scope: Scope, depth: int, parallel_depth: int,
                 build: Callable[[str], Term]) -> Term:
         """Resolve a ``mu var.`` body; rename ``var`` if it would capture a declaration name.
@@ -300,9 +341,13 @@ class Walk(Generic[Decl, Term]):
 def _written_names(body: s.GSyntax | s.LSyntax) -> set[str]:
     """Every name written in a body: references and ``mu`` variables."""
     names: set[str] = set()
+    seen: set[int] = set()  # a node in several places (Scribble 'do') is looked at once
     stack: list[s.GSyntax | s.LSyntax | None] = [body]
     while stack:
         node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
         match node:
             case s.GRef(name=name) | s.LRef(name=name):
                 names.add(name.text)
@@ -338,9 +383,13 @@ def _children(node: s.GSyntax | s.LSyntax | None) -> list[s.GSyntax | s.LSyntax 
 def _references(body: s.GSyntax | s.LSyntax, declarations: Mapping[str, object]) -> list[str]:
     """The declarations a body names (a superset of those it refers to: mu names count)."""
     found: list[str] = []
+    seen: set[int] = set()  # a node in several places (Scribble 'do') is looked at once
     stack: list[s.GSyntax | s.LSyntax | None] = [body]
     while stack:  # iterative: sequences nest deeply
         node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
         match node:
             case s.GRef(name=name) | s.LRef(name=name):
                 if name.text in declarations:

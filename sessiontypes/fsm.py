@@ -19,6 +19,7 @@ from .deep import run_deep
 from .local_types import describe_local
 from .location import Location
 from .sorts import Interaction, Sort, print_message
+from .work import METER
 
 __all__ = ["Action", "Transition", "StateMachine", "build_term_machine"]
 
@@ -195,6 +196,7 @@ class _Builder:
         while self.pending:  # a work list, not recursion: sequences may be very long
             node, env, state = self.pending.pop()
             self.fill(node, env, state)
+        METER.add("fsm", len(self.table))
         return StateMachine(self.role, self.protocol, initial, tuple(self.table), self.forks,
                             tuple(self.terms))
 

@@ -22,8 +22,9 @@ from dataclasses import dataclass, field
 from . import local_types as lt
 from .recursion import equivalent, free_vars, unfold
 from .sorts import Interaction
+from .work import METER
 
-__all__ = ["merge", "MergeError"]
+__all__ = ["merge", "merge_all", "MergeError"]
 
 
 class MergeError(Exception):
@@ -32,6 +33,7 @@ class MergeError(Exception):
     def __init__(self, reason: str) -> None:
         super().__init__(reason)
         self.reason = reason
+        self.index = -1  # merge_all: the term that did not merge with those before it
 
 
 def merge(left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
@@ -40,13 +42,69 @@ def merge(left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
     Raises:
         MergeError: they do not merge; ``reason`` says why.
     """
-    return _Merger().merge(left, right)
+    merger = _Merger()
+    try:
+        return merger.merge(left, right)
+    finally:
+        METER.add("merge", merger.steps)
+
+
+def merge_all(terms: list[lt.LocalTerm]) -> lt.LocalTerm:
+    """Merge ``terms`` left to right: ``merge(merge(terms[0], terms[1]), terms[2])`` and so on.
+
+    Receives are merged all at once, branch by branch: folded pairwise, a
+    choice of n branches each received rebuilt the growing choice n times
+    (quadratic in a wide choice).
+
+    Raises:
+        MergeError: some term does not merge with those before it; ``index`` says which.
+    """
+    first = terms[0]
+    if all(term is first for term in terms):
+        return first
+    if len(terms) > 2 and all(isinstance(term, _OFFERS) for term in terms):
+        return _merge_receives(terms)  # type: ignore[arg-type]
+    merged = first
+    for index in range(1, len(terms)):
+        try:
+            merged = merge(merged, terms[index])
+        except MergeError as error:
+            error.index = index
+            raise
+    return merged
+
+
+def _merge_receives(terms: list[_Offers]) -> lt.LocalTerm:
+    """:func:`merge_all` of external choices: the pairwise fold's result, each branch merged once."""
+    merged: dict[tuple[str | None, str], lt.Recv] = {}
+    steps = 0
+    try:
+        for index, term in enumerate(terms):
+            receives = lt.receives_of(term)
+            steps += len(receives)
+            try:
+                for branch in receives:
+                    key = (branch.peer, branch.message.label)
+                    twin = merged.get(key)
+                    if twin is None or index == 0:
+                        merged[key] = branch
+                        continue
+                    _same_sort(twin.message, branch.message)
+                    merged[key] = lt.Recv(twin.peer, twin.message, merge(twin.continuation, branch.continuation),
+                                          twin.location)
+            except MergeError as error:
+                error.index = index
+                raise
+    finally:
+        METER.add("merge", steps)
+    return lt.offer_among(tuple(merged.values()), terms[0].location)
 
 
 @dataclass
 class _Merger:
     # pairs being merged -> the variable that stands for their merge, and whether it was used
     in_progress: dict[tuple[lt.LocalTerm, lt.LocalTerm], list[object]] = field(default_factory=dict)
+    steps: int = 0  # messages and choices walked, for the work meter
 
     def merge(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
         # The messages both sides start with are walked in a loop, not compared as
@@ -58,6 +116,7 @@ class _Merger:
                and left.peer == right.peer and left.message == right.message):
             prefix.append(left)
             left, right = left.continuation, right.continuation
+        self.steps += len(prefix) + 1
         merged = self._merge_node(left, right)
         if merged is left:  # nothing new: keep the original term (and its sharing)
             return start
@@ -81,8 +140,10 @@ class _Merger:
     def _merge_offers(self, left: _Offers, right: _Offers) -> lt.LocalTerm:
         """Choices a peer makes: joined branch-wise by (peer, label), peers may differ."""
         merged: list[lt.Recv] = []
+        left_receives = lt.receives_of(left)
         right_branches = {(b.peer, b.message.label): b for b in lt.receives_of(right)}
-        for branch in lt.receives_of(left):
+        self.steps += len(left_receives) + len(right_branches)
+        for branch in left_receives:
             twin = right_branches.pop((branch.peer, branch.message.label), None)
             if twin is None:
                 merged.append(branch)
@@ -96,6 +157,7 @@ class _Merger:
     def _merge_selections(self, left: _Selections, right: _Selections) -> lt.LocalTerm:
         """Choices the role makes: the same (peer, label) pairs; continuations merged pair by pair."""
         left_branches, right_branches = lt.sends_of(left), lt.sends_of(right)
+        self.steps += len(left_branches) + len(right_branches)
         left_peers = list(dict.fromkeys(b.peer for b in left_branches))
         right_peers = list(dict.fromkeys(b.peer for b in right_branches))
         if set(left_peers) != set(right_peers):

@@ -19,10 +19,11 @@ from . import local_types as lt
 from .deep import run_deep
 from .errors import ProjectionError, UnknownRoleError
 from .location import Location
-from .merge import MergeError, merge
+from .merge import MergeError, merge, merge_all
 from .races import check_races, has_offer_among
 from .recursion import free_vars, substitute, unfold  # re-exported
 from .sharing import Sharing, find_shared
+from .work import METER
 
 __all__ = ["project_declared", "project", "merge", "MergeError", "unfold", "substitute", "free_vars"]
 
@@ -44,8 +45,11 @@ def project_declared(protocol: str, roles: tuple[str, ...], body: g.GlobalTerm, 
     if role not in roles:
         raise UnknownRoleError(protocol, role, roles)
     projector = _Projector(protocol, role, source_lines, shared)
-    local = run_deep(projector.project, body)
-    if has_offer_among(local):
+    try:
+        local = run_deep(projector.project, body)
+    finally:
+        METER.add("project", projector.work)
+    if has_offer_among(local, shared):
         check_races(protocol, role, body, local, projector.project, source_lines)
     return local
 
@@ -79,28 +83,49 @@ class _Projector:
     # every global of the module (see sessiontypes.sharing).
     shared: Sharing
     _occurs: dict[int, bool] = field(default_factory=dict)
+    work: int = 0  # nodes projected, for the work meter
 
     def project(self, term: g.GlobalTerm) -> lt.LocalTerm:
         role = self.role
         shared = self.shared.nodes
         passed: list[g.GlobalTerm] | None = None  # shared nodes that project to the same
-        while True:
-            if shared and id(term) in shared:
-                known: lt.LocalTerm | None = self.shared.get(("project", role), term)
-                if known is not None:
+        try:
+            while True:
+                if shared and id(term) in shared:
+                    known: lt.LocalTerm | None = self.shared.get(("project", role), term)
+                    if known is not None:
+                        break
+                    failed: ProjectionError | None = self.shared.get(("unprojectable", role), term)
+                    if failed is not None:
+                        raise self._renamed(failed)
+                    if passed is None:
+                        passed = []
+                    passed.append(term)
+                # Fast path: most interactions of a large protocol do not involve the role.
+                self.work += 1
+                if not (isinstance(term, g.Choice) and len(term.branches) == 1
+                        and term.sender != role and term.receiver != role):
+                    known = self._project_node(term)
                     break
-                if passed is None:
-                    passed = []
-                passed.append(term)
-            # Fast path: most interactions of a large protocol do not involve the role.
-            if not (isinstance(term, g.Choice) and len(term.branches) == 1
-                    and term.sender != role and term.receiver != role):
-                known = self._project_node(term)
-                break
-            term = term.branches[0].continuation
+                term = term.branches[0].continuation
+        except ProjectionError as error:
+            # A shared node that does not project fails the same way wherever it is
+            # used: remember it, so each global that uses it (a chain of declarations
+            # ending in an unmergeable choice) fails at once instead of projecting
+            # the chain again.
+            for node in passed or ():
+                self.shared.put(("unprojectable", role), node, error)
+            raise
         for node in passed or ():
             self.shared.put(("project", role), node, known)
         return known
+
+    def _renamed(self, error: ProjectionError) -> ProjectionError:
+        """``error``, found while projecting another global, as this global's (without its traceback)."""
+        if type(error) is not ProjectionError or error.protocol == self.protocol:
+            return error.with_traceback(None)
+        return ProjectionError(self.protocol, error.role, error.location, error.labels, error.left,
+                               error.right, error.reason, error.source_line)
 
     def _project_node(self, term: g.GlobalTerm) -> lt.LocalTerm:
         role = self.role
@@ -147,13 +172,10 @@ class _Projector:
 
     def _merge_branches(self, branches: tuple[g.Branch, ...], location: Location) -> lt.LocalTerm:
         projections = [self.project(b.continuation) for b in branches]
-        merged = projections[0]
-        for index in range(1, len(projections)):
-            try:
-                merged = merge(merged, projections[index])
-            except MergeError:
-                raise self._blame(branches, projections, index, location) from None
-        return merged
+        try:
+            return merge_all(projections)
+        except MergeError as error:
+            raise self._blame(branches, projections, error.index, location) from None
 
     def _merge_routes(self, term: g.Routed) -> lt.LocalTerm:
         """Onto a role other than the sender: its view of each branch, merged."""
@@ -163,16 +185,13 @@ class _Projector:
             if route.receiver == self.role:
                 rest = lt.Recv(term.sender, route.message, rest, route.location)
             projections.append(rest)
-        merged = projections[0]
-        # the branches as the error names them: 'B:m1' and 'C:m2'
-        branches = tuple([g.Branch(replace(r.message, label=f"{r.receiver}:{r.message.label}"), r.continuation)
-                          for r in term.branches])
-        for index in range(1, len(projections)):
-            try:
-                merged = merge(merged, projections[index])
-            except MergeError:
-                raise self._blame(branches, projections, index, term.location) from None
-        return merged
+        try:
+            return merge_all(projections)
+        except MergeError as error:
+            # the branches as the error names them: 'B:m1' and 'C:m2'
+            branches = tuple([g.Branch(replace(r.message, label=f"{r.receiver}:{r.message.label}"),
+                                       r.continuation) for r in term.branches])
+            raise self._blame(branches, projections, error.index, term.location) from None
 
     def _blame(self, branches: tuple[g.Branch, ...], projections: list[lt.LocalTerm],
                index: int, location: Location) -> ProjectionError:
@@ -191,7 +210,8 @@ class _Projector:
         return ProjectionError(
             self.protocol, self.role, location,
             (branches[other].message.label, branches[index].message.label),
-            str(projections[other]), str(projections[index]), reason, line)
+            # Bounded: the behaviours can be long, or exponential written out.
+            lt.describe_local(projections[other]), lt.describe_local(projections[index]), reason, line)
 
     def _absent_loop(self, loop: g.Rec) -> lt.LocalTerm:
         """Project a loop the role takes no part in.

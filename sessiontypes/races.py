@@ -30,7 +30,9 @@ from .errors import ChoiceRaceError
 from .fsm import StateMachine, build_term_machine
 from .location import Location
 from .printer import print_message
+from .sharing import Sharing
 from .sorts import Interaction
+from .work import METER
 
 __all__ = ["check_races", "has_offer_among"]
 
@@ -45,29 +47,53 @@ _Env = dict[str, tuple[g.Rec, "_Env"]]
 _Config = tuple[g.GlobalTerm, _Env, StateMachine | None, int, frozenset[_Watch]]
 
 
-def has_offer_among(term: lt.LocalTerm) -> bool:
-    """Whether a receive from several peers at once occurs in ``term``."""
-    seen: set[int] = set()
-    stack = [term]
-    while stack:
-        node = stack.pop()
-        if id(node) in seen:
-            continue
-        seen.add(id(node))
-        match node:
-            case lt.OfferAmong():
-                return True
-            case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
-                stack.append(cont)
-            case lt.Select(branches=branches) | lt.Offer(branches=branches):
-                stack.extend(b.continuation for b in branches)
-            case lt.SelectAmong(branches=sends):
-                stack.extend(b.continuation for b in sends)
-            case lt.Rec(body=body):
-                stack.append(body)
-            case lt.Parallel(branches=parts):
-                stack.extend(parts)
-    return False
+def has_offer_among(term: lt.LocalTerm, shared: Sharing | None = None) -> bool:
+    """Whether a receive from several peers at once occurs in ``term``.
+
+    With ``shared``, the answer for every node walked is remembered there, so
+    the projections of the globals of one file, which share the projections
+    of the declarations they use, are walked once together (a chain of n
+    declarations was walked n times, quadratic).
+    """
+    memo: dict[int, tuple[lt.LocalTerm, bool]] = {} if shared is None else shared.table("offer_among")
+    visits = 0
+    # Post-order, iterative (sequences nest deeply): a node is answered once
+    # its children are.
+    stack: list[tuple[lt.LocalTerm, bool]] = [(term, False)]
+    try:
+        while stack:
+            node, children_done = stack.pop()
+            if id(node) in memo and memo[id(node)][0] is node:
+                continue
+            children = _local_children(node)
+            if children_done or not children:
+                found = isinstance(node, lt.OfferAmong) or any(memo[id(c)][1] for c in children)
+                memo[id(node)] = (node, found)
+                continue
+            visits += 1
+            if isinstance(node, lt.OfferAmong):
+                memo[id(node)] = (node, True)
+                continue
+            stack.append((node, True))
+            stack.extend((child, False) for child in children)
+    finally:
+        METER.add("offer_among", visits)
+    return memo[id(term)][1]
+
+
+def _local_children(node: lt.LocalTerm) -> list[lt.LocalTerm]:
+    match node:
+        case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
+            return [cont]
+        case lt.Select(branches=branches) | lt.Offer(branches=branches):
+            return [b.continuation for b in branches]
+        case lt.SelectAmong(branches=actions) | lt.OfferAmong(branches=actions):
+            return list(actions)
+        case lt.Rec(body=body):
+            return [body]
+        case lt.Parallel(branches=parts):
+            return list(parts)
+    return []
 
 
 def check_races(protocol: str, role: str, body: g.GlobalTerm, local: lt.LocalTerm,
@@ -99,6 +125,12 @@ class _Walk:
         root: _Env = {}
         self.keep.append(root)
         stack: list[_Config] = [(body, root, machine, machine.initial, frozenset())]
+        try:
+            self.walk(stack, seen)
+        finally:
+            METER.add("races", len(seen))
+
+    def walk(self, stack: list[_Config], seen: set[tuple[int, int, int, int, frozenset[_Watch]]]) -> None:
         while stack:
             node, env, machine_, state, watches = stack.pop()
             key = (id(node), id(env), id(machine_), state, watches)

@@ -49,9 +49,17 @@ GlobalWalk = Walk[s.GlobalDecl, g.GlobalTerm]
 
 
 def global_walk(reporter: Reporter, sorts: SortTable, declarations: Mapping[str, s.GlobalDecl],
-                other_kind: set[str]) -> GlobalWalk:
-    """The state for resolving the global declarations of one file."""
-    return Walk(reporter, sorts, declarations, "global", other_kind, _resolve_global_body)
+                other_kind: set[str],
+                shared_syntax: Mapping[int, tuple[s.GSyntax, frozenset[str]]] | None = None) -> GlobalWalk:
+    """The state for resolving the global declarations of one file.
+
+    ``shared_syntax``: the file's syntax nodes that occur in several places
+    (:attr:`sessiontypes.syntax.SourceFile.shared`), each resolved once.
+    """
+    walk: GlobalWalk = Walk(reporter, sorts, declarations, "global", other_kind, _resolve_global_body)
+    if shared_syntax:
+        walk.shared_syntax = shared_syntax
+    return walk
 
 
 def resolve_global(decl: s.GlobalDecl, walk: GlobalWalk) -> g.GlobalTerm:
@@ -68,7 +76,11 @@ def _resolve_global_body(walk: GlobalWalk, decl: s.GlobalDecl, scope: Scope, dep
 
 
 def _resolve_g(walk: GlobalWalk, node: s.GSyntax | None,
-               scope: Scope, depth: int, parallel_depth: int) -> g.GlobalTerm:
+               scope: Scope, depth: int, parallel_depth: int, share: bool = True) -> g.GlobalTerm:
+    walk.visits += 1
+    if share and walk.shared_syntax and id(node) in walk.shared_syntax:
+        return walk.shared_node(node, scope, depth, parallel_depth,
+                                lambda: _resolve_g(walk, node, scope, depth, parallel_depth, share=False))
     match node:
         case None:
             return g.End()

@@ -41,6 +41,10 @@ class Sharing:
             return None
         return found[1]
 
+    def table(self, table: object) -> dict[int, tuple[Any, Any]]:
+        """The whole table ``table``: (node, result) by the node's id, to read and fill in a loop."""
+        return self._tables.setdefault(table, {})
+
     def put(self, table: object, node: object, result: object) -> None:
         """Remember ``result`` for ``node`` in ``table`` (a pass's name and parameters)."""
         self._tables.setdefault(table, {})[id(node)] = (node, result)

@@ -8,6 +8,7 @@ first token, left out of equality.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -218,11 +219,19 @@ Declaration = TypeDecl | GlobalDecl | LocalDecl
 
 @dataclass(frozen=True, slots=True)
 class SourceFile:
-    """A parsed file: its path, its text split in lines, its declarations."""
+    """A parsed file: its path, its text split in lines, its declarations.
+
+    ``shared`` lists global syntax nodes that occur in several places (a
+    Scribble ``do`` of one protocol before one continuation is translated
+    once), by id, each with the names free in it: resolution resolves each
+    once per meaning of those names instead of once per place.
+    """
 
     path: str
     lines: tuple[str, ...]
     declarations: tuple[Declaration, ...]
+    shared: Mapping[int, tuple[GSyntax, frozenset[str]]] = field(default_factory=dict, compare=False,
+                                                                 repr=False)
 
     def line(self, number: int) -> str:
         """Return line ``number`` (1-based), or "" if out of range."""

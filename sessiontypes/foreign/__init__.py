@@ -9,6 +9,7 @@ projection and their errors work unchanged. See docs/foreign.md.
 
 from __future__ import annotations
 
+from ..deep import run_deep
 from ..syntax import SourceFile
 from .errors import UnsupportedConstructError
 from .read import read_module
@@ -36,8 +37,14 @@ def parse_foreign(text: str, path: str, language: str) -> SourceFile:
         ProtocolSyntaxError: the text does not follow the language's grammar.
         UnsupportedConstructError: it uses a construct outside the subset read.
         ProtocolCheckError: a problem found while translating (an unknown
-            payload type in Scribble, ``continue`` without its ``rec``, ...).
+            payload type in Scribble, ``continue`` without its ``rec``, ...), or
+            blocks nested deeper than :data:`~sessiontypes.foreign.read.MAX_NESTING`.
     """
+    return run_deep(_parse, text, path, language)
+
+
+def _parse(text: str, path: str, language: str) -> SourceFile:
+    # Nesting recurses (up to MAX_NESTING levels): where deep recursion is safe.
     lines = _lines(text)
     return translate(read_module(text, path, language, lines), path, lines)
 

@@ -15,13 +15,17 @@ from typing import Any, NoReturn
 
 import lark
 
-from ..errors import ProtocolSyntaxError
+from ..errors import Diagnostic, ProtocolCheckError, ProtocolSyntaxError
 from ..location import Location
 from ..syntax import Name
 from . import tree as t
 from .errors import UnsupportedConstructError
 
-__all__ = ["read_module"]
+__all__ = ["MAX_NESTING", "read_module"]
+
+# How deeply choice, rec and par blocks may nest. Far beyond what anyone writes;
+# the bound keeps the reader's and the checker's recursion within its stack.
+MAX_NESTING = 10_000
 
 _GRAMMARS = {"scribble": "scribble.lark", "nuscr": "nuscr.lark"}
 _parsers: dict[str, lark.Lark] = {}
@@ -57,7 +61,33 @@ def read_module(text: str, path: str, language: str, lines: tuple[str, ...]) -> 
         parsed = _parser(language).parse(text)
     except lark.exceptions.UnexpectedInput as error:
         raise _syntax_error(error, path, lines) from None
+    _check_nesting(parsed, path, lines)
     return _Reader(path, lines, language).module(parsed)
+
+
+def _check_nesting(root: lark.Tree[Any], path: str, lines: tuple[str, ...]) -> None:
+    """Refuse blocks nested deeper than :data:`MAX_NESTING`, at the first block too deep.
+
+    The walks after this one recurse once per level of nesting (never per
+    interaction of a sequence); this walk, iterative, bounds them.
+    """
+    stack: list[tuple[lark.Tree[Any], int]] = [(root, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if node.data in ("block", "body"):
+            depth += 1
+            if depth > MAX_NESTING:
+                brace = node.children[0]
+                assert isinstance(brace, lark.Token), brace
+                location = Location(path, brace.line or 0, brace.column or 0)
+                line = lines[location.line - 1] if 0 < location.line <= len(lines) else ""
+                raise ProtocolCheckError([Diagnostic(
+                    "error", location, f"blocks nested more than {MAX_NESTING} deep (a choice, rec or "
+                    f"par inside another, {MAX_NESTING} times); at most {MAX_NESTING} levels are read",
+                    line)])
+        if node.data in ("protocol", "nested"):
+            depth -= 1  # its own body is not nested in anything
+        stack.extend((child, depth) for child in node.children if isinstance(child, lark.Tree))
 
 
 def _syntax_error(error: lark.exceptions.UnexpectedInput, path: str,

@@ -22,6 +22,7 @@ from .. import syntax as s
 from ..errors import Diagnostic, ProtocolCheckError
 from ..location import Location
 from ..sorts import BUILTIN_SORTS
+from ..work import METER
 from . import tree as t
 from .errors import UnsupportedConstructError
 
@@ -64,7 +65,8 @@ def translate(module: t.ForeignModule, path: str, lines: tuple[str, ...]) -> s.S
                        (protocol.name.text,))
         body = translator.sequence(protocol.body, s.GEnd(protocol.end), scope)
         globals_.append(s.GlobalDecl(protocol.name, protocol.roles, body, protocol.location))
-    return s.SourceFile(path, lines, (*translator.sorts.values(), *globals_))
+    METER.add("translate", translator.work)
+    return s.SourceFile(path, lines, (*translator.sorts.values(), *globals_), translator.shared())
 
 
 @dataclass(frozen=True)
@@ -85,6 +87,17 @@ class _Translator:
         self.protocols = {p.name.text: p for p in module.protocols}
         self.aliases = {a.name.text: a for a in module.aliases}
         self.sorts: dict[str, s.TypeDecl] = {}
+        self.work = 0  # interactions translated, for the work meter
+        # (protocol, roles, continuation, names taken) -> (continuation, its translation)
+        self._expansions: dict[tuple[object, ...], tuple[s.GSyntax, s.GSyntax]] = {}
+        # Translations used in more than one place, and their free rec variables.
+        self._shared: dict[int, tuple[s.GSyntax, frozenset[str]]] = {}
+        self._free_memo: dict[int, tuple[s.GSyntax, frozenset[str]]] = {}
+        self._through: dict[int, tuple[tuple[t.Interaction, ...], bool]] = {}
+
+    def shared(self) -> dict[int, tuple[s.GSyntax, frozenset[str]]]:
+        """The translations of ``do`` used in several places, with their free ``rec`` variables."""
+        return self._shared
 
     # ---- errors ----
     def _line(self, location: Location) -> str:
@@ -143,54 +156,96 @@ class _Translator:
 
     # ---- interactions ----
     def sequence(self, block: tuple[t.Interaction, ...], then: s.GSyntax, scope: _Scope) -> s.GSyntax:
-        """The global type of ``block`` followed by ``then``."""
-        if not block:
-            return then
-        first, rest = block[0], block[1:]
-        match first:
-            case t.Continue():
-                if rest:
-                    self._error(_location(rest[0]), f"this interaction is never reached: "
-                                                    f"it follows 'continue {first.var.text}'")
-                if first.var.text not in scope.variables:
-                    self._error(first.var.location, f"'continue {first.var.text}': no enclosing "
-                                                    f"'rec {first.var.text}'")
-                return s.GRef(s.Name(scope.variables[first.var.text], first.var.location))
-            case t.Transfer():
-                return self._transfer(first, self.sequence(rest, then, scope), scope)
-            case t.Rec():
-                after = self.sequence(rest, then, scope)
-                var = _fresh(first.var.text, scope.taken)
-                inner = _Scope(scope.protocol, scope.roles,
-                               {**scope.variables, first.var.text: var}, scope.taken | {var},
-                               scope.calls)
-                body = self.sequence(first.body, after, inner)
-                self._check_reached(body, after, rest)
-                return s.GRec(s.Name(var, first.var.location), body, first.location)
-            case t.Choice():
-                after = self.sequence(rest, then, scope)
-                choice = self._choice(first, after, scope)
-                self._check_reached(choice, after, rest)
-                return choice
-            case t.Do():
-                return self._do(first, self.sequence(rest, then, scope), scope)
-            case t.Par():
-                after = self.sequence(rest, then, scope)
-                if not isinstance(after, s.GEnd):
-                    self._refuse(_location(rest[0]) if rest else first.location,
-                                 "an interaction after 'par'",
-                                 "a parallel composition of the language has no continuation")
-                return s.GParallel(tuple(self.sequence(b, s.GEnd(first.location), scope)
-                                         for b in first.blocks), first.location)
-            case _:
-                assert_never(first)
+        """The global type of ``block`` followed by ``then``.
 
-    def _check_reached(self, body: s.GSyntax, after: s.GSyntax,
-                       rest: tuple[t.Interaction, ...]) -> None:
-        """Refuse ``rest`` when every path through ``body`` loops back before reaching it."""
-        if rest and not _reaches(body, after):
+        Built from the last interaction to the first, in a loop: a block can
+        hold any number of interactions (only nesting costs stack).
+        """
+        self.work += len(block)
+        for index, item in enumerate(block[:-1]):  # the first 'continue' that something follows
+            if isinstance(item, t.Continue):
+                self._error(_location(block[index + 1]), f"this interaction is never reached: "
+                                                         f"it follows 'continue {item.var.text}'")
+        result = then
+        for index in range(len(block) - 1, -1, -1):
+            item = block[index]
+            rest = block[index + 1:index + 2]  # what follows, if anything: for errors
+            match item:
+                case t.Continue():
+                    if item.var.text not in scope.variables:
+                        self._error(item.var.location, f"'continue {item.var.text}': no enclosing "
+                                                       f"'rec {item.var.text}'")
+                    result = s.GRef(s.Name(scope.variables[item.var.text], item.var.location))
+                case t.Transfer():
+                    result = self._transfer(item, result, scope)
+                case t.Rec():
+                    var = _fresh(item.var.text, scope.taken)
+                    inner = _Scope(scope.protocol, scope.roles,
+                                   {**scope.variables, item.var.text: var}, scope.taken | {var},
+                                   scope.calls)
+                    body = self.sequence(item.body, result, inner)
+                    self._check_reached(item.body, rest)
+                    result = s.GRec(s.Name(var, item.var.location), body, item.location)
+                case t.Choice():
+                    if len(item.blocks) > 1 and not isinstance(result, (s.GEnd, s.GRef)):
+                        # Every branch goes on with what follows: one node in several places.
+                        self._shared[id(result)] = (result, self._free(result))
+                    choice = self._choice(item, result, scope)
+                    self._check_reached_any(item.blocks, rest)
+                    result = choice
+                case t.Do():
+                    result = self._do(item, result, scope)
+                case t.Par():
+                    if not isinstance(result, s.GEnd):
+                        self._refuse(_location(rest[0]) if rest else item.location,
+                                     "an interaction after 'par'",
+                                     "a parallel composition of the language has no continuation")
+                    result = s.GParallel(tuple(self.sequence(b, s.GEnd(item.location), scope)
+                                               for b in item.blocks), item.location)
+                case _:
+                    assert_never(item)
+        return result
+
+    def _check_reached(self, block: tuple[t.Interaction, ...], rest: tuple[t.Interaction, ...]) -> None:
+        """Refuse ``rest`` when every path through ``block`` loops back before reaching it."""
+        if rest and not self._falls_through(block):
             self._error(_location(rest[0]), "this interaction is never reached: every path "
                                             "before it ends in 'continue'")
+
+    def _check_reached_any(self, blocks: tuple[tuple[t.Interaction, ...], ...],
+                           rest: tuple[t.Interaction, ...]) -> None:
+        if rest and not any(self._falls_through(b) for b in blocks):
+            self._error(_location(rest[0]), "this interaction is never reached: every path "
+                                            "before it ends in 'continue'")
+
+    def _falls_through(self, block: tuple[t.Interaction, ...]) -> bool:
+        """Whether some path through ``block`` reaches its end (does not end in ``continue``).
+
+        Read off the foreign tree, remembered per block: looking for the
+        continuation in the translated type walked the whole type below every
+        choice followed by something, quadratic in the nesting.
+        """
+        known = self._through.get(id(block))
+        if known is not None:
+            return known[1]
+        self._through[id(block)] = (block, True)  # a 'do' cycle (refused elsewhere) ends here
+        last = block[-1] if block else None
+        match last:
+            case None | t.Transfer() | t.Par():
+                found = True
+            case t.Continue():
+                found = False
+            case t.Rec():
+                found = self._falls_through(last.body)
+            case t.Choice():
+                found = any(self._falls_through(b) for b in last.blocks)
+            case t.Do():
+                callee = self.protocols.get(last.protocol.text.rsplit(".", 1)[-1])
+                found = callee is None or self._falls_through(callee.body)
+            case _:
+                assert_never(last)
+        self._through[id(block)] = (block, found)
+        return found
 
     def _transfer(self, transfer: t.Transfer, then: s.GSyntax, scope: _Scope) -> s.GSyntax:
         message = self._message(transfer)
@@ -242,7 +297,7 @@ class _Translator:
                 self._error(branch.location, f"unguarded recursion: 'rec {branch.var.text}' "
                                              "loops with no interaction in between")
             unfolded.add(id(branch))
-            branch = _substitute(branch.body, branch.var.text, branch)
+            branch = self._substitute(branch.body, branch.var.text, branch, {})
         match branch:
             case s.GInteraction():
                 if branch.sender.text != chooser.text:
@@ -266,6 +321,54 @@ class _Translator:
                 assert_never(branch)
         raise AssertionError(branch)  # every case above returns or raises
 
+    def _substitute(self, body: s.GSyntax, var: str, replacement: s.GSyntax,
+                        done: dict[int, s.GSyntax]) -> s.GSyntax:
+        """``body`` with the free ``var`` replaced (unfolding ``mu var. body`` once).
+
+        A part where ``var`` is not free is kept as it is, and a part met again
+        (the types are shared) is substituted once (``done``).
+        """
+        if var not in self._free(body):
+            return body
+        if id(body) in done:
+            return done[id(body)]
+        result = self._substitute_node(body, var, replacement, done)
+        done[id(body)] = result
+        return result
+
+    def _substitute_node(self, body: s.GSyntax, var: str, replacement: s.GSyntax,
+                         done: dict[int, s.GSyntax]) -> s.GSyntax:
+        match body:
+            case s.GRef():
+                return replacement if body.name.text == var else body
+            case s.GEnd():
+                return body
+            case s.GRec():
+                inner = body.body if body.var.text == var else self._substitute(body.body, var, replacement, done)
+                return body if inner is body.body else s.GRec(body.var, inner, body.location)
+            case s.GInteraction():
+                continuations = [None if b.continuation is None
+                                 else self._substitute(b.continuation, var, replacement, done)
+                                 for b in body.branches]
+                if all(c is b.continuation for c, b in zip(continuations, body.branches, strict=True)):
+                    return body  # unchanged: keep the object (and its sharing)
+                branches = tuple(s.GBranchSyntax(b.message, c)
+                                 for b, c in zip(body.branches, continuations, strict=True))
+                return s.GInteraction(body.sender, body.receiver, branches, body.braced, body.location)
+            case s.GRouted():
+                routes = [self._substitute(r, var, replacement, done) for r in body.branches]
+                if all(n is r for n, r in zip(routes, body.branches, strict=True)):
+                    return body
+                return s.GRouted(body.sender, tuple(r for r in routes if isinstance(r, s.GInteraction)),
+                                 body.location)
+            case s.GParallel():
+                parts = tuple(self._substitute(b, var, replacement, done) for b in body.branches)
+                if all(p is b for p, b in zip(parts, body.branches, strict=True)):
+                    return body
+                return s.GParallel(parts, body.location)
+            case _:
+                assert_never(body)
+
     def _do(self, do: t.Do, then: s.GSyntax, scope: _Scope) -> s.GSyntax:
         name = do.protocol.text.rsplit(".", 1)[-1]
         callee = self.protocols.get(name)
@@ -282,8 +385,41 @@ class _Translator:
             self._error(do.location, f"'do {name}' passes {len(do.roles)} roles; protocol "
                                      f"{name} has {len(callee.roles)}")
         roles = {param.text: self._role(arg, scope).text for param, arg in zip(callee.roles, do.roles, strict=True)}
+        # The same protocol with the same roles before the same continuation is
+        # the same type: translated once and shared (a choice with a 'do' in
+        # each branch, level after level, was copied exponentially often).
+        key = (name, tuple(roles.items()), id(then), scope.taken)
+        known = self._expansions.get(key)
+        if known is not None:
+            self._shared[id(known[1])] = (known[1], self._free(then))
+            return known[1]
         inner = _Scope(callee, roles, {}, scope.taken, (*scope.calls, name))
-        return self.sequence(callee.body, then, inner)
+        expansion = self.sequence(callee.body, then, inner)
+        self._expansions[key] = (then, expansion)
+        return expansion
+
+    def _free(self, node: s.GSyntax) -> frozenset[str]:
+        """The ``rec`` variables free in ``node`` (remembered per node: the types are shared)."""
+        memo = self._free_memo
+        stack: list[tuple[s.GSyntax, bool]] = [(node, False)]
+        while stack:  # post-order, iterative: sequences nest deeply
+            current, done = stack.pop()
+            if id(current) in memo:
+                continue
+            children = _syntax_children(current)
+            if not done and children:
+                stack.append((current, True))
+                stack.extend((child, False) for child in children)
+                continue
+            match current:
+                case s.GRef():
+                    free = frozenset({current.name.text})
+                case s.GRec():
+                    free = memo[id(current.body)][1] - {current.var.text}
+                case _:
+                    free = frozenset().union(*[memo[id(c)][1] for c in children])
+            memo[id(current)] = (current, free)
+        return memo[id(node)][1]
 
 
 def _fresh(name: str, taken: frozenset[str]) -> str:
@@ -293,65 +429,17 @@ def _fresh(name: str, taken: frozenset[str]) -> str:
     return name
 
 
-def _reaches(body: s.GSyntax, target: s.GSyntax) -> bool:
-    """Whether ``target`` (the very object) occurs in ``body``."""
-    seen: set[int] = set()
-    stack = [body]
-    while stack:
-        node = stack.pop()
-        if node is target:
-            return True
-        if id(node) in seen:
-            continue
-        seen.add(id(node))
-        match node:
-            case s.GInteraction():
-                stack.extend(b.continuation for b in node.branches if b.continuation is not None)
-            case s.GRouted():
-                stack.extend(node.branches)
-            case s.GRec():
-                stack.append(node.body)
-            case s.GParallel():
-                stack.extend(node.branches)
-            case s.GRef() | s.GEnd():
-                pass
-            case _:
-                assert_never(node)
-    return False
-
-
-def _substitute(body: s.GSyntax, var: str, replacement: s.GSyntax) -> s.GSyntax:
-    """``body`` with the free ``var`` replaced (unfolding ``mu var. body`` once)."""
-    match body:
-        case s.GRef():
-            return replacement if body.name.text == var else body
-        case s.GEnd():
-            return body
-        case s.GRec():
-            inner = body.body if body.var.text == var else _substitute(body.body, var, replacement)
-            return body if inner is body.body else s.GRec(body.var, inner, body.location)
+def _syntax_children(node: s.GSyntax) -> list[s.GSyntax]:
+    match node:
         case s.GInteraction():
-            continuations = [None if b.continuation is None
-                             else _substitute(b.continuation, var, replacement)
-                             for b in body.branches]
-            if all(c is b.continuation for c, b in zip(continuations, body.branches, strict=True)):
-                return body  # unchanged: keep the object, which _reaches looks for
-            branches = tuple(s.GBranchSyntax(b.message, c)
-                             for b, c in zip(body.branches, continuations, strict=True))
-            return s.GInteraction(body.sender, body.receiver, branches, body.braced, body.location)
+            return [b.continuation for b in node.branches if b.continuation is not None]
         case s.GRouted():
-            routes = [_substitute(r, var, replacement) for r in body.branches]
-            if all(n is r for n, r in zip(routes, body.branches, strict=True)):
-                return body
-            return s.GRouted(body.sender, tuple(r for r in routes if isinstance(r, s.GInteraction)),
-                             body.location)
+            return list(node.branches)
+        case s.GRec():
+            return [node.body]
         case s.GParallel():
-            parts = tuple(_substitute(b, var, replacement) for b in body.branches)
-            if all(p is b for p, b in zip(parts, body.branches, strict=True)):
-                return body
-            return s.GParallel(parts, body.location)
-        case _:
-            assert_never(body)
+            return list(node.branches)
+    return []
 
 
 def _location(interaction: t.Interaction) -> Location:
