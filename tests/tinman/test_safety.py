@@ -134,8 +134,8 @@ def test_a_bump_is_the_safety_layers_failure_and_the_report_counts_safety_stops(
     assert ("safety layer (range scan): 1 safety stop, 2 commands slowed near an obstacle, 3 commands held "
             "for want of a fresh scan") in _lines(data(0), [])
     ok, problems = _judge(data(3), Settings())
-    assert not ok and problems == ["mission failed: the robot bumped into the room (3 bumps in 1 contact): "
-                                   "the safety layer did not stop it"]
+    assert not ok and problems == [("mission failed: the robot bumped into the room (3 bumps in 1 contact): "
+                                    "the safety layer did not stop it")]
 
 
 def test_an_old_scan_leaves_less_room_and_no_scan_or_a_stale_one_lets_the_robot_turn_but_not_drive() -> None:
