@@ -76,11 +76,11 @@ def protocol_cases() -> list[Case]:
         Case("wide-check-choice-2000", lambda d: [*ANODIZE, "check", write(d, "p.proto", wide_choice_proto(2000))],
              "ok"),
         Case("wide-project-roles-100", lambda d: [*ANODIZE, "project", write(d, "p.proto", many_roles_proto(100))]),
-        Case("wide-check-scr-sequence-400", lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_sequence(400))],
+        Case("wide-check-scr-sequence-2000", lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_sequence(2000))],
              "ok"),
-        Case("deep-check-scr-do-per-level-8",
-             lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_do_per_level(8))]),
-        Case("wide-check-scr-chain-300", lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_chain(300))]),
+        Case("deep-check-scr-do-per-level-18",
+             lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_do_per_level(18))]),
+        Case("wide-check-scr-chain-1000", lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_chain(1000))]),
         Case("infinite-check-nuscr-dev-zero", lambda d: [*ANODIZE, "check", _link(d, "/dev/zero", "p.nuscr")],
              NOT_REGULAR),
         Case("malformed-check-not-utf8", lambda d: [*ANODIZE, "check", write(d, "p.proto", b"global \xff\xfe")]),
@@ -91,19 +91,24 @@ def protocol_cases() -> list[Case]:
         Case("lying-check-proto-in-scr", lambda d: [*ANODIZE, "check", write(d, "p.scr", GOOD_PROTOCOL)]),
         Case("malformed-check-unterminated", lambda d: [*ANODIZE, "check", write(d, "p.proto", 'type X = "abc')]),
     ]
-    # The slow sweep: more seeds of noise, and the sizes today's checker takes seconds on.
+    # The slow sweep: more seeds of noise, and sizes the checker takes seconds on (issue 27's: a
+    # 10,000-message Scribble sequence, 40 levels of a 'do' per branch, an 8,000-declaration chain).
     cases += [Case(f"malformed-check-noise-{seed}", lambda d, s=seed: [*ANODIZE, "check",
                                                                        write(d, "p.proto", noise(s, 65536))],
                    slow=True) for seed in range(10, 13)]
     cases += [
         Case("deep-check-nested-choice-1000",
              lambda d: [*ANODIZE, "check", write(d, "p.proto", nested_choice_proto(1000))], slow=True),
-        Case("wide-check-sequence-2000", lambda d: [*ANODIZE, "check", write(d, "p.proto", sequence_proto(2000))],
+        Case("wide-check-sequence-8000", lambda d: [*ANODIZE, "check", write(d, "p.proto", sequence_proto(8000))],
              slow=True),
         Case("wide-check-choice-20000",
              lambda d: [*ANODIZE, "check", write(d, "p.proto", wide_choice_proto(20000))], slow=True),
-        Case("deep-check-scr-do-per-level-11",
-             lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_do_per_level(11))], slow=True),
+        Case("deep-check-scr-do-per-level-40",
+             lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_do_per_level(40))], slow=True),
+        Case("wide-check-scr-sequence-10000",
+             lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_sequence(10000))], "ok", slow=True),
+        Case("wide-check-scr-chain-8000", lambda d: [*ANODIZE, "check", write(d, "p.scr", scribble_chain(8000))],
+             slow=True),
     ]
     return cases
 
