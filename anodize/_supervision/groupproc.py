@@ -283,6 +283,7 @@ class _GroupProcess:
         Each tap bounds its own close; this waits at most :data:`TAPS_CLOSE_WITHIN` in all."""
         if not self.taps:
             return
+
         def close_all() -> None:
             for tap in self.taps:
                 tap.close()
