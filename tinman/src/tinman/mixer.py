@@ -28,9 +28,9 @@ a centred stick means "no command" (as with ROS's twist_mux, where a silent tele
 topic yields to navigation); a person driving is not stopped by the map.
 
 Last, every command, teleop's too, passes the safety layer (:mod:`tinman.safety`)
-with the scanner's latest scan, when Move has one: that sees the room as it is, not
-as the estimate places the robot in the map, and slows or stops the robot before
-contact. Nothing above can override it.
+with the scanner's latest scan and its age: that sees the room as it is, not as the
+estimate places the robot in the map, and slows or stops the robot before contact; a
+robot with a scanner and no fresh scan may turn, not drive. Nothing above can override it.
 """
 
 from __future__ import annotations
