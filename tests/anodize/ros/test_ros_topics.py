@@ -6,6 +6,7 @@ written against the ROS types; ``test_ros_interop.py`` does the same with Fast D
 from __future__ import annotations
 
 import json
+import re
 import threading
 import time
 from pathlib import Path
@@ -112,7 +113,8 @@ def test_colour_and_depth_on_their_topics_and_commands_back_reach_ros_nodes_too(
     # ... and what the writer told it about itself: the type hash as ROS 2 Iron+ does.
     fields = userdata_fields(node.userdata["/camera/color/image_raw"])
     assert fields["typehash"] == ros_type("sensor_msgs/msg/Image").type_hash
-    assert fields["anodize"].startswith("anodize1,camera,camera,0,")
+    # The claim: this run ("camera", with its token), group camera, incarnation 0 (decision 0032).
+    assert re.match(r"anodize1,camera/[0-9a-f]+,camera,0,", fields["anodize"]), fields["anodize"]
     assert "DDS domain" in report.summary() and f"ROS 2 topics on domain {ros_domain}" in report.summary()
 
 
