@@ -311,7 +311,9 @@ def test_the_endpoint_tests_pass_on_the_python_core(tmp_path: Path) -> None:
     check = ("from anodize._session.endpoint import COMPILED_CORE; from anodize._transport.frames import COMPILED; "
              "assert COMPILED_CORE is None and not COMPILED")
     subprocess.run([sys.executable, "-c", check], env=env, check=True)
-    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider",
+    # Not the slow ones: they are about whole runs (a killed group, a GIL held for good), which
+    # the core does not change, and the suite runs them once already.
+    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "-m", "not slow",
                              "-k", "not test_the_endpoint_tests_pass_on_the_python_core",
                              *(str(_HERE / name) for name in files)],
                             cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)  # nothing left here
