@@ -68,12 +68,17 @@ def impatient_asker(ep: Endpoint) -> None:
     ep.send("L", "stop")
 
 
-def answerer(ep: Endpoint) -> None:
-    """L: answers each ask, after a pause, with its own priority at that moment."""
+def _answer_asks_of(ep: Endpoint, asker: str) -> None:
+    """L: answers each ask of ``asker``, after a pause, with its own priority at that moment."""
     _tell_tid("L")
-    while ep.recv("H", timeout=30).label == "ask":
+    while ep.recv(asker, timeout=30).label == "ask":
         time.sleep(PAUSE)
-        ep.send("H", "answer", own_priority())
+        ep.send(asker, "answer", own_priority())
+
+
+def answerer(ep: Endpoint) -> None:
+    """L: answers H."""
+    _answer_asks_of(ep, "H")
 
 
 def middle(ep: Endpoint) -> None:
@@ -87,10 +92,7 @@ def middle(ep: Endpoint) -> None:
 
 def chain_answerer(ep: Endpoint) -> None:
     """L at the end of the chain: answers M."""
-    _tell_tid("L")
-    while ep.recv("M", timeout=30).label == "ask":
-        time.sleep(PAUSE)
-        ep.send("M", "answer", own_priority())
+    _answer_asks_of(ep, "M")
 
 
 def chain_asker(ep: Endpoint) -> None:
