@@ -45,7 +45,9 @@ def test_fast_dds_drives_the_controller_and_reads_its_twists(ros_domain: int, tm
                           typehash=ros_type("sensor_msgs/msg/Joy").type_hash)
     report = teleop().run(timeout=60)
     joy_code, joy_out, joy_err = finish_peer(joystick, 30)
-    _, twist_out, _ = finish_peer(wheels, 70)  # it waits for 40 Twists: as many as Joys came
+    # It waits for 40 Twists, but only as many come as Joys reached the controller (a volatile topic
+    # loses the first few): once the run is over, every Twist is sent, so a short grace delivers them.
+    _, twist_out, _ = finish_peer(wheels, 10)
     assert joy_code == 0, joy_out + joy_err
     # The joystick node published its 40 and left: the controller hears that no node publishes
     # /joy any more, rather than waiting for ever.
@@ -71,7 +73,7 @@ def test_a_fast_dds_joy_of_another_type_hash_is_rejected_and_the_external_role_b
                           typehash="RIHS01_" + "ab" * 32)
     report = teleop().run(timeout=30)
     finish_peer(joystick, 30)
-    _, twist_out, _ = finish_peer(wheels, 30)
+    _, twist_out, _ = finish_peer(wheels, 3)  # the run is over: a Twist it sent would have arrived
     error = report.roles["C"].error
     assert isinstance(error, ProtocolViolationError), report.summary()
     assert error.blame == "J" and error.role == "C"
