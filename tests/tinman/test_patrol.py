@@ -135,8 +135,8 @@ def test_every_waypoint_but_not_back_at_the_dock_is_not_a_completed_patrol() -> 
     records = {"Gazebo": _gazebo(waypoints=5, docked=False, end=(2.0, 1.0))}
     mission = mission_outcome(records, dock=DOCK, time_limit=90.0)
     assert mission["outcome"] == "FAILED" and not mission["patrol_completed"]
-    assert mission["failures"] == ["the patrol was not completed in the time limit: the robot did not get "
-                                   "back to the dock (1.00 m from it at the end)"]
+    assert mission["failures"] == [("the patrol was not completed in the time limit: the robot did not get "
+                                   "back to the dock (1.00 m from it at the end)")]
     assert "1.00 m from the dock at the end" in mission_line(mission)
 
 
@@ -144,8 +144,8 @@ def test_a_planner_back_at_the_dock_by_a_wrong_pose_does_not_complete_the_patrol
     records = {"Gazebo": _gazebo(waypoints=4, docked=False), "Patrol": {"completed_stamp": 50.0}}
     mission = mission_outcome(records, dock=DOCK, time_limit=180.0)
     assert mission["outcome"] == "FAILED" and mission["ended_by"] == "patrol completed"
-    assert mission["failures"] == ["the Planner, by its pose, was back at the dock, but the robot truly "
-                                   "reached 4 of 5 waypoints"]
+    assert mission["failures"] == [("the Planner, by its pose, was back at the dock, but the robot truly "
+                                   "reached 4 of 5 waypoints")]
     assert ": patrol ended by the Planner: 4 of 5" in mission_line(mission)
 
 
