@@ -9,13 +9,16 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
+from matplotlib.collections import PathCollection
 
 from tinman.app import PATROL_HINT, PATROL_LIMIT, TinMan, patrol_done
 from tinman.mission import DOCK, DOCK_TOLERANCE, WAYPOINT_TOLERANCE, simulate_mission
 from tinman.mission_outcome import mission_line, mission_marks, mission_outcome
+from tinman.picture import run_figure
 from tinman.planning import Patrol
-from tinman.settings import ENVIRONMENT_VARIABLE, current
+from tinman.settings import ENVIRONMENT_VARIABLE, Settings, current
 from tinman.world import DEFAULT_WORLD
 
 WAYPOINTS = DEFAULT_WORLD.waypoints
@@ -153,3 +156,25 @@ def test_the_looping_patrol_of_a_short_run_is_judged_as_before() -> None:
     mission = mission_outcome({"Gazebo": _gazebo(waypoints=2, docked=False)})
     assert mission["outcome"] == "ok" and mission["mode"] == "loop" and mission["ended_by"] == "duration"
     assert mission_line(mission) == "mission: ok: 2 of 5 waypoints reached (1 at 10.0 s, 2 at 20.0 s), 0 bumps"
+
+
+def _room_marks(settings: Settings) -> dict[str, Any]:
+    room = next(axes for axes in run_figure(settings).axes if axes.get_label() == "room")
+    return {str(c.get_label()): c for c in room.collections if isinstance(c, PathCollection)}
+
+
+def test_the_map_rings_the_dock_once_the_whole_patrol_is_back_there(tmp_path: Path) -> None:
+    settings = Settings(out=str(tmp_path), patrol=True)
+    settings.records.mkdir(parents=True)
+    (settings.records / "Gazebo.json").write_text(json.dumps(_gazebo(waypoints=5, docked=True)))
+    marks = _room_marks(settings)
+    dock = marks["back at the dock at 60.0 s: patrol done"]
+    assert np.asarray(dock.get_offsets()).tolist() == [list(DOCK)]
+    assert any(label.startswith("waypoints reached (5)") for label in marks)
+
+
+def test_the_map_of_a_looping_patrol_has_no_dock_mark(tmp_path: Path) -> None:
+    settings = Settings(out=str(tmp_path))  # the same path, but the patrol loops: the dock is no goal
+    settings.records.mkdir(parents=True)
+    (settings.records / "Gazebo.json").write_text(json.dumps(_gazebo(waypoints=5, docked=True)))
+    assert not any(label.startswith("back at the dock") for label in _room_marks(settings))
