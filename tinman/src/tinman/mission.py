@@ -26,7 +26,8 @@ from .planning import NoPathError, Patrol, Planner
 from .pursuit import PurePursuit
 from .world import DEFAULT_WORLD, World
 
-__all__ = ["CRUISE_SPEED", "MAX_TURN_RATE", "WAYPOINT_TOLERANCE", "DOCK_TOLERANCE", "DOCK", "REPLAN_PERIOD",
+__all__ = ["CRUISE_SPEED", "MAX_TURN_RATE", "WAYPOINT_TOLERANCE", "DOCK_TOLERANCE", "DOCKING_TOLERANCE", "DOCK",
+           "REPLAN_PERIOD",
            "patrol_pursuit",
            "MissionTrace", "simulate_mission"]
 
@@ -38,9 +39,11 @@ __all__ = ["CRUISE_SPEED", "MAX_TURN_RATE", "WAYPOINT_TOLERANCE", "DOCK_TOLERANC
 CRUISE_SPEED = 0.4        # m/s
 MAX_TURN_RATE = 1.0       # rad/s
 WAYPOINT_TOLERANCE = 0.5  # metres
-# Back at the dock, the whole patrol is done. Wider than the path follower's 0.15 m (it stops
-# that near its path's end, by Move's pose), so the robot cannot stop short of what the
-# Planner, judging by its own pose, counts as docked.
+# Back at the dock, the whole patrol is done: the Planner counts the robot docked within
+# DOCKING_TOLERANCE of the dock by its pose, wider than the path follower's 0.15 m (it stops that
+# near its path's end, by Move's pose), so the robot cannot stop short of it. The report judges
+# the true path against the wider DOCK_TOLERANCE: a few centimetres of pose error is no failure.
+DOCKING_TOLERANCE = 0.2   # metres
 DOCK_TOLERANCE = 0.3      # metres
 DOCK = (DEFAULT_WORLD.start[0], DEFAULT_WORLD.start[1])  # where the robot starts and a whole patrol ends
 REPLAN_PERIOD = 0.5       # seconds, the live Planner's default
@@ -110,7 +113,7 @@ def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate:
         raise ValueError("duration, rate and replan period must be positive")
     period = 1.0 / rate
     planner = Planner(world, method=method, seed=seed)
-    patrol = Patrol(world, tolerance=waypoint_tolerance, dock=dock, dock_tolerance=DOCK_TOLERANCE)
+    patrol = Patrol(world, tolerance=waypoint_tolerance, dock=dock, dock_tolerance=DOCKING_TOLERANCE)
     completed_at: float | None = None
     # Offline the drive model is the truth (perfect odometry): its estimate never goes stale.
     mixer = Mixer(world, period, pursuit if pursuit is not None else patrol_pursuit(), clock=lambda: 0.0)

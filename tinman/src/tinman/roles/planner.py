@@ -9,7 +9,7 @@ from anodize import Endpoint
 from ..faults import start_faults
 from ..geometry import robot_pose
 from ..messages import Header, Path, PoseStamped, path_through, pose_matrix, seconds
-from ..mission import DOCK, DOCK_TOLERANCE, WAYPOINT_TOLERANCE
+from ..mission import DOCK, DOCKING_TOLERANCE, WAYPOINT_TOLERANCE
 from ..planning import NoPathError, Patrol, Planner
 from ..records import save_record
 from ..settings import current
@@ -38,7 +38,7 @@ def planner(ep: Endpoint) -> None:
     start_faults("Planner")
     planning = Planner(DEFAULT_WORLD, method=settings.planner, seed=settings.seed)
     patrol = Patrol(DEFAULT_WORLD, tolerance=WAYPOINT_TOLERANCE, dock=DOCK if settings.patrol else None,
-                    dock_tolerance=DOCK_TOLERANCE)
+                    dock_tolerance=DOCKING_TOLERANCE)
     path: Path | None = None
     docked = False
     planned_at = -float("inf")  # the stamp of the pose the last plan started from
