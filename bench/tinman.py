@@ -28,6 +28,12 @@ ground truth's first pose and using nothing else from it.
             world's without the low-contrast FAST fallback (threshold 20 only), to
             show what each buys.
 
+--patrol measures the whole robot instead: N runs of ``anodize run tinman --patrol``
+(every waypoint, then back to the dock, or the time limit) quiet and N with two CPU hogs at
+normal priority, interleaved: patrol completed, time to complete, bumps, safety stops,
+recoveries, VO and fused ATE, control period p99 (``bench/patrol_runs.py``); medians and
+spread, into bench/results/tinman_patrol.json. A run takes up to the time limit (180 s).
+
 The process is pinned to one CPU (``os.sched_setaffinity``) and OpenCV to one
 thread once the sequences exist. The machine's load average is recorded with the
 results: on a shared machine other work slows everything down, so read fps with
@@ -36,6 +42,8 @@ the load in mind.
 Usage:
   .venv/bin/python bench/tinman.py [--repeat 3] [--cpu N] [--max-frames N] [--worlds easy,realistic]
       [--render-frames 150] [--no-ablation] [--quick] [--json PATH]
+  .venv/bin/python bench/tinman.py --patrol [--runs 10] [--limit 180] [--world realistic]
+      [--loads quiet,hogs] [--keep DIR] [--json PATH]
 """
 
 from __future__ import annotations
@@ -59,7 +67,7 @@ sys.path.append(str(BENCH))  # last: bench's shared helpers (runs.py), after the
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
-from runs import LoadWatch, write_results  # noqa: E402
+from runs import LoadWatch, source_state, write_results  # noqa: E402
 
 from tinman.ate import evaluate_ate  # noqa: E402
 from tinman.cameras import LiveCamera  # noqa: E402
@@ -71,6 +79,7 @@ from tinman.world import DEFAULT_WORLD  # noqa: E402
 from tinman.worlds import WORLDS, world_look  # noqa: E402
 
 DEFAULT_JSON = BENCH / "results" / "tinman.json"
+DEFAULT_PATROL_JSON = BENCH / "results" / "tinman_patrol.json"
 ATE_TARGET_PERCENT = 1.0
 FPS_TARGET = 15.0
 FPS_AIM = 30.0
@@ -226,8 +235,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--render-frames", type=int, default=150, help="poses timed per renderer (default 150)")
     parser.add_argument("--no-ablation", action="store_true", help="skip the run without depth refinement")
     parser.add_argument("--quick", action="store_true", help="smoke test: 150 frames, 1 run, no ablation")
-    parser.add_argument("--json", type=Path, default=DEFAULT_JSON, help=f"default {DEFAULT_JSON}")
+    parser.add_argument("--json", type=Path, default=None,
+                        help=f"default {DEFAULT_JSON} ({DEFAULT_PATROL_JSON} with --patrol)")
+    patrol = parser.add_argument_group("the whole patrol (--patrol)")
+    patrol.add_argument("--patrol", action="store_true", help="run whole patrols instead (see above)")
+    patrol.add_argument("--runs", type=int, default=10, help="patrols per load (default 10)")
+    patrol.add_argument("--limit", type=float, default=180.0, help="each patrol's time limit, s (default 180)")
+    patrol.add_argument("--world", choices=WORLDS, default="realistic", help="the room's look (default realistic)")
+    patrol.add_argument("--loads", default="quiet,hogs", help="comma-separated: quiet, hogs (default both)")
+    patrol.add_argument("--keep", type=Path, help="copy each run's trajectory.png into this folder")
     args = parser.parse_args(argv)
+    if args.patrol:
+        return patrol_main(args, parser)
+    args.json = args.json or DEFAULT_JSON
     worlds = [w for w in args.worlds.split(",") if w]
     unknown = [w for w in worlds if w not in WORLDS]
     if unknown or not worlds:
@@ -289,6 +309,53 @@ def main(argv: list[str] | None = None) -> int:
         "ablations": {name: {"world": world, **summary} for name, (world, summary) in ablations.items()},
     }
     write_results(args.json, document, started, title="TinMan visual odometry", how=how, watch=watch)
+    return 0
+
+
+def patrol_main(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """``--patrol``: whole patrols, the loads interleaved run by run; a table and the JSON."""
+    from patrol_runs import LOAD_NAMES, LOADS, run_patrol, summarise
+    from patrol_runs import table as patrol_table
+
+    loads = [load for load in args.loads.split(",") if load]
+    if not loads or any(load not in LOADS for load in loads):
+        parser.error(f"--loads {args.loads}: expected names from {', '.join(LOADS)}")
+    if args.runs < 1 or not args.limit > 0:
+        parser.error("--runs and --limit must be positive")
+    started = time.monotonic()
+    watch = LoadWatch()
+    runs: dict[str, list[dict[str, Any]]] = {load: [] for load in loads}
+    for number in range(1, args.runs + 1):
+        for load in loads:
+            result = run_patrol(args.limit, args.world, load, args.keep)
+            watch.sample()
+            runs[load].append(result)
+            ended = f"completed in {result['time_s']:.1f} s" if result.get("completed") else result.get("ended_by")
+            shown = result.get("error") or (f"{ended}, {result['waypoints']} waypoints, {result['bumps']} bumps, "
+                                             f"VO ATE {result['vo_ate_percent']}%")
+            print(f"run {number}/{args.runs} {load}: {shown}", flush=True)
+    summary = {load: summarise(found) for load, found in runs.items()}
+    rows = patrol_table(summary)
+    how = (f"TinMan's whole patrol (`anodize run tinman --patrol --world {args.world} --duration {args.limit:g}`: "
+           f"five waypoints, then back to the dock, or the time limit), {args.runs} "
+           f"{'run' if args.runs == 1 else 'runs'} per load ({', '.join(LOAD_NAMES[load] for load in loads)}), "
+           f"the loads interleaved run by run; medians, the range in brackets; Python {platform.python_version()} "
+           f"on {os.cpu_count()} CPUs")
+    if args.runs < 3:  # a proof that the benchmark works, not a measurement to compare
+        how += (f"; ONLY {args.runs} {'RUN' if args.runs == 1 else 'RUNS'} PER LOAD: this shows the benchmark "
+                "works, it is not a measurement (the issue's is 10 per load)")
+    print(how)
+    print()
+    print_table(rows)
+    document = {
+        "benchmark": "tinman_patrol", "script": "bench/tinman.py --patrol",
+        "source": source_state(REPO, "anodize", "tinman", "bench"),
+        "options": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
+        "table": rows, "summary": summary, "runs": runs,
+        "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()},
+    }
+    write_results(args.json or DEFAULT_PATROL_JSON, document, started, title="TinMan's whole patrol", how=how,
+                  watch=watch)
     return 0
 
 

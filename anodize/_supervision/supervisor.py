@@ -14,7 +14,8 @@ for every transport:
   ``max_restarts`` times;
 - the timeout counts from "go" (every group ready), then every group is asked
   to stop and, ``grace`` seconds later, ended;
-- Ctrl-C stops the run the same way, and the report says it was interrupted.
+- Ctrl-C stops the run the same way, and the report says it was interrupted;
+- so does the caller's ``stop_when``, when it gives a reason (a mission done).
 """
 
 from __future__ import annotations
@@ -281,7 +282,7 @@ class Supervisor:
     def __init__(self, protocol: str, roles: Sequence[str], groups: dict[str, Group],
                  channels: Sequence[tuple[str, str]], runner: Runner, timeout: float | None,
                  grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None,
-                 elsewhere: Elsewhere | None = None) -> None:
+                 elsewhere: Elsewhere | None = None, stop_when: Callable[[], str | None] | None = None) -> None:
         self.protocol = protocol
         self.roles = tuple(roles)
         self.channels = tuple(channels)
@@ -290,6 +291,7 @@ class Supervisor:
         self.timeout = timeout
         self.grace = grace
         self.on_status = on_status
+        self.stop_when = stop_when
         self.records = {name: _GroupRecord(group) for name, group in groups.items()}
         everyone = groups if elsewhere is None else elsewhere.groups
         self.group_of = {role: g.name for g in everyone.values() for role in g.roles}
@@ -310,8 +312,10 @@ class Supervisor:
             while self._live():
                 try:
                     self._step()
-                    if self.on_status is not None and time.monotonic() >= next_status:
-                        self.on_status(self.statuses())
+                    if time.monotonic() >= next_status:
+                        self._ask_stop_when()
+                        if self.on_status is not None:
+                            self.on_status(self.statuses())
                         next_status = time.monotonic() + STATUS_EVERY
                 except KeyboardInterrupt:
                     if self.interrupted:  # a second Ctrl-C: no more grace
@@ -344,6 +348,14 @@ class Supervisor:
             if record.killed and not record.ended and time.monotonic() - record.killed_at > KILL_BOUND:
                 self._exited(record, f"it did not end within {KILL_BOUND:g} s of being killed; "
                                      "the run stopped waiting for it")
+
+    def _ask_stop_when(self) -> None:
+        """Stop every group once the caller's ``stop_when`` gives a reason (asked only while running)."""
+        if self.stop_when is None or self.state is not RunState.RUNNING:
+            return
+        why = self.stop_when()
+        if why:
+            self._stop_all(why)
 
     def _live(self) -> bool:
         return any(not r.ended for r in self.records.values())

@@ -181,7 +181,7 @@ class System:
             on_status: Callable[[dict[str, GroupStatus]], None] | None = None, *,
             taps: Sequence[ChannelTap] = (), liveness: float | None = None, host: str | None = None,
             wait: float | None = None, record: str | os.PathLike[str] | None = None,
-            live: ChannelTap | None = None) -> RunReport:
+            live: ChannelTap | None = None, stop_when: Callable[[], str | None] | None = None) -> RunReport:
         """Run every role to the end of its local type (or until ``timeout`` seconds).
 
         Roles still running at the timeout are stopped (``RoleStopped`` is raised in
@@ -192,6 +192,10 @@ class System:
         (inproc). Ctrl-C stops the run the same way and the report is marked
         interrupted. ``on_status``, if given, is called about twice a second with a
         :class:`GroupStatus` per group (from the supervising thread: keep it quick).
+        ``stop_when``, if given, is asked as often (also from that thread, also quick) and
+        stops the run as the timeout does when it returns a reason, which the report's notes
+        give ("stopping every group: the patrol is done"): how a caller that knows its
+        mission is done, e.g. from what the roles wrote, ends a run whose roles loop forever.
         What only some transports have (liveness, hosts, the start barrier) are fields
         of the transport value.
 
@@ -226,7 +230,7 @@ class System:
         runner = transport.runner(plan)
         scope = runner.scope
         report = Supervisor(gt.name, scope.roles, scope.groups, scope.channels, runner, timeout, grace, on_status,
-                            scope.elsewhere).run()
+                            scope.elsewhere, stop_when).run()
         notes = [note for tap in taps for note in tap.end()]
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()},
                                    notes=(*report.notes, *notes))

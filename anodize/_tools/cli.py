@@ -580,7 +580,7 @@ def _run_named(name: str, rest: list[str]) -> int:
     try:
         with _taps(prepared.record, args.foxglove) as taps:
             report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
-                                         taps=taps)
+                                         taps=taps, stop_when=prepared.stop_when)
     finally:
         if progress is not None:
             progress.close()

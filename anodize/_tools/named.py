@@ -31,13 +31,16 @@ ENTRY_POINT_GROUP = "anodize.systems"
 
 @dataclass
 class Prepared:
-    """What a named system hands back to be run: the system, its timeout (seconds), and where
-    to record it (None: not recorded)."""
+    """What a named system hands back to be run: the system, its timeout (seconds), where
+    to record it (None: not recorded), and ``stop_when``: asked about twice a second while
+    the run goes, it ends the run early by returning a reason (None: go on; see
+    ``System.run``)."""
 
     system: System
     timeout: float | None
     grace: float = 3.0
     record: Path | None = None
+    stop_when: Callable[[], str | None] | None = None
 
 
 @dataclass

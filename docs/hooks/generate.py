@@ -26,7 +26,7 @@ MARKER = re.compile(r"^<!--\s*generated:\s*(.*?)\s*-->[ \t]*$", re.MULTILINE)
 
 # The order of the performance page; result files not named here follow, by name.
 BENCH_ORDER = ["monitor_overhead", "peers", "transport", "dds", "ros_images", "check_scaling", "recording",
-               "tinman", "render"]
+               "tinman", "tinman_patrol", "render"]
 BENCH_KEYS = ("title", "how", "table", "load")
 
 
@@ -108,9 +108,10 @@ def benchmark(name: str, document: dict[str, Any]) -> str:
     options = document.get("options", {})
     quick = (" A `--quick` smoke run: fewer repetitions and smaller workloads than the defaults."
              if isinstance(options, dict) and options.get("quick") else "")
+    script = document.get("script") or f"bench/{name}.py"  # a mode of another script names it so
     return "\n".join([
         f"## {document['title']}", "",
-        f"`bench/{name}.py`, {document.get('date', 'undated')}{commit}: {document['how']}.{quick}", "",
+        f"`{script}`, {document.get('date', 'undated')}{commit}: {document['how']}.{quick}", "",
         _load(document["load"]), "",
         *_table(table), "",
     ])

@@ -33,9 +33,14 @@ from .outcome import build_report
 from .settings import FAULTS, Settings, export
 from .worlds import DEFAULT_LOOK, WORLDS
 
-__all__ = ["TINMAN", "TinMan", "SYSTEM_FILE", "TinManError"]
+__all__ = ["TINMAN", "TinMan", "SYSTEM_FILE", "TinManError", "patrol_done", "PATROL_HINT", "PATROL_LIMIT"]
 
 SYSTEM_FILE = Path(__file__).with_name("tinman.toml")
+SHORT_RUN = 20.0       # seconds: the default run, a sample of the patrol
+PATROL_LIMIT = 180.0   # seconds: a whole patrol's default time limit (an ideal drive takes 45 s)
+PATROL_DONE = "the patrol is completed (the Planner is back at the dock)"
+PATROL_HINT = ("the whole patrol (five waypoints, then back to the dock): "
+               f"anodize run tinman --patrol  (ends when done, or after {PATROL_LIMIT:g} s)")
 PAPER_GLOBAL = "TinMan"  # Fig. 16 as written
 
 
@@ -55,8 +60,12 @@ class TinMan:
         self.settings = Settings()
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
-        parser.add_argument("--duration", type=float, default=20.0, metavar="S",
-                            help="seconds to run (default 20)")
+        parser.add_argument("--duration", type=float, default=None, metavar="S",
+                            help=f"seconds to run (default {SHORT_RUN:g}); with --patrol, the time limit "
+                                 f"(default {PATROL_LIMIT:g})")
+        parser.add_argument("--patrol", action="store_true",
+                            help="the whole patrol: every waypoint, then back to the dock; the run ends when "
+                                 "the robot is back (or at the time limit, --duration)")
         parser.add_argument("--out", default="out/tinman", metavar="DIR",
                             help="folder for report.json and trajectory.png (default out/tinman)")
         parser.add_argument("--paper", action="store_true",
@@ -87,6 +96,9 @@ class TinMan:
                                  "(default: OUT/run.mcap); check it with 'anodize verify PATH'")
 
     def prepare(self, args: argparse.Namespace, log: Callable[[str], None]) -> Prepared:
+        patrol = bool(getattr(args, "patrol", False))
+        if args.duration is None:
+            args.duration = PATROL_LIMIT if patrol else SHORT_RUN
         if not args.duration > 0:
             raise TinManError(f"--duration {args.duration}: expected a number of seconds > 0")
         config = load_config(SYSTEM_FILE)
@@ -108,13 +120,14 @@ class TinMan:
                               "--world chooses what the simulated camera renders")
         dataset = _dataset(args.dataset) if args.dataset is not None else ""
         self.settings = Settings(out=str(out.resolve()), dataset=dataset, world=world,
-                                 duration=float(args.duration), paper=args.paper, teleop=args.teleop,
+                                 duration=float(args.duration), patrol=patrol, paper=args.paper, teleop=args.teleop,
                                  inject=inject, groups=groups, planner=args.planner)
         shutil.rmtree(self.settings.records, ignore_errors=True)  # no record of an older run may linger
         self.settings.records.mkdir(parents=True, exist_ok=True)
         export(self.settings)
         record = None if args.record is None else Path(args.record or out / "run.mcap")
-        return Prepared(build_system(config), timeout=float(args.duration), grace=3.0, record=record)
+        return Prepared(build_system(config), timeout=float(args.duration), grace=3.0, record=record,
+                        stop_when=patrol_done(self.settings.records) if patrol else None)
 
     def progress(self, statuses: dict[str, GroupStatus], elapsed: float) -> str:
         """The live line, as much of it as the terminal has room for (80 columns when unknown).
@@ -151,7 +164,21 @@ class TinMan:
             title += (f": VO ATE RMSE {data['ate_rmse_m'] * 100:.1f} cm over {data['trajectory_length_m']:.2f} m "
                       f"({data['ate_percent']:.2f}%)")
         picture = draw_run(out / "trajectory.png", settings, title=title)
-        return Finished(ok, [*_lines(data, problems), f"wrote {_shown(report_file)} and {_shown(picture)}"])
+        lines = [*_lines(data, problems), f"wrote {_shown(report_file)} and {_shown(picture)}"]
+        if not settings.patrol:
+            lines.append(PATROL_HINT)
+        return Finished(ok, lines)
+
+
+def patrol_done(records: Path) -> Callable[[], str | None]:
+    """``stop_when`` of a whole patrol: the reason to stop once the Planner has written its
+    ``Patrol`` record (back at the dock by its pose), else None."""
+    def done() -> str | None:
+        try:
+            return PATROL_DONE if (records / "Patrol.json").is_file() else None
+        except OSError:
+            return None
+    return done
 
 
 _BRIEF_STATES = {"starting": "start", "restarting": "restart", "stopped": "stop", "failed": "FAILED"}

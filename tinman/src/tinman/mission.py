@@ -26,7 +26,9 @@ from .planning import NoPathError, Patrol, Planner
 from .pursuit import PurePursuit
 from .world import DEFAULT_WORLD, World
 
-__all__ = ["CRUISE_SPEED", "MAX_TURN_RATE", "WAYPOINT_TOLERANCE", "REPLAN_PERIOD", "patrol_pursuit",
+__all__ = ["CRUISE_SPEED", "MAX_TURN_RATE", "WAYPOINT_TOLERANCE", "DOCK_TOLERANCE", "DOCKING_TOLERANCE", "DOCK",
+           "REPLAN_PERIOD",
+           "patrol_pursuit",
            "MissionTrace", "simulate_mission"]
 
 # How the patrol drives. The camera films the robot's way, so turns are kept gentle
@@ -37,6 +39,13 @@ __all__ = ["CRUISE_SPEED", "MAX_TURN_RATE", "WAYPOINT_TOLERANCE", "REPLAN_PERIOD
 CRUISE_SPEED = 0.4        # m/s
 MAX_TURN_RATE = 1.0       # rad/s
 WAYPOINT_TOLERANCE = 0.5  # metres
+# Back at the dock, the whole patrol is done: the Planner counts the robot docked within
+# DOCKING_TOLERANCE of the dock by its pose, wider than the path follower's 0.15 m (it stops that
+# near its path's end, by Move's pose), so the robot cannot stop short of it. The report judges
+# the true path against the wider DOCK_TOLERANCE: a few centimetres of pose error is no failure.
+DOCKING_TOLERANCE = 0.2   # metres
+DOCK_TOLERANCE = 0.3      # metres
+DOCK = (DEFAULT_WORLD.start[0], DEFAULT_WORLD.start[1])  # where the robot starts and a whole patrol ends
 REPLAN_PERIOD = 0.5       # seconds, the live Planner's default
 
 
@@ -58,6 +67,8 @@ class MissionTrace:
         planning_failures: the messages of the plans that failed (the last path was kept).
         bumps: steps the drive refused because of a collision (0 in a sound mission).
         odometer: the distance driven (metres).
+        completed_at: seconds since the start when the robot, on a patrol done once (a
+            ``dock`` given), was back at the dock (None: not done, or a looping patrol).
     """
 
     stamps: np.ndarray
@@ -68,12 +79,14 @@ class MissionTrace:
     planning_failures: list[str]
     bumps: int
     odometer: float
+    completed_at: float | None = None
 
 
 def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate: float = 100.0,
                      method: str = "rrt", seed: int = 0, script: tuple[JoyWindow, ...] = JOY_SCRIPT,
                      replan_period: float = REPLAN_PERIOD, pursuit: PurePursuit | None = None,
-                     waypoint_tolerance: float = WAYPOINT_TOLERANCE) -> MissionTrace:
+                     waypoint_tolerance: float = WAYPOINT_TOLERANCE,
+                     dock: tuple[float, float] | None = None) -> MissionTrace:
     """Patrol ``world``'s waypoints for ``duration`` seconds, deterministically.
 
     Args:
@@ -86,6 +99,8 @@ def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate:
         replan_period: seconds between two plans.
         pursuit: the path follower; ``patrol_pursuit()`` when omitted.
         waypoint_tolerance: how near a waypoint counts as reached (``Patrol``'s tolerance).
+        dock: the whole patrol once, then back to ``dock`` (``world.start[:2]``, say), where the
+            robot then stays (an empty path, as the live Planner sends); None: the patrol loops.
 
     Returns:
         The trace: ``round(duration * rate) + 1`` stamps from 0 to ``duration``; the
@@ -98,7 +113,8 @@ def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate:
         raise ValueError("duration, rate and replan period must be positive")
     period = 1.0 / rate
     planner = Planner(world, method=method, seed=seed)
-    patrol = Patrol(world, tolerance=waypoint_tolerance)
+    patrol = Patrol(world, tolerance=waypoint_tolerance, dock=dock, dock_tolerance=DOCKING_TOLERANCE)
+    completed_at: float | None = None
     # Offline the drive model is the truth (perfect odometry): its estimate never goes stale.
     mixer = Mixer(world, period, pursuit if pursuit is not None else patrol_pursuit(), clock=lambda: 0.0)
     robot = mixer.model
@@ -115,16 +131,20 @@ def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate:
         poses[step] = robot.pose
         if step == steps:
             break
-        if step % replan_every == 0:
+        if step % replan_every == 0 and completed_at is None:
             x, y, _ = robot.pose
             goal = patrol.goal_for(x, y)
-            try:
-                path = planner.plan((x, y), goal)
-            except NoPathError as error:
-                failures.append(str(error))
+            if patrol.done:  # back at the dock: an empty path, and the robot stays
+                completed_at = t
+                mixer.set_path(path_through([], Header(stamp=stamp_from_seconds(t), frame_id="map")))
             else:
-                plans.append((t, path))
-                mixer.set_path(path_through(path, Header(stamp=stamp_from_seconds(t), frame_id="map")))
+                try:
+                    path = planner.plan((x, y), goal)
+                except NoPathError as error:
+                    failures.append(str(error))
+                else:
+                    plans.append((t, path))
+                    mixer.set_path(path_through(path, Header(stamp=stamp_from_seconds(t), frame_id="map")))
         axes, buttons = scripted_joy(t, script)
         v, w, _ = twist_from_joy(axes, buttons)
         _, source = mixer.step(twist_planar(v, w))
@@ -132,4 +152,4 @@ def simulate_mission(world: World = DEFAULT_WORLD, duration: float = 30.0, rate:
     teleop[steps] = teleop[steps - 1] if steps else False
     return MissionTrace(stamps=stamps, poses=poses, teleop=teleop, plans=plans,
                         waypoints_reached=patrol.reached, planning_failures=failures,
-                        bumps=robot.bumps, odometer=robot.odometer)
+                        bumps=robot.bumps, odometer=robot.odometer, completed_at=completed_at)

@@ -8,6 +8,11 @@ layer stopped it and how often odometry recovered after losing track. A bump is 
 mission failure: the safety layer is there so that no pose estimate, however wrong,
 drives the robot into a wall.
 
+With ``--patrol`` the patrol is done once: every waypoint, then back to the dock, and the
+run ends when the Planner, by its pose, is back there (its ``Patrol`` record) or at the time
+limit. The outcome then says which (``patrol completed in N s`` or ``time limit``), judged on
+the true path: a patrol the Planner believed done but the robot did not truly drive fails.
+
 The picture marks what this module finds (:func:`mission_marks`), so the map and the
 report cannot disagree.
 """
@@ -19,11 +24,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .mission import WAYPOINT_TOLERANCE
+from .mission import DOCK_TOLERANCE, WAYPOINT_TOLERANCE
 from .world import DEFAULT_WORLD
 
-__all__ = ["WaypointReached", "Contact", "MissionMarks", "mission_marks", "mission_outcome", "mission_line",
-           "counted", "CONTACT_GAP"]
+__all__ = ["WaypointReached", "Contact", "DockReached", "MissionMarks", "mission_marks", "mission_outcome",
+           "mission_line", "counted", "CONTACT_GAP"]
 
 CONTACT_GAP = 0.5  # seconds: bumps closer in time than this are one contact (the robot pressing on a wall)
 
@@ -63,41 +68,78 @@ class Contact:
 
 
 @dataclass(frozen=True)
+class DockReached:
+    """Back at the dock after every waypoint of a patrol done once (``t``: seconds since the
+    simulator started; ``x, y``: where the robot was then)."""
+
+    t: float
+    x: float
+    y: float
+
+
+@dataclass(frozen=True)
 class MissionMarks:
-    """What the picture marks on the map: reached waypoints and contacts."""
+    """What the picture marks on the map: reached waypoints, contacts, and the dock once back at it."""
 
     waypoints: tuple[WaypointReached, ...]
     contacts: tuple[Contact, ...]
+    dock: DockReached | None = None
+
+
+Point = tuple[float, float]
 
 
 def mission_marks(records: Mapping[str, Mapping[str, Any]],
-                  waypoints: Sequence[tuple[float, float]] = DEFAULT_WORLD.waypoints,
-                  tolerance: float = WAYPOINT_TOLERANCE) -> MissionMarks:
-    """The waypoints the robot reached, in patrol order, and where it bumped, from the Gazebo record."""
+                  waypoints: Sequence[Point] = DEFAULT_WORLD.waypoints,
+                  tolerance: float = WAYPOINT_TOLERANCE, dock: Point | None = None,
+                  dock_tolerance: float = DOCK_TOLERANCE) -> MissionMarks:
+    """The waypoints the robot reached, in patrol order, where it bumped, and (a patrol done once,
+    ``dock`` given) when it was back at the dock after the last waypoint, from the Gazebo record."""
     gazebo = records.get("Gazebo", {})
-    return MissionMarks(_reached(_rows(gazebo), waypoints, tolerance), _contacts(gazebo.get("bump_events") or []))
+    rows = _rows(gazebo)
+    reached = _reached(rows, waypoints, tolerance)
+    docked = _docked(rows, reached, len(waypoints), dock, dock_tolerance) if dock is not None else None
+    return MissionMarks(reached, _contacts(gazebo.get("bump_events") or []), docked)
 
 
 def mission_outcome(records: Mapping[str, Mapping[str, Any]],
-                    waypoints: Sequence[tuple[float, float]] = DEFAULT_WORLD.waypoints) -> dict[str, Any]:
+                    waypoints: Sequence[Point] = DEFAULT_WORLD.waypoints, *,
+                    dock: Point | None = None, time_limit: float | None = None) -> dict[str, Any]:
     """``report.json``'s ``mission``: ``outcome`` (``"ok"`` or ``"FAILED"``) and ``failures`` (why),
-    ``waypoints_reached`` (each with its number, lap, time and place), ``patrol_completed`` (every
-    waypoint reached, the last one being by the dock), ``bumps``, ``contacts``, ``safety_stops``
-    and ``recoveries`` (None where no role counted them)."""
-    marks = mission_marks(records, waypoints)
+    ``waypoints_reached`` (each with its number, lap, time and place), ``patrol_completed``,
+    ``bumps``, ``contacts``, ``safety_stops`` and ``recoveries`` (None where no role counted them).
+
+    Looping (no ``dock``), ``patrol_completed`` is every waypoint reached once. The whole patrol
+    (``dock``, with ``--patrol``): ``mode`` is ``"patrol"``, ``patrol_completed`` means every
+    waypoint in order and then the dock on the true path, ``completed_in_s`` when it got back,
+    ``ended_by`` is ``"patrol completed"`` (the Planner's ``Patrol`` record: back at the dock by
+    its pose) or ``"time limit"``, and a patrol not completed fails the mission."""
+    marks = mission_marks(records, waypoints, dock=dock)
     gazebo = records.get("Gazebo", {})
     bumps = gazebo.get("bumps")
     failures = []
     if bumps:
         failures.append(f"the robot bumped into the room ({counted(bumps, 'bump')} in "
                         f"{counted(len(marks.contacts) or 1, 'contact')}): the safety layer did not stop it")
+    every = len(marks.waypoints) >= len(waypoints)
+    patrol: dict[str, Any] = {"mode": "loop", "ended_by": "duration", "time_limit_s": time_limit}
+    if dock is not None:
+        ended_by = "patrol completed" if "Patrol" in records else "time limit"
+        completed = every and marks.dock is not None
+        patrol = {"mode": "patrol", "ended_by": ended_by, "time_limit_s": time_limit,
+                  "dock": {"x": dock[0], "y": dock[1], "t_s": marks.dock.t if marks.dock else None,
+                           "final_distance_m": _final_distance(gazebo, dock)},
+                  "completed_in_s": marks.dock.t if completed and marks.dock else None}
+        if not completed:
+            failures.append(_not_completed(ended_by, marks, len(waypoints), patrol["dock"]["final_distance_m"]))
     return {
         "outcome": "FAILED" if failures else "ok",
         "failures": failures,
+        **patrol,
         "patrol_waypoints": len(waypoints),
         "waypoints_reached": [{"number": w.number, "lap": w.lap, "t_s": w.t, "x": w.x, "y": w.y}
                               for w in marks.waypoints],
-        "patrol_completed": len(marks.waypoints) >= len(waypoints),
+        "patrol_completed": every if dock is None else patrol["completed_in_s"] is not None,
         "bumps": bumps,
         "contacts": [{"t_s": c.t, "x": c.x, "y": c.y, "bumps": c.bumps} for c in marks.contacts],
         "safety_stops": records.get("Move", {}).get("safety_stops"),
@@ -105,12 +147,30 @@ def mission_outcome(records: Mapping[str, Mapping[str, Any]],
     }
 
 
+def _not_completed(ended_by: str, marks: MissionMarks, waypoints: int, distance: float | None) -> str:
+    """Why a patrol done once is not completed, on the true path."""
+    where = f" ({distance:.2f} m from it at the end)" if distance is not None else ""
+    missed = (f"reached {len(marks.waypoints)} of {counted(waypoints, 'waypoint')}"
+              if len(marks.waypoints) < waypoints else f"did not get back to the dock{where}")
+    if ended_by == "patrol completed":
+        return f"the Planner, by its pose, was back at the dock, but the robot truly {missed}"
+    return f"the patrol was not completed in the time limit: the robot {missed}"
+
+
 def mission_line(mission: Mapping[str, Any]) -> str:
-    """``mission: ok: 2 of 5 waypoints reached (1 at 6.1 s, 2 at 12.8 s), 0 bumps, 1 safety stop``."""
+    """``mission: ok: 2 of 5 waypoints reached (1 at 6.1 s, 2 at 12.8 s), 0 bumps, 1 safety stop``;
+    the whole patrol's begins ``patrol completed in 45.3 s:`` or ``time limit (180 s):``."""
     reached = mission["waypoints_reached"]
     when = ", ".join(f"{w['number']} at {w['t_s']:.1f} s" for w in reached)
+    whole = mission.get("mode") == "patrol"
     parts = [f"{len(reached)} of {counted(mission['patrol_waypoints'], 'waypoint')} reached"
-             + (f" ({when})" if when else "") + (", patrol completed" if mission["patrol_completed"] else "")]
+             + (f" ({when})" if when else "")
+             + (", patrol completed" if mission["patrol_completed"] and not whole else "")]
+    dock = mission.get("dock") or {}
+    if whole and dock.get("t_s") is not None:
+        parts.append(f"back at the dock at {dock['t_s']:.1f} s")
+    elif whole and dock.get("final_distance_m") is not None:
+        parts.append(f"{dock['final_distance_m']:.2f} m from the dock at the end")
     if mission["bumps"] is not None:
         parts.append(counted(mission["bumps"], "bump"))
     if mission["safety_stops"] is not None:
@@ -118,7 +178,15 @@ def mission_line(mission: Mapping[str, Any]) -> str:
     if mission["recoveries"] is not None:
         parts.append(counted(mission["recoveries"], "recovery", "recoveries"))
     verdict = mission["outcome"] + (f" ({'; '.join(mission['failures'])})" if mission["failures"] else "")
-    return f"mission: {verdict}: {', '.join(parts)}"
+    head = ""
+    if whole and mission.get("completed_in_s") is not None:
+        head = f"patrol completed in {mission['completed_in_s']:.1f} s: "
+    elif whole and mission.get("ended_by") == "time limit":
+        limit = mission.get("time_limit_s")
+        head = "time limit" + (f" ({limit:g} s)" if limit is not None else "") + ": "
+    elif whole:
+        head = "patrol ended by the Planner: "
+    return f"mission: {verdict}: {head}{', '.join(parts)}"
 
 
 def counted(number: int, noun: str, plural: str | None = None) -> str:
@@ -149,6 +217,27 @@ def _reached(rows: list[tuple[float, float, float]], waypoints: Sequence[tuple[f
         if math.hypot(x - wx, y - wy) <= tolerance:
             found.append(WaypointReached(index + 1, len(found) // len(waypoints) + 1, round(t, 3), x, y))
     return tuple(found)
+
+
+def _docked(rows: list[tuple[float, float, float]], reached: Sequence[WaypointReached], waypoints: int,
+            dock: Point, tolerance: float) -> DockReached | None:
+    """The first moment, after the patrol's last waypoint, the robot was within ``tolerance`` of the dock."""
+    if len(reached) < waypoints or not waypoints:
+        return None
+    after = reached[waypoints - 1].t
+    for t, x, y in rows:
+        if t >= after and math.hypot(x - dock[0], y - dock[1]) <= tolerance:
+            return DockReached(round(t, 3), x, y)
+    return None
+
+
+def _final_distance(gazebo: Mapping[str, Any], dock: Point) -> float | None:
+    """How far the robot truly was from the dock at the end (None: no true path)."""
+    rows = _rows(gazebo)
+    if not rows:
+        return None
+    _, x, y = rows[-1]
+    return round(math.hypot(x - dock[0], y - dock[1]), 3)
 
 
 def _contacts(events: Sequence[Sequence[float]]) -> tuple[Contact, ...]:

@@ -10,6 +10,7 @@ import numpy as np
 from anodize import ProtocolViolationError, RunReport
 
 from .ate import evaluate_ate
+from .mission import DOCK
 from .mission_outcome import mission_outcome
 from .records import load_records
 from .settings import Settings
@@ -40,7 +41,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
     ate = _ate(settings)
     violations = violations_in(report)
     run = report.to_dict()
-    mission = mission_outcome(records)
+    mission = mission_outcome(records, dock=DOCK if settings.patrol else None, time_limit=settings.duration)
     return {
         "system": "tinman",
         "global": report.protocol,
@@ -48,7 +49,8 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "outcome": report.outcome,  # the system's: how the groups ended (the robot's is "mission")
         "mission": mission,
         "duration_s": round(report.duration, 3),
-        "requested_duration_s": settings.duration,
+        "requested_duration_s": settings.duration,  # with --patrol, the time limit
+        "patrol": settings.patrol,
         "dataset": settings.dataset,
         "world": settings.world if not settings.dataset else None,
         "injected": dict(settings.inject),

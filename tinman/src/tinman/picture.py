@@ -49,7 +49,7 @@ from matplotlib.transforms import Affine2D
 from .ate import AteResult, evaluate_ate
 from .dataset import DatasetError, TumSequence
 from .geometry import FR1
-from .mission import WAYPOINT_TOLERANCE
+from .mission import DOCK, WAYPOINT_TOLERANCE
 from .mission_outcome import counted, mission_marks
 from .outcome import truth_path
 from .records import load_records
@@ -146,6 +146,7 @@ class _Run:
     ate: AteResult | None
     ate_stamps: np.ndarray  # the ground-truth stamp of each of ate.errors
     ate_problem: str  # why there is no ATE ("" when there is one)
+    patrol: bool = False  # the whole patrol once (--patrol): the dock is its end
 
 
 def draw_run(path: str | Path, settings: Settings, estimate: Sequence[Sequence[float]] | None = None,
@@ -227,7 +228,7 @@ def _read_run(settings: Settings, estimate: Sequence[Sequence[float]] | None, wo
                    else "no true path yet: the simulated camera's is saved when the run stops")
     return _Run(records=records, report=_fresh_report(settings), recorded=recorded, frames=frames, t0=first,
                 span=span, truth=truth, estimate=(stamps, positions) if len(stamps) else None, ate=ate,
-                ate_stamps=ate_stamps, ate_problem=problem)
+                ate_stamps=ate_stamps, ate_problem=problem, patrol=settings.patrol)
 
 
 def _open_sequence(settings: Settings) -> TumSequence | None:
@@ -352,7 +353,7 @@ def _draw_room(axes: Axes, run: _Run, world: World, moments: list[tuple[float, i
     marks.append(axes.scatter([world.start[0]], [world.start[1]], marker="s", s=90, facecolor="white",
                               edgecolor="black", lw=1.6, zorder=8, label="start (the robot's dock)"))
     marks += _draw_ends(axes, run, robot)
-    marks += _draw_mission(axes, run, world)
+    marks += _draw_mission(axes, run, world, DOCK if run.patrol else None)
     marks += _draw_moment_marks(axes, run, moments)
 
     xs = [0.0, world.width]
@@ -385,9 +386,10 @@ def _robot_path(record: dict[str, Any]) -> np.ndarray:
     return finite
 
 
-def _draw_mission(axes: Axes, run: _Run, world: World) -> list[Any]:
-    """The waypoints reached (a ring on each, its time beside it) and the contacts (a cross each)."""
-    found = mission_marks(run.records, world.waypoints, WAYPOINT_TOLERANCE)
+def _draw_mission(axes: Axes, run: _Run, world: World, dock: tuple[float, float] | None) -> list[Any]:
+    """The waypoints reached (a ring on each, its time beside it), the contacts (a cross each) and,
+    on a whole patrol, the dock once the robot was back at it (a ring with its time)."""
+    found = mission_marks(run.records, world.waypoints, WAYPOINT_TOLERANCE, dock=dock)
     marks: list[Any] = []
     if found.waypoints:
         places = [world.waypoints[w.number - 1] for w in found.waypoints]
@@ -404,6 +406,12 @@ def _draw_mission(axes: Axes, run: _Run, world: World) -> list[Any]:
                                   facecolor="#E00000", edgecolor="black", lw=0.8, zorder=9.5,
                                   label=f"bumps: {counted(bumps, 'bump')} in "
                                         f"{counted(len(found.contacts), 'contact')}"))
+    if found.dock is not None and dock is not None:
+        marks.append(axes.scatter([dock[0]], [dock[1]], marker="o", s=520, facecolor="none",
+                                  edgecolor=COLOURS["truth"], lw=2.2, ls="--", zorder=7.5,
+                                  label=f"back at the dock at {found.dock.t:.1f} s: patrol done"))
+        axes.annotate(f"{found.dock.t:.1f} s", dock, xytext=(7, 6), textcoords="offset points",
+                      fontsize=8, color=COLOURS["truth"], zorder=7.5)
     return marks
 
 
@@ -594,7 +602,10 @@ def _headline(run: _Run) -> list[str]:
         mission = report.get("mission") or {}
         if mission:
             reached = mission.get("waypoints_reached") or []
-            parts.append(f"mission {mission.get('outcome', '?')}: {len(reached)} of "
+            head = (f"patrol completed in {_number(mission.get('completed_in_s'), '.1f')} s, "
+                    if mission.get("completed_in_s") is not None
+                    else "time limit, " if mission.get("ended_by") == "time limit" else "")
+            parts.append(f"mission {mission.get('outcome', '?')}: {head}{len(reached)} of "
                          f"{_count(mission.get('patrol_waypoints'), 'waypoint')} reached")
         failed = [name for name, group in (report.get("groups") or {}).items() if group.get("status") == "failed"]
         injected = report.get("injected") or {}

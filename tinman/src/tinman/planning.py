@@ -385,14 +385,21 @@ class Planner:
 
 
 class Patrol:
-    """The world's waypoints in a loop: the goal is the current one until the robot is near it.
+    """The world's waypoints in order: the goal is the current one until the robot is near it.
+
+    Looping (no ``dock``), the patrol starts again from the first waypoint after the last.
+    Once (a ``dock`` given), the goal after the last waypoint is the dock, and the patrol
+    is ``done`` when the robot is within ``dock_tolerance`` of it: the whole patrol.
 
     Attributes:
         index: the current waypoint's position in ``world.waypoints``.
         reached: how many waypoints the robot has reached so far.
+        dock: where a patrol done once ends (None: it loops).
+        done: the patrol was done once and the robot is back at the dock.
     """
 
-    def __init__(self, world: World, tolerance: float = 0.3) -> None:
+    def __init__(self, world: World, tolerance: float = 0.3, dock: Point | None = None,
+                 dock_tolerance: float = 0.3) -> None:
         """A patrol starting at the world's first waypoint.
 
         Raises:
@@ -402,18 +409,31 @@ class Patrol:
             raise ValueError("the world has no waypoints to patrol")
         self.waypoints = tuple((float(x), float(y)) for x, y in world.waypoints)
         self.tolerance = tolerance
+        self.dock = None if dock is None else (float(dock[0]), float(dock[1]))
+        self.dock_tolerance = dock_tolerance
         self.index = 0
         self.reached = 0
+        self.done = False
+
+    @property
+    def docking(self) -> bool:
+        """Every waypoint is reached and the goal is the dock (a patrol done once)."""
+        return self.dock is not None and self.reached >= len(self.waypoints)
 
     @property
     def goal(self) -> Point:
-        """The current waypoint."""
+        """The current waypoint, or the dock once every waypoint of a patrol done once is reached."""
+        if self.dock is not None and self.docking:
+            return self.dock
         return self.waypoints[self.index]
 
     def goal_for(self, x: float, y: float) -> Point:
-        """The goal for a robot at ``(x, y)``: the next waypoint once it is within tolerance."""
+        """The goal for a robot at ``(x, y)``: the next one once it is within tolerance of this one."""
         gx, gy = self.goal
-        if math.hypot(x - gx, y - gy) <= self.tolerance:
+        distance = math.hypot(x - gx, y - gy)
+        if self.docking:
+            self.done = self.done or distance <= self.dock_tolerance
+        elif distance <= self.tolerance:
             self.index = (self.index + 1) % len(self.waypoints)
             self.reached += 1
         return self.goal

@@ -30,7 +30,9 @@ class Settings:
         world: how the room looks to the simulated camera (:data:`tinman.worlds.WORLDS`):
             ``"realistic"`` (photographs, plain walls, repeated patterns, flickering lamps, motion
             blur; :data:`tinman.worlds.DEFAULT_LOOK`) or ``"easy"`` (procedural textures made for ORB).
-        duration: seconds the run lasts.
+        duration: seconds the run lasts (with ``patrol``, its time limit).
+        patrol: the whole patrol once (every waypoint, then back to the dock), the run ending
+            when the Planner is back at the dock; else the patrol loops until ``duration``.
         paper: whether the run follows Fig. 16's single loop (``TinMan``).
         teleop: keyboard driving from the terminal instead of the scripted joystick.
         inject: group -> fault to inject (one of :data:`FAULTS`).
@@ -46,6 +48,7 @@ class Settings:
     dataset: str = ""
     world: str = "realistic"
     duration: float = 20.0
+    patrol: bool = False
     paper: bool = False
     teleop: bool = False
     inject: dict[str, str] = field(default_factory=dict)

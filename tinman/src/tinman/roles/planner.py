@@ -9,7 +9,7 @@ from anodize import Endpoint
 from ..faults import start_faults
 from ..geometry import robot_pose
 from ..messages import Header, Path, PoseStamped, path_through, pose_matrix, seconds
-from ..mission import WAYPOINT_TOLERANCE
+from ..mission import DOCK, DOCKING_TOLERANCE, WAYPOINT_TOLERANCE
 from ..planning import NoPathError, Patrol, Planner
 from ..records import save_record
 from ..settings import current
@@ -28,12 +28,19 @@ def planner(ep: Endpoint) -> None:
     this process's clock: what the Planner sends depends on what it received and
     nothing else, so ``anodize replay`` of a recorded run reproduces it message for
     message. (The planning time measured for the record is not sent.)
+
+    With ``--patrol`` (``settings.patrol``) the patrol is done once: the five waypoints,
+    then back to the dock. Once the robot is there by its pose, the Planner sends empty
+    paths (Move stays still) and writes the ``Patrol`` record, by which the launcher
+    stops the run (:func:`tinman.app.patrol_done`).
     """
     settings = current()
     start_faults("Planner")
     planning = Planner(DEFAULT_WORLD, method=settings.planner, seed=settings.seed)
-    patrol = Patrol(DEFAULT_WORLD, tolerance=WAYPOINT_TOLERANCE)
+    patrol = Patrol(DEFAULT_WORLD, tolerance=WAYPOINT_TOLERANCE, dock=DOCK if settings.patrol else None,
+                    dock_tolerance=DOCKING_TOLERANCE)
     path: Path | None = None
+    docked = False
     planned_at = -float("inf")  # the stamp of the pose the last plan started from
     plans: list[dict[str, object]] = []
     failures: list[str] = []
@@ -47,6 +54,14 @@ def planner(ep: Endpoint) -> None:
             planned_at = now
             x, y, _ = robot_pose(pose_matrix(pose.pose))
             goal = patrol.goal_for(x, y)
+            if patrol.done:  # back at the dock: the robot stays, and the launcher ends the run
+                if not docked:
+                    docked = True
+                    path = Path(header=Header(stamp=pose.header.stamp, frame_id="map"), poses=[])
+                    save_record("Patrol", {"completed_stamp": now, "x": round(x, 3), "y": round(y, 3),
+                                           "waypoints": patrol.reached})
+                ep.send("Move", "Path", path)
+                continue
             began = time.perf_counter()
             try:
                 points = planning.plan((x, y), goal)
