@@ -17,6 +17,13 @@ Nothing waits: a receive beyond the recording's end, a receive on a channel that
 recorded, and ``Endpoint.sleep(math.inf)`` end the replay (``RoleStopped`` in the role,
 the reason in :attr:`ReplayNetwork.ending`); other ``Endpoint.sleep`` calls return at
 once, their seconds counted in :attr:`ReplayClock.skipped`.
+
+The role's clock (``Endpoint.now()``, ``Endpoint.wall()``) is the replay's
+(:class:`ReplayClock`): each endpoint of the role (its own, each parallel branch's) reads
+the readings the recording holds for it, in order; where the recording holds none (a
+recording made before clocks were recorded, or the role reads more often than it did in
+the run), it reads message time: the recorded time of the last message its thread
+received, advanced by that thread's ``Endpoint.sleep`` calls.
 """
 
 from __future__ import annotations
@@ -113,14 +120,33 @@ class ReplayDivergenceError(AnodizeError):
 
 
 class ReplayClock(threading.Event):
-    """The replayed role's stop event, which ``Endpoint.sleep`` waits on: a finite sleep
-    returns at once (the seconds are added to :attr:`skipped`); a sleep for ever ends the
-    replay."""
+    """The replayed role's clock, and its stop event, which ``Endpoint.sleep`` waits on.
 
-    def __init__(self, network: ReplayNetwork) -> None:
+    A finite sleep returns at once (the seconds are added to :attr:`skipped`, and to the
+    sleeping thread's message time); a sleep for ever ends the replay. ``now`` and ``wall``
+    give each endpoint of the role the readings the run recorded for it, in order (see the
+    module docstring); beyond them, message time.
+
+    Args:
+        network: the replay's network.
+        readings: per endpoint (``""``, ``"1"``, ...), the recorded readings: ``(kind, value)``
+            with kind ``"now"`` or ``"wall"``.
+        start: the time (seconds since the epoch) a thread that has received nothing reads.
+    """
+
+    def __init__(self, network: ReplayNetwork, readings: Mapping[str, Sequence[tuple[str, float]]] | None = None,
+                 start: float = 0.0) -> None:
         super().__init__()
         self._network = network
         self.skipped = 0.0
+        self._readings = {branch: deque(items) for branch, items in (readings or {}).items()}
+        self.recorded = sum(len(items) for items in self._readings.values())
+        self.replayed = 0     # readings given back as recorded
+        self.from_messages = 0  # readings made of message time
+        self.differs = ""     # the first reading the role took otherwise than in the run
+        self._start = start
+        self._thread = threading.local()
+        self._lock = threading.Lock()
 
     def wait(self, timeout: float | None = None) -> bool:
         if self.is_set():
@@ -130,7 +156,37 @@ class ReplayClock(threading.Event):
                                                 "(Endpoint.sleep(math.inf))")
             return True
         self.skipped += timeout
+        self._thread.time = self._message_time() + timeout
         return False
+
+    def heard(self, log_time: int) -> None:
+        """The calling thread received a message recorded at ``log_time`` (ns since the epoch)."""
+        self._thread.time = max(self._message_time(), log_time / 1e9)
+
+    def now(self, branch: str) -> float:
+        return self._read(branch, "now")
+
+    def wall(self, branch: str) -> float:
+        return self._read(branch, "wall")
+
+    def _read(self, branch: str, kind: str) -> float:
+        with self._lock:
+            readings = self._readings.get(branch)
+            if readings:
+                recorded, value = readings.popleft()
+                if recorded == kind:
+                    self.replayed += 1
+                    return value
+                self.differs = self.differs or (
+                    f"endpoint {branch or '(the role)'} read {kind}() where the run read {recorded}() "
+                    f"(its reading {self.replayed + 1}): the role reads its clock otherwise than in the run")
+                self._readings.clear()  # out of step: the rest would be given to other reads
+            self.from_messages += 1
+        return self._message_time()
+
+    def _message_time(self) -> float:
+        found: float | None = getattr(self._thread, "time", None)
+        return self._start if found is None else found
 
 
 class ReplayNetwork:
@@ -146,12 +202,14 @@ class ReplayNetwork:
         decode: the payload of a recorded message (raises ``ValueError`` and others when
             the recorded bytes do not decode).
         difference: why a sent payload is not the recorded one ("" when it is).
+        readings: per endpoint of the role, its recorded clock readings (:class:`ReplayClock`).
     """
 
     def __init__(self, role: str, feeds: Mapping[str, Sequence[RecordedItem]],
                  expected: Mapping[str, Sequence[RecordedItem]], unrecorded_in: Mapping[str, str],
                  unrecorded_out: Sequence[str], decode: Callable[[RecordedItem], object],
-                 difference: Callable[[RecordedItem, object], str]) -> None:
+                 difference: Callable[[RecordedItem, object], str],
+                 readings: Mapping[str, Sequence[tuple[str, float]]] | None = None) -> None:
         self.role = role
         self._decode = decode
         self._difference = difference
@@ -166,7 +224,9 @@ class ReplayNetwork:
         self.doorbells: dict[str, Doorbell] = {role: _Rings(self, [peer for _, peer, _ in order])}
         self.failed: dict[str, str] = {}
         self.alarm = False
-        self.clock = ReplayClock(self)
+        self.clock = ReplayClock(self, readings, min((item.log_time for items in [*feeds.values(), *expected.values()]
+                                                      for item in items[:1]), default=0) / 1e9)
+        self.clocks = {role: self.clock}  # the role's Endpoint.now() and wall() (anodize._session.clock)
         self.ending: tuple[str, str] | None = None  # (outcome, detail), the first reason to end
         self.divergence: Divergence | None = None
         self.endpoint: Endpoint | None = None  # set once made: its state goes into the messages
@@ -285,6 +345,7 @@ class _Feed:
         if not isinstance(item, RecordedItem):
             return item
         self.delivered += 1
+        network.clock.heard(item.log_time)
         return network.payload_of(item)
 
     def get_nowait(self) -> object:

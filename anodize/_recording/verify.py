@@ -35,7 +35,7 @@ from .encoding import JSON_TYPE, SortCodec, UnknownObject, class_sorts, codec_fo
 from .metadata import recorded_channels
 from .plan import META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
-from .tap import GAP_KEY, SEQUENCE_WRAP
+from .tap import CLOCK_KEY, GAP_KEY, SEQUENCE_WRAP
 
 __all__ = ["Violation", "ChannelResult", "VerifyReport", "verify", "RECORDING_FAULT", "Gap", "NOT_IMPORTED"]
 
@@ -376,6 +376,8 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
         key = _key_of(topic, topics or {})
         if topic.metadata.get(GAP_KEY) == "1":
             gap_topics.add(topic.id)
+        elif CLOCK_KEY in topic.metadata:
+            continue  # a role's clock readings: no channel of the protocol (a replay gives them back)
         elif key is None:
             report.unmapped.append(f"{topic.topic} ({topic.type_name})")
         elif key[:2] not in pairs:
