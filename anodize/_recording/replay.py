@@ -195,7 +195,7 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
         _require_imported(recording, machine.all_transitions())
     sends_to, receives_from = peers_of(machine)
     listed, groups = recorded_channels(recording), group_of(recording)  # checked before anything runs
-    readings: dict[str, list[tuple[str, float]]] = {}
+    readings: dict[str, list[tuple[str, float, int]]] = {}
     streams = _streams(recording, role, topics or {}, report.notes, readings)
     recorded = set(streams) if listed is None else listed
     why = _why_unrecorded(groups)
@@ -213,7 +213,7 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
         expected={p: streams.get((role, p), []) for p in sorted(sends_to) if (role, p) in recorded},
         unrecorded_in={p: why(p, role) for p in sorted(receives_from) if (p, role) not in recorded},
         unrecorded_out=[p for p in sorted(sends_to) if (role, p) not in recorded],
-        decode=decode, difference=difference, readings=readings)
+        decode=decode, difference=difference, readings=readings, threads=bool(machine.forks))
     endpoint = network.endpoint = Endpoint(role, global_type.name, machine, network)
     _run(function, endpoint, network, timeout, report)
     _account(network, report)
@@ -234,13 +234,25 @@ def _run(function: Callable[..., Any], endpoint: Endpoint, network: ReplayNetwor
         except BaseException as error:  # reported, never swallowed
             raised.append(error)
 
+    def threads_end(args: threading.ExceptHookArgs) -> None:
+        """A thread of the role's own ended by an exception: stopped by the replay (a divergence
+        included: the network has it) is how it ends; anything else is the role's failure."""
+        if args.exc_value is not None and not isinstance(args.exc_value, (RoleStopped, ReplayDivergenceError)):
+            raised.append(args.exc_value)
+            network.stop(_FAILED, f"{endpoint.role}'s thread {args.thread.name if args.thread else '?'} raised "
+                                  f"{type(args.exc_value).__name__}")
+
     thread = threading.Thread(target=body, name=f"replay:{endpoint.role}", daemon=True)
-    thread.start()
-    thread.join(timeout)
-    if thread.is_alive():
-        network.stop(TIMED_OUT, f"{endpoint.role} did not end within {timeout:g} s (it computes, or waits "
-                                "outside its endpoint, e.g. in time.sleep); it was stopped at its next action")
-        thread.join(2.0)
+    hook, threading.excepthook = threading.excepthook, threads_end
+    try:
+        thread.start()
+        thread.join(timeout)
+        if thread.is_alive():
+            network.stop(TIMED_OUT, f"{endpoint.role} did not end within {timeout:g} s (it computes, or waits "
+                                    "outside its endpoint, e.g. in time.sleep); it was stopped at its next action")
+            thread.join(2.0)
+    finally:
+        threading.excepthook = hook
     error = raised[0] if raised else None
     if network.ending is not None:
         report.outcome, report.detail = network.ending
@@ -273,6 +285,8 @@ def _account(network: ReplayNetwork, report: ReplayReport) -> None:
     report.clock = (clock.replayed, clock.recorded, clock.from_messages)
     if clock.differs:
         report.notes.append(f"clock: {clock.differs}; from there on it reads message time")
+    if network.turnstile.out_of_order:
+        report.notes.append(f"threads: {network.turnstile.out_of_order}")
     report.divergence = network.divergence
     # Ended where the recorded role could not have sent more? Then what it did not send, it should have.
     if report.divergence is not None or report.error is not None or report.outcome in (NOT_RECORDED, TIMED_OUT):
@@ -288,7 +302,7 @@ def _account(network: ReplayNetwork, report: ReplayReport) -> None:
 
 
 def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, str, str]],
-             notes: list[str], readings: dict[str, list[tuple[str, float]]],
+             notes: list[str], readings: dict[str, list[tuple[str, float, int]]],
              ) -> dict[tuple[str, str], list[RecordedItem]]:
     """The recorded messages of the channels into and out of ``role``, per channel, in order;
     the role's clock readings go into ``readings``, per endpoint, in order.
@@ -327,7 +341,7 @@ def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, st
     return streams
 
 
-def _reading(message: RecordedMessage, done: int, readings: dict[str, list[tuple[str, float]]],
+def _reading(message: RecordedMessage, done: int, readings: dict[str, list[tuple[str, float, int]]],
              notes: list[str]) -> int:
     """Take one recorded clock reading into ``readings``; returns the readings taken, or -1 at a
     break in their numbering or a reading that does not decode (the rest is not taken)."""
@@ -345,7 +359,7 @@ def _reading(message: RecordedMessage, done: int, readings: dict[str, list[tuple
         notes.append(f"clock: reading {done + 1} on {message.topic.topic} does not decode ({error}): "
                      "message time from there")
         return -1
-    readings.setdefault(branch, []).append((kind, value))
+    readings.setdefault(branch, []).append((kind, value, message.log_time))
     return done + 1
 
 

@@ -24,6 +24,9 @@ the readings the recording holds for it, in order; where the recording holds non
 recording made before clocks were recorded, or the role reads more often than it did in
 the run), it reads message time: the recorded time of the last message its thread
 received, advanced by that thread's ``Endpoint.sleep`` calls.
+
+A role that forks into threads is taken through the recorded order of its sends and
+clock readings (:mod:`.turnstile`).
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from typing import TYPE_CHECKING
 
 from .._session.channel import Channel, Corrupt, Doorbell
 from ..errors import AnodizeError, RoleStopped
+from .turnstile import BEYOND, Turnstile
 
 if TYPE_CHECKING:
     from .._session.endpoint import Endpoint
@@ -129,17 +133,18 @@ class ReplayClock(threading.Event):
 
     Args:
         network: the replay's network.
-        readings: per endpoint (``""``, ``"1"``, ...), the recorded readings: ``(kind, value)``
-            with kind ``"now"`` or ``"wall"``.
+        readings: per endpoint (``""``, ``"1"``, ...), the recorded readings: ``(kind, value,
+            time read)`` with kind ``"now"`` or ``"wall"``, the time in ns since the epoch.
         start: the time (seconds since the epoch) a thread that has received nothing reads.
     """
 
-    def __init__(self, network: ReplayNetwork, readings: Mapping[str, Sequence[tuple[str, float]]] | None = None,
+    def __init__(self, network: ReplayNetwork, readings: Mapping[str, Sequence[tuple[str, float, int]]] | None = None,
                  start: float = 0.0) -> None:
         super().__init__()
         self._network = network
         self.skipped = 0.0
-        self._readings = {branch: deque(items) for branch, items in (readings or {}).items()}
+        self._readings = {branch: deque((kind, value) for kind, value, _ in items)
+                          for branch, items in (readings or {}).items()}
         self.recorded = sum(len(items) for items in self._readings.values())
         self.replayed = 0     # readings given back as recorded
         self.from_messages = 0  # readings made of message time
@@ -170,6 +175,8 @@ class ReplayClock(threading.Event):
         return self._read(branch, "wall")
 
     def _read(self, branch: str, kind: str) -> float:
+        if self._readings.get(branch):
+            self._network.turnstile.take(("clock", branch), self._network.role)  # the reading's turn
         with self._lock:
             readings = self._readings.get(branch)
             if readings:
@@ -180,6 +187,8 @@ class ReplayClock(threading.Event):
                 self.differs = self.differs or (
                     f"endpoint {branch or '(the role)'} read {kind}() where the run read {recorded}() "
                     f"(its reading {self.replayed + 1}): the role reads its clock otherwise than in the run")
+                for other in self._readings:
+                    self._network.turnstile.drop(("clock", other))
                 self._readings.clear()  # out of step: the rest would be given to other reads
             self.from_messages += 1
         return self._message_time()
@@ -203,13 +212,15 @@ class ReplayNetwork:
             the recorded bytes do not decode).
         difference: why a sent payload is not the recorded one ("" when it is).
         readings: per endpoint of the role, its recorded clock readings (:class:`ReplayClock`).
+        threads: the role may run several threads (it forks): keep their recorded order
+            (:class:`~.turnstile.Turnstile`).
     """
 
     def __init__(self, role: str, feeds: Mapping[str, Sequence[RecordedItem]],
                  expected: Mapping[str, Sequence[RecordedItem]], unrecorded_in: Mapping[str, str],
                  unrecorded_out: Sequence[str], decode: Callable[[RecordedItem], object],
                  difference: Callable[[RecordedItem, object], str],
-                 readings: Mapping[str, Sequence[tuple[str, float]]] | None = None) -> None:
+                 readings: Mapping[str, Sequence[tuple[str, float, int]]] | None = None, threads: bool = False) -> None:
         self.role = role
         self._decode = decode
         self._difference = difference
@@ -224,6 +235,11 @@ class ReplayNetwork:
         self.doorbells: dict[str, Doorbell] = {role: _Rings(self, [peer for _, peer, _ in order])}
         self.failed: dict[str, str] = {}
         self.alarm = False
+        streams: dict[object, list[int]] = {("send", peer): [item.log_time for item in items]
+                                            for peer, items in expected.items()}
+        streams.update({("clock", branch): [stamp for _, _, stamp in items]
+                        for branch, items in (readings or {}).items()})
+        self.turnstile = Turnstile(streams, active=threads)
         self.clock = ReplayClock(self, readings, min((item.log_time for items in [*feeds.values(), *expected.values()]
                                                       for item in items[:1]), default=0) / 1e9)
         self.clocks = {role: self.clock}  # the role's Endpoint.now() and wall() (anodize._session.clock)
@@ -247,6 +263,7 @@ class ReplayNetwork:
                 self.ending = (outcome, detail)
             self.alarm = True
         self.clock.set()
+        self.turnstile.stop()
 
     def end(self, outcome: str, detail: str) -> RoleStopped:
         """End the replay; returns the ``RoleStopped`` for the calling role thread to raise."""
@@ -267,11 +284,13 @@ class ReplayNetwork:
             ReplayDivergenceError: it is another message.
             RoleStopped: the recording holds no more on that channel (the replay ends).
         """
+        items = self._expected[peer]
+        check = self.checks[peer]
+        # Its turn (a role's threads send in the recorded order); beyond the recording, after every other event.
+        self.turnstile.take(("send", peer) if check.sent < len(items) else BEYOND, self.role)
         with self._lock:
             if self.ending is not None:
                 raise RoleStopped(self.detail())
-            items = self._expected[peer]
-            check = self.checks[peer]
             channel = f"{self.role}->{peer}"
             if check.sent >= len(items):
                 raise self.end(RECORDING_ENDS, f"the recording ends here: {self.role} sends "
@@ -338,6 +357,9 @@ class _Feed:
                                       f"which the recording does not have ({self.unrecorded}): "
                                       f"{network.role} cannot be replayed alone from here")
         if not self._items:
+            network.turnstile.take(BEYOND, network.role)  # the role's other threads do what they did first
+            if network.ending is not None:
+                raise RoleStopped(network.detail())
             raise network.end(RECORDING_ENDS, f"the recording ends here: {network.role}{network.state()} waits for a "
                                         f"message from {self._peer}, and all {self.recorded} recorded on "
                                         f"{channel} have been delivered")
@@ -395,6 +417,12 @@ class _Rings:
     def get(self, *, timeout: float | None = None) -> str:
         network = self._network
         with network._lock:  # branch threads may wait together
+            if network.ending is not None:
+                raise RoleStopped(network.detail())
+            if self._order:
+                return self._order.popleft()
+        network.turnstile.take(BEYOND, network.role)  # the role's other threads do what they did first
+        with network._lock:
             if network.ending is not None:
                 raise RoleStopped(network.detail())
             if self._order:

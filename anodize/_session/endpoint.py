@@ -472,13 +472,16 @@ class Endpoint(_Core):
         """Wait ``seconds`` (a role's pacing; ``math.inf``: until the run stops).
 
         A role that paces itself with ``time.sleep`` notices a stop only at its next
-        send or receive; this wait ends the moment the supervisor stops the run.
+        send or receive; this wait ends the moment the supervisor stops the run. Waking,
+        it reads the role's clock (:meth:`now`): a recording then holds when each sleep
+        ended, and a replay keeps the role's threads in that order.
 
         Raises:
             RoleStopped: the run is stopping.
         """
         if self._stop_event.wait(None if seconds == float("inf") else max(0.0, seconds)):
             raise RoleStopped(f"sleeping in state {self._state_number()} (Endpoint.sleep)")
+        self._clock.now(self._branch)
 
     def now(self) -> float:
         """The role's monotonic clock, in seconds (only differences between readings mean anything).

@@ -32,12 +32,14 @@ ENTRY_POINT_GROUP = "anodize.systems"
 @dataclass
 class Prepared:
     """What a named system hands back to be run: the system, its timeout (seconds), and where
-    to record it (None: not recorded)."""
+    to record it (None: not recorded; ``record_inside``: the channels inside groups too, so
+    that each role can be replayed alone)."""
 
     system: System
     timeout: float | None
     grace: float = 3.0
     record: Path | None = None
+    record_inside: bool = False
 
 
 @dataclass

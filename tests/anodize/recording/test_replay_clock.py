@@ -14,6 +14,7 @@ recorded run, the recording's in a replay; and a run recorded inside its groups.
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -105,7 +106,7 @@ def test_the_live_clock_is_the_machine_s() -> None:
 def test_a_role_that_sends_its_clock_readings_replays_equal(talked: Path, role: str) -> None:
     report = _replay(talked, TALK, role, {"B": _clocked_buyer, "S": _clocked_seller}[role])
     assert report.ok and report.divergence is None
-    readings = {"B": 2 * ROUNDS, "S": ROUNDS + 1}[role]
+    readings = {"B": 3 * ROUNDS, "S": ROUNDS + 1}[role]  # B: now(), wall(), and each sleep's end
     assert report.clock == (readings, readings, 0)
     assert f"  clock: {readings} of {readings} recorded readings given back" in report.text().splitlines()
 
@@ -116,8 +117,7 @@ def test_beyond_the_recorded_readings_the_clock_is_message_time(talked: Path) ->
     seen: list[float] = []
 
     def seller(ep: Endpoint) -> None:  # reads its clock more often than the seller did in the run
-        for _ in range(ROUNDS + 1):
-            seen.append(ep.now())
+        seen.extend(ep.now() for _ in range(ROUNDS + 1))
         ep.recv("B")
         seen.append(ep.now())
         ep.sleep(2.0)
@@ -125,7 +125,7 @@ def test_beyond_the_recorded_readings_the_clock_is_message_time(talked: Path) ->
         ep.send("B", "quote", "0.0")
 
     report = _replay(talked, TALK, "S", seller)
-    assert report.clock == (ROUNDS + 1, ROUNDS + 1, 2)
+    assert report.clock == (ROUNDS + 1, ROUNDS + 1, 3)  # the sleep's end is a reading too
     assert seen[-2:] == [first / 1e9, first / 1e9 + 2.0]
 
 
@@ -135,44 +135,66 @@ def test_a_role_that_reads_its_clock_otherwise_is_told_so(talked: Path) -> None:
         ep.recv("B")
 
     report = _replay(talked, TALK, "S", seller)
-    assert "note: clock: endpoint (the role) read wall() where the run read now() (its reading 1): the role " \
-           "reads its clock otherwise than in the run; from there on it reads message time" in report.text()
+    assert ("note: clock: endpoint (the role) read wall() where the run read now() (its reading 1): the role "
+            "reads its clock otherwise than in the run; from there on it reads message time") in report.text()
 
 
-def test_each_parallel_branch_reads_its_own_recorded_readings(tmp_path: Path) -> None:
-    def sender(ep: Endpoint) -> None:
-        ticks, tocks = ep.fork()
-        for _ in range(ROUNDS):  # the branches read in turn here; their readings are kept apart
-            ticks.send("B", "tick", repr(ticks.now()))
-            tocks.send("C", "tock", repr(tocks.now()))
-            ep.sleep(0.001)
-        ticks.send("B", "done")
+def _two_threads(ep: Endpoint) -> None:
+    """One thread counts, the other sends the count now and then: what the second sends depends
+    on how the two interleaved, each reading its own branch's clock."""
+    ticks, tocks = ep.fork()
+    count = [0]
+
+    def tock() -> None:
+        for _ in range(ROUNDS):
+            tocks.sleep(0.004)
+            tocks.send("C", "tock", f"{count[0]} at {tocks.now()!r}")
         tocks.send("C", "done")
 
-    def receiver(peer: str) -> Callable[[Endpoint], None]:
-        def run(ep: Endpoint) -> None:
-            while ep.recv("A").label != "done":
-                pass
-        return run
+    thread = threading.Thread(target=tock, name="A-tocks")
+    thread.start()
+    for number in range(4 * ROUNDS):
+        count[0] += 1
+        ticks.send("B", "tick", str(number))
+        ticks.sleep(0.001)
+    ticks.send("B", "done")
+    thread.join()
 
+
+def _receiver(ep: Endpoint) -> None:
+    while ep.recv("A").label != "done":
+        pass
+
+
+@pytest.fixture(scope="module")
+def forked(tmp_path_factory: pytest.TempPathFactory) -> Path:
     system = System(FORKED)
-    system.group("a").role("A", sender)
-    system.group("b").role("B", receiver("B"))
-    system.group("c").role("C", receiver("C"))
-    path = tmp_path / "run.mcap"
+    system.group("a").role("A", _two_threads)
+    system.group("b").role("B", _receiver)
+    system.group("c").role("C", _receiver)
+    path = tmp_path_factory.mktemp("forked") / "run.mcap"
     assert system.run(timeout=20.0, taps=[Recording(path)]).ok
+    return path
 
-    def other_order(ep: Endpoint) -> None:  # all ticks, then all tocks: each branch's readings still fit
+
+def test_a_role_s_threads_replay_in_their_recorded_order(forked: Path) -> None:
+    # Each thread reads its own branch's readings, and the tock thread sends the count the tick
+    # thread had reached in the run: the replay keeps the threads' recorded order.
+    report = _replay(forked, FORKED, "A", _two_threads)
+    assert report.ok and report.divergence is None
+    assert report.clock == (4 * ROUNDS + 2 * ROUNDS, 4 * ROUNDS + 2 * ROUNDS, 0)
+    assert not any(note.startswith("threads:") for note in report.notes)
+
+
+def test_threads_that_no_longer_act_as_in_the_run_are_let_go_and_told_so(forked: Path) -> None:
+    def one_thread(ep: Endpoint) -> None:  # all tocks before any tick: the tocks' turns never come
         ticks, tocks = ep.fork()
-        for _ in range(ROUNDS):
-            ticks.send("B", "tick", repr(ticks.now()))
-        for _ in range(ROUNDS):
-            tocks.send("C", "tock", repr(tocks.now()))
-        ticks.send("B", "done")
-        tocks.send("C", "done")
+        tocks.send("C", "tock", "0")
+        ticks.send("B", "tick", "0")
 
-    report = _replay(path, FORKED, "A", other_order)
-    assert report.ok and report.clock == (2 * ROUNDS, 2 * ROUNDS, 0)
+    report = _replay(forked, FORKED, "A", one_thread)
+    assert any(note.startswith("threads: a thread of A (replay:A) waited 2 s for its recorded turn")
+               for note in report.notes), report.notes
 
 
 def test_the_clock_s_readings_are_no_channel_of_the_protocol(talked: Path) -> None:
