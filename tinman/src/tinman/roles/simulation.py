@@ -180,9 +180,10 @@ class _Film:
             return int((ended - self.begun) / self.period) + 1
         return sum(1 for index in range(len(self.recorded)) if self.recorded.offset(index) <= ended - self.begun)
 
-    def record(self, ended: float) -> dict[str, object]:
+    def record(self, ended: float | None = None) -> dict[str, object]:
+        """What the camera did (frames due up to ``ended``, monotonic; now if None)."""
         return {"camera_frames": self.taken, "camera_frames_skipped": self.skipped,
-                "camera_frames_due": self.frames_due(ended),
+                "camera_frames_due": self.frames_due(time.monotonic() if ended is None else ended),
                 "camera": "live" if self.live is not None else "recorded", "camera_rate": 1.0 / self.period,
                 "world": self.live.look.name if self.live is not None else None}
 
