@@ -97,11 +97,15 @@ def world_clock(gazebo: dict[str, Any]) -> dict[str, Any]:
     period per command) against the wall seconds it ran, and the camera frames it rendered
     against those that fell due. A factor well below 1 means the run measured the harness's
     starvation as much as the robot."""
-    simulated, wall = gazebo.get("simulated_s"), gazebo.get("wall_s")
-    factor = simulated / wall if isinstance(simulated, (int, float)) and isinstance(wall, (int, float)) and wall > 0 \
-        else None
+    simulated, wall = _number(gazebo.get("simulated_s")), _number(gazebo.get("wall_s"))
+    factor = simulated / wall if simulated is not None and wall is not None and wall > 0 else None
     return {"simulated_s": _round(simulated), "wall_s": _round(wall), "real_time_factor": _round(factor),
             "camera_frames_rendered": gazebo.get("camera_frames"), "camera_frames_due": gazebo.get("camera_frames_due")}
+
+
+def _number(value: Any) -> float | None:
+    """A record's number (records are read as untrusted input: anything else is None)."""
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
 
 
 def world_clock_line(world: dict[str, Any]) -> str | None:
