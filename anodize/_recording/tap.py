@@ -174,8 +174,8 @@ class Recorder:
         channel's numbering shows the gap to a replay)."""
         codec = codec_for_sort(None)  # a JSON String
         data = codec.ros.serialize(codec.ros.cls(data=json.dumps({"branch": branch, kind: value})))
-        stamp = time.time_ns()
         with self._lock:
+            stamp = time.time_ns()  # under the lock: the role's readings are numbered in the order of their times
             sequence = self._clock_sequence[role] = self._clock_sequence[role] % SEQUENCE_WRAP + 1
             if self.broken or self._closing or self._pending_bytes + len(data) > self.backlog:
                 self.clock_lost[role] = self.clock_lost.get(role, 0) + 1

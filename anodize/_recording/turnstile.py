@@ -22,7 +22,8 @@ what it receives) is ordered exactly; one that does not is ordered by its next e
 
 A turn that does not come within :data:`PATIENCE` seconds of the last event (a thread
 that waits for an event another thread will never reach: the role's code no longer
-does what it did in the run) is taken anyway, and :attr:`Turnstile.out_of_order` says so.
+does what it did in the run) is taken anyway, :attr:`Turnstile.out_of_order` says so,
+and from then on no turns are kept (the order is lost: waiting again would only stall).
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ from collections.abc import Hashable, Mapping, Sequence
 
 __all__ = ["Turnstile", "PATIENCE", "BEYOND"]
 
-PATIENCE = 2.0  # seconds a thread waits for its turn with no event happening meanwhile
+PATIENCE = 10.0  # seconds a thread waits for its turn with no event happening meanwhile (a thread
+                 # between two events may compute for long on a busy machine: a frame, a plan)
 BEYOND = None   # the key of an action beyond the recording: it waits until every event has happened
 
 
@@ -62,12 +64,13 @@ class Turnstile:
             self._pop(key)
             return
         with self._turn:
-            while not self._stopped and not self._ready(key):
+            while self.active and not self._stopped and not self._ready(key):
                 if time.monotonic() - self._last_event > PATIENCE:
                     self.out_of_order = self.out_of_order or (
                         f"a thread of {role} ({threading.current_thread().name}) waited {PATIENCE:g} s for its "
                         "recorded turn while no other took one: the role no longer acts as it did in the run, and "
                         "from there its threads may interleave otherwise")
+                    self.active = False
                     break
                 self._turn.wait(0.05)
             self._pop(key)

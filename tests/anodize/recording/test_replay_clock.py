@@ -31,6 +31,7 @@ from role_drivers import load_global  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import Endpoint, Recording, System  # noqa: E402
+from anodize._recording import turnstile  # noqa: E402
 from anodize._recording.reader import open_recording  # noqa: E402
 from anodize._recording.replay import ReplayReport, replay  # noqa: E402
 from anodize._recording.verify import verify  # noqa: E402
@@ -186,14 +187,16 @@ def test_a_role_s_threads_replay_in_their_recorded_order(forked: Path) -> None:
     assert not any(note.startswith("threads:") for note in report.notes)
 
 
-def test_threads_that_no_longer_act_as_in_the_run_are_let_go_and_told_so(forked: Path) -> None:
+def test_threads_that_no_longer_act_as_in_the_run_are_let_go_and_told_so(
+        forked: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(turnstile, "PATIENCE", 0.5)  # a second of a test, not ten
     def one_thread(ep: Endpoint) -> None:  # all tocks before any tick: the tocks' turns never come
         ticks, tocks = ep.fork()
         tocks.send("C", "tock", "0")
         ticks.send("B", "tick", "0")
 
     report = _replay(forked, FORKED, "A", one_thread)
-    assert any(note.startswith("threads: a thread of A (replay:A) waited 2 s for its recorded turn")
+    assert any(note.startswith("threads: a thread of A (replay:A) waited 0.5 s for its recorded turn")
                for note in report.notes), report.notes
 
 
