@@ -17,6 +17,12 @@ would have been, so ``anodize verify`` reports a gap of the recording's, not a
 violation, and the run's report counts what was lost. When the group ends, the writer
 has :data:`CLOSE_WITHIN` seconds to write what is queued; what it has not written by
 then becomes a gap too. The supervisor merges the parts when the run ends (:mod:`.merge`).
+
+The recorder also keeps its roles' clocks (:meth:`Recorder.clocks`, which the group gives
+its network: :mod:`anodize._session.clock`): each reading a role takes (``Endpoint.now()``,
+``Endpoint.wall()``, the end of an ``Endpoint.sleep``) goes on the role's clock channel
+(:data:`CLOCK_TOPIC`, metadata :data:`CLOCK_KEY`), numbered and stamped, for
+``anodize replay`` to give back; like a message, it never waits for the writer.
 """
 
 from __future__ import annotations

@@ -8,7 +8,10 @@ recorded run, the recording's in a replay; and a run recorded inside its groups.
   it received last, advanced by its ``Endpoint.sleep`` arguments;
 - a role that reads its clock otherwise than in the run is told so;
 - the clock's channels are no channels of the protocol: ``anodize verify`` passes;
-- ``Recording(inside=True)``: a role that talks to a role of its own group replays equal.
+- ``Recording(inside=True)``: a role that talks to a role of its own group replays equal;
+- a forked role's threads replay in their recorded order (and are let go, saying so, when
+  its code no longer acts as in the run);
+- a generated typed state reads the clock without being used.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ import replay_roles  # noqa: E402
 from role_drivers import load_global  # noqa: E402
 
 import sessiontypes  # noqa: E402
-from anodize import Endpoint, Recording, System  # noqa: E402
+from anodize import Endpoint, Recording, State, System  # noqa: E402
 from anodize._recording import turnstile  # noqa: E402
 from anodize._recording.reader import open_recording  # noqa: E402
 from anodize._recording.replay import ReplayReport, replay  # noqa: E402
@@ -219,3 +222,16 @@ def test_a_run_recorded_inside_its_groups_replays_a_role_that_talks_inside_its_g
     report = _replay(path, TWO_BUYER, "B1", replay_roles.buyer1)
     assert (report.ok, report.outcome) == (True, "finished")
     assert report.compared == {"B1->S": (1, 1), "B1->B2": (1, 1)}
+
+
+def test_a_typed_state_reads_the_clock_without_being_used() -> None:
+    class Clocked:
+        def now(self) -> float:
+            return 1.5
+
+        def wall(self) -> float:
+            return 1.7e9
+
+    state = State(Clocked())  # type: ignore[arg-type]  # only the clock is read
+    assert (state.now(), state.wall()) == (1.5, 1.7e9)
+    state._use()  # still unused: reading the clock is no action of the protocol
