@@ -183,7 +183,10 @@ def _parser() -> argparse.ArgumentParser:
                        "compared with it",
         description="Run role R's function alone, fed the messages its peers sent in the recorded run; each "
                     "message it sends is compared with the recorded one, and its monitor checks the protocol. "
-                    "Exit 0 when its outputs match the recording and follow the protocol, 1 otherwise.")
+                    "Its clock (Endpoint.now(), Endpoint.wall()) gives back the readings it took in the run; "
+                    "Endpoint.sleep returns at once. "
+                    "Exit 0 when its outputs match the recording and follow the protocol, 1 otherwise "
+                    "(a replay that compared nothing included).")
     _add_recording_arguments(replay)
     replay.add_argument("--role", required=True, metavar="R", help="the role to replay")
     replay.add_argument("--function", metavar="MODULE:FUNCTION",
