@@ -94,7 +94,8 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
 def world_clock(gazebo: dict[str, Any]) -> dict[str, Any]:
     """How well the simulated world kept real time (it runs at nice -10 so that no load on the
     robot's groups starves it: decision 0030): the seconds its physics stepped (one control
-    period per command) against the wall seconds it ran, and the camera frames it rendered
+    period per command) against the wall seconds from its first step to its last (plus a
+    period), and the camera frames it rendered
     against those that fell due. A factor well below 1 means the run measured the harness's
     starvation as much as the robot."""
     simulated, wall = _number(gazebo.get("simulated_s")), _number(gazebo.get("wall_s"))

@@ -92,7 +92,10 @@ def gazebo(ep: Endpoint) -> None:
         save_record("Gazebo", {"trajectory": trace, "odometer_m": robot.drive.odometer, "bumps": robot.drive.bumps,
                                "bump_events": bumped,
                                "columns": ["t", "x", "y", "theta", "v", "w"],
-                               "simulated_s": round(len(trace) * period, 6), "wall_s": round(ended - start, 6),
+                               # The physics' seconds against the wall's, from the first step to the last
+                               # (the robot's start and the run's stop are not the world's to keep up with).
+                               "simulated_s": round(len(trace) * period, 6),
+                               "wall_s": round(trace[-1][0] - trace[0][0] + period, 6) if trace else 0.0,
                                **(film.record(ended) if film is not None else {})})
 
 
