@@ -19,10 +19,13 @@ from sessiontypes import Sort, StateMachine
 
 from .._transport.ros_lanes import check_topic_name
 
-__all__ = ["RecordPlan", "ChannelLabel", "record_plan", "default_topic", "channel_labels", "PROFILE", "META"]
+__all__ = ["RecordPlan", "ChannelLabel", "record_plan", "default_topic", "channel_labels", "PROFILE", "META",
+           "CLOCK_KEY", "CLOCK_TOPIC"]
 
 PROFILE = "ros2"          # the MCAP profile rosbag2 writes
 META = "anodize"          # prefix of anodize's keys in channel metadata, and its metadata record's name
+CLOCK_TOPIC = "/anodize/clock/{role}"  # where a role's clock readings are recorded (no channel of the protocol)
+CLOCK_KEY = f"{META}.clock"  # a clock channel's metadata key (its value: the role)
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,7 @@ from ..errors import AnodizeError, ConfigurationError, ProtocolViolationError, R
 from .compare import TopicCodecs, payload_difference
 from .encoding import class_sorts, codec_for_sort, imported_class
 from .metadata import group_of, recorded_channels
-from .plan import META
+from .plan import CLOCK_KEY, META
 from .reader import RecordedMessage, Recording
 from .replay_network import (
     DIVERGED,
@@ -57,7 +57,6 @@ from .replay_network import (
     ReplayDivergenceError,
     ReplayNetwork,
 )
-from .tap import CLOCK_KEY
 
 __all__ = ["replay", "ReplayReport"]
 

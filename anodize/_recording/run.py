@@ -60,7 +60,8 @@ class Recording:
         result = merge_parts(Path(plan.parts), self.target, info)
         size = f"{result.bytes / 2**20:.1f} MiB"
         where = "between and inside groups" if self.inside else "between groups"
-        notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels {where} to "
+        readings = f", and {result.readings} readings of the roles' clocks," if result.readings else ""
+        notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels {where}{readings} to "
                  + str(self.target)]
         notes.extend(f"recording: {note}" for note in result.notes)
         return notes

@@ -45,11 +45,11 @@ from .._session.channel import Channel
 from .._session.endpoint import put_each
 from ..taps import TapGroup
 from .encoding import SortCodec, codec_for_sort
-from .plan import META, PROFILE, ChannelLabel, RecordPlan
+from .plan import CLOCK_KEY, CLOCK_TOPIC, META, PROFILE, ChannelLabel, RecordPlan
 
 __all__ = ["GroupRecording", "Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG",
-           "channel_metadata", "QOS_PROFILES", "GAP_TOPIC", "GAP_KEY", "CLOSE_WITHIN", "open_part", "CLOCK_KEY",
-           "CLOCK_TOPIC", "RecordingClock"]
+           "channel_metadata", "QOS_PROFILES", "GAP_TOPIC", "GAP_KEY", "CLOSE_WITHIN", "open_part",
+           "RecordingClock"]
 
 FEATURE = "recording a run (--record)"
 BACKLOG = 64 * 2**20  # bytes a group's recorder may hold; beyond it, messages become a gap
@@ -58,8 +58,6 @@ CLOSE_WITHIN = 1.0    # seconds the writer has, once its group ends, to write wh
                       # group keeps beating meanwhile, so a longer close is no liveness verdict)
 GAP_TOPIC = "/anodize/recording/gaps"  # where a part says which messages it could not record
 GAP_KEY = f"{META}.gaps"  # the gap channel's metadata key (its value: "1")
-CLOCK_TOPIC = "/anodize/clock/{role}"  # where a part records the readings of a role's clock
-CLOCK_KEY = f"{META}.clock"  # a clock channel's metadata key (its value: the role)
 _FLUSH_EVERY = 0.1    # seconds
 _BATCH = 64           # messages the writer takes from its queue at a time
 _GAP = -1             # in the queue, in place of an MCAP channel: a gap record

@@ -33,9 +33,9 @@ from .by_name import sort_text, validator_by_name
 from .channel_view import ChannelView, Node, sort_key
 from .encoding import JSON_TYPE, SortCodec, UnknownObject, class_sorts, codec_for_sort
 from .metadata import recorded_channels
-from .plan import META, channel_labels
+from .plan import CLOCK_KEY, META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
-from .tap import CLOCK_KEY, GAP_KEY, SEQUENCE_WRAP
+from .tap import GAP_KEY, SEQUENCE_WRAP
 
 __all__ = ["Violation", "ChannelResult", "VerifyReport", "verify", "RECORDING_FAULT", "Gap", "NOT_IMPORTED"]
 

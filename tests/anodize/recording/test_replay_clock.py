@@ -84,7 +84,12 @@ def talked(tmp_path_factory: pytest.TempPathFactory) -> Path:
     system.group("b").role("B", _clocked_buyer)
     system.group("s").role("S", _clocked_seller)
     path = tmp_path_factory.mktemp("clock") / "run.mcap"
-    assert system.run(timeout=20.0, taps=[Recording(path)]).ok
+    report = system.run(timeout=20.0, taps=[Recording(path)])
+    assert report.ok
+    # B read now() and wall() and ended a sleep each round; S read now() once, then once a title.
+    note = next(note for note in report.notes if note.startswith("recorded "))
+    assert note.startswith("recorded 11 messages (") and note.endswith(
+        f" on 3 channels between groups, and {3 * ROUNDS + ROUNDS + 1} readings of the roles' clocks, to {path}"), note
     return path
 
 
