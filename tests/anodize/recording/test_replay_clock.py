@@ -11,7 +11,8 @@ recorded run, the recording's in a replay; and a run recorded inside its groups.
 - ``Recording(inside=True)``: a role that talks to a role of its own group replays equal;
 - a forked role's threads replay in their recorded order (and are let go, saying so, when
   its code no longer acts as in the run);
-- a generated typed state reads the clock without being used.
+- a generated typed state reads the clock without being used;
+- `anodize run --record PATH --record-inside` (and `--record-inside` alone is a usage error).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from anodize._recording import turnstile  # noqa: E402
 from anodize._recording.reader import open_recording  # noqa: E402
 from anodize._recording.replay import ReplayReport, replay  # noqa: E402
 from anodize._recording.verify import verify  # noqa: E402
+from anodize._tools.cli import main  # noqa: E402
 
 ROOT = HERE.parents[1]
 TWO_BUYER = sessiontypes.load(ROOT / "protocols" / "two_buyer.proto").globals["TwoBuyer"]
@@ -240,3 +242,17 @@ def test_a_typed_state_reads_the_clock_without_being_used() -> None:
     state = State(Clocked())  # type: ignore[arg-type]  # only the clock is read
     assert (state.now(), state.wall()) == (1.5, 1.7e9)
     state._use()  # still unused: reading the clock is no action of the protocol
+
+
+def test_record_inside_needs_record(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    system = tmp_path / "system.toml"
+    system.write_text(f'protocol = "{ROOT / "protocols" / "two_buyer.proto"}"\nglobal = "TwoBuyer"\n'
+                      f'pythonpath = ["{HERE}"]\n[groups.all]\n'
+                      'roles = { B1 = "replay_roles:buyer1", B2 = "replay_roles:buyer2", S = "replay_roles:seller" }\n',
+                      encoding="utf-8")
+    capsys.readouterr()
+    assert main(["run", str(system), "--record-inside", "--quiet"]) == 2
+    assert capsys.readouterr().err.endswith("--record-inside needs --record PATH\n")
+    path = tmp_path / "run.mcap"
+    assert main(["run", str(system), "--record", str(path), "--record-inside", "--quiet"]) == 0
+    assert "on 6 channels between and inside groups" in capsys.readouterr().out
