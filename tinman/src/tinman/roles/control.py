@@ -108,11 +108,11 @@ def move(ep: Endpoint) -> None:
     scanner_lost: list[str] = []
     if not settings.paper:  # the scan, planning and perception loops run beside the control loop: threads
         branches = ep.fork()
-        threading.Thread(target=_take_scans, args=(branch_from(branches, "Gazebo"), mixer, scanner_lost, clock),
+        threading.Thread(target=_take_scans, args=(_branch_from(branches, "Gazebo"), mixer, scanner_lost, clock),
                          name="Move-scans", daemon=True).start()
-        threading.Thread(target=_take_paths, args=(branch_from(branches, "Planner"), mixer, planner_lost, clock),
+        threading.Thread(target=_take_paths, args=(_branch_from(branches, "Planner"), mixer, planner_lost, clock),
                          name="Move-paths", daemon=True).start()
-        threading.Thread(target=_take_estimates, args=(branch_from(branches, "VisOdom"), mixer, perception_lost,
+        threading.Thread(target=_take_estimates, args=(_branch_from(branches, "VisOdom"), mixer, perception_lost,
                                                        clock), name="Move-estimates", daemon=True).start()
     sent: list[float] = []
     teleop_after_loss = 0
@@ -147,7 +147,7 @@ def _estimate(mixer: Mixer, pose: PoseStamped) -> None:
     mixer.set_estimate(seconds(pose.header.stamp), robot_pose(pose_matrix(pose.pose)))
 
 
-def branch_from(branches: tuple[Endpoint, ...], peer: str) -> Endpoint:
+def _branch_from(branches: tuple[Endpoint, ...], peer: str) -> Endpoint:
     """The parallel branch (of ``ep.fork()``'s) that receives from ``peer``."""
     return next(branch for branch in branches if peer in branch.received)
 
