@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from .._extras import import_extra
-from .plan import META, PROFILE
+from .plan import CLOCK_KEY, META, PROFILE
 
 __all__ = ["MergeResult", "merge_parts", "recording_file"]
 
@@ -35,6 +35,7 @@ class MergeResult:
     messages: int = 0
     channels: int = 0
     bytes: int = 0
+    readings: int = 0  # of the roles' clocks, on their clock channels (not counted in messages, channels)
     notes: list[str] = field(default_factory=list)
 
 
@@ -68,6 +69,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
         schemas: dict[tuple[str, bytes], int] = {}
         known: dict[tuple[str, int, tuple[tuple[str, str], ...]], int] = {}  # a restarted group's channels again
         topics: dict[int, dict[str, Any]] = {}
+        clocks: set[int] = set()  # the recording's clock channels
 
         def channel_of(number: int, channel_id: int) -> int:
             """The recording's channel of a part's, registered at its first message (one pass)."""
@@ -79,6 +81,8 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
             new = known.get(key)
             if new is None:
                 new = known[key] = writer.register_channel(topic, "cdr", schema, metadata)
+                if CLOCK_KEY in metadata:
+                    clocks.add(new)
                 topics[new] = {"name": topic, "type": type_name, "hash": metadata.get("topic_type_hash", ""),
                                "qos": metadata.get("offered_qos_profiles", ""), "count": 0}
             ids[(number, channel_id)] = new
@@ -91,9 +95,12 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
             writer.add_message(new, log_time, data, publish_time, sequence)
             topics[new]["count"] += 1
             start, end = min(start, log_time), max(end, log_time)
-            result.messages += 1
+            if new in clocks:
+                result.readings += 1
+            else:
+                result.messages += 1
             result.bytes += len(data)
-        result.channels = len(topics)
+        result.channels = len(topics) - len(clocks)
         for source in sources:
             result.notes.extend(source.notes)
         ran_at: dict[str, list[str]] = {}
@@ -105,7 +112,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
                 f"{priority} ({', '.join(parts)})" for priority, parts in sorted(ran_at.items())))
         if result.messages == 0:
             start = end = 0
-        bag = _bag_metadata(path.name, topics, start, end, result.messages)
+        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings)
         writer.add_metadata("rosbag2", {"serialized_metadata": _yaml(bag)})
         writer.add_metadata(META, run_info)
         writer.finish()  # type: ignore[no-untyped-call]

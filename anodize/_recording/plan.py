@@ -1,6 +1,7 @@
 """What a recorded run records: which channels, under which topics, at which end.
 
-Every channel between two groups is recorded, every label of it on its own MCAP
+Every channel between two groups is recorded (with ``inside``, every channel inside a
+group too), every label of it on its own MCAP
 channel (a ROS topic carries one message type): under the ROS topic the system maps
 it to, else ``/anodize/<Sender>/<Receiver>/<label>``. A channel is recorded where it
 is sent, so what is recorded is what left the sender, numbered in the order it was
@@ -18,10 +19,13 @@ from sessiontypes import Sort, StateMachine
 
 from .._transport.ros_lanes import check_topic_name
 
-__all__ = ["RecordPlan", "ChannelLabel", "record_plan", "default_topic", "channel_labels", "PROFILE", "META"]
+__all__ = ["RecordPlan", "ChannelLabel", "record_plan", "default_topic", "channel_labels", "PROFILE", "META",
+           "CLOCK_KEY", "CLOCK_TOPIC"]
 
 PROFILE = "ros2"          # the MCAP profile rosbag2 writes
 META = "anodize"          # prefix of anodize's keys in channel metadata, and its metadata record's name
+CLOCK_TOPIC = "/anodize/clock/{role}"  # where a role's clock readings are recorded (no channel of the protocol)
+CLOCK_KEY = f"{META}.clock"  # a clock channel's metadata key (its value: the role)
 
 
 @dataclass(frozen=True)
@@ -80,7 +84,7 @@ def default_topic(sender: str, receiver: str, label: str) -> str:
 
 
 def record_plan(parts: str, machines: Mapping[str, StateMachine], group_of: Mapping[str, str],
-                ros_topics: Mapping[tuple[str, str, str], str]) -> RecordPlan:
+                ros_topics: Mapping[tuple[str, str, str], str], inside: bool = False) -> RecordPlan:
     """The plan of a run whose roles run in ``group_of``'s groups (a role in none is external).
 
     Args:
@@ -88,9 +92,10 @@ def record_plan(parts: str, machines: Mapping[str, StateMachine], group_of: Mapp
         machines: every role's state machine.
         group_of: role -> group name, for every role anodize runs.
         ros_topics: ``(sender, receiver, label) -> ROS topic`` of the labels the system maps.
+        inside: record the channels inside each group too (each role can then be replayed alone).
     """
     labels = channel_labels(machines)
-    between = {(s, r) for s, r, _ in labels if group_of.get(s) != group_of.get(r)}
+    between = {(s, r) for s, r, _ in labels if inside or group_of.get(s) != group_of.get(r)}
     topics = {key: ros_topics.get(key) or default_topic(*key) for key in labels if key[:2] in between}
     at_sender = frozenset(pair for pair in between if pair[0] in group_of)
     at_receiver = frozenset(pair for pair in between if pair[0] not in group_of and pair[1] in group_of)

@@ -7,15 +7,29 @@ what it sent then (:mod:`.compare` says how payloads are compared), and its moni
 checks every action against the protocol as in a live run. A failure seen on the robot
 is then the same failure here, with a debugger at hand.
 
-What a replay cannot reproduce: time (``Endpoint.sleep`` returns at once; ``time.sleep``
-in the role's code still sleeps; a ``recv(..., timeout=...)`` that timed out in the run
-gets the next recorded message instead), and the channels a recording leaves out (both
-ends in one group): messages the role sends there are counted, not compared, and a
-receive there ends the replay, saying that the role cannot be replayed alone from there.
+Time is the replay's. A role that reads its clock through its endpoint
+(``Endpoint.now()``, ``Endpoint.wall()``) reads, in a replay, the readings it took in the
+recorded run, in order, each endpoint (the role's, each parallel branch's) its own: a
+recording records every reading. Where the recording has none for it (a recording made
+before clocks were recorded, or a role that reads its clock more often than it did in
+the run), it reads message time: the recorded time of the message its thread received
+last, advanced by that thread's ``Endpoint.sleep`` arguments. ``Endpoint.sleep`` returns
+at once.
+
+What a replay cannot reproduce: time read past the endpoint (``time.monotonic()``,
+``time.sleep`` in the role's code: it still sleeps); a ``recv(..., timeout=...)`` that
+timed out in the run (it gets the next recorded message instead); the interleaving of a
+role's own threads (each thread gets its channels' messages in the recorded order, and
+its own clock readings, but two threads that share state run as the replay's scheduler
+runs them); and the channels a recording leaves out (both ends in one group, unless the
+run recorded inside its groups): messages the role sends there are counted, not
+compared, and a receive there ends the replay, saying that the role cannot be replayed
+alone from there.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 import threading
 import traceback
@@ -27,12 +41,12 @@ from sessiontypes import GlobalType, Transition
 
 from .._session.endpoint import Endpoint, peers_of
 from .._session.typed import argument_for
-from ..errors import ConfigurationError, ProtocolViolationError, RoleStopped
+from ..errors import AnodizeError, ConfigurationError, ProtocolViolationError, RoleStopped
 from .compare import TopicCodecs, payload_difference
-from .encoding import class_sorts, imported_class
+from .encoding import class_sorts, codec_for_sort, imported_class
 from .metadata import group_of, recorded_channels
-from .plan import META
-from .reader import Recording
+from .plan import CLOCK_KEY, META
+from .reader import RecordedMessage, Recording
 from .replay_network import (
     DIVERGED,
     FINISHED,
@@ -64,6 +78,8 @@ class ReplayReport:
         compared: per channel out of the role, (messages compared, messages recorded).
         uncompared: per channel out of the role that the recording leaves out, messages sent.
         slept: seconds of ``Endpoint.sleep`` that the replay skipped.
+        clock: readings of the role's clock: (given back as recorded, recorded, read from
+            message time instead).
         notes: what else the reader should know (a recording cut short, ...).
     """
 
@@ -80,6 +96,7 @@ class ReplayReport:
     compared: dict[str, tuple[int, int]] = field(default_factory=dict)
     uncompared: dict[str, int] = field(default_factory=dict)
     slept: float = 0.0
+    clock: tuple[int, int, int] = (0, 0, 0)
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -115,6 +132,10 @@ class ReplayReport:
                      "this channel)" for channel, sent in self.uncompared.items())
         if self.slept:
             lines.append(f"  Endpoint.sleep: {self.slept:g} s of sleeping skipped")
+        replayed, recorded, from_messages = self.clock
+        if recorded or from_messages:
+            lines.append(f"  clock: {replayed} of {recorded} recorded readings given back"
+                         + (f", {from_messages} read from message time" if from_messages else ""))
         if self.divergence is not None:
             lines.append(f"divergence: {self.divergence}")
         if self.error is not None:
@@ -132,7 +153,8 @@ class ReplayReport:
                 "divergence": None if self.divergence is None else self.divergence.__dict__,
                 "error": None if self.error is None else f"{type(self.error).__name__}: {self.error}",
                 "received": self.received, "compared": self.compared, "uncompared": self.uncompared,
-                "slept": self.slept, "notes": self.notes}
+                "slept": self.slept, "clock": {"replayed": self.clock[0], "recorded": self.clock[1],
+                                               "from_messages": self.clock[2]}, "notes": self.notes}
 
 
 def _messages(count: int) -> str:
@@ -172,7 +194,8 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
         _require_imported(recording, machine.all_transitions())
     sends_to, receives_from = peers_of(machine)
     listed, groups = recorded_channels(recording), group_of(recording)  # checked before anything runs
-    streams = _streams(recording, role, topics or {}, report.notes)
+    readings: dict[str, list[tuple[str, float, int]]] = {}
+    streams = _streams(recording, role, topics or {}, report.notes, readings)
     recorded = set(streams) if listed is None else listed
     why = _why_unrecorded(groups)
     codecs = TopicCodecs()
@@ -189,7 +212,7 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
         expected={p: streams.get((role, p), []) for p in sorted(sends_to) if (role, p) in recorded},
         unrecorded_in={p: why(p, role) for p in sorted(receives_from) if (p, role) not in recorded},
         unrecorded_out=[p for p in sorted(sends_to) if (role, p) not in recorded],
-        decode=decode, difference=difference)
+        decode=decode, difference=difference, readings=readings, threads=bool(machine.forks))
     endpoint = network.endpoint = Endpoint(role, global_type.name, machine, network)
     _run(function, endpoint, network, timeout, report)
     _account(network, report)
@@ -210,13 +233,25 @@ def _run(function: Callable[..., Any], endpoint: Endpoint, network: ReplayNetwor
         except BaseException as error:  # reported, never swallowed
             raised.append(error)
 
+    def threads_end(args: threading.ExceptHookArgs) -> None:
+        """A thread of the role's own ended by an exception: stopped by the replay (a divergence
+        included: the network has it) is how it ends; anything else is the role's failure."""
+        if args.exc_value is not None and not isinstance(args.exc_value, (RoleStopped, ReplayDivergenceError)):
+            raised.append(args.exc_value)
+            network.stop(_FAILED, f"{endpoint.role}'s thread {args.thread.name if args.thread else '?'} raised "
+                                  f"{type(args.exc_value).__name__}")
+
     thread = threading.Thread(target=body, name=f"replay:{endpoint.role}", daemon=True)
-    thread.start()
-    thread.join(timeout)
-    if thread.is_alive():
-        network.stop(TIMED_OUT, f"{endpoint.role} did not end within {timeout:g} s (it computes, or waits "
-                                "outside its endpoint, e.g. in time.sleep); it was stopped at its next action")
-        thread.join(2.0)
+    hook, threading.excepthook = threading.excepthook, threads_end
+    try:
+        thread.start()
+        thread.join(timeout)
+        if thread.is_alive():
+            network.stop(TIMED_OUT, f"{endpoint.role} did not end within {timeout:g} s (it computes, or waits "
+                                    "outside its endpoint, e.g. in time.sleep); it was stopped at its next action")
+            thread.join(2.0)
+    finally:
+        threading.excepthook = hook
     error = raised[0] if raised else None
     if network.ending is not None:
         report.outcome, report.detail = network.ending
@@ -244,7 +279,13 @@ def _account(network: ReplayNetwork, report: ReplayReport) -> None:
                        for peer, check in network.checks.items() if check.recorded}
     report.uncompared = {f"{role}->{peer}": check.sent for peer, check in network.checks.items()
                          if not check.recorded}
-    report.slept = network.clock.skipped
+    clock = network.clock
+    report.slept = clock.skipped
+    report.clock = (clock.replayed, clock.recorded, clock.from_messages)
+    if clock.differs:
+        report.notes.append(f"clock: {clock.differs}; from there on it reads message time")
+    if network.turnstile.out_of_order:
+        report.notes.append(f"threads: {network.turnstile.out_of_order}")
     report.divergence = network.divergence
     # Ended where the recorded role could not have sent more? Then what it did not send, it should have.
     if report.divergence is not None or report.error is not None or report.outcome in (NOT_RECORDED, TIMED_OUT):
@@ -260,13 +301,18 @@ def _account(network: ReplayNetwork, report: ReplayReport) -> None:
 
 
 def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, str, str]],
-             notes: list[str]) -> dict[tuple[str, str], list[RecordedItem]]:
-    """The recorded messages of the channels into and out of ``role``, per channel, in order.
+             notes: list[str], readings: dict[str, list[tuple[str, float, int]]],
+             ) -> dict[tuple[str, str], list[RecordedItem]]:
+    """The recorded messages of the channels into and out of ``role``, per channel, in order;
+    the role's clock readings go into ``readings``, per endpoint, in order.
 
     A channel's messages are taken up to the first break in their numbering (a message lost,
-    or the sender's group started again): what follows is not the same run of the role.
+    or the sender's group started again): what follows is not the same run of the role. So
+    are the clock's readings.
     """
     keys: dict[int, tuple[str, str, str]] = {}
+    clock_topics = {topic.id for topic in recording.topics if topic.metadata.get(CLOCK_KEY) == role}
+    clock_read = 0
     for topic in recording.topics:
         meta = topic.metadata
         key = ((meta[f"{META}.sender"], meta.get(f"{META}.receiver", ""), meta.get(f"{META}.label", ""))
@@ -276,6 +322,10 @@ def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, st
     streams: dict[tuple[str, str], list[RecordedItem]] = {}
     broken: set[tuple[str, str]] = set()
     for message in recording.messages():
+        if message.topic.id in clock_topics:
+            if clock_read >= 0:
+                clock_read = _reading(message, clock_read, readings, notes)
+            continue
         key = keys.get(message.topic.id)
         if key is None or key[:2] in broken:
             continue
@@ -288,6 +338,28 @@ def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, st
             continue
         items.append(RecordedItem(len(items), key[2], message.log_time, bytes(message.data), message.topic))
     return streams
+
+
+def _reading(message: RecordedMessage, done: int, readings: dict[str, list[tuple[str, float, int]]],
+             notes: list[str]) -> int:
+    """Take one recorded clock reading into ``readings``; returns the readings taken, or -1 at a
+    break in their numbering or a reading that does not decode (the rest is not taken)."""
+    if message.sequence and message.sequence != done + 1:
+        notes.append(f"clock: {done} readings replayed; the next one is numbered {message.sequence} "
+                     "(readings are missing): message time from there")
+        return -1
+    try:
+        found = json.loads(codec_for_sort(None).ros.deserialize(bytes(message.data)).data)  # type: ignore[attr-defined]
+        branch = found.pop("branch")
+        (kind, value), = found.items()
+        if not isinstance(branch, str) or kind not in ("now", "wall") or not isinstance(value, float):
+            raise ValueError(f"not a reading: {found!r}")
+    except (AnodizeError, ValueError, TypeError, KeyError, AttributeError, RecursionError) as error:
+        notes.append(f"clock: reading {done + 1} on {message.topic.topic} does not decode ({error}): "
+                     "message time from there")
+        return -1
+    readings.setdefault(branch, []).append((kind, value, message.log_time))
+    return done + 1
 
 
 def _why_unrecorded(groups: Mapping[str, str]) -> Callable[[str, str], str]:

@@ -17,6 +17,16 @@ Nothing waits: a receive beyond the recording's end, a receive on a channel that
 recorded, and ``Endpoint.sleep(math.inf)`` end the replay (``RoleStopped`` in the role,
 the reason in :attr:`ReplayNetwork.ending`); other ``Endpoint.sleep`` calls return at
 once, their seconds counted in :attr:`ReplayClock.skipped`.
+
+The role's clock (``Endpoint.now()``, ``Endpoint.wall()``) is the replay's
+(:class:`ReplayClock`): each endpoint of the role (its own, each parallel branch's) reads
+the readings the recording holds for it, in order; where the recording holds none (a
+recording made before clocks were recorded, or the role reads more often than it did in
+the run), it reads message time: the recorded time of the last message its thread
+received, advanced by that thread's ``Endpoint.sleep`` calls.
+
+A role that forks into threads is taken through the recorded order of its sends and
+clock readings (:mod:`.turnstile`).
 """
 
 from __future__ import annotations
@@ -31,6 +41,7 @@ from typing import TYPE_CHECKING
 
 from .._session.channel import Channel, Corrupt, Doorbell
 from ..errors import AnodizeError, RoleStopped
+from .turnstile import BEYOND, Turnstile
 
 if TYPE_CHECKING:
     from .._session.endpoint import Endpoint
@@ -113,14 +124,34 @@ class ReplayDivergenceError(AnodizeError):
 
 
 class ReplayClock(threading.Event):
-    """The replayed role's stop event, which ``Endpoint.sleep`` waits on: a finite sleep
-    returns at once (the seconds are added to :attr:`skipped`); a sleep for ever ends the
-    replay."""
+    """The replayed role's clock, and its stop event, which ``Endpoint.sleep`` waits on.
 
-    def __init__(self, network: ReplayNetwork) -> None:
+    A finite sleep returns at once (the seconds are added to :attr:`skipped`, and to the
+    sleeping thread's message time); a sleep for ever ends the replay. ``now`` and ``wall``
+    give each endpoint of the role the readings the run recorded for it, in order (see the
+    module docstring); beyond them, message time.
+
+    Args:
+        network: the replay's network.
+        readings: per endpoint (``""``, ``"1"``, ...), the recorded readings: ``(kind, value,
+            time read)`` with kind ``"now"`` or ``"wall"``, the time in ns since the epoch.
+        start: the time (seconds since the epoch) a thread that has received nothing reads.
+    """
+
+    def __init__(self, network: ReplayNetwork, readings: Mapping[str, Sequence[tuple[str, float, int]]] | None = None,
+                 start: float = 0.0) -> None:
         super().__init__()
         self._network = network
         self.skipped = 0.0
+        self._readings = {branch: deque((kind, value) for kind, value, _ in items)
+                          for branch, items in (readings or {}).items()}
+        self.recorded = sum(len(items) for items in self._readings.values())
+        self.replayed = 0     # readings given back as recorded
+        self.from_messages = 0  # readings made of message time
+        self.differs = ""     # the first reading the role took otherwise than in the run
+        self._start = start
+        self._thread = threading.local()
+        self._lock = threading.Lock()
 
     def wait(self, timeout: float | None = None) -> bool:
         if self.is_set():
@@ -130,7 +161,41 @@ class ReplayClock(threading.Event):
                                                 "(Endpoint.sleep(math.inf))")
             return True
         self.skipped += timeout
+        self._thread.time = self._message_time() + timeout
         return False
+
+    def heard(self, log_time: int) -> None:
+        """The calling thread received a message recorded at ``log_time`` (ns since the epoch)."""
+        self._thread.time = max(self._message_time(), log_time / 1e9)
+
+    def now(self, branch: str) -> float:
+        return self._read(branch, "now")
+
+    def wall(self, branch: str) -> float:
+        return self._read(branch, "wall")
+
+    def _read(self, branch: str, kind: str) -> float:
+        if self._readings.get(branch):
+            self._network.turnstile.take(("clock", branch), self._network.role)  # the reading's turn
+        with self._lock:
+            readings = self._readings.get(branch)
+            if readings:
+                recorded, value = readings.popleft()
+                if recorded == kind:
+                    self.replayed += 1
+                    return value
+                self.differs = self.differs or (
+                    f"endpoint {branch or '(the role)'} read {kind}() where the run read {recorded}() "
+                    f"(its reading {self.replayed + 1}): the role reads its clock otherwise than in the run")
+                for other in self._readings:
+                    self._network.turnstile.drop(("clock", other))
+                self._readings.clear()  # out of step: the rest would be given to other reads
+            self.from_messages += 1
+        return self._message_time()
+
+    def _message_time(self) -> float:
+        found: float | None = getattr(self._thread, "time", None)
+        return self._start if found is None else found
 
 
 class ReplayNetwork:
@@ -146,12 +211,16 @@ class ReplayNetwork:
         decode: the payload of a recorded message (raises ``ValueError`` and others when
             the recorded bytes do not decode).
         difference: why a sent payload is not the recorded one ("" when it is).
+        readings: per endpoint of the role, its recorded clock readings (:class:`ReplayClock`).
+        threads: the role may run several threads (it forks): keep their recorded order
+            (:class:`~.turnstile.Turnstile`).
     """
 
     def __init__(self, role: str, feeds: Mapping[str, Sequence[RecordedItem]],
                  expected: Mapping[str, Sequence[RecordedItem]], unrecorded_in: Mapping[str, str],
                  unrecorded_out: Sequence[str], decode: Callable[[RecordedItem], object],
-                 difference: Callable[[RecordedItem, object], str]) -> None:
+                 difference: Callable[[RecordedItem, object], str],
+                 readings: Mapping[str, Sequence[tuple[str, float, int]]] | None = None, threads: bool = False) -> None:
         self.role = role
         self._decode = decode
         self._difference = difference
@@ -166,7 +235,14 @@ class ReplayNetwork:
         self.doorbells: dict[str, Doorbell] = {role: _Rings(self, [peer for _, peer, _ in order])}
         self.failed: dict[str, str] = {}
         self.alarm = False
-        self.clock = ReplayClock(self)
+        streams: dict[object, list[int]] = {("send", peer): [item.log_time for item in items]
+                                            for peer, items in expected.items()}
+        streams.update({("clock", branch): [stamp for _, _, stamp in items]
+                        for branch, items in (readings or {}).items()})
+        self.turnstile = Turnstile(streams, active=threads)
+        self.clock = ReplayClock(self, readings, min((item.log_time for items in [*feeds.values(), *expected.values()]
+                                                      for item in items[:1]), default=0) / 1e9)
+        self.clocks = {role: self.clock}  # the role's Endpoint.now() and wall() (anodize._session.clock)
         self.ending: tuple[str, str] | None = None  # (outcome, detail), the first reason to end
         self.divergence: Divergence | None = None
         self.endpoint: Endpoint | None = None  # set once made: its state goes into the messages
@@ -187,6 +263,7 @@ class ReplayNetwork:
                 self.ending = (outcome, detail)
             self.alarm = True
         self.clock.set()
+        self.turnstile.stop()
 
     def end(self, outcome: str, detail: str) -> RoleStopped:
         """End the replay; returns the ``RoleStopped`` for the calling role thread to raise."""
@@ -207,11 +284,13 @@ class ReplayNetwork:
             ReplayDivergenceError: it is another message.
             RoleStopped: the recording holds no more on that channel (the replay ends).
         """
+        items = self._expected[peer]
+        check = self.checks[peer]
+        # Its turn (a role's threads send in the recorded order); beyond the recording, after every other event.
+        self.turnstile.take(("send", peer) if check.sent < len(items) else BEYOND, self.role)
         with self._lock:
             if self.ending is not None:
                 raise RoleStopped(self.detail())
-            items = self._expected[peer]
-            check = self.checks[peer]
             channel = f"{self.role}->{peer}"
             if check.sent >= len(items):
                 raise self.end(RECORDING_ENDS, f"the recording ends here: {self.role} sends "
@@ -278,6 +357,9 @@ class _Feed:
                                       f"which the recording does not have ({self.unrecorded}): "
                                       f"{network.role} cannot be replayed alone from here")
         if not self._items:
+            network.turnstile.take(BEYOND, network.role)  # the role's other threads do what they did first
+            if network.ending is not None:
+                raise RoleStopped(network.detail())
             raise network.end(RECORDING_ENDS, f"the recording ends here: {network.role}{network.state()} waits for a "
                                         f"message from {self._peer}, and all {self.recorded} recorded on "
                                         f"{channel} have been delivered")
@@ -285,6 +367,7 @@ class _Feed:
         if not isinstance(item, RecordedItem):
             return item
         self.delivered += 1
+        network.clock.heard(item.log_time)
         return network.payload_of(item)
 
     def get_nowait(self) -> object:
@@ -334,6 +417,12 @@ class _Rings:
     def get(self, *, timeout: float | None = None) -> str:
         network = self._network
         with network._lock:  # branch threads may wait together
+            if network.ending is not None:
+                raise RoleStopped(network.detail())
+            if self._order:
+                return self._order.popleft()
+        network.turnstile.take(BEYOND, network.role)  # the role's other threads do what they did first
+        with network._lock:
             if network.ending is not None:
                 raise RoleStopped(network.detail())
             if self._order:

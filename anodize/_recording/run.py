@@ -18,7 +18,9 @@ __all__ = ["Recording"]
 
 
 class Recording:
-    """A channel tap (:mod:`anodize.taps`) that records every message between groups to ``target``.
+    """A channel tap (:mod:`anodize.taps`) that records every message between groups to ``target``
+    (``inside=True``: inside groups too, so that every role can be replayed alone), and every
+    reading of each role's clock (``Endpoint.now()``, ``Endpoint.wall()``).
 
     ``System.run(taps=[Recording("run.mcap")])``: an MCAP file if ``target`` ends in
     ``.mcap``, else a rosbag2 folder (docs/recording.md). Each group writes its part
@@ -26,8 +28,9 @@ class Recording:
     say what was recorded. A recording records one run.
     """
 
-    def __init__(self, target: str | os.PathLike[str]) -> None:
+    def __init__(self, target: str | os.PathLike[str], inside: bool = False) -> None:
         self.target = Path(target)
+        self.inside = inside
         self.plan: RecordPlan | None = None
         self._run: TapRun | None = None
 
@@ -37,7 +40,7 @@ class Recording:
             raise AnodizeError(f"recording {self.target} records one run: make another for the next")
         # The parts are written beside the target, so the merge is a rename away on the same file system.
         parts = self.target.with_name(f".{self.target.name}.parts-{os.getpid()}")
-        self.plan = record_plan(str(parts), run.machines, run.group_of, run.topics)
+        self.plan = record_plan(str(parts), run.machines, run.group_of, run.topics, self.inside)
         self._run = run
         return GroupRecording(self.plan)
 
@@ -56,7 +59,9 @@ class Recording:
                 "role_functions": json.dumps(dict(run.functions)), "group_of": json.dumps(dict(plan.group_of))}
         result = merge_parts(Path(plan.parts), self.target, info)
         size = f"{result.bytes / 2**20:.1f} MiB"
-        notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels between groups to "
+        where = "between and inside groups" if self.inside else "between groups"
+        readings = f", and {result.readings} readings of the roles' clocks," if result.readings else ""
+        notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels {where}{readings} to "
                  + str(self.target)]
         notes.extend(f"recording: {note}" for note in result.notes)
         return notes

@@ -17,6 +17,12 @@ would have been, so ``anodize verify`` reports a gap of the recording's, not a
 violation, and the run's report counts what was lost. When the group ends, the writer
 has :data:`CLOSE_WITHIN` seconds to write what is queued; what it has not written by
 then becomes a gap too. The supervisor merges the parts when the run ends (:mod:`.merge`).
+
+The recorder also keeps its roles' clocks (:meth:`Recorder.clocks`, which the group gives
+its network: :mod:`anodize._session.clock`): each reading a role takes (``Endpoint.now()``,
+``Endpoint.wall()``, the end of an ``Endpoint.sleep``) goes on the role's clock channel
+(:data:`CLOCK_TOPIC`, metadata :data:`CLOCK_KEY`), numbered and stamped, for
+``anodize replay`` to give back; like a message, it never waits for the writer.
 """
 
 from __future__ import annotations
@@ -39,10 +45,11 @@ from .._session.channel import Channel
 from .._session.endpoint import put_each
 from ..taps import TapGroup
 from .encoding import SortCodec, codec_for_sort
-from .plan import META, PROFILE, ChannelLabel, RecordPlan
+from .plan import CLOCK_KEY, CLOCK_TOPIC, META, PROFILE, ChannelLabel, RecordPlan
 
 __all__ = ["GroupRecording", "Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG",
-           "channel_metadata", "QOS_PROFILES", "GAP_TOPIC", "GAP_KEY", "CLOSE_WITHIN", "open_part"]
+           "channel_metadata", "QOS_PROFILES", "GAP_TOPIC", "GAP_KEY", "CLOSE_WITHIN", "open_part",
+           "RecordingClock"]
 
 FEATURE = "recording a run (--record)"
 BACKLOG = 64 * 2**20  # bytes a group's recorder may hold; beyond it, messages become a gap
@@ -54,6 +61,7 @@ GAP_KEY = f"{META}.gaps"  # the gap channel's metadata key (its value: "1")
 _FLUSH_EVERY = 0.1    # seconds
 _BATCH = 64           # messages the writer takes from its queue at a time
 _GAP = -1             # in the queue, in place of an MCAP channel: a gap record
+_CLOCK = -2           # in the queue, _CLOCK - i: a reading of the clock of the group's i-th role
 
 
 def open_part(path: Path) -> IO[bytes]:
@@ -141,6 +149,10 @@ class Recorder:
         self._gaps: dict[tuple[str, str], list[int]] = {}  # channel -> [first number, count, time] not queued
         self.lost: dict[tuple[str, str], int] = {}  # channel -> messages not recorded: the writer was behind
         self._gap_channel: int | None = None
+        self._roles = sorted(machines)
+        self._clock_sequence = dict.fromkeys(self._roles, 0)
+        self._clock_channels: dict[int, int] = {}  # queue number -> the part's MCAP channel
+        self.clock_lost: dict[str, int] = {}  # role -> clock readings not recorded (the writer was behind)
         self._give_up = threading.Event()  # close: the disk is too slow to wait for what is queued
         self.priority = ""  # what side_work_priority applied to the writer
         for key in sorted(self._labels):  # codecs made now, not in a role's first send (building one takes time)
@@ -155,6 +167,26 @@ class Recorder:
         for pair, end in self.recorded.items():
             if pair in queues:
                 queues[pair] = RecordingChannel(queues[pair], self, pair, at_sender=(end == "send"))
+
+    def clocks(self) -> dict[str, RecordingClock]:
+        """The clocks of the group's roles: the machine's, each reading recorded (:mod:`anodize._session.clock`)."""
+        return {role: RecordingClock(self, role) for role in self._roles}
+
+    def reading(self, role: str, branch: str, kind: str, value: float) -> None:
+        """Record that ``role``'s endpoint ``branch`` read ``value`` from its clock (``kind``: "now"
+        or "wall"), on the role's clock channel; never waits (beyond the backlog it is lost, and the
+        channel's numbering shows the gap to a replay)."""
+        codec = codec_for_sort(None)  # a JSON String
+        data = codec.ros.serialize(codec.ros.cls(data=json.dumps({"branch": branch, kind: value})))
+        with self._lock:
+            stamp = time.time_ns()  # under the lock: the role's readings are numbered in the order of their times
+            sequence = self._clock_sequence[role] = self._clock_sequence[role] % SEQUENCE_WRAP + 1
+            if self.broken or self._closing or self._pending_bytes + len(data) > self.backlog:
+                self.clock_lost[role] = self.clock_lost.get(role, 0) + 1
+                return
+            self._pending.append((_CLOCK - self._roles.index(role), stamp, sequence, data))
+            self._pending_bytes += len(data)
+            self._lock.notify_all()
 
     def encode(self, pair: tuple[str, str], label: str, payload: object) -> tuple[int, int, bytes] | None:
         """A message of channel ``pair`` as it will be recorded: (label's number, time, bytes).
@@ -258,6 +290,23 @@ class Recorder:
                 f"{META}.protocol": self.protocol, GAP_KEY: "1"})
         return self._gap_channel
 
+    def _clock_channel_id(self, number: int) -> int:
+        """The part's clock channel of queued number ``number`` (``_CLOCK - i``), registered at its
+        first reading (the caller holds ``_io``)."""
+        found = self._clock_channels.get(number)
+        if found is None:
+            role = self._roles[_CLOCK - number]
+            codec = codec_for_sort(None)
+            schema = self._schemas.get(codec.type_name)
+            if schema is None:
+                schema = self._schemas[codec.type_name] = self._writer.register_schema(
+                    codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+            found = self._clock_channels[number] = self._writer.register_channel(
+                CLOCK_TOPIC.format(role=role), "cdr", schema, {
+                    "offered_qos_profiles": QOS_PROFILES, "topic_type_hash": codec.ros.type_hash,
+                    f"{META}.protocol": self.protocol, CLOCK_KEY: role})
+        return found
+
     def _write_loop(self) -> None:
         self._tid = threading.get_native_id()
         self._group_scheduling = thread_scheduling()  # what it inherited: given back at close
@@ -270,7 +319,7 @@ class Recorder:
             with self._lock:
                 self.broken = f"the recording's writer failed: {type(error).__name__}: {error}"
                 for channel_id, *_ in [*self._writing, *self._pending]:
-                    if channel_id != _GAP:
+                    if channel_id >= 0:
                         self._count_unrecorded(self._pair_of.get(channel_id, ("?", "?")), "", self.broken)
                 self._writing = []
                 self._pending.clear()
@@ -294,9 +343,10 @@ class Recorder:
                     if self._give_up.is_set():  # the group has ended and the disk is slow: the rest is a gap
                         self._write_gaps(batch[done:])
                         return
-                    target = self._mcap_channel(channel_id) if channel_id != _GAP else self._gap_channel_id()
+                    target = (self._mcap_channel(channel_id) if channel_id >= 0 else
+                              self._gap_channel_id() if channel_id == _GAP else self._clock_channel_id(channel_id))
                     self._writer.add_message(target, stamp, data, stamp, sequence)
-                    self.written += channel_id != _GAP
+                    self.written += channel_id >= 0
             self._writing = []
             with self._lock:
                 self._pending_bytes -= sum(len(item[3]) for item in batch if item[0] != _GAP)
@@ -365,6 +415,8 @@ class Recorder:
         first message not written to the last it numbered."""
         first: dict[tuple[str, str], tuple[int, int]] = {}
         for channel_id, stamp, sequence, data in unwritten:
+            if channel_id < _GAP:  # a clock reading: lost, as the clock channel's numbering shows
+                continue
             if channel_id == _GAP:
                 found = json.loads(codec_for_sort(None).ros.deserialize(data).data)  # type: ignore[attr-defined]
                 sender, receiver = str(found["channel"]).split("->", 1)
@@ -375,6 +427,25 @@ class Recorder:
             self.lost[pair] = self.lost.get(pair, 0) + 1
         return [self._gap_record(pair, sequence, (self._sequence.get(pair, sequence) - sequence) % SEQUENCE_WRAP + 1,
                                  stamp) for pair, (sequence, stamp) in first.items()]
+
+
+class RecordingClock:
+    """A role's clock in a recorded run: the machine's, each reading recorded by its group's
+    :class:`Recorder` (``anodize replay`` gives them back to the role, in order)."""
+
+    def __init__(self, recorder: Recorder, role: str) -> None:
+        self._recorder = recorder
+        self._role = role
+
+    def now(self, branch: str) -> float:
+        value = time.monotonic()
+        self._recorder.reading(self._role, branch, "now", value)
+        return value
+
+    def wall(self, branch: str) -> float:
+        value = time.time()
+        self._recorder.reading(self._role, branch, "wall", value)
+        return value
 
 
 class TappedChannel:

@@ -33,7 +33,7 @@ from .by_name import sort_text, validator_by_name
 from .channel_view import ChannelView, Node, sort_key
 from .encoding import JSON_TYPE, SortCodec, UnknownObject, class_sorts, codec_for_sort
 from .metadata import recorded_channels
-from .plan import META, channel_labels
+from .plan import CLOCK_KEY, META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
 from .tap import GAP_KEY, SEQUENCE_WRAP
 
@@ -376,6 +376,8 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
         key = _key_of(topic, topics or {})
         if topic.metadata.get(GAP_KEY) == "1":
             gap_topics.add(topic.id)
+        elif CLOCK_KEY in topic.metadata:
+            continue  # a role's clock readings: no channel of the protocol (a replay gives them back)
         elif key is None:
             report.unmapped.append(f"{topic.topic} ({topic.type_name})")
         elif key[:2] not in pairs:

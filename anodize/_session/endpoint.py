@@ -25,6 +25,7 @@ from sessiontypes import StateMachine
 from ..errors import Action, AnodizeError, PeerFailedError, ProtocolViolationError, RoleStopped
 from . import compiled
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
+from .clock import clock_of
 from .inheriting import Lender, get_lending, inheriting, lend_to_any
 from .monitor import Monitor
 from .statistics import EndpointStatistics
@@ -101,6 +102,8 @@ class Endpoint(_Core):
         self.high_water: dict[str, int] = dict.fromkeys(self._waiting, 0)
         self.received: dict[str, int] = dict.fromkeys(self._in, 0)
         self._stop_event = network.stop_event_for(role)
+        self._clock = clock_of(network, role)
+        self._branch = ""  # which endpoint of the role reads the clock: "" the role's, "1", "2", ... a branch's
         self._plain = not machine.forks  # no parallel composition: skip the routing checks
         self._fork_lock = threading.Lock()
         self._doorbell = network.doorbells.get(role)
@@ -469,13 +472,34 @@ class Endpoint(_Core):
         """Wait ``seconds`` (a role's pacing; ``math.inf``: until the run stops).
 
         A role that paces itself with ``time.sleep`` notices a stop only at its next
-        send or receive; this wait ends the moment the supervisor stops the run.
+        send or receive; this wait ends the moment the supervisor stops the run. Waking,
+        it reads the role's clock (:meth:`now`): a recording then holds when each sleep
+        ended, and a replay keeps the role's threads in that order.
 
         Raises:
             RoleStopped: the run is stopping.
         """
         if self._stop_event.wait(None if seconds == float("inf") else max(0.0, seconds)):
             raise RoleStopped(f"sleeping in state {self._state_number()} (Endpoint.sleep)")
+        self._clock.now(self._branch)
+
+    def now(self) -> float:
+        """The role's monotonic clock, in seconds (only differences between readings mean anything).
+
+        Live, ``time.monotonic()``. Read time here, not from ``time``, and a recorded run can
+        be replayed: a recording records each reading, and ``anodize replay`` gives the role
+        the readings it took in the run, in order (then, beyond them, the recorded time of the
+        message it received last, advanced by its ``sleep`` calls). Each parallel branch's
+        endpoint (``fork()``) has its own sequence of readings: a thread reads its own.
+        """
+        return self._clock.now(self._branch)
+
+    def wall(self) -> float:
+        """The wall clock, in seconds since the epoch: what a role stamps messages with.
+
+        Live, ``time.time()``; recorded and replayed as :meth:`now` is.
+        """
+        return self._clock.wall(self._branch)
 
     # ---- completion ------------------------------------------------------------------
     def unfinished(self) -> list[Endpoint]:
@@ -597,11 +621,12 @@ class Endpoint(_Core):
             if self._branches is not None:
                 return
             branches = []
-            for machine in self._machine.forks[fork_state]:
+            for number, machine in enumerate(self._machine.forks[fork_state], start=1):
                 sends_to, receives_from = peers_of(machine)
                 branch = type(self)(self.role, self.protocol, machine, self._network,
                                   self._monitor is not None, (sends_to, receives_from))
                 branch._doorbell = self._doorbell
+                branch._branch = f"{self._branch}.{number}" if self._branch else str(number)
                 if self._lender is not None:
                     branch._join_pending = True
                     branch._plain = False  # the Python path at first: see _join_pending

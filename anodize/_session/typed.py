@@ -28,6 +28,15 @@ class State:
         self._endpoint = endpoint
         self._used = False
 
+    def now(self) -> float:
+        """The role's monotonic clock (:meth:`Endpoint.now`): reading it is no action of the
+        protocol, so the state stays unused."""
+        return self._endpoint.now()
+
+    def wall(self) -> float:
+        """The wall clock (:meth:`Endpoint.wall`), for stamps; the state stays unused."""
+        return self._endpoint.wall()
+
     def _use(self) -> Endpoint:
         """Mark the state used and return the endpoint (``LinearityError`` the second time)."""
         if self._used:

@@ -42,6 +42,7 @@ from .._isolation.memory import data_size, limit_data
 from .._isolation.sched import apply_thread_scheduling
 from .._isolation.tree import become_subreaper, kill_tree
 from .._ros import RosType, ros_type
+from .._session.clock import adopt_clocks
 from .._session.endpoint import Endpoint
 from .._session.payloads import resolve_class, with_field_classes
 from .._transport.codec import MAX_FRAME, Codec, DecodeError, make_codec
@@ -163,6 +164,8 @@ class _GroupProcess:
             BoostTable.open(spec.inheritance[0], spec.inheritance[1]))
         network.inheritance = self.inheritance  # before the endpoints: they hook their waits on it
         self.taps = _open_taps(spec, network.queues)  # before the endpoints take their channels
+        for tap in self.taps:
+            adopt_clocks(network, tap)  # a recording records its roles' clock readings
         endpoints = {role: Endpoint(role, spec.protocol, spec.machines[role], network, spec.monitors)
                      for role in spec.roles}
         threads = [threading.Thread(target=self._role_thread, name=f"anodize:{spec.name}/{role}",

@@ -31,6 +31,7 @@ from typing import Any
 
 from .._isolation.inherit import Boosts, inheritance_table
 from .._isolation.procstat import own_run_delay
+from .._session.clock import adopt_clocks
 from .._session.endpoint import Endpoint
 from .._transport.inproc import InprocNetwork
 from ..taps import GroupTap
@@ -105,6 +106,7 @@ class ThreadRunner:
             for tap_plan in self.plan.taps:  # before the endpoints take their channels
                 tap = tap_plan.open(self.plan.tap_group(group, incarnation))
                 tap.attach(network.queues)
+                adopt_clocks(network, tap)  # a recording records its roles' clock readings
                 self.taps.append(tap)
             endpoints = {role: Endpoint(role, self.protocol, self.machines[role], network, self.monitors)
                          for role in group.roles}

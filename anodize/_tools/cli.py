@@ -165,6 +165,9 @@ def _parser() -> argparse.ArgumentParser:
     run_system.add_argument("--record", metavar="PATH",
                             help="record every message between groups: PATH.mcap is an MCAP file, any other PATH "
                                  "a rosbag2 folder (see 'anodize verify' and 'anodize replay')")
+    run_system.add_argument("--record-inside", action="store_true",
+                            help="with --record: record the channels inside each group too, so that every role "
+                                 "can be replayed alone ('anodize replay')")
     _add_foxglove_argument(run_system)
     run_system.set_defaults(run=_run)
 
@@ -180,7 +183,10 @@ def _parser() -> argparse.ArgumentParser:
                        "compared with it",
         description="Run role R's function alone, fed the messages its peers sent in the recorded run; each "
                     "message it sends is compared with the recorded one, and its monitor checks the protocol. "
-                    "Exit 0 when its outputs match the recording and follow the protocol, 1 otherwise.")
+                    "Its clock (Endpoint.now(), Endpoint.wall()) gives back the readings it took in the run; "
+                    "Endpoint.sleep returns at once. "
+                    "Exit 0 when its outputs match the recording and follow the protocol, 1 otherwise "
+                    "(a replay that compared nothing included).")
     _add_recording_arguments(replay)
     replay.add_argument("--role", required=True, metavar="R", help="the role to replay")
     replay.add_argument("--function", metavar="MODULE:FUNCTION",
@@ -434,7 +440,9 @@ def _run(args: argparse.Namespace) -> int:
             wait=args.wait if args.wait is not None else config.transport.wait))
     system = build_system(config)
     timeout = args.timeout if args.timeout is not None else config.timeout
-    with _taps(args.record, args.foxglove) as taps:
+    if args.record_inside and args.record is None:
+        raise UsageError("--record-inside needs --record PATH")
+    with _taps(args.record, args.foxglove, args.record_inside) as taps:
         report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout), taps=taps)
     print(report.summary())
     if args.json:
@@ -483,14 +491,15 @@ def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
 
 
 @contextlib.contextmanager
-def _taps(record: str | os.PathLike[str] | None, foxglove: int | None) -> Iterator[list[ChannelTap]]:
-    """The run's channel taps: ``--record`` (first: it wraps the channels first, as it always has),
-    then ``--foxglove``."""
+def _taps(record: str | os.PathLike[str] | None, foxglove: int | None,
+          inside: bool = False) -> Iterator[list[ChannelTap]]:
+    """The run's channel taps: ``--record`` (first: it wraps the channels first, as it always has;
+    ``inside``: the channels inside groups too), then ``--foxglove``."""
     taps: list[ChannelTap] = []
     if record is not None:
         from .._recording import Recording
 
-        taps.append(Recording(record))
+        taps.append(Recording(record, inside=inside))
     with _live_view(foxglove) as live:
         if live is not None:
             taps.append(live)
@@ -578,7 +587,7 @@ def _run_named(name: str, rest: list[str]) -> int:
     prepared = named.prepare(args, lambda line: print(line, flush=True))
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
     try:
-        with _taps(prepared.record, args.foxglove) as taps:
+        with _taps(prepared.record, args.foxglove, prepared.record_inside) as taps:
             report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
                                          taps=taps, stop_when=prepared.stop_when)
     finally:

@@ -32,8 +32,9 @@ ENTRY_POINT_GROUP = "anodize.systems"
 @dataclass
 class Prepared:
     """What a named system hands back to be run: the system, its timeout (seconds), where
-    to record it (None: not recorded), and ``stop_when``: asked about twice a second while
-    the run goes, it ends the run early by returning a reason (None: go on; see
+    to record it (None: not recorded; ``record_inside``: the channels inside groups too, so
+    that each role can be replayed alone), and ``stop_when``: asked about twice a second
+    while the run goes, it ends the run early by returning a reason (None: go on; see
     ``System.run``)."""
 
     system: System
@@ -41,6 +42,7 @@ class Prepared:
     grace: float = 3.0
     record: Path | None = None
     stop_when: Callable[[], str | None] | None = None
+    record_inside: bool = False
 
 
 @dataclass

@@ -1,5 +1,8 @@
-"""``anodize replay`` of a recorded TinMan run: the Planner's replay matches its recording message
-for message, and no replay writes into the recorded run's folder."""
+"""``anodize replay`` of a recorded TinMan run: every role's replay but the simulator's matches its
+recording message for message (the roles read time through their endpoints, which a recording
+records and a replay gives back; Move's and VisOdom's threads go through their recorded order);
+the Visualizer, which only receives, compares nothing and says so (exit 1); no replay writes
+into the recorded run's folder; and the run's report gives the world's real-time factor."""
 
 from __future__ import annotations
 
@@ -49,14 +52,39 @@ def _replay(recorded: Path, role: str, function: str) -> tuple[int, str]:
     return done.returncode, done.stdout
 
 
-def test_the_planners_replay_matches_its_recording_and_writes_nothing_into_the_run(recorded: Path) -> None:
+ROLES = {"Joy": "control:joy", "Control": "control:control", "Move": "control:move",
+         "Camera": "perception:camera", "VisOdom": "perception:visodom", "Planner": "planner:planner"}
+
+
+@pytest.mark.parametrize("role", sorted(ROLES))
+def test_each_role_but_the_simulator_s_replays_equal_and_writes_nothing_into_the_run(recorded: Path,
+                                                                                     role: str) -> None:
     before = _folder(recorded)
-    assert "records/Planner.json" in before
-    status, out = _replay(recorded, "Planner", "tinman.roles.planner:planner")
-    first = out.splitlines()[0]
-    assert first.endswith("global TinManParallel: matches the recording and follows the protocol"), out
-    sent = next(line for line in out.splitlines() if line.startswith("  sent on Planner->Move: "))
-    compared, _, recorded_count = sent.removeprefix("  sent on Planner->Move: ").partition(" compared of ")
-    assert int(compared) >= 2 and recorded_count == f"{compared} recorded", out
+    assert f"records/{role}.json" in before or role in ("Joy", "Control")  # they keep no record
+    status, out = _replay(recorded, role, f"tinman.roles.{ROLES[role]}")
+    lines = out.splitlines()
+    assert lines[0].endswith("global TinManParallel: matches the recording and follows the protocol"), out
+    sent = [line for line in lines if line.startswith(f"  sent on {role}->")]
+    assert sent, out
+    for line in sent:  # every recorded message of each channel out of the role, compared
+        compared, _, recorded_count = line.split(": ", 1)[1].partition(" compared of ")
+        assert int(compared) >= 2 and recorded_count == f"{compared} recorded", out
+    assert not any(line.startswith(("note: threads:", "note: clock:")) for line in lines), out
     assert status == 0
     assert _folder(recorded) == before  # not a file of the recorded run written again
+
+
+def test_the_visualizer_only_receives_so_its_replay_compares_nothing_and_fails(recorded: Path) -> None:
+    before = _folder(recorded)
+    status, out = _replay(recorded, "Visualizer", "tinman.roles.simulation:visualizer")
+    assert out.splitlines()[0].endswith("COMPARED NOTHING: the role sent no message on a recorded channel, so the "
+                                        "replay shows nothing (not a pass)"), out
+    assert status == 1
+    assert _folder(recorded) == before
+
+
+def test_the_report_gives_the_world_s_real_time_factor(recorded: Path) -> None:
+    world = json.loads((recorded / "report.json").read_text())["world_clock"]
+    assert world["simulated_s"] > 0 and world["wall_s"] > 0
+    assert abs(world["real_time_factor"] - world["simulated_s"] / world["wall_s"]) < 0.01
+    assert 0 < world["camera_frames_rendered"] <= world["camera_frames_due"]

@@ -29,7 +29,7 @@ from anodize import (
 )
 
 from .mission_outcome import counted, mission_line
-from .outcome import build_report
+from .outcome import build_report, world_clock_line
 from .settings import FAULTS, Settings, export
 from .worlds import DEFAULT_LOOK, WORLDS
 
@@ -91,8 +91,9 @@ class TinMan:
                             help="with --transport dds: a ROS 2 node on the network plays ROLE (e.g. Joy: a "
                                  "joy_node on /joy; Gazebo: a simulator on /cmd_vel); TinMan does not run it")
         parser.add_argument("--record", nargs="?", const="", default=None, metavar="PATH",
-                            help="record every message between groups (camera images, poses, plans, commands) "
-                                 "to PATH: an MCAP file if it ends in .mcap, else a rosbag2 folder "
+                            help="record every message (camera images, poses, plans, commands; inside groups too, "
+                                 "so that each role can be replayed alone with 'anodize replay') and every role's "
+                                 "clock readings to PATH: an MCAP file if it ends in .mcap, else a rosbag2 folder "
                                  "(default: OUT/run.mcap); check it with 'anodize verify PATH'")
 
     def prepare(self, args: argparse.Namespace, log: Callable[[str], None]) -> Prepared:
@@ -127,7 +128,7 @@ class TinMan:
         export(self.settings)
         record = None if args.record is None else Path(args.record or out / "run.mcap")
         return Prepared(build_system(config), timeout=float(args.duration), grace=3.0, record=record,
-                        stop_when=patrol_done(self.settings.records) if patrol else None)
+                        record_inside=True, stop_when=patrol_done(self.settings.records) if patrol else None)
 
     def progress(self, statuses: dict[str, GroupStatus], elapsed: float) -> str:
         """The live line, as much of it as the terminal has room for (80 columns when unknown).
@@ -308,6 +309,9 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
     if lost:
         lines.append(f"planner lost during the run; teleop commands after that: "
                      f"{data['control']['teleop_commands_after_planner_lost']}")
+    world = world_clock_line(data.get("world_clock") or {})
+    if world is not None:
+        lines.append(world)
     lines.append(f"protocol violations: {data['violations']}")
     lines.extend(f"problem: {problem}" for problem in problems)
     return lines

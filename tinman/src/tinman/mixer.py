@@ -113,18 +113,21 @@ class Mixer:
         self._stamp: float | None = None
         self._clock = clock
         self._fresh_at = clock()  # the robot starts knowing its pose: its dock
+        self.path_at: float | None = None  # when the latest path came (clock)
         self._lost = False
         self._scan: tuple[LaserScan, float] | None = None  # the latest scan, and when it came (clock)
         self._lock = threading.Lock()  # the planning and perception branches' threads hand over
 
     def set_scan(self, scan: LaserScan) -> None:
         """The scanner's latest scan (the scan branch's thread hands it over as it comes)."""
+        came = self._clock()  # read outside the lock: a replay may hold a thread at its clock (its turn)
         with self._lock:
-            self._scan = (scan, self._clock())
+            self._scan = (scan, came)
 
     def set_path(self, path: Path) -> None:
         """Follow ``path`` from now on (the latest plan always wins)."""
         points = path_points(path)
+        self.path_at = self._clock()  # when the latest plan came (it orders this thread's turns in a replay)
         with self._lock:
             self._path = points
             self.paths_received += 1
@@ -135,6 +138,7 @@ class Mixer:
         The robot is then where the odometry says (through ``offset``), unless the estimate
         follows a gap or jumps (see the module): then the drive model's pose is kept and
         ``offset`` changes so that this estimate reads as that pose."""
+        came = self._clock()  # outside the lock, as in set_scan
         with self._lock:
             if stamp == self._stamp:
                 return
@@ -144,7 +148,7 @@ class Mixer:
                 estimate = self.model.pose
                 self.bridged += 1
             self._stamp = stamp
-            self._fresh_at = self._clock()
+            self._fresh_at = came
             self.model.pose = estimate
             self.estimates += 1
 
@@ -159,8 +163,11 @@ class Mixer:
 
     def tracking(self) -> bool:
         """Whether a fresh estimate came within ``LOST_AFTER`` seconds."""
+        return self._tracking_at(self._clock())  # read outside the lock, as in set_scan
+
+    def _tracking_at(self, now: float) -> bool:
         with self._lock:
-            return self._clock() - self._fresh_at <= LOST_AFTER
+            return now - self._fresh_at <= LOST_AFTER
 
     def _clear_ahead(self, pose: Pose, v: float, w: float) -> bool:
         """Whether the arc ``(v, w)`` keeps the robot clear of the room's walls and boxes for
@@ -175,6 +182,9 @@ class Mixer:
         The safety layer limits the command first: against ``scan`` when given (Fig. 16's
         single loop hands over this step's), else against the latest :meth:`set_scan` gave,
         as old as it is."""
+        # Time first, before the state the other threads hand over is read: a replay orders the
+        # threads at their clock readings (anodize replay), so what follows sees what it saw live.
+        now = self._clock()
         v, w = teleop.linear.x, teleop.angular.z
         if abs(v) > IDLE_EPSILON or abs(w) > IDLE_EPSILON:
             source = "teleop"
@@ -184,7 +194,7 @@ class Mixer:
                 pose = self.model.pose
             if len(path) < 2 or self.pursuit.at_goal(pose, path):
                 v, w, source = 0.0, 0.0, "idle"
-            elif not self.tracking():
+            elif not self._tracking_at(now):
                 v, w, source = 0.0, 0.0, "lost"
                 self.stops += not self._lost
             else:
@@ -201,7 +211,7 @@ class Mixer:
             with self._lock:
                 latest = self._scan
             v, w = (self.safety.limit(v, w, None) if latest is None
-                    else self.safety.limit(v, w, latest[0], self._clock() - latest[1]))
+                    else self.safety.limit(v, w, latest[0], now - latest[1]))
         with self._lock:
             self.model.step(v, w, self.period)
         self.sources[source] += 1

@@ -16,7 +16,7 @@ from .records import load_records
 from .settings import Settings
 from .tum import read_trajectory
 
-__all__ = ["build_report", "violations_in", "truth_path", "CAMERA_TRUTH"]
+__all__ = ["build_report", "violations_in", "truth_path", "CAMERA_TRUTH", "world_clock", "world_clock_line"]
 
 CAMERA_TRUTH = "camera_truth.txt"  # in the records: the simulated camera's true path, TUM format
 
@@ -59,6 +59,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "frames_dropped": _sum(vo.get("frames_dropped"), gazebo.get("camera_frames_skipped")),
         "frames_published": camera.get("frames_published"),
         "camera": gazebo.get("camera"),
+        "world_clock": world_clock(gazebo),
         "vo_track_ms": {key: vo.get("track_ms", {}).get(key) for key in ("p50", "p99")},
         "violations": len(violations),
         "violation_messages": violations,
@@ -90,6 +91,36 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
                     "plan_ms_p50": _round(float(np.median(planner["plan_ms"])) if planner.get("plan_ms") else None)},
         "notes": list(report.notes),
     }
+
+
+def world_clock(gazebo: dict[str, Any]) -> dict[str, Any]:
+    """How well the simulated world kept real time (it runs at nice -10 so that no load on the
+    robot's groups starves it: decision 0030): the seconds its physics stepped (one control
+    period per command) against the wall seconds from its first step to its last (plus a
+    period), and the camera frames it rendered
+    against those that fell due. A factor well below 1 means the run measured the harness's
+    starvation as much as the robot."""
+    simulated, wall = _number(gazebo.get("simulated_s")), _number(gazebo.get("wall_s"))
+    factor = simulated / wall if simulated is not None and wall is not None and wall > 0 else None
+    return {"simulated_s": _round(simulated), "wall_s": _round(wall), "real_time_factor": _round(factor),
+            "camera_frames_rendered": gazebo.get("camera_frames"), "camera_frames_due": gazebo.get("camera_frames_due")}
+
+
+def _number(value: Any) -> float | None:
+    """A record's number (records are read as untrusted input: anything else is None)."""
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+def world_clock_line(world: dict[str, Any]) -> str | None:
+    """The printed line of :func:`world_clock` (None when the world left no record)."""
+    if world.get("real_time_factor") is None:
+        return None
+    line = (f"world (real time): real-time factor {world['real_time_factor']:.2f} "
+            f"({world['simulated_s']:.2f} s simulated in {world['wall_s']:.2f} s)")
+    rendered, due = world.get("camera_frames_rendered"), world.get("camera_frames_due")
+    if rendered is not None and due is not None:
+        line += f"; camera rendered {rendered} of {due} frames due"
+    return line
 
 
 def _ate(settings: Settings) -> dict[str, Any]:

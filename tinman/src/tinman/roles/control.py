@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time
 
 import numpy as np
 
@@ -13,7 +12,18 @@ from ..faults import start_faults
 from ..geometry import robot_pose
 from ..joystick import AXES, BUTTONS, scripted_joy, twist_from_joy
 from ..keyboard import Keyboard
-from ..messages import Header, Joy, LaserScan, Path, PoseStamped, Twist, pose_matrix, seconds, stamp_now, twist_planar
+from ..messages import (
+    Header,
+    Joy,
+    LaserScan,
+    Path,
+    PoseStamped,
+    Twist,
+    pose_matrix,
+    seconds,
+    stamp_from_seconds,
+    twist_planar,
+)
 from ..messages import joy as joy_message
 from ..mission import patrol_pursuit
 from ..mixer import Mixer
@@ -32,6 +42,9 @@ def joy(ep: Endpoint) -> None:
     With ``--foxglove``, a joystick in the Foxglove app (a client publishing
     ``sensor_msgs/Joy`` on ``/joy``) takes over while it publishes: its latest state,
     fitted to this gamepad's layout, is what Joy sends.
+
+    Time is the endpoint's clock (``ep.now()``, ``ep.wall()`` for the stamps), so that
+    ``anodize replay`` of a recorded run gives Joy the times it read then.
     """
     settings = current()
     start_faults("Joy")
@@ -39,20 +52,21 @@ def joy(ep: Endpoint) -> None:
     keyboard = Keyboard.open() if settings.teleop else None
     read = keyboard.read if keyboard is not None else scripted_joy
     client = client_input(ep, "Control", "Joy")  # None without --foxglove
-    start = time.monotonic()
+    start = ep.now()
     tick = 0
     try:
         while True:
-            axes, buttons = read(time.monotonic() - start)
+            axes, buttons = read(ep.now() - start)
             held = client.latest(max_age=CLIENT_HOLD) if client is not None else None
             if isinstance(held, Joy):
                 axes, buttons = _fitted(held)
-            ep.send("Control", "Joy", joy_message(Header(stamp=stamp_now(), frame_id="joy"), axes, buttons))
+            ep.send("Control", "Joy", joy_message(Header(stamp=stamp_from_seconds(ep.wall()), frame_id="joy"),
+                                                  axes, buttons))
             tick += 1
-            late = time.monotonic() - (start + tick * period)
+            late = ep.now() - (start + tick * period)
             if late > period:  # fell behind (e.g. the machine was busy): do not burst to catch up
                 tick += int(late / period)
-            ep.sleep(start + tick * period - time.monotonic())
+            ep.sleep(start + tick * period - ep.now())
     finally:
         if keyboard is not None:
             keyboard.close()
@@ -79,22 +93,27 @@ def control(ep: Endpoint) -> None:
 def move(ep: Endpoint) -> None:
     """The mixer: a command to the robot for every command from Control, steering by the
     odometry's estimate (VisOdom's Pose), each checked by the safety layer against the range
-    scanner's latest scan (Gazebo's LaserScan) before it goes to the robot."""
+    scanner's latest scan (Gazebo's LaserScan) before it goes to the robot.
+
+    Time is the endpoint's clock: each of Move's threads reads the clock of the branch it
+    acts through (:class:`_ThreadClock`), so ``anodize replay`` gives each the times it read
+    in the recorded run."""
     settings = current()
     start_faults("Move")
+    clock = _ThreadClock(ep)
     mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate, patrol_pursuit(),  # as the mission drives
-                  scanned=True)
+                  clock=clock, scanned=True)
     planner_lost: list[str] = []
     perception_lost: list[str] = []
     scanner_lost: list[str] = []
     if not settings.paper:  # the scan, planning and perception loops run beside the control loop: threads
-        ep.fork()
-        threading.Thread(target=_take_scans, args=(ep, mixer, scanner_lost), name="Move-scans",
-                         daemon=True).start()
-        threading.Thread(target=_take_paths, args=(ep, mixer, planner_lost), name="Move-paths",
-                         daemon=True).start()
-        threading.Thread(target=_take_estimates, args=(ep, mixer, perception_lost), name="Move-estimates",
-                         daemon=True).start()
+        branches = ep.fork()
+        threading.Thread(target=_take_scans, args=(_branch_from(branches, "Gazebo"), mixer, scanner_lost, clock),
+                         name="Move-scans", daemon=True).start()
+        threading.Thread(target=_take_paths, args=(_branch_from(branches, "Planner"), mixer, planner_lost, clock),
+                         name="Move-paths", daemon=True).start()
+        threading.Thread(target=_take_estimates, args=(_branch_from(branches, "VisOdom"), mixer, perception_lost,
+                                                       clock), name="Move-estimates", daemon=True).start()
     sent: list[float] = []
     teleop_after_loss = 0
     try:
@@ -107,7 +126,7 @@ def move(ep: Endpoint) -> None:
             scan: LaserScan | None = ep.recv("Gazebo").payload if settings.paper else None  # else the latest
             command, source = mixer.step(teleop, scan)
             ep.send("Gazebo", "Twist", command)
-            sent.append(time.monotonic())
+            sent.append(ep.now())
             if planner_lost and source == "teleop":
                 teleop_after_loss += 1
     finally:
@@ -128,7 +147,30 @@ def _estimate(mixer: Mixer, pose: PoseStamped) -> None:
     mixer.set_estimate(seconds(pose.header.stamp), robot_pose(pose_matrix(pose.pose)))
 
 
-def _take_estimates(ep: Endpoint, mixer: Mixer, perception_lost: list[str]) -> None:
+def _branch_from(branches: tuple[Endpoint, ...], peer: str) -> Endpoint:
+    """The parallel branch (of ``ep.fork()``'s) that receives from ``peer``."""
+    return next(branch for branch in branches if peer in branch.received)
+
+
+class _ThreadClock:
+    """The mixer's clock: each of Move's threads reads the clock of the endpoint it acts through
+    (the role's own until it says otherwise), so each endpoint's readings are one thread's."""
+
+    def __init__(self, ep: Endpoint) -> None:
+        self._role = ep
+        self._local = threading.local()
+
+    def use(self, ep: Endpoint) -> None:
+        """From now on the calling thread reads ``ep``'s clock."""
+        self._local.endpoint = ep
+
+    def __call__(self) -> float:
+        endpoint: Endpoint = getattr(self._local, "endpoint", self._role)
+        return endpoint.now()
+
+
+def _take_estimates(ep: Endpoint, mixer: Mixer, perception_lost: list[str], clock: _ThreadClock) -> None:
+    clock.use(ep)
     try:
         while True:
             _estimate(mixer, ep.recv("VisOdom").payload)
@@ -138,7 +180,8 @@ def _take_estimates(ep: Endpoint, mixer: Mixer, perception_lost: list[str]) -> N
         pass
 
 
-def _take_scans(ep: Endpoint, mixer: Mixer, scanner_lost: list[str]) -> None:
+def _take_scans(ep: Endpoint, mixer: Mixer, scanner_lost: list[str], clock: _ThreadClock) -> None:
+    clock.use(ep)
     try:
         while True:
             mixer.set_scan(ep.recv("Gazebo").payload)
@@ -148,7 +191,8 @@ def _take_scans(ep: Endpoint, mixer: Mixer, scanner_lost: list[str]) -> None:
         pass
 
 
-def _take_paths(ep: Endpoint, mixer: Mixer, planner_lost: list[str]) -> None:
+def _take_paths(ep: Endpoint, mixer: Mixer, planner_lost: list[str], clock: _ThreadClock) -> None:
+    clock.use(ep)
     try:
         while True:
             mixer.set_path(ep.recv("Planner").payload)

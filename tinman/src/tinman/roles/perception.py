@@ -57,8 +57,8 @@ def visodom(ep: Endpoint) -> None:
     latest = _Latest()
     period = 1.0 / (TumSequence.open(settings.dataset).frame_rate if settings.dataset else settings.camera_rate)
     if not settings.paper:  # the planning loop: the latest pose at the planner's rate
-        ep.fork()
-        threading.Thread(target=_feed_planner, args=(ep, latest, settings.replan_period),
+        planning = next(branch for branch in ep.fork() if "Planner" in branch.sent)  # its thread acts through it
+        threading.Thread(target=_feed_planner, args=(planning, latest, settings.replan_period),
                          name="VisOdom-planner", daemon=True).start()
     stamps: list[float] = []
     poses: list[np.ndarray] = []
@@ -73,7 +73,7 @@ def visodom(ep: Endpoint) -> None:
             depth: Image = ep.recv("Camera").payload
             captured = seconds(color.header.stamp)
             # Late against its capture stamp, not a publish stamp (an Image has none): see Lateness.
-            late = lateness(captured, time.monotonic())
+            late = lateness(captured, ep.now())  # the endpoint's clock: a replay gives back the run's
             if last is not None and late > STALE_FRAMES * period:
                 dropped += 1  # catch up: the Visualizer gets the latest estimate again
             else:

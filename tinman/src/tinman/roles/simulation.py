@@ -83,13 +83,20 @@ def gazebo(ep: Endpoint) -> None:
             if robot.drive.bumps > bumps and len(bumped) < MAX_BUMP_EVENTS:
                 bumped.append([t, round(x, 4), round(y, 4)])
     finally:
+        # The world's own clock is real time (it stands for the physical world: decision 0030), so
+        # it reads time.monotonic(), not an endpoint's clock; the report compares the two.
+        ended = time.monotonic()
         film = films[0] if films else None  # None: the run stopped before the camera was set up
         if film is not None:
             film.save(settings)
         save_record("Gazebo", {"trajectory": trace, "odometer_m": robot.drive.odometer, "bumps": robot.drive.bumps,
                                "bump_events": bumped,
                                "columns": ["t", "x", "y", "theta", "v", "w"],
-                               **(film.record() if film is not None else {})})
+                               # The physics' seconds against the wall's, from the first step to the last
+                               # (the robot's start and the run's stop are not the world's to keep up with).
+                               "simulated_s": round(len(trace) * period, 6),
+                               "wall_s": round(trace[-1][0] - trace[0][0] + period, 6) if trace else 0.0,
+                               **(film.record(ended) if film is not None else {})})
 
 
 class _Robot:
@@ -168,8 +175,18 @@ class _Film:
             write_trajectory(settings.records / CAMERA_TRUTH, self.stamps, self.poses,
                              comment="TinMan Gazebo: the simulated camera's true path")
 
-    def record(self) -> dict[str, object]:
+    def frames_due(self, ended: float) -> int:
+        """Frames that fell due between the camera's first frame and ``ended`` (monotonic)."""
+        if ended < self.begun:
+            return 0
+        if self.recorded is None:
+            return int((ended - self.begun) / self.period) + 1
+        return sum(1 for index in range(len(self.recorded)) if self.recorded.offset(index) <= ended - self.begun)
+
+    def record(self, ended: float | None = None) -> dict[str, object]:
+        """What the camera did (frames due up to ``ended``, monotonic; now if None)."""
         return {"camera_frames": self.taken, "camera_frames_skipped": self.skipped,
+                "camera_frames_due": self.frames_due(time.monotonic() if ended is None else ended),
                 "camera": "live" if self.live is not None else "recorded", "camera_rate": 1.0 / self.period,
                 "world": self.live.look.name if self.live is not None else None}
 

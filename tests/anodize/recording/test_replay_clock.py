@@ -1,0 +1,258 @@
+"""The role's clock (``Endpoint.now()``, ``Endpoint.wall()``): the machine's live, recorded in a
+recorded run, the recording's in a replay; and a run recorded inside its groups.
+
+- live, ``now`` is ``time.monotonic()`` and ``wall`` is ``time.time()`` (bracketed by them);
+- a role whose messages carry what it read from its clock replays equal: the replay gives
+  back each endpoint's readings, in order (a parallel branch's apart from the role's);
+- beyond the recorded readings, a role reads message time: the recorded time of the message
+  it received last, advanced by its ``Endpoint.sleep`` arguments;
+- a role that reads its clock otherwise than in the run is told so;
+- the clock's channels are no channels of the protocol: ``anodize verify`` passes;
+- ``Recording(inside=True)``: a role that talks to a role of its own group replays equal;
+- a forked role's threads replay in their recorded order (and are let go, saying so, when
+  its code no longer acts as in the run);
+- a generated typed state reads the clock without being used;
+- `anodize run --record PATH --record-inside` (and `--record-inside` alone is a usage error).
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+HERE = Path(__file__).resolve().parents[1]
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+import replay_roles  # noqa: E402
+from role_drivers import load_global  # noqa: E402
+
+import sessiontypes  # noqa: E402
+from anodize import Endpoint, Recording, State, System  # noqa: E402
+from anodize._recording import turnstile  # noqa: E402
+from anodize._recording.reader import open_recording  # noqa: E402
+from anodize._recording.replay import ReplayReport, replay  # noqa: E402
+from anodize._recording.verify import verify  # noqa: E402
+from anodize._tools.cli import main  # noqa: E402
+
+ROOT = HERE.parents[1]
+TWO_BUYER = sessiontypes.load(ROOT / "protocols" / "two_buyer.proto").globals["TwoBuyer"]
+TALK = load_global("""
+global Talk(B, S) =
+  mu t. B -> S : { title(str). S -> B : quote(str). t,
+                   done }
+""", "Talk")
+FORKED = load_global("""
+global Forked(A, B, C) =
+  ( mu x. A -> B : { tick(str). x, done } || mu y. A -> C : { tock(str). y, done } )
+""", "Forked")
+ROUNDS = 5
+
+
+def _replay(path: Path, global_type: sessiontypes.GlobalType, role: str, function: Callable[..., Any]) -> ReplayReport:
+    with open_recording(path) as recording:
+        report = replay(recording, global_type, role, function, timeout=20.0)
+    print(report.text())  # shown when a test fails
+    return report
+
+
+def _clocked_buyer(ep: Endpoint) -> None:
+    """Sends what it reads from its clock, sleeping a little between rounds."""
+    for _ in range(ROUNDS):
+        ep.send("S", "title", f"{ep.now()!r} {ep.wall()!r}")
+        ep.recv("S")
+        ep.sleep(0.01)
+    ep.send("S", "done")
+
+
+def _clocked_seller(ep: Endpoint) -> None:
+    """Answers each title with the time it took since the last one, by its own clock."""
+    last = ep.now()
+    while ep.recv("B").label == "title":
+        now = ep.now()
+        ep.send("B", "quote", repr(now - last))
+        last = now
+
+
+@pytest.fixture(scope="module")
+def talked(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    system = System(TALK)
+    system.group("b").role("B", _clocked_buyer)
+    system.group("s").role("S", _clocked_seller)
+    path = tmp_path_factory.mktemp("clock") / "run.mcap"
+    report = system.run(timeout=20.0, taps=[Recording(path)])
+    assert report.ok
+    # B read now() and wall() and ended a sleep each round; S read now() once, then once a title.
+    note = next(note for note in report.notes if note.startswith("recorded "))
+    assert note.startswith("recorded 11 messages (") and note.endswith(
+        f" on 3 channels between groups, and {3 * ROUNDS + ROUNDS + 1} readings of the roles' clocks, to {path}"), note
+    return path
+
+
+def test_the_live_clock_is_the_machine_s() -> None:
+    seen: list[float] = []
+
+    def buyer(ep: Endpoint) -> None:
+        seen.extend((time.monotonic(), ep.now(), time.monotonic(), time.time(), ep.wall(), time.time()))
+        ep.send("S", "done")
+
+    def seller(ep: Endpoint) -> None:
+        ep.recv("B")
+
+    system = System(TALK)
+    system.group("b").role("B", buyer)
+    system.group("s").role("S", seller)
+    assert system.run(timeout=20.0).ok
+    before, now, after, wall_before, wall, wall_after = seen
+    assert before <= now <= after and wall_before <= wall <= wall_after
+
+
+@pytest.mark.parametrize("role", ["B", "S"])
+def test_a_role_that_sends_its_clock_readings_replays_equal(talked: Path, role: str) -> None:
+    report = _replay(talked, TALK, role, {"B": _clocked_buyer, "S": _clocked_seller}[role])
+    assert report.ok and report.divergence is None
+    readings = {"B": 3 * ROUNDS, "S": ROUNDS + 1}[role]  # B: now(), wall(), and each sleep's end
+    assert report.clock == (readings, readings, 0)
+    assert f"  clock: {readings} of {readings} recorded readings given back" in report.text().splitlines()
+
+
+def test_beyond_the_recorded_readings_the_clock_is_message_time(talked: Path) -> None:
+    with open_recording(talked) as recording:
+        first = next(m.log_time for m in recording.messages() if m.topic.topic.endswith("/B/S/title"))
+    seen: list[float] = []
+
+    def seller(ep: Endpoint) -> None:  # reads its clock more often than the seller did in the run
+        seen.extend(ep.now() for _ in range(ROUNDS + 1))
+        ep.recv("B")
+        seen.append(ep.now())
+        ep.sleep(2.0)
+        seen.append(ep.now())
+        ep.send("B", "quote", "0.0")
+
+    report = _replay(talked, TALK, "S", seller)
+    assert report.clock == (ROUNDS + 1, ROUNDS + 1, 3)  # the sleep's end is a reading too
+    assert seen[-2:] == [first / 1e9, first / 1e9 + 2.0]
+
+
+def test_a_role_that_reads_its_clock_otherwise_is_told_so(talked: Path) -> None:
+    def seller(ep: Endpoint) -> None:
+        ep.wall()  # the run's seller read now() first
+        ep.recv("B")
+
+    report = _replay(talked, TALK, "S", seller)
+    assert ("note: clock: endpoint (the role) read wall() where the run read now() (its reading 1): the role "
+            "reads its clock otherwise than in the run; from there on it reads message time") in report.text()
+
+
+def _two_threads(ep: Endpoint) -> None:
+    """One thread counts, the other sends the count now and then: what the second sends depends
+    on how the two interleaved, each reading its own branch's clock."""
+    ticks, tocks = ep.fork()
+    count = [0]
+
+    def tock() -> None:
+        for _ in range(ROUNDS):
+            tocks.sleep(0.004)
+            tocks.send("C", "tock", f"{count[0]} at {tocks.now()!r}")
+        tocks.send("C", "done")
+
+    thread = threading.Thread(target=tock, name="A-tocks")
+    thread.start()
+    for number in range(4 * ROUNDS):
+        count[0] += 1
+        ticks.send("B", "tick", str(number))
+        ticks.sleep(0.001)
+    ticks.send("B", "done")
+    thread.join()
+
+
+def _receiver(ep: Endpoint) -> None:
+    while ep.recv("A").label != "done":
+        pass
+
+
+@pytest.fixture(scope="module")
+def forked(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    system = System(FORKED)
+    system.group("a").role("A", _two_threads)
+    system.group("b").role("B", _receiver)
+    system.group("c").role("C", _receiver)
+    path = tmp_path_factory.mktemp("forked") / "run.mcap"
+    assert system.run(timeout=20.0, taps=[Recording(path)]).ok
+    return path
+
+
+def test_a_role_s_threads_replay_in_their_recorded_order(forked: Path) -> None:
+    # Each thread reads its own branch's readings, and the tock thread sends the count the tick
+    # thread had reached in the run: the replay keeps the threads' recorded order.
+    report = _replay(forked, FORKED, "A", _two_threads)
+    assert report.ok and report.divergence is None
+    assert report.clock == (4 * ROUNDS + 2 * ROUNDS, 4 * ROUNDS + 2 * ROUNDS, 0)
+    assert not any(note.startswith("threads:") for note in report.notes)
+
+
+def test_threads_that_no_longer_act_as_in_the_run_are_let_go_and_told_so(
+        forked: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(turnstile, "PATIENCE", 0.5)  # a second of a test, not ten
+    def one_thread(ep: Endpoint) -> None:  # all tocks before any tick: the tocks' turns never come
+        ticks, tocks = ep.fork()
+        tocks.send("C", "tock", "0")
+        ticks.send("B", "tick", "0")
+
+    report = _replay(forked, FORKED, "A", one_thread)
+    assert any(note.startswith("threads: a thread of A (replay:A) waited 0.5 s for its recorded turn")
+               for note in report.notes), report.notes
+
+
+def test_the_clock_s_readings_are_no_channel_of_the_protocol(talked: Path) -> None:
+    with open_recording(talked) as recording:
+        topics = sorted(topic.topic for topic in recording.topics)
+        report = verify(recording, TALK)
+    assert "/anodize/clock/B" in topics and "/anodize/clock/S" in topics
+    assert report.conforms and report.unmapped == [], report.text()
+
+
+def test_a_run_recorded_inside_its_groups_replays_a_role_that_talks_inside_its_group(tmp_path: Path) -> None:
+    system = System(TWO_BUYER)
+    system.group("shop").role("B1", replay_roles.buyer1).role("S", replay_roles.seller)
+    system.group("b2").role("B2", replay_roles.buyer2)
+    path = tmp_path / "run.mcap"
+    run = system.run(timeout=20.0, taps=[Recording(path, inside=True)])
+    assert run.ok
+    assert any("channels between and inside groups" in note for note in run.notes), run.notes
+    report = _replay(path, TWO_BUYER, "B1", replay_roles.buyer1)
+    assert (report.ok, report.outcome) == (True, "finished")
+    assert report.compared == {"B1->S": (1, 1), "B1->B2": (1, 1)}
+
+
+def test_a_typed_state_reads_the_clock_without_being_used() -> None:
+    class Clocked:
+        def now(self) -> float:
+            return 1.5
+
+        def wall(self) -> float:
+            return 1.7e9
+
+    state = State(Clocked())  # type: ignore[arg-type]  # only the clock is read
+    assert (state.now(), state.wall()) == (1.5, 1.7e9)
+    state._use()  # still unused: reading the clock is no action of the protocol
+
+
+def test_record_inside_needs_record(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    system = tmp_path / "system.toml"
+    system.write_text(f'protocol = "{ROOT / "protocols" / "two_buyer.proto"}"\nglobal = "TwoBuyer"\n'
+                      f'pythonpath = ["{HERE}"]\n[groups.all]\n'
+                      'roles = { B1 = "replay_roles:buyer1", B2 = "replay_roles:buyer2", S = "replay_roles:seller" }\n',
+                      encoding="utf-8")
+    capsys.readouterr()
+    assert main(["run", str(system), "--record-inside", "--quiet"]) == 2
+    assert capsys.readouterr().err.endswith("--record-inside needs --record PATH\n")
+    path = tmp_path / "run.mcap"
+    assert main(["run", str(system), "--record", str(path), "--record-inside", "--quiet"]) == 0
+    assert "on 6 channels between and inside groups" in capsys.readouterr().out
