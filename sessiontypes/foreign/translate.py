@@ -90,6 +90,11 @@ class _Translator:
         self.work = 0  # interactions translated, for the work meter
         # (protocol, roles, continuation, names taken) -> (continuation, its translation)
         self._expansions: dict[tuple[object, ...], tuple[s.GSyntax, s.GSyntax]] = {}
+        # (transfer, roles, continuation) -> (continuation, its translation): the
+        # interactions after a 'do' are one node whether the protocol that holds
+        # them is translated as a global or inlined in another's, so the 'do'
+        # finds its expansion again (see _continuation_key).
+        self._transfers: dict[tuple[object, ...], tuple[s.GSyntax, s.GSyntax]] = {}
         # Translations used in more than one place, and their free rec variables.
         self._shared: dict[int, tuple[s.GSyntax, frozenset[str]]] = {}
         self._free_memo: dict[int, tuple[s.GSyntax, frozenset[str]]] = {}
@@ -248,6 +253,16 @@ class _Translator:
         return found
 
     def _transfer(self, transfer: t.Transfer, then: s.GSyntax, scope: _Scope) -> s.GSyntax:
+        key = (id(transfer), tuple(scope.roles.items()), _continuation_key(then))
+        known = self._transfers.get(key)
+        if known is not None:
+            self._shared[id(known[1])] = (known[1], self._free(known[1]))
+            return known[1]
+        result = self._transfer_node(transfer, then, scope)
+        self._transfers[key] = (then, result)
+        return result
+
+    def _transfer_node(self, transfer: t.Transfer, then: s.GSyntax, scope: _Scope) -> s.GSyntax:
         message = self._message(transfer)
         sender = self._role(transfer.sender, scope)
         # A multicast "m from A to B, C" is "A -> B : m. A -> C : m" (as the language's own).
@@ -388,7 +403,7 @@ class _Translator:
         # The same protocol with the same roles before the same continuation is
         # the same type: translated once and shared (a choice with a 'do' in
         # each branch, level after level, was copied exponentially often).
-        key = (name, tuple(roles.items()), id(then), scope.taken)
+        key = (name, tuple(roles.items()), _continuation_key(then), scope.taken)
         known = self._expansions.get(key)
         if known is not None:
             self._shared[id(known[1])] = (known[1], self._free(then))
@@ -420,6 +435,16 @@ class _Translator:
                     free = frozenset().union(*[memo[id(c)][1] for c in children])
             memo[id(current)] = (current, free)
         return memo[id(node)][1]
+
+
+def _continuation_key(then: s.GSyntax) -> object:
+    """What a translation depends on of its continuation: the node, or just that it ends.
+
+    Every end is alike (its location is where the protocol that ends was
+    written, which no check reports): the chain ``P0`` does ``P1``, ``P1``
+    does ``P2``, ... translates ``P2`` once, not once per global that reaches it.
+    """
+    return "end" if isinstance(then, s.GEnd) else id(then)
 
 
 def _fresh(name: str, taken: frozenset[str]) -> str:
