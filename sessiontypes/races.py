@@ -20,8 +20,9 @@ Each (place in the global type, state, watches) is walked once, so loops end.
 
 The globals of one file share the declarations they use, so the walks of a
 chain of declarations would cover the chain once per global. A walk that
-reaches a shared node with nothing else left to walk (its work list empty,
-outside every loop, the rest of the role's local type closed) walks from
+reaches a shared node with nothing else left to walk (what its work list holds
+was walked already), outside every loop and with the rest of the role's local
+type closed, walks from
 there exactly what a walk of that node alone would, and finds the same race
 or none: that outcome is remembered in the module's ``Sharing`` and the
 next global that reaches the node in the same state takes it from there.
@@ -54,6 +55,7 @@ class _Watch(NamedTuple):
 _Env = dict[str, tuple[g.Rec, "_Env"]]
 _Machine = StateMachine | LazyStateMachine
 _Config = tuple[g.GlobalTerm, _Env, _Machine | None, int, frozenset[_Watch]]
+_Key = tuple[int, int, int, int, frozenset[_Watch]]  # a configuration, by the ids of its parts
 # A walk's outcome from a shared node, whichever global it was walked for: by
 # (the rest of the local type's id or None, watches), (that rest, the race or None).
 _Outcomes = dict[tuple[int | None, frozenset[_Watch]], tuple[lt.LocalTerm | None, ChoiceRaceError | None]]
@@ -142,12 +144,11 @@ class _Walk:
         self.entries: list[tuple[g.GlobalTerm, tuple[int | None, frozenset[_Watch]], lt.LocalTerm | None]] = []
 
     def run(self, body: g.GlobalTerm, machine: LazyStateMachine) -> None:
-        seen: set[tuple[int, int, int, int, frozenset[_Watch]]] = set()
+        seen: set[_Key] = set()
         root: _Env = {}
         self.keep.append(root)
-        stack: list[_Config] = [(body, root, machine, machine.initial, frozenset())]
         try:
-            self.walk(stack, seen)
+            self.walk((body, root, machine, machine.initial, frozenset()), seen)
         except ChoiceRaceError as race:
             self.remember(race)
             raise
@@ -192,35 +193,52 @@ class _Walk:
         raise ChoiceRaceError(self.protocol, race.role, race.location, race.left, race.right, race.reason,
                               race.decided_at, race.source_line)
 
-    def walk(self, stack: list[_Config], seen: set[tuple[int, int, int, int, frozenset[_Watch]]]) -> None:
-        while stack:
-            node, env, machine_, state, watches = stack.pop()
-            key = (id(node), id(env), id(machine_), state, watches)
+    def walk(self, first: _Config, seen: set[_Key]) -> None:
+        """Walk every configuration reachable from ``first`` once, depth first."""
+        stack: list[tuple[_Key, _Config]] = []
+        # Configurations on the stack not walked yet, by key; and how many in all.
+        # None left means the one being walked is all that is left to walk.
+        waiting: dict[_Key, int] = {}
+        unwalked = 0
+        following: list[_Config] = [first]
+        while True:
+            for config in following:
+                node, env, machine_, state, watches = config
+                key = (id(node), id(env), id(machine_), state, watches)
+                stack.append((key, config))
+                if key not in seen:
+                    waiting[key] = waiting.get(key, 0) + 1
+                    unwalked += 1
+            if not stack:
+                return
+            key, (node, env, machine_, state, watches) = stack.pop()
+            following = []
             if key in seen:
                 continue
             seen.add(key)
-            if not stack and self.known(node, env, machine_, state, watches):
+            unwalked -= waiting.pop(key)  # its copies further down will be skipped
+            if not unwalked and self.known(node, env, machine_, state, watches):
                 continue
             match node:
                 case g.Rec():
-                    stack.append((node.body, self.enter(node, env), machine_, state, watches))
+                    following.append((node.body, self.enter(node, env), machine_, state, watches))
                 case g.Var(name=name):
                     if name in env:
                         loop, inner = env[name]
-                        stack.append((loop.body, inner, machine_, state, watches))
+                        following.append((loop.body, inner, machine_, state, watches))
                 case g.Choice(sender=sender, receiver=receiver, branches=branches):
                     for b in branches:
                         after = self.step(machine_, state, watches, sender, receiver, b.message,
                                           b.location if len(branches) > 1 else node.location)
                         if after is not None:
-                            stack.append((b.continuation, env, machine_, after[0], after[1]))
+                            following.append((b.continuation, env, machine_, after[0], after[1]))
                 case g.Routed(sender=sender, branches=routes):
                     for r in routes:
                         after = self.step(machine_, state, watches, sender, r.receiver, r.message, r.location)
                         if after is not None:
-                            stack.append((r.continuation, env, machine_, after[0], after[1]))
+                            following.append((r.continuation, env, machine_, after[0], after[1]))
                 case g.Parallel(branches=parts):
-                    stack.extend(self.parts(parts, env, machine_, state, watches))
+                    following.extend(self.parts(parts, env, machine_, state, watches))
 
     def enter(self, loop: g.Rec, env: _Env) -> _Env:
         key = (id(loop), id(env))
