@@ -14,8 +14,9 @@ their locations in the foreign file, so the checker's errors point into it.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import NoReturn, assert_never
 
 from .. import syntax as s
@@ -61,9 +62,9 @@ def translate(module: t.ForeignModule, path: str, lines: tuple[str, ...]) -> s.S
     for protocol in module.protocols:
         if protocol.aux:
             continue
-        scope = _Scope(protocol, {r.text: r.text for r in protocol.roles}, {}, frozenset(),
-                       (protocol.name.text,))
-        body = translator.sequence(protocol.body, s.GEnd(protocol.end), scope)
+        scope = _Scope(protocol, {r.text: r.text for r in protocol.roles}, {}, frozenset())
+        with translator.inlining(protocol.name.text):
+            body = translator.sequence(protocol.body, s.GEnd(protocol.end), scope)
         globals_.append(s.GlobalDecl(protocol.name, protocol.roles, body, protocol.location))
     METER.add("translate", translator.work)
     return s.SourceFile(path, lines, (*translator.sorts.values(), *globals_), translator.shared())
@@ -77,7 +78,6 @@ class _Scope:
     roles: Mapping[str, str]                 # the protocol's role -> the role it stands for
     variables: Mapping[str, str]             # rec variable -> its .proto name
     taken: frozenset[str]                    # .proto variables bound around here, callers included
-    calls: tuple[str, ...] = field(default=())  # the protocols being inlined, outermost first
 
 
 class _Translator:
@@ -99,6 +99,23 @@ class _Translator:
         self._shared: dict[int, tuple[s.GSyntax, frozenset[str]]] = {}
         self._free_memo: dict[int, tuple[s.GSyntax, frozenset[str]]] = {}
         self._through: dict[int, tuple[tuple[t.Interaction, ...], bool]] = {}
+        self._calls: list[str] = []  # the protocols being inlined, outermost first
+        self._calling: set[str] = set()
+
+    @contextmanager
+    def inlining(self, protocol: str) -> Iterator[None]:
+        """Translate ``protocol``'s body within this block (a 'do' of it again is refused).
+
+        A stack on the translator, not a tuple in each scope: a chain of
+        thousands of 'do's made the tuples quadratic in time and memory.
+        """
+        self._calls.append(protocol)
+        self._calling.add(protocol)
+        try:
+            yield
+        finally:
+            self._calls.pop()
+            self._calling.discard(protocol)
 
     def shared(self) -> dict[int, tuple[s.GSyntax, frozenset[str]]]:
         """The translations of ``do`` used in several places, with their free ``rec`` variables."""
@@ -186,8 +203,7 @@ class _Translator:
                 case t.Rec():
                     var = _fresh(item.var.text, scope.taken)
                     inner = _Scope(scope.protocol, scope.roles,
-                                   {**scope.variables, item.var.text: var}, scope.taken | {var},
-                                   scope.calls)
+                                   {**scope.variables, item.var.text: var}, scope.taken | {var})
                     body = self.sequence(item.body, result, inner)
                     self._check_reached(item.body, rest)
                     result = s.GRec(s.Name(var, item.var.location), body, item.location)
@@ -393,8 +409,8 @@ class _Translator:
         if callee is None:
             self._error(do.protocol.location, f"'do {do.protocol.text}': no protocol "
                                               f"{do.protocol.text} in this file")
-        if name in scope.calls:
-            self._refuse(do.location, f"a recursive 'do' ({' -> '.join((*scope.calls, name))})",
+        if name in self._calling:
+            self._refuse(do.location, f"a recursive 'do' ({' -> '.join((*self._calls, name))})",
                          "write the recursion with 'rec' and 'continue'")
         if len(do.roles) != len(callee.roles):
             self._error(do.location, f"'do {name}' passes {len(do.roles)} roles; protocol "
@@ -408,8 +424,9 @@ class _Translator:
         if known is not None:
             self._shared[id(known[1])] = (known[1], self._free(then))
             return known[1]
-        inner = _Scope(callee, roles, {}, scope.taken, (*scope.calls, name))
-        expansion = self.sequence(callee.body, then, inner)
+        inner = _Scope(callee, roles, {}, scope.taken)
+        with self.inlining(name):
+            expansion = self.sequence(callee.body, then, inner)
         self._expansions[key] = (then, expansion)
         return expansion
 
