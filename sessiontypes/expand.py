@@ -29,6 +29,7 @@ from typing import Generic, TypeVar
 from . import syntax as s
 from .errors import Diagnostic
 from .filescope import Reporter, SortTable
+from .work import METER
 
 __all__ = ["Binder", "Scope", "Capture", "Walk", "components"]
 
@@ -194,8 +195,10 @@ class Walk(Generic[Decl, Term]):
 
     def __post_init__(self) -> None:
         memo: dict[int, tuple[str, ...]] = {}  # shared across the bodies: they share nodes
-        graph = {name: _references(decl.body, self.declarations, self.shared_syntax, memo)
+        visits = [0]
+        graph = {name: _references(decl.body, self.declarations, self.shared_syntax, memo, visits)
                  for name, decl in self.declarations.items()}
+        METER.add("references", visits[0])
         self._components = components(graph)
         self._referenced = {target for name, targets in graph.items() for target in targets if target != name}
 
@@ -388,13 +391,14 @@ _RefFrame = tuple[object, list[s.GSyntax | s.LSyntax | None], dict[str, None], s
 
 
 def _references(body: s.GSyntax | s.LSyntax, declarations: Mapping[str, object],
-                shared: Mapping[int, object], memo: dict[int, tuple[str, ...]]) -> list[str]:
+                shared: Mapping[int, object], memo: dict[int, tuple[str, ...]], visits: list[int]) -> list[str]:
     """The declarations a body names (a superset of those it refers to: mu names count).
 
     A node in several places (Scribble 'do', :attr:`sessiontypes.syntax.SourceFile.shared`)
     is looked at once for all the bodies: what it names is remembered in
     ``memo`` (the globals of a chain of Scribble protocols each hold the rest
-    of the chain; walking it once per global was quadratic).
+    of the chain; walking it once per global was quadratic). ``visits[0]``
+    counts the nodes looked at, for the work meter.
     """
     frames: list[_RefFrame] = [(None, [body], {}, set())]
     while True:  # iterative: sequences and chains of 'do' nest deeply
@@ -405,6 +409,7 @@ def _references(body: s.GSyntax | s.LSyntax, declarations: Mapping[str, object],
             if id(node) in seen:
                 continue
             seen.add(id(node))
+            visits[0] += 1
             if node is not summarised and id(node) in shared:
                 known = memo.get(id(node))
                 if known is None:  # summarise it first, then come back to it
