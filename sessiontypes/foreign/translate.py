@@ -27,7 +27,13 @@ from ..work import METER
 from . import tree as t
 from .errors import UnsupportedConstructError
 
-__all__ = ["translate"]
+__all__ = ["MAX_TRANSLATED", "translate"]
+
+# How many interactions a file's protocols may expand to. A 'do' before the end
+# of a protocol is written out at each use (what follows it differs), so a
+# chain of protocols that each 'do' the next and then interact means a number
+# of interactions quadratic in the file's size; beyond this a located error.
+MAX_TRANSLATED = 1_000_000
 
 # Payload type names of the peers that mean a builtin sort (beside BUILTIN_SORTS' own).
 _SORT_SYNONYMS = {
@@ -59,14 +65,16 @@ def translate(module: t.ForeignModule, path: str, lines: tuple[str, ...]) -> s.S
     """
     translator = _Translator(module, lines)
     globals_: list[s.Declaration] = []
-    for protocol in module.protocols:
-        if protocol.aux:
-            continue
-        scope = _Scope(protocol, {r.text: r.text for r in protocol.roles}, {}, frozenset())
-        with translator.inlining(protocol.name.text):
-            body = translator.sequence(protocol.body, s.GEnd(protocol.end), scope)
-        globals_.append(s.GlobalDecl(protocol.name, protocol.roles, body, protocol.location))
-    METER.add("translate", translator.work)
+    try:
+        for protocol in module.protocols:
+            if protocol.aux:
+                continue
+            scope = _Scope(protocol, {r.text: r.text for r in protocol.roles}, {}, frozenset())
+            with translator.inlining(protocol.name.text):
+                body = translator.sequence(protocol.body, s.GEnd(protocol.end), scope)
+            globals_.append(s.GlobalDecl(protocol.name, protocol.roles, body, protocol.location))
+    finally:
+        METER.add("translate", translator.work)
     return s.SourceFile(path, lines, (*translator.sorts.values(), *globals_), translator.shared())
 
 
@@ -424,6 +432,10 @@ class _Translator:
         if known is not None:
             self._shared[id(known[1])] = (known[1], self._free(then))
             return known[1]
+        if self.work > MAX_TRANSLATED:
+            self._error(do.location, f"the protocols expand to more than {MAX_TRANSLATED} interactions "
+                                     f"(a 'do' followed by more interactions is written out at every use); "
+                                     f"at most {MAX_TRANSLATED} are translated")
         inner = _Scope(callee, roles, {}, scope.taken)
         with self.inlining(name):
             expansion = self.sequence(callee.body, then, inner)

@@ -13,6 +13,7 @@ causes of their failures) are those each global gets on its own.
 from __future__ import annotations
 
 import contextlib
+import importlib
 import re
 import sys
 from collections.abc import Callable
@@ -41,6 +42,8 @@ from sessiontypes.printer import print_local  # noqa: E402
 from sessiontypes.project import project_declared  # noqa: E402
 from sessiontypes.sharing import Sharing  # noqa: E402
 from sessiontypes.work import METER  # noqa: E402
+
+foreign_translate = importlib.import_module("sessiontypes.foreign.translate")  # the package exports its function
 
 # ---- the families ---------------------------------------------------------------------
 
@@ -495,3 +498,29 @@ def _meanings(text: str) -> dict[str, object]:
     except ProtocolError:
         return {"rejected": True}
     return {name: {role: _in_file(glob, role) for role in glob.roles} for name, glob in module.globals.items()}
+
+
+def scribble_chain_doing_first(n: int) -> str:
+    """Each protocol does the next, then sends: written out, the globals are about n**2 interactions."""
+    out = [f"global protocol P{i}(role A, role B) {{ do P{i + 1}(A, B); m() from A to B; }}" for i in range(n)]
+    out.append(f"global protocol P{n}(role A, role B) {{ e() from A to B; }}")
+    return "\n".join(out) + "\n"
+
+
+def test_protocols_that_expand_beyond_the_limit_are_a_located_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(foreign_translate, "MAX_TRANSLATED", 5_000)
+    assert sessiontypes.loads(scribble_chain_doing_first(50), "chain.scr")  # about 2,500 interactions
+    with pytest.raises(ProtocolCheckError) as caught:
+        sessiontypes.loads(scribble_chain_doing_first(80), "chain.scr")  # about 6,500
+    (error,) = caught.value.diagnostics
+    assert error.location.column == error.source_line.index("do ") + 1
+    assert error.message == ("the protocols expand to more than 5000 interactions (a 'do' followed by more "
+                             "interactions is written out at every use); at most 5000 are translated")
+
+
+@pytest.mark.slow
+def test_protocols_that_expand_beyond_the_real_limit_are_refused_in_bounded_work() -> None:
+    before = METER.total()
+    with pytest.raises(ProtocolCheckError, match="expand to more than"):
+        sessiontypes.loads(scribble_chain_doing_first(3_000), "chain.scr")  # 4.5 million written out
+    assert METER.total() - before < 2 * foreign_translate.MAX_TRANSLATED
