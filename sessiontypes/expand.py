@@ -29,6 +29,7 @@ from typing import Generic, TypeVar
 from . import syntax as s
 from .errors import Diagnostic
 from .filescope import Reporter, SortTable
+from .work import METER
 
 __all__ = ["Binder", "Scope", "Capture", "Walk", "components"]
 
@@ -193,7 +194,11 @@ class Walk(Generic[Decl, Term]):
     shared: dict[int, Term] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        graph = {name: _references(decl.body, self.declarations) for name, decl in self.declarations.items()}
+        memo: dict[int, tuple[str, ...]] = {}  # shared across the bodies: they share nodes
+        visits = [0]
+        graph = {name: _references(decl.body, self.declarations, self.shared_syntax, memo, visits)
+                 for name, decl in self.declarations.items()}
+        METER.add("references", visits[0])
         self._components = components(graph)
         self._referenced = {target for name, targets in graph.items() for target in targets if target != name}
 
@@ -380,23 +385,53 @@ def _children(node: s.GSyntax | s.LSyntax | None) -> list[s.GSyntax | s.LSyntax 
     return []
 
 
-def _references(body: s.GSyntax | s.LSyntax, declarations: Mapping[str, object]) -> list[str]:
-    """The declarations a body names (a superset of those it refers to: mu names count)."""
-    found: list[str] = []
-    seen: set[int] = set()  # a node in several places (Scribble 'do') is looked at once
-    stack: list[s.GSyntax | s.LSyntax | None] = [body]
-    while stack:  # iterative: sequences nest deeply
-        node = stack.pop()
-        if id(node) in seen:
+# One per shared node being summarised (None: the body), innermost last: that node,
+# the nodes left to look at, the names found (in order), the nodes looked at.
+_RefFrame = tuple[object, list[s.GSyntax | s.LSyntax | None], dict[str, None], set[int]]
+
+
+def _references(body: s.GSyntax | s.LSyntax, declarations: Mapping[str, object],
+                shared: Mapping[int, object], memo: dict[int, tuple[str, ...]], visits: list[int]) -> list[str]:
+    """The declarations a body names (a superset of those it refers to: mu names count).
+
+    A node in several places (Scribble 'do', :attr:`sessiontypes.syntax.SourceFile.shared`)
+    is looked at once for all the bodies: what it names is remembered in
+    ``memo`` (the globals of a chain of Scribble protocols each hold the rest
+    of the chain; walking it once per global was quadratic). ``visits[0]``
+    counts the nodes looked at, for the work meter.
+    """
+    frames: list[_RefFrame] = [(None, [body], {}, set())]
+    while True:  # iterative: sequences and chains of 'do' nest deeply
+        summarised, stack, found, seen = frames[-1]
+        inner: _RefFrame | None = None
+        while stack:
+            node = stack.pop()
+            if id(node) in seen:
+                continue
+            seen.add(id(node))
+            visits[0] += 1
+            if node is not summarised and id(node) in shared:
+                known = memo.get(id(node))
+                if known is None:  # summarise it first, then come back to it
+                    seen.discard(id(node))
+                    stack.append(node)
+                    inner = (node, [node], {}, set())
+                    break
+                found.update(dict.fromkeys(known))
+                continue
+            match node:
+                case s.GRef(name=name) | s.LRef(name=name):
+                    if name.text in declarations:
+                        found[name.text] = None
+                case _:
+                    stack.extend(_children(node))
+        if inner is not None:
+            frames.append(inner)
             continue
-        seen.add(id(node))
-        match node:
-            case s.GRef(name=name) | s.LRef(name=name):
-                if name.text in declarations:
-                    found.append(name.text)
-            case _:
-                stack.extend(_children(node))
-    return found
+        frames.pop()
+        if summarised is None:
+            return list(found)
+        memo[id(summarised)] = tuple(found)
 
 
 def components(graph: Mapping[str, Iterable[str]]) -> dict[str, int]:

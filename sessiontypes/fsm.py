@@ -21,7 +21,7 @@ from .location import Location
 from .sorts import Interaction, Sort, print_message
 from .work import METER
 
-__all__ = ["Action", "Transition", "StateMachine", "build_term_machine"]
+__all__ = ["Action", "Transition", "StateMachine", "LazyStateMachine", "build_term_machine"]
 
 Action = Literal["send", "recv"]
 Key = tuple[Action, "str | None", str]
@@ -106,6 +106,14 @@ class StateMachine:
         """The transition for that action from ``state``, or None if not allowed."""
         return self.table[state].get((action, peer, label))
 
+    def fork_at(self, state: int) -> tuple[StateMachine, ...] | None:
+        """The machines of the parallel branches if ``state`` is a fork, else None."""
+        return self.forks.get(state)
+
+    def term_at(self, state: int) -> lt.LocalTerm:
+        """The local type that remains from ``state``."""
+        return self.terms[state]
+
     def expected(self, state: int) -> list[Transition]:
         """The actions allowed in ``state``, sorted."""
         return sorted(self.table[state].values(), key=lambda t: (t.action, t.peer or "", t.label))
@@ -179,6 +187,49 @@ def build_term_machine(term: lt.LocalTerm, role: str | None = None, protocol: st
     return run_deep(lambda: _Builder(role, protocol).build(term))
 
 
+class LazyStateMachine:
+    """The state machine of a local term, each state filled when it is first looked at.
+
+    For a walk that looks at few of the states (the race check of a global
+    whose rest it has checked for another global of the file): building the
+    whole machine for every global of a chain of declarations was quadratic.
+    States and transitions are those :func:`build_term_machine` makes.
+    """
+
+    def __init__(self, term: lt.LocalTerm, role: str | None = None, protocol: str = "") -> None:
+        self._builder = _Builder(role, protocol)
+        self.initial = self._builder.state_of(term, {})
+
+    def _filled(self, state: int) -> _Builder:
+        builder = self._builder
+        pending = builder.pending.pop(state, None)
+        if pending is not None:
+            builder.fill(*pending)  # recurses only into parallel branches
+        return builder
+
+    @property
+    def size(self) -> int:
+        """The states made so far (filled or not)."""
+        return len(self._builder.table)
+
+    def peers_at(self, state: int, action: Action) -> list[str | None]:
+        """See :meth:`StateMachine.peers_at`."""
+        table = self._filled(state).table[state]
+        return list(dict.fromkeys(t.peer for t in table.values() if t.action == action))
+
+    def step(self, state: int, action: Action, peer: str | None, label: str) -> Transition | None:
+        """See :meth:`StateMachine.step`."""
+        return self._filled(state).table[state].get((action, peer, label))
+
+    def fork_at(self, state: int) -> tuple[StateMachine, ...] | None:
+        """See :meth:`StateMachine.fork_at`."""
+        return self._filled(state).forks.get(state)
+
+    def term_at(self, state: int) -> lt.LocalTerm:
+        """See :meth:`StateMachine.term_at`."""
+        return self._builder.terms[state]
+
+
 class _Builder:
     def __init__(self, role: str | None, protocol: str) -> None:
         self.role = role
@@ -189,12 +240,14 @@ class _Builder:
         self.ids: dict[tuple[int, int], int] = {}
         self.end: int | None = None
         self.envs: list[dict[str, int]] = []  # kept alive: their ids key self.ids
-        self.pending: list[tuple[lt.LocalTerm, dict[str, int], int]] = []
+        # States made but not filled yet, by state (a work list, not recursion:
+        # sequences may be very long).
+        self.pending: dict[int, tuple[lt.LocalTerm, dict[str, int], int]] = {}
 
     def build(self, term: lt.LocalTerm) -> StateMachine:
         initial = self.state_of(term, {})
-        while self.pending:  # a work list, not recursion: sequences may be very long
-            node, env, state = self.pending.pop()
+        while self.pending:
+            _, (node, env, state) = self.pending.popitem()
             self.fill(node, env, state)
         METER.add("fsm", len(self.table))
         return StateMachine(self.role, self.protocol, initial, tuple(self.table), self.forks,
@@ -233,7 +286,7 @@ class _Builder:
             return known
         state = self.new_state(term)
         self.ids[key] = state
-        self.pending.append((term, env, state))
+        self.pending[state] = (term, env, state)
         return state
 
     def fill(self, term: lt.LocalTerm, env: dict[str, int], state: int) -> None:

@@ -18,7 +18,11 @@ JSON               64 MiB     ``ANODIZE_MAX_JSON_BYTES``
 source (lint)      8 MiB      ``ANODIZE_MAX_SOURCE_BYTES``
 recording          64 GiB     ``ANODIZE_MAX_RECORDING_BYTES``
 rosbag2 metadata   16 MiB     ``ANODIZE_MAX_METADATA_BYTES``
+MCAP chunk         256 MiB    ``ANODIZE_MAX_CHUNK_BYTES``
 =================  =========  ==============================
+
+An MCAP chunk's limit bounds what one chunk of a recording may expand to
+(``anodize._recording.mcap_chunks``), not the size of a file.
 
 A value is a number of bytes, or a size such as ``64MiB``.
 """
@@ -33,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["InputLimit", "InputLimitError", "PROTOCOL", "SYSTEM_FILE", "JSON", "SOURCE", "RECORDING",
-           "RECORDING_METADATA", "read_limited", "check_text", "check_file"]
+           "RECORDING_METADATA", "MCAP_CHUNK", "read_limited", "check_text", "check_file"]
 
 
 class InputLimitError(OSError):
@@ -89,6 +93,7 @@ JSON = InputLimit("JSON file", 64 * 2**20, "ANODIZE_MAX_JSON_BYTES")
 SOURCE = InputLimit("Python source file", 8 * 2**20, "ANODIZE_MAX_SOURCE_BYTES")
 RECORDING = InputLimit("recording file", 64 * 2**30, "ANODIZE_MAX_RECORDING_BYTES")
 RECORDING_METADATA = InputLimit("rosbag2 metadata.yaml", 16 * 2**20, "ANODIZE_MAX_METADATA_BYTES")
+MCAP_CHUNK = InputLimit("MCAP chunk", 256 * 2**20, "ANODIZE_MAX_CHUNK_BYTES")
 
 
 def read_limited(path: str | os.PathLike[str], limit: InputLimit) -> bytes:

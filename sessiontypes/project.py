@@ -50,7 +50,7 @@ def project_declared(protocol: str, roles: tuple[str, ...], body: g.GlobalTerm, 
     finally:
         METER.add("project", projector.work)
     if has_offer_among(local, shared):
-        check_races(protocol, role, body, local, projector.project, source_lines)
+        check_races(protocol, role, body, local, projector.project, source_lines, shared)
     return local
 
 

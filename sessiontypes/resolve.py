@@ -56,10 +56,8 @@ def global_walk(reporter: Reporter, sorts: SortTable, declarations: Mapping[str,
     ``shared_syntax``: the file's syntax nodes that occur in several places
     (:attr:`sessiontypes.syntax.SourceFile.shared`), each resolved once.
     """
-    walk: GlobalWalk = Walk(reporter, sorts, declarations, "global", other_kind, _resolve_global_body)
-    if shared_syntax:
-        walk.shared_syntax = shared_syntax
-    return walk
+    return Walk(reporter, sorts, declarations, "global", other_kind, _resolve_global_body,
+                shared_syntax=shared_syntax or {})
 
 
 def resolve_global(decl: s.GlobalDecl, walk: GlobalWalk) -> g.GlobalTerm:

@@ -16,6 +16,7 @@ from sessiontypes.limits import RECORDING, RECORDING_METADATA, InputLimit, check
 
 from .._extras import import_extra
 from ..errors import AnodizeError
+from .mcap_chunks import ChunkTooLargeError, iter_messages
 from .plan import META
 
 __all__ = ["RecordedTopic", "RecordedMessage", "RecordingError", "open_recording", "Recording"]
@@ -116,16 +117,16 @@ class Recording:
     def _mcap_messages(self) -> Iterator[RecordedMessage]:
         import heapq
 
-        from mcap.reader import make_reader
-
         by_id = {t.id: t for t in self.topics}
 
         def one(number: int, file: Path) -> Iterator[RecordedMessage]:
             with file.open("rb") as stream:
                 try:
-                    for _, channel, message in make_reader(stream).iter_messages(log_time_order=True):
+                    for channel, message in iter_messages(stream, str(file)):
                         yield RecordedMessage(by_id[number * 2**16 + channel.id], message.log_time,
                                               message.sequence, message.data)
+                except ChunkTooLargeError as error:
+                    raise RecordingError(str(error)) from None
                 except Exception as error:  # a damaged chunk
                     raise RecordingError(f"{file}: cannot read on: {type(error).__name__}: {error}") from None
 

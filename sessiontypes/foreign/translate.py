@@ -14,8 +14,9 @@ their locations in the foreign file, so the checker's errors point into it.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import NoReturn, assert_never
 
 from .. import syntax as s
@@ -26,7 +27,13 @@ from ..work import METER
 from . import tree as t
 from .errors import UnsupportedConstructError
 
-__all__ = ["translate"]
+__all__ = ["MAX_TRANSLATED", "translate"]
+
+# How many interactions a file's protocols may expand to. A 'do' before the end
+# of a protocol is written out at each use (what follows it differs), so a
+# chain of protocols that each 'do' the next and then interact means a number
+# of interactions quadratic in the file's size; beyond this a located error.
+MAX_TRANSLATED = 1_000_000
 
 # Payload type names of the peers that mean a builtin sort (beside BUILTIN_SORTS' own).
 _SORT_SYNONYMS = {
@@ -58,14 +65,16 @@ def translate(module: t.ForeignModule, path: str, lines: tuple[str, ...]) -> s.S
     """
     translator = _Translator(module, lines)
     globals_: list[s.Declaration] = []
-    for protocol in module.protocols:
-        if protocol.aux:
-            continue
-        scope = _Scope(protocol, {r.text: r.text for r in protocol.roles}, {}, frozenset(),
-                       (protocol.name.text,))
-        body = translator.sequence(protocol.body, s.GEnd(protocol.end), scope)
-        globals_.append(s.GlobalDecl(protocol.name, protocol.roles, body, protocol.location))
-    METER.add("translate", translator.work)
+    try:
+        for protocol in module.protocols:
+            if protocol.aux:
+                continue
+            scope = _Scope(protocol, {r.text: r.text for r in protocol.roles}, {}, frozenset())
+            with translator.inlining(protocol.name.text):
+                body = translator.sequence(protocol.body, s.GEnd(protocol.end), scope)
+            globals_.append(s.GlobalDecl(protocol.name, protocol.roles, body, protocol.location))
+    finally:
+        METER.add("translate", translator.work)
     return s.SourceFile(path, lines, (*translator.sorts.values(), *globals_), translator.shared())
 
 
@@ -77,7 +86,6 @@ class _Scope:
     roles: Mapping[str, str]                 # the protocol's role -> the role it stands for
     variables: Mapping[str, str]             # rec variable -> its .proto name
     taken: frozenset[str]                    # .proto variables bound around here, callers included
-    calls: tuple[str, ...] = field(default=())  # the protocols being inlined, outermost first
 
 
 class _Translator:
@@ -90,10 +98,32 @@ class _Translator:
         self.work = 0  # interactions translated, for the work meter
         # (protocol, roles, continuation, names taken) -> (continuation, its translation)
         self._expansions: dict[tuple[object, ...], tuple[s.GSyntax, s.GSyntax]] = {}
+        # (transfer, roles, continuation) -> (continuation, its translation): the
+        # interactions after a 'do' are one node whether the protocol that holds
+        # them is translated as a global or inlined in another's, so the 'do'
+        # finds its expansion again (see _continuation_key).
+        self._transfers: dict[tuple[object, ...], tuple[s.GSyntax, s.GSyntax]] = {}
         # Translations used in more than one place, and their free rec variables.
         self._shared: dict[int, tuple[s.GSyntax, frozenset[str]]] = {}
         self._free_memo: dict[int, tuple[s.GSyntax, frozenset[str]]] = {}
         self._through: dict[int, tuple[tuple[t.Interaction, ...], bool]] = {}
+        self._calls: list[str] = []  # the protocols being inlined, outermost first
+        self._calling: set[str] = set()
+
+    @contextmanager
+    def inlining(self, protocol: str) -> Iterator[None]:
+        """Translate ``protocol``'s body within this block (a 'do' of it again is refused).
+
+        A stack on the translator, not a tuple in each scope: a chain of
+        thousands of 'do's made the tuples quadratic in time and memory.
+        """
+        self._calls.append(protocol)
+        self._calling.add(protocol)
+        try:
+            yield
+        finally:
+            self._calls.pop()
+            self._calling.discard(protocol)
 
     def shared(self) -> dict[int, tuple[s.GSyntax, frozenset[str]]]:
         """The translations of ``do`` used in several places, with their free ``rec`` variables."""
@@ -181,8 +211,7 @@ class _Translator:
                 case t.Rec():
                     var = _fresh(item.var.text, scope.taken)
                     inner = _Scope(scope.protocol, scope.roles,
-                                   {**scope.variables, item.var.text: var}, scope.taken | {var},
-                                   scope.calls)
+                                   {**scope.variables, item.var.text: var}, scope.taken | {var})
                     body = self.sequence(item.body, result, inner)
                     self._check_reached(item.body, rest)
                     result = s.GRec(s.Name(var, item.var.location), body, item.location)
@@ -248,6 +277,16 @@ class _Translator:
         return found
 
     def _transfer(self, transfer: t.Transfer, then: s.GSyntax, scope: _Scope) -> s.GSyntax:
+        key = (id(transfer), tuple(scope.roles.items()), _continuation_key(then))
+        known = self._transfers.get(key)
+        if known is not None:
+            self._shared[id(known[1])] = (known[1], self._free(known[1]))
+            return known[1]
+        result = self._transfer_node(transfer, then, scope)
+        self._transfers[key] = (then, result)
+        return result
+
+    def _transfer_node(self, transfer: t.Transfer, then: s.GSyntax, scope: _Scope) -> s.GSyntax:
         message = self._message(transfer)
         sender = self._role(transfer.sender, scope)
         # A multicast "m from A to B, C" is "A -> B : m. A -> C : m" (as the language's own).
@@ -378,8 +417,8 @@ class _Translator:
         if callee is None:
             self._error(do.protocol.location, f"'do {do.protocol.text}': no protocol "
                                               f"{do.protocol.text} in this file")
-        if name in scope.calls:
-            self._refuse(do.location, f"a recursive 'do' ({' -> '.join((*scope.calls, name))})",
+        if name in self._calling:
+            self._refuse(do.location, f"a recursive 'do' ({' -> '.join((*self._calls, name))})",
                          "write the recursion with 'rec' and 'continue'")
         if len(do.roles) != len(callee.roles):
             self._error(do.location, f"'do {name}' passes {len(do.roles)} roles; protocol "
@@ -388,13 +427,18 @@ class _Translator:
         # The same protocol with the same roles before the same continuation is
         # the same type: translated once and shared (a choice with a 'do' in
         # each branch, level after level, was copied exponentially often).
-        key = (name, tuple(roles.items()), id(then), scope.taken)
+        key = (name, tuple(roles.items()), _continuation_key(then), scope.taken)
         known = self._expansions.get(key)
         if known is not None:
             self._shared[id(known[1])] = (known[1], self._free(then))
             return known[1]
-        inner = _Scope(callee, roles, {}, scope.taken, (*scope.calls, name))
-        expansion = self.sequence(callee.body, then, inner)
+        if self.work > MAX_TRANSLATED:
+            self._error(do.location, f"the protocols expand to more than {MAX_TRANSLATED} interactions "
+                                     f"(a 'do' followed by more interactions is written out at every use); "
+                                     f"at most {MAX_TRANSLATED} are translated")
+        inner = _Scope(callee, roles, {}, scope.taken)
+        with self.inlining(name):
+            expansion = self.sequence(callee.body, then, inner)
         self._expansions[key] = (then, expansion)
         return expansion
 
@@ -420,6 +464,16 @@ class _Translator:
                     free = frozenset().union(*[memo[id(c)][1] for c in children])
             memo[id(current)] = (current, free)
         return memo[id(node)][1]
+
+
+def _continuation_key(then: s.GSyntax) -> object:
+    """What a translation depends on of its continuation: the node, or just that it ends.
+
+    Every end is alike (its location is where the protocol that ends was
+    written, which no check reports): the chain ``P0`` does ``P1``, ``P1``
+    does ``P2``, ... translates ``P2`` once, not once per global that reaches it.
+    """
+    return "end" if isinstance(then, s.GEnd) else id(then)
 
 
 def _fresh(name: str, taken: frozenset[str]) -> str:

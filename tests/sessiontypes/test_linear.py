@@ -13,6 +13,7 @@ causes of their failures) are those each global gets on its own.
 from __future__ import annotations
 
 import contextlib
+import importlib
 import re
 import sys
 from collections.abc import Callable
@@ -33,6 +34,7 @@ from test_references import reference_files, write  # noqa: E402
 import sessiontypes  # noqa: E402
 from sessiontypes import ProjectionError, ProtocolError  # noqa: E402
 from sessiontypes.check import check_file  # noqa: E402
+from sessiontypes.declarations import GlobalType  # noqa: E402
 from sessiontypes.errors import ProtocolCheckError  # noqa: E402
 from sessiontypes.foreign import read as foreign_read  # noqa: E402
 from sessiontypes.parse import parse_file  # noqa: E402
@@ -40,6 +42,8 @@ from sessiontypes.printer import print_local  # noqa: E402
 from sessiontypes.project import project_declared  # noqa: E402
 from sessiontypes.sharing import Sharing  # noqa: E402
 from sessiontypes.work import METER  # noqa: E402
+
+foreign_translate = importlib.import_module("sessiontypes.foreign.translate")  # the package exports its function
 
 # ---- the families ---------------------------------------------------------------------
 
@@ -61,6 +65,18 @@ def chain_to_an_unmergeable_choice(n: int) -> str:
     lines = [f"global G{i}(A, B, C) = A -> B : {{l. B -> C : x. G{i + 1}, r. B -> C : y. G{i + 1}}}"
              for i in range(n)]
     return "\n".join([*lines, f"global G{n}(A, B, C) = A -> B : {{l. C -> A : x, r. A -> C : y}}"])
+
+
+def chain_to_a_choice_among_peers(n: int) -> str:
+    """C receives in every declaration; the last is a choice C learns from whichever of A and B speaks first."""
+    lines = [f"global G{i}(A, B, C) = A -> C : x. G{i + 1}" for i in range(n)]
+    return "\n".join([*lines, f"global G{n}(A, B, C) = A -> B : {{l. A -> C : x, r. B -> C : y}}"])
+
+
+def chain_to_a_race(n: int) -> str:
+    """The same, and in the branch B's 'y' decides, A may send C 'z' before 'y' arrives."""
+    lines = [f"global G{i}(A, B, C) = A -> C : x. G{i + 1}" for i in range(n)]
+    return "\n".join([*lines, f"global G{n}(A, B, C) = A -> B : {{l. B -> C : y. A -> C : z, r. A -> C : w}}"])
 
 
 def wide_choice(n: int) -> str:
@@ -97,6 +113,22 @@ def scribble_do_in_a_loop(n: int) -> str:
     return "\n".join(out) + "\n"
 
 
+def scribble_chain(n: int) -> str:
+    """n global protocols, each sending once and doing the next: each global reaches the rest of the chain."""
+    out = [f"global protocol P{i}(role A, role B) {{ m() from A to B; do P{i + 1}(A, B); }}" for i in range(n)]
+    out.append(f"global protocol P{n}(role A, role B) {{ e() from A to B; }}")
+    return "\n".join(out) + "\n"
+
+
+def scribble_chain_of_choices(n: int) -> str:
+    """The same with a choice whose branches both do the next protocol."""
+    out = [f"global protocol P{i}(role A, role B, role C) {{ choice at A {{ l() from A to B; do P{i + 1}(A, B, C); }} "
+           f"or {{ r() from A to B; do P{i + 1}(A, B, C); }} }}" for i in range(n)]
+    out.append(f"global protocol P{n}(role A, role B, role C) {{ choice at A {{ l() from A to C; }} "
+               "or { r() from A to B; s() from B to C; } }")
+    return "\n".join(out) + "\n"
+
+
 def scribble_sequence(n: int) -> str:
     body = "\n".join(f"  m{i % 7}() from {'AB'[i % 2]} to {'BA'[i % 2]};" for i in range(n))
     return f"global protocol P(role A, role B) {{\n{body}\n}}\n"
@@ -120,11 +152,15 @@ FAMILIES: list[tuple[Callable[[int], str], str, int]] = [
     (chain, "p.proto", 400),
     (unmergeable_chain, "p.proto", 300),
     (chain_to_an_unmergeable_choice, "p.proto", 300),
+    (chain_to_a_choice_among_peers, "p.proto", 300),
+    (chain_to_a_race, "p.proto", 300),
     (wide_choice, "p.proto", 300),
     (deep_nesting, "p.proto", 300),
     (long_sequence, "p.proto", 500),
     (scribble_do_per_branch, "p.scr", 100),
     (scribble_do_in_a_loop, "p.scr", 100),
+    (scribble_chain, "p.scr", 200),
+    (scribble_chain_of_choices, "p.nuscr", 200),
     (scribble_sequence, "p.nuscr", 500),
     (scribble_nesting, "p.scr", 200),
 ]
@@ -341,12 +377,12 @@ def _write_block(items: tuple[object, ...], roles: tuple[str, ...], protocols: l
     return " ".join(parts)
 
 
-def _scribble(protocols: list[tuple[object, ...]], inline: bool) -> str:
+def _scribble(protocols: list[tuple[object, ...]], inline: bool, globals_: frozenset[int] = frozenset({0})) -> str:
     lines = []
     for index, body in enumerate(protocols):
         if inline and index:
             continue
-        aux = "aux " if index else ""
+        aux = "" if index in globals_ else "aux "
         lines.append(f"{aux}global protocol P{index}(role A, role B, role C) "
                      f"{{ {_write_block(body, ROLES, protocols, inline)} }}")
     return "\n".join(lines) + "\n"
@@ -369,3 +405,122 @@ def test_a_shared_do_means_its_callee_written_out(protocols: list[tuple[object, 
     assume(_written_out_size(protocols) < 2_000)  # the oracle writes every 'do' out
     referring, inlined = _scribble(protocols, inline=False), _scribble(protocols, inline=True)
     assert _meaning(referring) == _meaning(inlined), (referring, inlined)
+
+
+# Files whose globals each refer to later ones and end in choices learnt from several
+# peers: what a global's projection is, or why it has none, is what it is on its own.
+
+_PAIRS = [(s, r) for s in ROLES for r in ROLES if s != r]
+
+
+@st.composite
+def peer_choice_files(draw: st.DrawFn) -> str:
+    count = draw(st.integers(2, 5))
+
+    def body(index: int, depth: int, loop: bool) -> str:
+        kinds = ["ref", "end", "msg", "choice", "peers", "peers", "routed"] if depth < 4 else ["ref", "end"]
+        kind = draw(st.sampled_from([*kinds, "continue"] if loop else kinds))
+        sender, receiver = draw(st.sampled_from(_PAIRS))
+        match kind:
+            case "ref" if index + 1 < count:
+                return f"G{draw(st.integers(index + 1, count - 1))}"
+            case "continue":
+                return "t"
+            case "msg":
+                return f"{sender} -> {receiver} : {draw(st.sampled_from(['x', 'y']))}. {body(index, depth + 1, loop)}"
+            case "choice":
+                return (f"{sender} -> {receiver} : {{l. {body(index, depth + 1, loop)}, "
+                        f"r. {body(index, depth + 1, loop)}}}")
+            case "peers":  # the third role learns the choice from whichever of the two tells it first
+                third = next(r for r in ROLES if r not in (sender, receiver))
+                return (f"{sender} -> {receiver} : {{l. {sender} -> {third} : a. {body(index, depth + 1, loop)}, "
+                        f"r. {receiver} -> {third} : b. {body(index, depth + 1, loop)}}}")
+            case "routed":
+                first, second = (r for r in ROLES if r != sender)
+                return (f"{sender} -> {{{first} : l. {body(index, depth + 1, loop)}, "
+                        f"{second} : r. {body(index, depth + 1, loop)}}}")
+        return "end"
+
+    lines = []
+    for index in range(count):
+        loop = draw(st.booleans())
+        text = body(index, 0, loop)
+        lines.append(f"global G{index} = " + (f"mu t. A -> B : go. {text}" if loop else text))
+    return "\n".join(lines)
+
+
+def _alone(glob: GlobalType, role: str) -> object:
+    """``role``'s projection of ``glob`` with nothing remembered from the file's other globals."""
+    try:
+        return print_local(project_declared(glob.name, glob.roles, glob.body, role, glob.source_lines,
+                                            Sharing(glob.shared.nodes)))
+    except ProjectionError as error:
+        return (type(error).__name__, error.message)
+
+
+def _in_file(glob: GlobalType, role: str) -> object:
+    try:
+        return print_local(glob.project(role).body)
+    except ProjectionError as error:
+        return (type(error).__name__, error.message)
+
+
+@given(peer_choice_files())
+@settings(deadline=None, max_examples=examples(300))
+def test_races_remembered_across_globals_are_those_each_global_has_on_its_own(text: str) -> None:
+    try:
+        module, diagnostics = check_file(parse_file(text, "peers.proto"))
+    except ProtocolError:
+        return
+    if any(d.severity == "error" and "projectable" not in d.message for d in diagnostics):
+        return  # not checked for projection
+    for glob in module.globals.values():
+        for role in glob.roles:
+            assert _in_file(glob, role) == _alone(glob, role), (text, glob.name, role)
+
+
+@given(scribble_files())
+@settings(deadline=None, max_examples=examples(200))
+def test_each_global_of_a_scribble_file_means_what_it_means_alone(protocols: list[tuple[object, ...]]) -> None:
+    """Expansions shared between the globals of one file change none of them."""
+    indices = range(len(protocols))
+    together = _meanings(_scribble(protocols, inline=False, globals_=frozenset(indices)))
+    alone = [_meanings(_scribble(protocols, inline=False, globals_=frozenset({i}))) for i in indices]
+    if "rejected" in together:
+        assert any("rejected" in one for one in alone)
+    else:
+        assert together == {f"P{i}": one[f"P{i}"] for i, one in enumerate(alone)}
+
+
+def _meanings(text: str) -> dict[str, object]:
+    try:
+        module = sessiontypes.loads(text, "p.nuscr")
+    except ProtocolError:
+        return {"rejected": True}
+    return {name: {role: _in_file(glob, role) for role in glob.roles} for name, glob in module.globals.items()}
+
+
+def scribble_chain_doing_first(n: int) -> str:
+    """Each protocol does the next, then sends: written out, the globals are about n**2 interactions."""
+    out = [f"global protocol P{i}(role A, role B) {{ do P{i + 1}(A, B); m() from A to B; }}" for i in range(n)]
+    out.append(f"global protocol P{n}(role A, role B) {{ e() from A to B; }}")
+    return "\n".join(out) + "\n"
+
+
+def test_protocols_that_expand_beyond_the_limit_are_a_located_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(foreign_translate, "MAX_TRANSLATED", 5_000)
+    assert sessiontypes.loads(scribble_chain_doing_first(50), "chain.scr")  # about 2,500 interactions
+    with pytest.raises(ProtocolCheckError) as caught:
+        sessiontypes.loads(scribble_chain_doing_first(80), "chain.scr")  # about 6,500
+    (error,) = caught.value.diagnostics
+    assert error.location.column == error.source_line.index("do ") + 1
+    assert error.message == ("the protocols expand to more than 5000 interactions (a 'do' followed by more "
+                             "interactions is written out at every use); at most 5000 are translated")
+
+
+@pytest.mark.slow
+def test_protocols_that_expand_beyond_the_real_limit_are_refused_in_bounded_work() -> None:
+    before = METER.total()
+    with pytest.raises(ProtocolCheckError, match="expand to more than"):
+        sessiontypes.loads(scribble_chain_doing_first(3_000), "chain.scr")  # 4.5 million written out
+    assert METER.total() - before < 2 * foreign_translate.MAX_TRANSLATED
