@@ -146,7 +146,8 @@ class VisualOdometry:
         self._seconds_ago: float | None = None     # from the last frame to this one
         self._failed_in_a_row = 0
 
-    def track(self, rgb: np.ndarray, depth_m: np.ndarray, stamp: float | None = None) -> np.ndarray:
+    def track(self, rgb: np.ndarray, depth_m: np.ndarray, stamp: float | None = None,
+              prior: np.ndarray | None = None) -> np.ndarray:
         """Estimate the pose of the next frame.
 
         Args:
@@ -155,6 +156,11 @@ class VisualOdometry:
             stamp: the frame's capture time in seconds, if known: the motion model then predicts
                 over the time since the last frame (frames dropped in between are allowed for),
                 else over one frame.
+            prior: ``T_wc`` of this frame as another estimate has it (the fused pose, carried by the
+                wheels while the camera saw nothing). Used only once tracking has failed: the
+                frame is then matched against the keyframe from where the prior puts it (not
+                where the camera coasted to), and a restart makes the new keyframe at the prior.
+                That is relocalisation: against the keyframe seen before, else from the prior.
 
         Returns:
             ``T_wc`` (4x4) of this frame; the previous frame's when tracking failed.
@@ -179,6 +185,9 @@ class VisualOdometry:
         steps = self._steps_since_last(stamp)
         self._step = _scaled(self._motion, steps)
         self._stamp = stamp
+        if prior is not None and self._failed_in_a_row > 0 and self._keyframe is not None:
+            self._relative = np.linalg.inv(self._keyframe.pose) @ np.asarray(prior, dtype=float)
+            self._step = np.eye(4)
         if self._keyframe is None:
             made = self._make_keyframe(pixels, descriptors, depth_m, self.pose)
             self.failures += not made
