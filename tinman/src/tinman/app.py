@@ -293,7 +293,7 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
                      + (", still lost at the end" if recovery.get("lost_at_the_end") else "")
                      + f"; {counted(control.get('recovering_commands') or 0, 'path command')} on the wheels alone")
     if control.get("stops_for_lost_tracking"):
-        lines.append(f"the estimate went stale (perception gone): the robot stopped "
+        lines.append(f"no fresh estimate for a while (perception slow or gone): the robot stopped "
                      f"{counted(control['stops_for_lost_tracking'], 'time')}, then drove on "
                      f"({counted(control['path_commands_after_a_stop'] or 0, 'path command')} after)")
     lost = data["control"].get("planner_lost")

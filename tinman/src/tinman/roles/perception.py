@@ -106,7 +106,11 @@ def visodom(ep: Endpoint) -> None:
             # Late against its capture stamp, not a publish stamp (an Image has none): see Lateness.
             late = lateness(captured, time.monotonic())
             if last is not None and late > STALE_FRAMES * period:
-                dropped += 1  # catch up: the Visualizer gets the latest estimate again
+                dropped += 1  # catch up: the Visualizer gets the latest estimate again (the wheels' since, if fused)
+                fused = fusion.fuse(captured, None)
+                if fused is not None:
+                    last = _published(*fused, wheels_only=recoveries.lost)
+                    latest.set(last)
             else:
                 began = time.perf_counter()
                 failures = odometry.failures
@@ -121,12 +125,9 @@ def visodom(ep: Endpoint) -> None:
                 recoveries.frame(captured, failed)
                 fused = fusion.fuse(captured, None if failed else pose)
                 if fused is not None:  # the one pose: fresh with every frame, the wheels' alone while lost
-                    stamp, t_wc = fused
-                    fused_stamps.append(stamp)
-                    fused_poses.append(t_wc)
-                    frame = "odom" if failed else "map"  # "odom": the wheels' alone, while the camera is lost
-                    last = PoseStamped(header=Header(stamp=stamp_from_seconds(stamp), frame_id=frame),
-                                       pose=pose_from_matrix(t_wc))
+                    fused_stamps.append(fused[0])
+                    fused_poses.append(fused[1])
+                    last = _published(*fused, wheels_only=failed)
                     latest.set(last)
                 elif last is None or not failed:
                     last = PoseStamped(header=Header(stamp=color.header.stamp, frame_id="map"),
@@ -151,12 +152,24 @@ def visodom(ep: Endpoint) -> None:
             "lost_frames": odometry.failures, "lost_stamps": lost[-200:], **recoveries.record(), **fusion.record()})
 
 
+def _published(stamp: float, t_wc: np.ndarray, wheels_only: bool) -> PoseStamped:
+    """The fused pose as VisOdom publishes it: in the ``map`` frame, or ``odom`` while the camera's
+    odometry is lost and the wheels alone carry it (Move then drives slower)."""
+    return PoseStamped(header=Header(stamp=stamp_from_seconds(stamp), frame_id="odom" if wheels_only else "map"),
+                       pose=pose_from_matrix(t_wc))
+
+
 class Recoveries:
     """Times to recover: from the first frame the camera's odometry lost to the next one it tracked."""
 
     def __init__(self) -> None:
         self.times: list[float] = []
         self._lost_since: float | None = None
+
+    @property
+    def lost(self) -> bool:
+        """Whether the last frame tracked was lost."""
+        return self._lost_since is not None
 
     def frame(self, stamp: float, failed: bool) -> None:
         """A frame captured at ``stamp`` was tracked (``failed`` False) or not."""
