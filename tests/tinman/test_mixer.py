@@ -102,6 +102,9 @@ def test_while_the_pose_is_the_wheels_alone_path_following_drives_slower() -> No
         assert source == "path"
         speeds.append(command.linear.x)
         assert mixer.recovering == int(wheels_only)
+        mixer.set_estimate(1.1, (x, y, 0.0))  # the camera tracks again: full speed
+        assert mixer.step(twist_planar(0.0, 0.0))[0].linear.x == speeds[0]
+        assert mixer.recovered == int(wheels_only)  # a path command after recovering
     assert 0 < speeds[1] < speeds[0]
 
 

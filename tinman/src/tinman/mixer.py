@@ -63,6 +63,7 @@ class Mixer:
         estimates: fresh estimates taken.
         stops: how often path following stopped because the estimate went stale.
         recovering: path commands given while the estimate was the wheels' alone (slower).
+        recovered: path commands given on a relocalised estimate after the first of those.
         held_back: path commands whose forward motion was dropped: it led too near a wall or box.
         safety: the safety layer every command passes (its ``stops`` and ``slowed`` count what it did).
     """
@@ -79,6 +80,7 @@ class Mixer:
         self.stops = 0
         self.resumed = 0  # path commands after the first stop: tracking came back
         self.recovering = 0
+        self.recovered = 0
         self.held_back = 0  # path commands that would have driven too near a wall or box
         self._wheels_only = False  # the latest estimate is the wheels' alone
         self.safety = SafetyLayer(period)
@@ -149,6 +151,8 @@ class Mixer:
                 if self._wheels_only:  # relocalising: slower, so the camera's odometry catches up sooner
                     v, w = v * RECOVERING_SPEED, w * RECOVERING_SPEED
                     self.recovering += 1
+                else:
+                    self.recovered += self.recovering > 0
                 if v > 0 and not self._clear_ahead(pose, v, w):
                     v = 0.0
                     self.held_back += 1

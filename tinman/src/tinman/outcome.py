@@ -84,6 +84,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
                     "stops_for_lost_tracking": move.get("stops_for_lost_tracking"),
                     "path_commands_after_a_stop": move.get("path_commands_after_a_stop"),
                     "recovering_commands": move.get("recovering_commands"),
+                    "path_commands_after_recovering": move.get("path_commands_after_recovering"),
                     "held_back_near_obstacles": move.get("held_back"),
                     "safety_stops": move.get("safety_stops"), "safety_slowed": move.get("safety_slowed"),
                     "safety_blind": move.get("safety_blind"), "scanner_lost": move.get("scanner_lost")},

@@ -119,6 +119,7 @@ def move(ep: Endpoint) -> None:
             "teleop_commands_after_planner_lost": teleop_after_loss,
             "estimates": mixer.estimates, "stops_for_lost_tracking": mixer.stops,
             "path_commands_after_a_stop": mixer.resumed, "recovering_commands": mixer.recovering,
+            "path_commands_after_recovering": mixer.recovered,
             "held_back": mixer.held_back,
             "perception_lost": perception_lost[0] if perception_lost else None,
             "estimated_pose": list(mixer.model.pose),
