@@ -147,12 +147,12 @@ class TinMan:
         report_file = out / "report.json"
         report_file.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
         title = "TinMan"
-        if data["fused"]["ate_rmse_m"] is not None:
-            fused = data["fused"]
+        fused = data["fused"]
+        if fused["ate_rmse_m"] is not None:
             title += (f": fused ATE RMSE {fused['ate_rmse_m'] * 100:.1f} cm over {fused['trajectory_length_m']:.2f} m "
                       f"({fused['ate_percent']:.2f}%)")
         if data["ate_rmse_m"] is not None:
-            title += (("," if data["fused"]["ate_rmse_m"] is not None else ":")
+            title += (("," if fused["ate_rmse_m"] is not None else ":")
                       + f" VO ATE RMSE {data['ate_rmse_m'] * 100:.1f} cm ({data['ate_percent']:.2f}%)")
         picture = draw_run(out / "trajectory.png", settings, title=title)
         return Finished(ok, [*_lines(data, problems), f"wrote {_shown(report_file)} and {_shown(picture)}"])
@@ -259,8 +259,8 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
         lines.append(f"visual odometry: ATE RMSE {data['ate_rmse_m']:.3f} m over {data['trajectory_length_m']:.2f} m "
                      f"({data['ate_percent']:.2f}%), {counted(data['frames_processed'] or 0, 'frame')} tracked, "
                      f"{data['frames_dropped']} dropped")
-    fused = data["fused"]
-    if fused["ate_rmse_m"] is not None:
+    fused = data.get("fused") or {}  # absent from a report written before the fused pose
+    if fused.get("ate_rmse_m") is not None:
         lines.append(f"fused pose (wheels and VO, what the robot steers by): ATE RMSE {fused['ate_rmse_m']:.3f} m "
                      f"over {fused['trajectory_length_m']:.2f} m ({fused['ate_percent']:.2f}%)")
     period = data["control_period_ms"]
@@ -268,7 +268,7 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
         lines.append(f"control loop: period p50 {period['p50']:.1f} ms, p99 {period['p99']:.1f} ms "
                      f"over {counted(data['control']['commands'] or 0, 'command')}")
     robot = data["robot"]
-    steered = fused if fused["final_position_error_m"] is not None else data
+    steered = fused if fused.get("final_position_error_m") is not None else data
     if steered.get("final_position_error_m") is not None and robot.get("distance_m") is not None:
         drift = steered.get("drift_per_m")  # None when the robot did not travel (e.g. turned on the spot)
         which = "fused pose" if steered is fused else "odometry"
@@ -283,7 +283,7 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
         lines.append(f"safety layer (range scan): {counted(stops, 'safety stop')}, "
                      f"{counted(slowed, 'command')} slowed near an obstacle"
                      + (f", {counted(blind, 'command')} held for want of a fresh scan" if blind else ""))
-    recovery = data["recovery"]
+    recovery = data.get("recovery") or {}
     if data.get("vo_lost_frames") or recovery.get("recoveries"):
         times = recovery.get("time_to_recover_s") or {}
         lines.append(f"visual odometry lost track on {counted(data['vo_lost_frames'] or 0, 'frame')}: "

@@ -250,10 +250,11 @@ def _read_truth(settings: Settings) -> tuple[np.ndarray, np.ndarray] | None:
 def _read_estimate(settings: Settings, estimate: Sequence[Sequence[float]] | None
                    ) -> tuple[np.ndarray, np.ndarray, str]:
     """``(stamps, positions, name)``: the estimate given (the Visualizer's: the pose VisOdom
-    published), else the fused estimate's file, else (a recorded camera: nothing fused) VO's."""
+    published, fused but with a recorded camera), else the fused estimate's file, else (a
+    recorded camera: nothing fused) VO's."""
     if estimate is not None:
         data = np.array(estimate, dtype=float).reshape(-1, 4)
-        return data[:, 0], data[:, 1:4], "estimate"
+        return data[:, 0], data[:, 1:4], "VO estimate" if settings.dataset else "fused estimate"
     for file, name in ((FUSED_ESTIMATE, "fused estimate"), (VO_ESTIMATE, "VO estimate")):
         try:
             stamps, poses = read_trajectory(settings.records / file)
