@@ -109,13 +109,13 @@ def visodom(ep: Endpoint) -> None:
                 dropped += 1  # catch up: the Visualizer gets the latest estimate again (the wheels' since, if fused)
                 fused = fusion.fuse(captured, None)
                 if fused is not None:
-                    last = _published(*fused, wheels_only=recoveries.lost)
+                    last = _published(fused[0], lied("VisOdom", fused[1]), wheels_only=recoveries.lost)
                     latest.set(last)
             else:
                 began = time.perf_counter()
                 failures = odometry.failures
-                pose = lied("VisOdom", odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")),
-                                                      captured, prior=fusion.prior(captured)))
+                pose = odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")), captured,
+                                      prior=fusion.prior(captured))
                 track_ms.append((time.perf_counter() - began) * 1000.0)
                 stamps.append(captured)
                 poses.append(pose)
@@ -126,12 +126,13 @@ def visodom(ep: Endpoint) -> None:
                 fused = fusion.fuse(captured, None if failed else pose)
                 if fused is not None:  # the one pose: fresh with every frame, the wheels' alone while lost
                     fused_stamps.append(fused[0])
+                    fused = (fused[0], lied("VisOdom", fused[1]))  # "lying-pose": the estimate the robot uses
                     fused_poses.append(fused[1])
                     last = _published(*fused, wheels_only=failed)
                     latest.set(last)
                 elif last is None or not failed:
                     last = PoseStamped(header=Header(stamp=color.header.stamp, frame_id="map"),
-                                       pose=pose_from_matrix(pose))
+                                       pose=pose_from_matrix(lied("VisOdom", pose)))
                     latest.set(last)
                 # Unfused and lost: no new estimate. The last one goes again with its own stamp, so Move
                 # sees its estimate go stale and stops (a fresh stamp would claim a fix VO does not have).
