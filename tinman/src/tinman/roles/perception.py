@@ -72,14 +72,13 @@ def visodom(ep: Endpoint) -> None:
     odometry relocalises from the estimate: against the keyframe it saw before, else a new one
     at the estimate (:meth:`tinman.vo.VisualOdometry.track`'s ``prior``). Each time it tracks
     again is a recovery, timed from the first frame it lost. With a recorded camera
-    (``--dataset``) the frames are not the simulated robot's, and Fig. 16's single loop
-    (``--paper``) has no wheel odometry: there the camera's odometry is the pose.
+    (``--dataset``) the frames are not the simulated robot's: the wheels are not fused and the
+    camera's odometry is the pose.
     """
     settings = current()
     start_faults("VisOdom")
     odometry = _odometry(settings.dataset)
-    # Fig. 16's single loop has no wheel odometry, and a recording's frames are not the robot's.
-    fusion = Fusion(None if settings.dataset or settings.paper else DEFAULT_WORLD.start)
+    fusion = Fusion(None if settings.dataset else DEFAULT_WORLD.start)
     latest = _Latest()
     period = 1.0 / (TumSequence.open(settings.dataset).frame_rate if settings.dataset else settings.camera_rate)
     if not settings.paper:  # the planning loop (the latest pose at the planner's rate) and the wheels' loop
@@ -101,6 +100,8 @@ def visodom(ep: Endpoint) -> None:
         while True:
             color: Image = ep.recv("Camera").payload  # the protocol's order: colour, then depth
             depth: Image = ep.recv("Camera").payload
+            if settings.paper:  # Fig. 16's single loop: a wheel odometry reading with every frame
+                fusion.odometry(ep.recv("Gazebo").payload)
             captured = seconds(color.header.stamp)
             # Late against its capture stamp, not a publish stamp (an Image has none): see Lateness.
             late = lateness(captured, time.monotonic())

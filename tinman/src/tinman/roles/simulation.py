@@ -46,8 +46,8 @@ def gazebo(ep: Endpoint) -> None:
     Fig. 16's single loop, a frame then a command, in turn. The wheels' encoders integrate
     every step the robot truly made, with their errors (:mod:`tinman.wheels`), and Gazebo
     hands VisOdom the pose they give (``nav_msgs/Odometry``, as a diff-drive plugin
-    publishes it) in ``TinManParallel``, at the control rate in a thread of its own (Fig. 16's
-    single loop has no such channel).
+    publishes it): in ``TinManParallel`` at the control rate in a thread of its own, in
+    Fig. 16's single loop, one with every frame.
     """
     settings = current()
     start_faults("Gazebo")
@@ -80,6 +80,7 @@ def gazebo(ep: Endpoint) -> None:
             if settings.paper and not films[0].shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
             if settings.paper:
+                _wheels(ep, robot)
                 _scan(ep, robot, angles, noise, period)
             twist: Twist = ep.recv("Move").payload
             bumps = robot.drive.bumps
