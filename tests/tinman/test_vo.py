@@ -407,3 +407,17 @@ def test_after_a_blind_spell_it_relocalises_against_the_keyframe_it_saw_before(
     back = odometry.track(*frames[25], prior=truth[25])
     assert odometry.last is not None and not odometry.last.failed and odometry.last.inliers >= odometry.min_inliers
     assert np.linalg.norm(back[:3, 3] - truth[25][:3, 3]) < 0.02
+
+
+def test_reanchored_on_another_estimate_it_tracks_on_from_there(driving: tuple[np.ndarray, list[Frame]]) -> None:
+    """The fused pose sets the odometry right (after a relocalisation matched the wrong place): the
+    motion tracked after it is the same, from where the other estimate put the camera."""
+    truth, frames = driving
+    odometry = VisualOdometry(FR1, truth[0])
+    _run(odometry, frames[:10])
+    shift = np.eye(4)
+    shift[0, 3] = 0.5  # the other estimate: half a metre along x from here
+    odometry.reanchor(shift @ truth[9])
+    assert odometry.reanchored == 1
+    rest = _run(odometry, frames[10:])
+    assert np.linalg.norm(rest[-1, :3, 3] - (shift @ truth[-1])[:3, 3]) < 0.015

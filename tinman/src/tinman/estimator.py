@@ -14,9 +14,11 @@ the pose at capture composed with the wheels' motion from then to now. That adds
 wheels' error over tens of milliseconds, which is far below the camera's.
 
 A measurement further than ``GATE`` (Mahalanobis, chi-square with 3 degrees of freedom
-at 0.999) from the estimate is refused as a false fix; after ``MAX_REFUSED`` in a row
-the camera is believed anyway (the estimate, not the camera, has gone astray: the
-covariance is reset to the measurement's).
+at 0.999) from the estimate is refused as a false fix. The gate widens as the wheels
+alone carry the estimate (their covariance grows with every motion), so a camera that
+is refused ``MAX_REFUSED`` times in a row disagrees with everything the estimate knows:
+its odometry is what went astray (a relocalisation that matched the wrong place), and
+``refused_in_a_row`` tells its caller to set it right (VisOdom re-anchors it on the estimate).
 
 The estimate is the robot's pose in the map, the frame both odometries start in (the
 dock). Pure: no clock, no threads; the VisOdom role calls it from its threads under a lock.
@@ -83,6 +85,7 @@ class PoseFilter:
         stamp: the time of the last wheel odometry reading (None before any).
         predictions, updates, refused: how many odometry motions were applied, VO poses taken,
             VO poses refused by the gate.
+        refused_in_a_row: VO poses refused since the last one taken.
     """
 
     def __init__(self, start: Pose, vo_sigma: Pose = (0.03, 0.03, 0.03), noise: OdometryNoise | None = None) -> None:
@@ -92,7 +95,7 @@ class PoseFilter:
         self.noise = noise or OdometryNoise()
         self.measurement_covariance = np.diag(np.square(vo_sigma))
         self.predictions = self.updates = self.refused = 0
-        self._refused_in_a_row = 0
+        self.refused_in_a_row = 0
         self._odometry_stamps: list[float] = []
         self._odometry_poses: list[Pose] = []
 
@@ -141,29 +144,26 @@ class PoseFilter:
         """A visual odometry pose of the robot, captured at ``stamp``: whether it was taken.
 
         Carried forward to the estimate's time by the wheels' motion since ``stamp``; refused
-        when it lies beyond ``GATE`` (unless ``MAX_REFUSED`` were refused in a row before it)."""
+        when it lies beyond ``GATE``."""
         now = self._odometry_at(self.stamp) if self.stamp is not None else None
         measured = pose if now is None else compose(pose, between(self._odometry_at(stamp), now))
         innovation = np.array([measured[0] - self.pose[0], measured[1] - self.pose[1],
                                math.remainder(measured[2] - self.pose[2], math.tau)])
         spread = self.covariance + self.measurement_covariance
         distance = float(innovation @ np.linalg.solve(spread, innovation))
-        if distance > GATE and self._refused_in_a_row < MAX_REFUSED:
-            self._refused_in_a_row += 1
+        if distance > GATE:
+            self.refused_in_a_row += 1
             self.refused += 1
             return False
-        if distance > GATE:  # the camera has said the same for a while: the estimate is what went astray
-            self.pose, self.covariance = measured, self.measurement_covariance.copy()
-        else:
-            gain = self.covariance @ np.linalg.inv(spread)
-            correction = gain @ innovation
-            self.pose = (self.pose[0] + float(correction[0]), self.pose[1] + float(correction[1]),
-                         math.remainder(self.pose[2] + float(correction[2]), math.tau))
-            identity = np.eye(3)
-            # Joseph form: stays symmetric and positive definite whatever the rounding.
-            self.covariance = ((identity - gain) @ self.covariance @ (identity - gain).T
-                               + gain @ self.measurement_covariance @ gain.T)
-        self._refused_in_a_row = 0
+        gain = self.covariance @ np.linalg.inv(spread)
+        correction = gain @ innovation
+        self.pose = (self.pose[0] + float(correction[0]), self.pose[1] + float(correction[1]),
+                     math.remainder(self.pose[2] + float(correction[2]), math.tau))
+        identity = np.eye(3)
+        # Joseph form: stays symmetric and positive definite whatever the rounding.
+        self.covariance = ((identity - gain) @ self.covariance @ (identity - gain).T
+                           + gain @ self.measurement_covariance @ gain.T)
+        self.refused_in_a_row = 0
         self.updates += 1
         return True
 

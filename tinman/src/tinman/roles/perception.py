@@ -12,7 +12,7 @@ import numpy as np
 from anodize import Endpoint, PeerFailedError, RoleStopped
 
 from ..dataset import TumSequence
-from ..estimator import PoseFilter
+from ..estimator import MAX_REFUSED, PoseFilter
 from ..faults import lied, start_faults
 from ..geometry import FR1, camera_pose, depth_metres, robot_pose
 from ..messages import (
@@ -124,6 +124,9 @@ def visodom(ep: Endpoint) -> None:
                     lost.append(captured)
                 recoveries.frame(captured, failed)
                 fused = fusion.fuse(captured, None if failed else pose)
+                if fusion.reanchor is not None:
+                    odometry.reanchor(fusion.reanchor)
+                    fusion.reanchor = None
                 if fused is not None:  # the one pose: fresh with every frame, the wheels' alone while lost
                     fused_stamps.append(fused[0])
                     fused = (fused[0], lied("VisOdom", fused[1]))  # "lying-pose": the estimate the robot uses
@@ -150,7 +153,8 @@ def visodom(ep: Endpoint) -> None:
                                  comment="TinMan fused estimate (wheel and visual odometry), camera poses")
         save_record("VisOdom", {
             "frames_processed": len(stamps), "frames_dropped": dropped, "track_ms": percentiles(track_ms),
-            "lost_frames": odometry.failures, "lost_stamps": lost[-200:], **recoveries.record(), **fusion.record()})
+            "lost_frames": odometry.failures, "lost_stamps": lost[-200:], "vo_reanchored": odometry.reanchored,
+            **recoveries.record(), **fusion.record()})
 
 
 def _published(stamp: float, t_wc: np.ndarray, wheels_only: bool) -> PoseStamped:
@@ -201,6 +205,7 @@ class Fusion:
     def __init__(self, start: tuple[float, float, float] | None) -> None:
         self.filter = PoseFilter(start) if start is not None else None
         self.readings = 0
+        self.reanchor: np.ndarray | None = None  # where the camera's odometry should be, at the last capture
         self._lock = threading.Lock()
 
     def odometry(self, message: Odometry) -> None:
@@ -225,6 +230,9 @@ class Fusion:
                 return None
             if t_wc is not None:
                 self.filter.measure(captured, robot_pose(t_wc))
+            if self.filter.refused_in_a_row >= MAX_REFUSED:  # the camera's odometry went astray: set it right
+                self.reanchor = camera_pose(*self.filter.pose_at(captured))
+                self.filter.refused_in_a_row = 0
             stamp = captured if self.filter.stamp is None else max(self.filter.stamp, captured)
             return stamp, camera_pose(*self.filter.pose)
 
