@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from tinman.messages import Header, Path, Time, path_through, twist_planar
-from tinman.mixer import BRIDGE_GAP, BRIDGE_JUMP, BRIDGE_TURN, Mixer
+from tinman.mixer import Mixer
 from tinman.world import DEFAULT_WORLD
 
 PERIOD = 0.02
@@ -77,37 +77,35 @@ def test_the_robot_steers_by_the_odometrys_estimate_and_stops_when_it_goes_stale
     assert source == "path" and command.linear.x > 0 and mixer.resumed == 1 and mixer.stops == 1
 
 
-def test_after_a_gap_in_the_odometry_the_drive_model_bridges_it_and_the_odometry_is_read_relative() -> None:
-    clock = Clock()
-    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=clock)
-    x, y, _ = DEFAULT_WORLD.start
-    mixer.set_estimate(1.0, (x, y, 0.0))
-    for _ in range(10):  # the robot turns on the spot for 0.2 s: 0.1 rad by its commands
-        mixer.step(twist_planar(0.0, 0.5))
-    turned = mixer.model.pose
-    # The odometry lost track meanwhile and restarted from its last pose: its next estimate, after
-    # a gap, says the robot never turned. Move keeps what its commands did ...
-    mixer.set_estimate(1.0 + 5 * BRIDGE_GAP, (x, y, 0.0))
-    assert mixer.model.pose == turned and mixer.bridged == 1
-    # ... and reads the odometry's later estimates in its own frame: 0.1 m ahead in the odometry's
-    # frame is 0.1 m along the turned heading.
-    mixer.set_estimate(1.0 + 5 * BRIDGE_GAP + 0.033, (x + 0.1, y, 0.0))
-    bx, by, btheta = mixer.model.pose
-    assert math.isclose(bx, turned[0] + 0.1 * math.cos(turned[2]), abs_tol=1e-9)
-    assert math.isclose(by, turned[1] + 0.1 * math.sin(turned[2]), abs_tol=1e-9)
-    assert math.isclose(btheta, turned[2], abs_tol=1e-9) and mixer.bridged == 1
-
-
-def test_an_estimate_that_jumps_from_where_the_commands_took_the_robot_is_a_false_fix() -> None:
+def test_move_takes_the_one_fused_pose_as_it_is_and_keeps_no_estimate_of_its_own() -> None:
+    """Issue 28 item 2: no bridged estimate beside the fused one. A pose that jumps from where
+    Move's commands took the robot (the estimator corrected it) is where the robot is."""
     mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0)
     x, y, _ = DEFAULT_WORLD.start
     mixer.set_estimate(1.0, (x, y, 0.0))
-    mixer.set_estimate(1.033, (x + 0.01, y, 0.01))  # close to where the robot is: taken as it is
-    assert mixer.model.pose == (x + 0.01, y, 0.01) and mixer.bridged == 0
-    mixer.set_estimate(1.066, (x + 0.01 + 2 * BRIDGE_JUMP, y, 0.01))  # a step no robot makes in 33 ms
-    assert mixer.model.pose == (x + 0.01, y, 0.01) and mixer.bridged == 1
-    mixer.set_estimate(1.1, (x + 0.01, y, 0.01 + 2 * BRIDGE_TURN))  # nor such a turn
-    assert mixer.bridged == 2
+    for _ in range(10):  # Move's commands carry its model forward between two estimates ...
+        mixer.step(twist_planar(0.0, 0.5))
+    assert mixer.model.pose != (x, y, 0.0)
+    mixer.set_estimate(1.2, (x + 0.3, y, 0.2))  # ... and the next fused pose replaces it, however far
+    assert mixer.model.pose == (x + 0.3, y, 0.2)
+    assert not hasattr(mixer, "offset") and not hasattr(mixer, "bridged")
+
+
+def test_while_the_pose_is_the_wheels_alone_path_following_drives_slower() -> None:
+    x, y, _ = DEFAULT_WORLD.start
+    speeds = []
+    for wheels_only in (False, True):
+        mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0)
+        mixer.set_path(path_of([(x, y), (x + 3.0, y)]))
+        mixer.set_estimate(1.0, (x, y, 0.0), wheels_only=wheels_only)
+        command, source = mixer.step(twist_planar(0.0, 0.0))
+        assert source == "path"
+        speeds.append(command.linear.x)
+        assert mixer.recovering == int(wheels_only)
+        mixer.set_estimate(1.1, (x, y, 0.0))  # the camera tracks again: full speed
+        assert mixer.step(twist_planar(0.0, 0.0))[0].linear.x == speeds[0]
+        assert mixer.recovered == int(wheels_only)  # a path command after recovering
+    assert 0 < speeds[1] < speeds[0]
 
 
 def test_path_following_drives_no_further_toward_a_box_it_believes_it_is_about_to_hit() -> None:

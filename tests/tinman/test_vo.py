@@ -373,3 +373,51 @@ def test_depth_at_never_reports_an_unreliable_reading(depths: np.ndarray) -> Non
         patch = depths[y - 1:y + 2, x - 1:x + 2]
         reliable = patch.min() >= 0.3 and patch.max() <= 6.0 and np.ptp(patch) <= 0.08 * patch.mean()
         assert value == (pytest.approx(patch.mean(), rel=1e-5) if reliable else 0.0)
+
+
+def test_lost_it_restarts_at_the_prior_it_is_given_not_where_it_coasted(
+        driving: tuple[np.ndarray, list[Frame]], flying: tuple[np.ndarray, list[Frame]]) -> None:
+    """Issue 28 item 3: the fused pose (here the truth) as the prior. Carried off to another part of
+    the room, the odometry restarts where the prior says, so its poses are right in the map."""
+    driving_truth, driving_frames = driving
+    flying_truth, flying_frames = flying
+    odometry = VisualOdometry(FR1, driving_truth[0], max_failures=2)
+    _run(odometry, driving_frames[:10])
+    for i in range(2):
+        odometry.track(*flying_frames[i], prior=flying_truth[i])
+    assert odometry.failures == 2 and odometry.last is not None and odometry.last.keyframe
+    resumed = [odometry.track(*frame, prior=flying_truth[i]) for i, frame in enumerate(flying_frames[2:20], 2)]
+    assert odometry.failures == 2
+    assert np.linalg.norm(resumed[-1][:3, 3] - flying_truth[19][:3, 3]) < 0.02
+
+
+def test_after_a_blind_spell_it_relocalises_against_the_keyframe_it_saw_before(
+        driving: tuple[np.ndarray, list[Frame]]) -> None:
+    """Covered for 15 frames while the robot drives on: with the prior, the first frame it sees again
+    is matched against the keyframe from before (it tracks: a pose found with inliers, not a restart
+    from nothing), and the pose is right."""
+    truth, frames = driving
+    odometry = VisualOdometry(FR1, truth[0], max_failures=3)
+    _run(odometry, frames[:10])
+    keyframes = odometry.keyframes
+    blind = (np.zeros_like(frames[0][0]), np.zeros_like(frames[0][1]))
+    for i in range(10, 25):
+        odometry.track(*blind, prior=truth[i])
+    assert odometry.failures == 15 and odometry.keyframes == keyframes  # nothing to restart from
+    back = odometry.track(*frames[25], prior=truth[25])
+    assert odometry.last is not None and not odometry.last.failed and odometry.last.inliers >= odometry.min_inliers
+    assert np.linalg.norm(back[:3, 3] - truth[25][:3, 3]) < 0.02
+
+
+def test_reanchored_on_another_estimate_it_tracks_on_from_there(driving: tuple[np.ndarray, list[Frame]]) -> None:
+    """The fused pose sets the odometry right (after a relocalisation matched the wrong place): the
+    motion tracked after it is the same, from where the other estimate put the camera."""
+    truth, frames = driving
+    odometry = VisualOdometry(FR1, truth[0])
+    _run(odometry, frames[:10])
+    shift = np.eye(4)
+    shift[0, 3] = 0.5  # the other estimate: half a metre along x from here
+    odometry.reanchor(shift @ truth[9])
+    assert odometry.reanchored == 1
+    rest = _run(odometry, frames[10:])
+    assert np.linalg.norm(rest[-1, :3, 3] - (shift @ truth[-1])[:3, 3]) < 0.015

@@ -161,9 +161,13 @@ class TinMan:
         report_file = out / "report.json"
         report_file.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
         title = "TinMan"
+        fused = data["fused"]
+        if fused["ate_rmse_m"] is not None:
+            title += (f": fused ATE RMSE {fused['ate_rmse_m'] * 100:.1f} cm over {fused['trajectory_length_m']:.2f} m "
+                      f"({fused['ate_percent']:.2f}%)")
         if data["ate_rmse_m"] is not None:
-            title += (f": VO ATE RMSE {data['ate_rmse_m'] * 100:.1f} cm over {data['trajectory_length_m']:.2f} m "
-                      f"({data['ate_percent']:.2f}%)")
+            title += (("," if fused["ate_rmse_m"] is not None else ":")
+                      + f" VO ATE RMSE {data['ate_rmse_m'] * 100:.1f} cm ({data['ate_percent']:.2f}%)")
         picture = draw_run(out / "trajectory.png", settings, title=title)
         lines = [*_lines(data, problems), f"wrote {_shown(report_file)} and {_shown(picture)}"]
         if not settings.patrol:
@@ -283,17 +287,23 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
         lines.append(f"visual odometry: ATE RMSE {data['ate_rmse_m']:.3f} m over {data['trajectory_length_m']:.2f} m "
                      f"({data['ate_percent']:.2f}%), {counted(data['frames_processed'] or 0, 'frame')} tracked, "
                      f"{data['frames_dropped']} dropped")
+    fused = data.get("fused") or {}  # absent from a report written before the fused pose
+    if fused.get("ate_rmse_m") is not None:
+        lines.append(f"fused pose (wheels and VO, what the robot steers by): ATE RMSE {fused['ate_rmse_m']:.3f} m "
+                     f"over {fused['trajectory_length_m']:.2f} m ({fused['ate_percent']:.2f}%)")
     period = data["control_period_ms"]
     if period.get("p50") is not None:
         lines.append(f"control loop: period p50 {period['p50']:.1f} ms, p99 {period['p99']:.1f} ms "
                      f"over {counted(data['control']['commands'] or 0, 'command')}")
     robot = data["robot"]
-    if data.get("final_position_error_m") is not None and robot.get("distance_m") is not None:
-        drift = data.get("drift_per_m")  # None when the robot did not travel (e.g. turned on the spot)
-        lines.append(f"robot (steered by the odometry): drove {robot['distance_m']:.2f} m, "
+    steered = fused if fused.get("final_position_error_m") is not None else data
+    if steered.get("final_position_error_m") is not None and robot.get("distance_m") is not None:
+        drift = steered.get("drift_per_m")  # None when the robot did not travel (e.g. turned on the spot)
+        which = "fused pose" if steered is fused else "odometry"
+        lines.append(f"robot (steered by the {which}): drove {robot['distance_m']:.2f} m, "
                      f"{counted(robot['waypoints_reached'], 'waypoint')} reached, "
                      f"{counted(robot['bumps'] or 0, 'bump')}; "
-                     f"odometry's final position error {data['final_position_error_m']:.3f} m"
+                     f"{which}'s final position error {steered['final_position_error_m']:.3f} m"
                      + (f" ({drift * 100:.2f} cm per metre)" if drift is not None else ""))
     control = data["control"]
     if control.get("safety_stops") is not None:
@@ -301,9 +311,18 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
         lines.append(f"safety layer (range scan): {counted(stops, 'safety stop')}, "
                      f"{counted(slowed, 'command')} slowed near an obstacle"
                      + (f", {counted(blind, 'command')} held for want of a fresh scan" if blind else ""))
-    if data.get("vo_lost_frames") or control.get("stops_for_lost_tracking"):
-        lines.append(f"odometry lost track on {counted(data['vo_lost_frames'] or 0, 'frame')}: the robot stopped "
-                     f"{counted(control['stops_for_lost_tracking'] or 0, 'time')}, then drove on "
+    recovery = data.get("recovery") or {}
+    if data.get("vo_lost_frames") or recovery.get("recoveries"):
+        times = recovery.get("time_to_recover_s") or {}
+        lines.append(f"visual odometry lost track on {counted(data['vo_lost_frames'] or 0, 'frame')}: "
+                     f"{counted(recovery.get('recoveries') or 0, 'recovery', 'recoveries')}"
+                     + (f", time to recover p50 {times['p50']:.2f} s, max {times['max']:.2f} s"
+                        if times.get("p50") is not None else "")
+                     + (", still lost at the end" if recovery.get("lost_at_the_end") else "")
+                     + f"; {counted(control.get('recovering_commands') or 0, 'path command')} on the wheels alone")
+    if control.get("stops_for_lost_tracking"):
+        lines.append(f"no fresh estimate for a while (perception slow or gone): the robot stopped "
+                     f"{counted(control['stops_for_lost_tracking'], 'time')}, then drove on "
                      f"({counted(control['path_commands_after_a_stop'] or 0, 'path command')} after)")
     lost = data["control"].get("planner_lost")
     if lost:

@@ -15,6 +15,7 @@ The functions below build and read them with values that fit their ROS types
 - time: :func:`stamp_now`, :func:`stamp_from_seconds`, :func:`seconds`;
 - motion: :func:`twist_planar`;
 - poses: :func:`pose_planar`, :func:`pose_from_matrix`, :func:`pose_matrix`, :func:`yaw`;
+- wheel odometry: :func:`odometry_message`, :func:`odometry_planar`;
 - paths: :func:`path_through`, :func:`path_points`;
 - images: :func:`image_of`, :func:`image_array` (``"rgb8"`` colour, ``"16UC1"`` depth:
   the TUM/Kinect convention of 5000 units per metre, 0 = no reading);
@@ -34,9 +35,12 @@ from rosbags.typesys.stores.ros2_jazzy import builtin_interfaces__msg__Time as T
 from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Point as Point
 from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Pose as Pose
 from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__PoseStamped as PoseStamped
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__PoseWithCovariance as PoseWithCovariance
 from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Quaternion as Quaternion
 from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Twist as Twist
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__TwistWithCovariance as TwistWithCovariance
 from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Vector3 as Vector3
+from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Odometry as Odometry
 from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Path as Path
 from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
 from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Joy as Joy
@@ -44,7 +48,8 @@ from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__LaserScan as Las
 from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
 
 __all__ = ["Time", "Header", "Vector3", "Twist", "Point", "Quaternion", "Pose", "PoseStamped", "Path",
-           "Joy", "Image", "LaserScan",
+           "Joy", "Image", "LaserScan", "Odometry", "PoseWithCovariance", "TwistWithCovariance",
+           "odometry_message", "odometry_planar",
            "stamp_now", "stamp_from_seconds", "seconds", "twist_planar", "pose_planar", "pose_from_matrix",
            "pose_matrix", "yaw", "path_through", "path_points", "image_of", "image_array", "image_layout", "joy"]
 
@@ -115,6 +120,23 @@ def yaw(pose: Pose) -> float:
     """The heading about +z of a floor pose (radians, -pi..pi)."""
     o = pose.orientation
     return math.atan2(2 * (o.w * o.z + o.x * o.y), 1 - 2 * (o.y * o.y + o.z * o.z))
+
+
+# ---- wheel odometry --------------------------------------------------------------------------
+
+def odometry_message(header: Header, pose: tuple[float, float, float], velocity: tuple[float, float],
+                     covariance: Sequence[float] = (0.0,) * 36) -> Odometry:
+    """A diff-drive's ``nav_msgs/Odometry``: its integrated floor ``pose`` ``(x, y, theta)`` and the
+    ``velocity`` ``(v, w)`` measured, in the ``odom`` frame (``header.frame_id``) of ``base_link``."""
+    return Odometry(header=header, child_frame_id="base_link",
+                    pose=PoseWithCovariance(pose=pose_planar(*pose), covariance=np.asarray(covariance, np.float64)),
+                    twist=TwistWithCovariance(twist=twist_planar(*velocity), covariance=np.zeros(36)))
+
+
+def odometry_planar(message: Odometry) -> tuple[float, float, float]:
+    """The floor pose ``(x, y, theta)`` of a ``nav_msgs/Odometry``."""
+    pose = message.pose.pose
+    return pose.position.x, pose.position.y, yaw(pose)
 
 
 # ---- paths -----------------------------------------------------------------------------------

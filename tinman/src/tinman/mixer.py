@@ -1,28 +1,18 @@
 """Move's logic: teleop wins when it commands anything, else pure pursuit on the latest path.
 
-Move steers by the robot's estimate of its place, the visual odometry's pose (each
-fresh estimate resets its model of the drive, which carries the pose forward between
-estimates with every command sent), so the odometry's error moves the real robot.
-When no fresh estimate has come for ``LOST_AFTER`` seconds (VisOdom lost track, or
-perception is gone), path following stops the robot and counts the stop; it resumes
-with the next fresh estimate.
-
-The drive model also bridges what the odometry cannot see, as a real robot's wheel
-odometry does. After a gap of more than ``BRIDGE_GAP`` seconds between two estimates
-(frames dropped, or tracking lost and restarted from a guess), or when an estimate
-jumps away from where the commands since the last one took the robot (more than
-``BRIDGE_JUMP`` metres or ``BRIDGE_TURN`` radians: a false fix), Move keeps the drive
-model's pose and from then on reads the odometry's poses relative to it (an offset
-between the odometry's frame and Move's, ``offset``). Over such short spans the
-commanded motion is what the base did (the simulated base does not slip: a real one
-slips a little, which these thresholds are far above).
+Move steers by the robot's one estimate of its place, the fused pose VisOdom publishes
+(wheel and visual odometry in one estimator, :mod:`tinman.estimator`): each fresh estimate
+sets Move's model of the drive, which carries the pose forward with every command sent
+until the next one comes (a prediction from the estimate, not a second estimate). While
+the estimate is the wheels' alone (the camera's odometry lost track and relocalises: the
+pose comes in the ``odom`` frame), path following drives at ``RECOVERING_SPEED`` of its
+speed. When no fresh estimate has come for ``LOST_AFTER`` seconds (perception is gone),
+path following stops the robot and counts the stop; it resumes with the next fresh estimate.
 
 Path following looks ahead before it drives: if the arc commanded would, in
 ``CLEAR_AHEAD`` seconds, bring the robot (by Move's pose, in the room's known map)
 within ``CLEAR_MARGIN`` of a wall or box, it drives no further (turning on the spot
-still goes) and counts it (``held_back``). The planner plans from VisOdom's own pose;
-when that has drifted far from Move's, the way onto its path is not one the planner
-checked. Teleop
+still goes) and counts it (``held_back``). Teleop
 is "active" while Control's twist is not zero: Control sends a twist every cycle, so
 a centred stick means "no command" (as with ROS's twist_mux, where a silent teleop
 topic yields to navigation); a person driving is not stopped by the map.
@@ -35,7 +25,6 @@ robot with a scanner and no fresh scan may turn, not drive. Nothing above can ov
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections.abc import Callable
@@ -46,31 +35,16 @@ from .safety import SafetyLayer
 from .sim import DiffDrive, arc_pose
 from .world import ROBOT_RADIUS, World
 
-__all__ = ["Mixer", "IDLE_EPSILON", "LOST_AFTER", "BRIDGE_GAP", "BRIDGE_JUMP", "BRIDGE_TURN", "CLEAR_AHEAD",
-           "CLEAR_MARGIN"]
+__all__ = ["Mixer", "IDLE_EPSILON", "LOST_AFTER", "RECOVERING_SPEED", "CLEAR_AHEAD", "CLEAR_MARGIN"]
 
 IDLE_EPSILON = 1e-3  # m/s or rad/s: a twist this small commands nothing
 LOST_AFTER = 0.5  # seconds without a fresh estimate before path following stops the robot
-BRIDGE_GAP = 0.1  # seconds between two estimates' stamps (three camera frames) the odometry may have lost
-BRIDGE_JUMP = 0.1  # metres an estimate may differ from the drive model's pose before it is a false fix ...
-BRIDGE_TURN = math.radians(5.0)  # ... or radians
+RECOVERING_SPEED = 0.5  # of path following's speed while the estimate is the wheels' alone
 
 CLEAR_AHEAD = 0.5  # seconds of the commanded arc checked against the map
 CLEAR_MARGIN = 0.05  # metres beyond the robot's radius
 
 Pose = tuple[float, float, float]
-
-
-def _compose(a: Pose, b: Pose) -> Pose:
-    """The planar pose ``b`` seen from ``a`` (``a`` then ``b``)."""
-    cos_a, sin_a = math.cos(a[2]), math.sin(a[2])
-    return (a[0] + cos_a * b[0] - sin_a * b[1], a[1] + sin_a * b[0] + cos_a * b[1],
-            math.remainder(a[2] + b[2], math.tau))
-
-
-def _inverse(a: Pose) -> Pose:
-    cos_a, sin_a = math.cos(a[2]), math.sin(a[2])
-    return (-cos_a * a[0] - sin_a * a[1], sin_a * a[0] - cos_a * a[1], -a[2])
 
 
 class Mixer:
@@ -88,9 +62,9 @@ class Mixer:
             ``lost``: stopped for want of a fresh estimate).
         estimates: fresh estimates taken.
         stops: how often path following stopped because the estimate went stale.
-        bridged: how often the drive model's pose was kept over the odometry's (a gap, or a jump).
+        recovering: path commands given while the estimate was the wheels' alone (slower).
+        recovered: path commands given on a relocalised estimate after the first of those.
         held_back: path commands whose forward motion was dropped: it led too near a wall or box.
-        offset: the odometry's frame in Move's, ``(x, y, theta)`` (zero until the first bridge).
         safety: the safety layer every command passes (its ``stops`` and ``slowed`` count what it did).
     """
 
@@ -105,9 +79,10 @@ class Mixer:
         self.estimates = 0
         self.stops = 0
         self.resumed = 0  # path commands after the first stop: tracking came back
-        self.bridged = 0
+        self.recovering = 0
+        self.recovered = 0
         self.held_back = 0  # path commands that would have driven too near a wall or box
-        self.offset: Pose = (0.0, 0.0, 0.0)
+        self._wheels_only = False  # the latest estimate is the wheels' alone
         self.safety = SafetyLayer(period)
         self._path: list[tuple[float, float]] = []
         self._stamp: float | None = None
@@ -132,34 +107,18 @@ class Mixer:
             self._path = points
             self.paths_received += 1
 
-    def set_estimate(self, stamp: float, pose: tuple[float, float, float]) -> None:
-        """The odometry's estimate of the robot at ``stamp``; a repeated stamp is no news.
-
-        The robot is then where the odometry says (through ``offset``), unless the estimate
-        follows a gap or jumps (see the module): then the drive model's pose is kept and
-        ``offset`` changes so that this estimate reads as that pose."""
+    def set_estimate(self, stamp: float, pose: Pose, wheels_only: bool = False) -> None:
+        """The fused estimate of the robot at ``stamp`` (``wheels_only``: the camera's odometry is
+        lost and the wheels carry it); a repeated stamp is no news. The robot is then where it says."""
         came = self._clock()  # outside the lock, as in set_scan
         with self._lock:
             if stamp == self._stamp:
                 return
-            estimate = _compose(self.offset, pose)
-            if self._stamp is not None and not self._believable(stamp, estimate):
-                self.offset = _compose(self.model.pose, _inverse(pose))
-                estimate = self.model.pose
-                self.bridged += 1
             self._stamp = stamp
             self._fresh_at = came
-            self.model.pose = estimate
+            self.model.pose = pose
+            self._wheels_only = wheels_only
             self.estimates += 1
-
-    def _believable(self, stamp: float, estimate: Pose) -> bool:
-        """Whether an estimate follows the last one closely enough, and lands near enough where the
-        commands since took the drive model, to be taken as it is."""
-        assert self._stamp is not None
-        x, y, theta = self.model.pose
-        return (stamp - self._stamp <= BRIDGE_GAP
-                and math.hypot(estimate[0] - x, estimate[1] - y) <= BRIDGE_JUMP
-                and abs(math.remainder(estimate[2] - theta, math.tau)) <= BRIDGE_TURN)
 
     def tracking(self) -> bool:
         """Whether a fresh estimate came within ``LOST_AFTER`` seconds."""
@@ -199,6 +158,11 @@ class Mixer:
                 self.stops += not self._lost
             else:
                 v, w = self.pursuit.command(pose, path)
+                if self._wheels_only:  # relocalising: slower, so the camera's odometry catches up sooner
+                    v, w = v * RECOVERING_SPEED, w * RECOVERING_SPEED
+                    self.recovering += 1
+                else:
+                    self.recovered += self.recovering > 0
                 if v > 0 and not self._clear_ahead(pose, v, w):
                     v = 0.0
                     self.held_back += 1

@@ -16,9 +16,12 @@ from .records import load_records
 from .settings import Settings
 from .tum import read_trajectory
 
-__all__ = ["build_report", "violations_in", "truth_path", "CAMERA_TRUTH", "world_clock", "world_clock_line"]
+__all__ = ["build_report", "violations_in", "truth_path", "CAMERA_TRUTH", "VO_ESTIMATE", "FUSED_ESTIMATE",
+           "world_clock", "world_clock_line"]
 
 CAMERA_TRUTH = "camera_truth.txt"  # in the records: the simulated camera's true path, TUM format
+VO_ESTIMATE = "vo_estimate.txt"  # in the records: the camera's odometry's path, TUM format
+FUSED_ESTIMATE = "fused_estimate.txt"  # in the records: the fused pose's path (camera poses), TUM format
 
 
 def violations_in(report: RunReport) -> list[str]:
@@ -38,7 +41,8 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
     move = records.get("Move", {})
     gazebo = records.get("Gazebo", {})
     planner = records.get("Planner", {})
-    ate = _ate(settings)
+    ate = _ate(settings)  # the camera's odometry alone (ate_*, also vo_ate_percent)
+    fused = _ate(settings, FUSED_ESTIMATE)  # the one pose the robot steers by
     violations = violations_in(report)
     run = report.to_dict()
     mission = mission_outcome(records, dock=DOCK if settings.patrol else None, time_limit=settings.duration)
@@ -55,6 +59,10 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "world": settings.world if not settings.dataset else None,
         "injected": dict(settings.inject),
         **ate,
+        "vo_ate_percent": ate["ate_percent"],
+        "fused_ate_percent": fused["ate_percent"],
+        "fused": {key: fused[key] for key in ("ate_rmse_m", "trajectory_length_m", "ate_percent", "ate_pairs",
+                                               "final_position_error_m", "drift_per_m")},
         "frames_processed": vo.get("frames_processed"),
         "frames_dropped": _sum(vo.get("frames_dropped"), gazebo.get("camera_frames_skipped")),
         "frames_published": camera.get("frames_published"),
@@ -79,11 +87,16 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
                     "estimates": move.get("estimates"),
                     "stops_for_lost_tracking": move.get("stops_for_lost_tracking"),
                     "path_commands_after_a_stop": move.get("path_commands_after_a_stop"),
-                    "bridged_by_the_drive_model": move.get("bridged"),
+                    "recovering_commands": move.get("recovering_commands"),
+                    "path_commands_after_recovering": move.get("path_commands_after_recovering"),
                     "held_back_near_obstacles": move.get("held_back"),
                     "safety_stops": move.get("safety_stops"), "safety_slowed": move.get("safety_slowed"),
                     "safety_blind": move.get("safety_blind"), "scanner_lost": move.get("scanner_lost")},
         "vo_lost_frames": vo.get("lost_frames"),
+        "recovery": {"recoveries": vo.get("recoveries"), "time_to_recover_s": vo.get("recovery_s"),
+                     "lost_at_the_end": vo.get("lost_at_the_end")},
+        "fusion": {"fused": vo.get("fused"), "wheel_readings": vo.get("wheel_readings"),
+                   "updates": vo.get("fused_updates"), "refused": vo.get("fused_refused")},
         "robot": {"distance_m": _round(gazebo.get("odometer_m")), "bumps": gazebo.get("bumps"),
                   "waypoints_reached": len(mission["waypoints_reached"])},
         "planner": {"method": planner.get("method"), "plans": planner.get("plans"),
@@ -123,10 +136,10 @@ def world_clock_line(world: dict[str, Any]) -> str | None:
     return line
 
 
-def _ate(settings: Settings) -> dict[str, Any]:
+def _ate(settings: Settings, estimate: str = VO_ESTIMATE) -> dict[str, Any]:
     empty = {"ate_rmse_m": None, "trajectory_length_m": None, "ate_percent": None, "ate_pairs": 0,
              "final_position_error_m": None, "drift_per_m": None}
-    estimate_file = settings.records / "vo_estimate.txt"
+    estimate_file = settings.records / estimate
     truth_file = truth_path(settings)
     if not estimate_file.exists() or not truth_file.exists():
         return empty

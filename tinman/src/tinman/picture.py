@@ -51,7 +51,7 @@ from .dataset import DatasetError, TumSequence
 from .geometry import FR1
 from .mission import DOCK, WAYPOINT_TOLERANCE
 from .mission_outcome import counted, mission_marks
-from .outcome import truth_path
+from .outcome import FUSED_ESTIMATE, VO_ESTIMATE, truth_path
 from .records import load_records
 from .settings import Settings
 from .tum import associate, read_trajectory
@@ -147,6 +147,7 @@ class _Run:
     ate_stamps: np.ndarray  # the ground-truth stamp of each of ate.errors
     ate_problem: str  # why there is no ATE ("" when there is one)
     patrol: bool = False  # the whole patrol once (--patrol): the dock is its end
+    name: str = "VO estimate"  # what the estimate is: "fused estimate" (the pose the robot steers by) or VO's
 
 
 def draw_run(path: str | Path, settings: Settings, estimate: Sequence[Sequence[float]] | None = None,
@@ -203,7 +204,7 @@ def _read_run(settings: Settings, estimate: Sequence[Sequence[float]] | None, wo
         frames = _RecordedFrames(sequence) if sequence is not None else None
     elif truth_all is not None:  # the simulated camera's true path: one pose per frame it took
         frames = _RenderedFrames(truth_all[0], truth_all[1], world, settings.seed, settings.world)
-    stamps, positions = _read_estimate(settings, estimate)
+    stamps, positions, name = _read_estimate(settings, estimate)
     first = (float(frames.stamps[0]) if frames is not None and len(frames.stamps)
              else float(stamps.min()) if len(stamps)
              else float(truth_all[0][0]) if truth_all is not None else None)
@@ -228,7 +229,7 @@ def _read_run(settings: Settings, estimate: Sequence[Sequence[float]] | None, wo
                    else "no true path yet: the simulated camera's is saved when the run stops")
     return _Run(records=records, report=_fresh_report(settings), recorded=recorded, frames=frames, t0=first,
                 span=span, truth=truth, estimate=(stamps, positions) if len(stamps) else None, ate=ate,
-                ate_stamps=ate_stamps, ate_problem=problem, patrol=settings.patrol)
+                ate_stamps=ate_stamps, ate_problem=problem, patrol=settings.patrol, name=name)
 
 
 def _open_sequence(settings: Settings) -> TumSequence | None:
@@ -247,15 +248,21 @@ def _read_truth(settings: Settings) -> tuple[np.ndarray, np.ndarray] | None:
     return (stamps, poses) if len(stamps) else None
 
 
-def _read_estimate(settings: Settings, estimate: Sequence[Sequence[float]] | None) -> tuple[np.ndarray, np.ndarray]:
+def _read_estimate(settings: Settings, estimate: Sequence[Sequence[float]] | None
+                   ) -> tuple[np.ndarray, np.ndarray, str]:
+    """``(stamps, positions, name)``: the estimate given (the Visualizer's: the pose VisOdom
+    published, fused but with a recorded camera), else the fused estimate's file, else (a
+    recorded camera: nothing fused) VO's."""
     if estimate is not None:
         data = np.array(estimate, dtype=float).reshape(-1, 4)
-        return data[:, 0], data[:, 1:4]
-    try:
-        stamps, poses = read_trajectory(settings.records / "vo_estimate.txt")
-    except (OSError, UnicodeDecodeError, ValueError):
-        return np.empty(0), np.empty((0, 3))
-    return stamps, poses[:, :3, 3]
+        return data[:, 0], data[:, 1:4], "VO estimate" if settings.dataset else "fused estimate"
+    for file, name in ((FUSED_ESTIMATE, "fused estimate"), (VO_ESTIMATE, "VO estimate")):
+        try:
+            stamps, poses = read_trajectory(settings.records / file)
+        except (OSError, UnicodeDecodeError, ValueError):
+            continue
+        return stamps, poses[:, :3, 3], name
+    return np.empty(0), np.empty((0, 3)), "VO estimate"
 
 
 def _span(settings: Settings, records: dict[str, dict[str, Any]], frames: _Frames | None,
@@ -343,7 +350,7 @@ def _draw_room(axes: Axes, run: _Run, world: World, moments: list[tuple[float, i
                                  label="robot's true path (Gazebo)")[0])
     if run.estimate is not None:
         xy = run.estimate[1]
-        label = "VO estimate, aligned (evaluate_ate)" if run.ate is not None else "VO estimate, not aligned"
+        label = f"{run.name}, aligned (evaluate_ate)" if run.ate is not None else f"{run.name}, not aligned"
         handles.append(axes.plot(xy[:, 0], xy[:, 1], color=COLOURS["estimate"], lw=1.4, ls=(0, (4.0, 2.5)),
                                  zorder=5, label=label)[0])
 
@@ -450,7 +457,7 @@ def _draw_ends(axes: Axes, run: _Run, robot: np.ndarray) -> list[Any]:
     if run.estimate is not None:
         x, y = run.estimate[1][-1, :2]
         handles.append(axes.scatter([x], [y], marker="X", s=80, facecolor=COLOURS["estimate"], edgecolor="white",
-                                    lw=0.8, zorder=9, label="end: VO estimate"))
+                                    lw=0.8, zorder=9, label=f"end: {run.name}"))
     return handles
 
 
@@ -497,7 +504,7 @@ def _draw_error(axes: Axes, run: _Run, moments: list[tuple[float, int]]) -> None
         lost_text = f"VO lost track on {lost} frame{'' if lost == 1 else 's'}"
     else:
         lost_text = "VO's lost-track count: not recorded"
-    axes.set_title(f"Position error of the VO estimate after alignment (evaluate_ate)\n{lost_text}", fontsize=11,
+    axes.set_title(f"Position error of the {run.name} after alignment (evaluate_ate)\n{lost_text}", fontsize=11,
                    loc="left")
     axes.set_xlabel("time since the camera's first frame (s)")
     axes.set_ylabel("position error (m)")

@@ -95,11 +95,14 @@ class VisualOdometry:
         use_depth: refine with this frame's depth readings too (else reprojection only,
             with ``cv2.solvePnPRefineLM``).
         pixel_sigma: the feature position noise assumed by the refinement, in pixels.
+        prior_turn, prior_step: while lost and given a prior, the most a pose found may depart
+            from it (radians, metres): a relocalisation further off matched the wrong place.
 
     Attributes:
         pose: ``T_wc`` of the last frame tracked (the initial pose before any).
         last: statistics of the last frame tracked (None before any).
         frames, failures, keyframes: counts so far.
+        reanchored: how often :meth:`reanchor` moved the odometry onto another estimate.
     """
 
     def __init__(self, intrinsics: Intrinsics, initial_pose: np.ndarray | None = None, features: int = 1000, *,
@@ -109,7 +112,8 @@ class VisualOdometry:
                  max_coast: int = 6, max_turn_per_frame: float = 0.05, max_step_per_frame: float = 0.05,
                  pyramid_levels: int = 2, scale_factor: float = 1.3, fast_threshold: int = 20,
                  low_contrast_threshold: int | None = 4,
-                 use_depth: bool = True, pixel_sigma: float = 2.0) -> None:
+                 use_depth: bool = True, pixel_sigma: float = 2.0, prior_turn: float = 0.15,
+                 prior_step: float = 0.2) -> None:
         self.intrinsics = intrinsics
         self.camera_matrix = intrinsics.matrix()
         self.pose = np.eye(4) if initial_pose is None else np.array(initial_pose, dtype=float)
@@ -145,8 +149,12 @@ class VisualOdometry:
         self._step = np.eye(4)                     # the motion predicted from the last frame to this one
         self._seconds_ago: float | None = None     # from the last frame to this one
         self._failed_in_a_row = 0
+        self._from_prior = False  # this frame is matched from a prior's prediction
+        self.prior_turn, self.prior_step = prior_turn, prior_step
+        self.reanchored = 0
 
-    def track(self, rgb: np.ndarray, depth_m: np.ndarray, stamp: float | None = None) -> np.ndarray:
+    def track(self, rgb: np.ndarray, depth_m: np.ndarray, stamp: float | None = None,
+              prior: np.ndarray | None = None) -> np.ndarray:
         """Estimate the pose of the next frame.
 
         Args:
@@ -155,6 +163,11 @@ class VisualOdometry:
             stamp: the frame's capture time in seconds, if known: the motion model then predicts
                 over the time since the last frame (frames dropped in between are allowed for),
                 else over one frame.
+            prior: ``T_wc`` of this frame as another estimate has it (the fused pose, carried by the
+                wheels while the camera saw nothing). Used only once tracking has failed: the
+                frame is then matched against the keyframe from where the prior puts it (not
+                where the camera coasted to), and a restart makes the new keyframe at the prior.
+                That is relocalisation: against the keyframe seen before, else from the prior.
 
         Returns:
             ``T_wc`` (4x4) of this frame; the previous frame's when tracking failed.
@@ -179,6 +192,11 @@ class VisualOdometry:
         steps = self._steps_since_last(stamp)
         self._step = _scaled(self._motion, steps)
         self._stamp = stamp
+        self._from_prior = prior is not None and self._failed_in_a_row > 0 and self._keyframe is not None
+        if self._from_prior:
+            assert self._keyframe is not None and prior is not None
+            self._relative = np.linalg.inv(self._keyframe.pose) @ np.asarray(prior, dtype=float)
+            self._step = np.eye(4)
         if self._keyframe is None:
             made = self._make_keyframe(pixels, descriptors, depth_m, self.pose)
             self.failures += not made
@@ -276,8 +294,20 @@ class VisualOdometry:
         surprise = np.linalg.inv(self._relative @ self._step) @ relative
         frames = self._failed_in_a_row + max(1.0, steps)
         cosine = np.clip((np.trace(surprise[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
+        if self._from_prior:  # the prior is known to a few centimetres: the bound does not grow while lost
+            return bool(np.arccos(cosine) <= self.prior_turn and np.linalg.norm(surprise[:3, 3]) <= self.prior_step)
         return bool(np.arccos(cosine) <= self.max_turn_per_frame * frames
                     and np.linalg.norm(surprise[:3, 3]) <= self.max_step_per_frame * frames)
+
+    def reanchor(self, t_wc: np.ndarray) -> None:
+        """Take ``t_wc`` as the camera's pose now, and move the keyframe with it (what is tracked
+        from here on is relative to that). For an estimate that knows better: the fused pose, when
+        this odometry has gone on disagreeing with it (a relocalisation that matched the wrong place)."""
+        t_wc = np.asarray(t_wc, dtype=float)
+        if self._keyframe is not None:
+            self._keyframe.pose = t_wc @ np.linalg.inv(self._relative)
+        self.pose = t_wc.copy()
+        self.reanchored += 1
 
     def _project(self, points: np.ndarray, camera_from_points: np.ndarray) -> np.ndarray:
         """Pixel positions of 3D points (N x 2); far outside the image for points behind the camera."""

@@ -92,8 +92,9 @@ def control(ep: Endpoint) -> None:
 
 def move(ep: Endpoint) -> None:
     """The mixer: a command to the robot for every command from Control, steering by the
-    odometry's estimate (VisOdom's Pose), each checked by the safety layer against the range
-    scanner's latest scan (Gazebo's LaserScan) before it goes to the robot.
+    fused estimate (VisOdom's Pose: wheel and visual odometry in one estimator), each checked
+    by the safety layer against the range scanner's latest scan (Gazebo's LaserScan) before it
+    goes to the robot.
 
     Time is the endpoint's clock: each of Move's threads reads the clock of the branch it
     acts through (:class:`_ThreadClock`), so ``anodize replay`` gives each the times it read
@@ -136,15 +137,18 @@ def move(ep: Endpoint) -> None:
             "period_ms": percentiles(periods), "planner_lost": planner_lost[0] if planner_lost else None,
             "teleop_commands_after_planner_lost": teleop_after_loss,
             "estimates": mixer.estimates, "stops_for_lost_tracking": mixer.stops,
-            "path_commands_after_a_stop": mixer.resumed, "bridged": mixer.bridged, "held_back": mixer.held_back,
+            "path_commands_after_a_stop": mixer.resumed, "recovering_commands": mixer.recovering,
+            "path_commands_after_recovering": mixer.recovered,
+            "held_back": mixer.held_back,
             "perception_lost": perception_lost[0] if perception_lost else None,
-            "odometry_pose": list(mixer.model.pose),
+            "estimated_pose": list(mixer.model.pose),
             "safety_stops": mixer.safety.stops, "safety_slowed": mixer.safety.slowed,
             "safety_blind": mixer.safety.blind, "scanner_lost": scanner_lost[0] if scanner_lost else None})
 
 
 def _estimate(mixer: Mixer, pose: PoseStamped) -> None:
-    mixer.set_estimate(seconds(pose.header.stamp), robot_pose(pose_matrix(pose.pose)))
+    mixer.set_estimate(seconds(pose.header.stamp), robot_pose(pose_matrix(pose.pose)),
+                       wheels_only=pose.header.frame_id == "odom")
 
 
 def _branch_from(branches: tuple[Endpoint, ...], peer: str) -> Endpoint:

@@ -12,16 +12,28 @@ import numpy as np
 from anodize import Endpoint, PeerFailedError, RoleStopped
 
 from ..dataset import TumSequence
+from ..estimator import MAX_REFUSED, PoseFilter
 from ..faults import lied, start_faults
-from ..geometry import FR1, camera_pose, depth_metres
-from ..messages import Header, Image, PoseStamped, image_array, pose_from_matrix, seconds
+from ..geometry import FR1, camera_pose, depth_metres, robot_pose
+from ..messages import (
+    Header,
+    Image,
+    Odometry,
+    PoseStamped,
+    image_array,
+    odometry_planar,
+    pose_from_matrix,
+    seconds,
+    stamp_from_seconds,
+)
+from ..outcome import FUSED_ESTIMATE, VO_ESTIMATE
 from ..records import percentiles, records_folder, save_record
 from ..settings import current
 from ..tum import write_trajectory
 from ..vo import VisualOdometry
 from ..world import DEFAULT_WORLD
 
-__all__ = ["camera", "visodom", "STALE_FRAMES", "Lateness"]
+__all__ = ["camera", "visodom", "STALE_FRAMES", "Lateness", "Recoveries", "Fusion"]
 
 STALE_FRAMES = 2.0  # a frame later than this many frame periods is dropped, not tracked
 
@@ -50,48 +62,85 @@ def camera(ep: Endpoint) -> None:
 
 
 def visodom(ep: Endpoint) -> None:
-    """RGB-D visual odometry: a pose for every frame; the latest pose to the planner."""
+    """RGB-D visual odometry fused with the wheels': one pose for every frame; the latest to the planner.
+
+    The estimator (:mod:`tinman.estimator`) takes every wheel odometry reading (Gazebo's
+    ``nav_msgs/Odometry``) as its prediction and every pose the camera's odometry tracks as a
+    measurement; its pose is the one VisOdom publishes, to the Visualizer, Move and the Planner.
+    When the camera's odometry loses track the estimate goes on with the wheels alone (the pose
+    is then published in the ``odom`` frame: Move drives slower while it is), and the camera's
+    odometry relocalises from the estimate: against the keyframe it saw before, else a new one
+    at the estimate (:meth:`tinman.vo.VisualOdometry.track`'s ``prior``). Each time it tracks
+    again is a recovery, timed from the first frame it lost. With a recorded camera
+    (``--dataset``) the frames are not the simulated robot's: the wheels are not fused and the
+    camera's odometry is the pose.
+    """
     settings = current()
     start_faults("VisOdom")
     odometry = _odometry(settings.dataset)
+    fusion = Fusion(None if settings.dataset else DEFAULT_WORLD.start)
     latest = _Latest()
     period = 1.0 / (TumSequence.open(settings.dataset).frame_rate if settings.dataset else settings.camera_rate)
-    if not settings.paper:  # the planning loop: the latest pose at the planner's rate
-        planning = next(branch for branch in ep.fork() if "Planner" in branch.sent)  # its thread acts through it
+    if not settings.paper:  # the planning loop (the latest pose at the planner's rate) and the wheels' loop
+        branches = ep.fork()  # each thread acts through its own branch (a replay reads each one's clock)
+        planning = next(branch for branch in branches if "Planner" in branch.sent)
+        wheels = next(branch for branch in branches if "Gazebo" in branch.received)
         threading.Thread(target=_feed_planner, args=(planning, latest, settings.replan_period),
                          name="VisOdom-planner", daemon=True).start()
+        threading.Thread(target=_take_wheels, args=(wheels, fusion), name="VisOdom-wheels", daemon=True).start()
     stamps: list[float] = []
     poses: list[np.ndarray] = []
+    fused_stamps: list[float] = []
+    fused_poses: list[np.ndarray] = []
     track_ms: list[float] = []
     dropped = 0
     lost: list[float] = []  # capture stamps of the frames tracking failed on
+    recoveries = Recoveries()
     lateness = Lateness()
     last: PoseStamped | None = None
     try:
         while True:
             color: Image = ep.recv("Camera").payload  # the protocol's order: colour, then depth
             depth: Image = ep.recv("Camera").payload
+            if settings.paper:  # Fig. 16's single loop: a wheel odometry reading with every frame
+                fusion.odometry(ep.recv("Gazebo").payload)
             captured = seconds(color.header.stamp)
             # Late against its capture stamp, not a publish stamp (an Image has none): see Lateness.
             late = lateness(captured, ep.now())  # the endpoint's clock: a replay gives back the run's
             if last is not None and late > STALE_FRAMES * period:
-                dropped += 1  # catch up: the Visualizer gets the latest estimate again
+                dropped += 1  # catch up: the Visualizer gets the latest estimate again (the wheels' since, if fused)
+                fused = fusion.fuse(captured, None)
+                if fused is not None:
+                    last = _published(fused[0], lied("VisOdom", fused[1]), wheels_only=recoveries.lost)
+                    latest.set(last)
             else:
                 began = time.perf_counter()
                 failures = odometry.failures
-                pose = lied("VisOdom", odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")),
-                                                     captured))
+                pose = odometry.track(_pixels(color, "rgb8"), depth_metres(_pixels(depth, "16UC1")), captured,
+                                      prior=fusion.prior(captured))
                 track_ms.append((time.perf_counter() - began) * 1000.0)
                 stamps.append(captured)
                 poses.append(pose)
-                if odometry.failures > failures:
+                failed = odometry.failures > failures
+                if failed:
                     lost.append(captured)
-                if last is None or odometry.failures == failures:
-                    last = PoseStamped(header=Header(stamp=color.header.stamp, frame_id="map"),
-                                       pose=pose_from_matrix(pose))
+                recoveries.frame(captured, failed)
+                fused = fusion.fuse(captured, None if failed else pose)
+                if fusion.reanchor is not None:
+                    odometry.reanchor(fusion.reanchor)
+                    fusion.reanchor = None
+                if fused is not None:  # the one pose: fresh with every frame, the wheels' alone while lost
+                    fused_stamps.append(fused[0])
+                    fused = (fused[0], lied("VisOdom", fused[1]))  # "lying-pose": the estimate the robot uses
+                    fused_poses.append(fused[1])
+                    last = _published(*fused, wheels_only=failed)
                     latest.set(last)
-                # Lost: no new estimate. The last one goes again with its own stamp, so Move sees
-                # its estimate go stale and stops (a fresh stamp would claim a fix VO does not have).
+                elif last is None or not failed:
+                    last = PoseStamped(header=Header(stamp=color.header.stamp, frame_id="map"),
+                                       pose=pose_from_matrix(lied("VisOdom", pose)))
+                    latest.set(last)
+                # Unfused and lost: no new estimate. The last one goes again with its own stamp, so Move
+                # sees its estimate go stale and stops (a fresh stamp would claim a fix VO does not have).
             ep.send("Visualizer", "Pose", last)
             if settings.paper:
                 ep.send("Planner", "Pose", last)
@@ -100,10 +149,101 @@ def visodom(ep: Endpoint) -> None:
         out = records_folder()
         if out is not None:  # a launched run (a replay writes nothing)
             out.mkdir(parents=True, exist_ok=True)
-            write_trajectory(out / "vo_estimate.txt", stamps, poses, comment="TinMan VisOdom estimate")
+            write_trajectory(out / VO_ESTIMATE, stamps, poses, comment="TinMan VisOdom estimate")
+            if fused_stamps:
+                write_trajectory(out / FUSED_ESTIMATE, fused_stamps, fused_poses,
+                                 comment="TinMan fused estimate (wheel and visual odometry), camera poses")
         save_record("VisOdom", {
             "frames_processed": len(stamps), "frames_dropped": dropped, "track_ms": percentiles(track_ms),
-            "lost_frames": odometry.failures, "lost_stamps": lost})
+            "lost_frames": odometry.failures, "lost_stamps": lost[-200:], "vo_reanchored": odometry.reanchored,
+            **recoveries.record(), **fusion.record()})
+
+
+def _published(stamp: float, t_wc: np.ndarray, wheels_only: bool) -> PoseStamped:
+    """The fused pose as VisOdom publishes it: in the ``map`` frame, or ``odom`` while the camera's
+    odometry is lost and the wheels alone carry it (Move then drives slower)."""
+    return PoseStamped(header=Header(stamp=stamp_from_seconds(stamp), frame_id="odom" if wheels_only else "map"),
+                       pose=pose_from_matrix(t_wc))
+
+
+class Recoveries:
+    """Times to recover: from the first frame the camera's odometry lost to the next one it tracked."""
+
+    def __init__(self) -> None:
+        self.times: list[float] = []
+        self._lost_since: float | None = None
+
+    @property
+    def lost(self) -> bool:
+        """Whether the last frame tracked was lost."""
+        return self._lost_since is not None
+
+    def frame(self, stamp: float, failed: bool) -> None:
+        """A frame captured at ``stamp`` was tracked (``failed`` False) or not."""
+        if failed and self._lost_since is None:
+            self._lost_since = stamp
+        elif not failed and self._lost_since is not None:
+            self.times.append(stamp - self._lost_since)
+            self._lost_since = None
+
+    def record(self) -> dict[str, object]:
+        """The record's ``recoveries`` (how many), ``recovery_s`` (p50 and max, seconds),
+        ``recovery_times_s`` (the last 50) and ``lost_at_the_end``."""
+        times = self.times
+        return {"recoveries": len(times),
+                "recovery_s": {"p50": round(float(np.median(times)), 3) if times else None,
+                               "max": round(max(times), 3) if times else None},
+                "recovery_times_s": [round(t, 3) for t in times[-50:]],
+                "lost_at_the_end": self._lost_since is not None}
+
+
+class Fusion:
+    """The estimator shared by VisOdom's tracking thread and its wheels thread (None: not fused).
+
+    Args:
+        start: the robot's dock, where the estimate starts; None for a recorded camera.
+    """
+
+    def __init__(self, start: tuple[float, float, float] | None) -> None:
+        self.filter = PoseFilter(start) if start is not None else None
+        self.readings = 0
+        self.reanchor: np.ndarray | None = None  # where the camera's odometry should be, at the last capture
+        self._lock = threading.Lock()
+
+    def odometry(self, message: Odometry) -> None:
+        """A wheel odometry reading (the prediction)."""
+        with self._lock:
+            self.readings += 1
+            if self.filter is not None:
+                self.filter.odometry(seconds(message.header.stamp), odometry_planar(message))
+
+    def prior(self, captured: float) -> np.ndarray | None:
+        """The camera's pose at ``captured`` by the estimate; None before the wheels' first reading."""
+        with self._lock:
+            if self.filter is None or self.filter.stamp is None:
+                return None
+            return camera_pose(*self.filter.pose_at(captured))
+
+    def fuse(self, captured: float, t_wc: np.ndarray | None) -> tuple[float, np.ndarray] | None:
+        """Take the camera's pose captured at ``captured`` (None: it lost track); the estimate's
+        stamp and camera pose after it, or None when not fused."""
+        with self._lock:
+            if self.filter is None:
+                return None
+            if t_wc is not None:
+                self.filter.measure(captured, robot_pose(t_wc))
+            if self.filter.refused_in_a_row >= MAX_REFUSED:  # the camera's odometry went astray: set it right
+                self.reanchor = camera_pose(*self.filter.pose_at(captured))
+                self.filter.refused_in_a_row = 0
+            stamp = captured if self.filter.stamp is None else max(self.filter.stamp, captured)
+            return stamp, camera_pose(*self.filter.pose)
+
+    def record(self) -> dict[str, object]:
+        with self._lock:
+            f = self.filter
+            return {"fused": f is not None, "wheel_readings": self.readings,
+                    "fused_updates": f.updates if f is not None else None,
+                    "fused_refused": f.refused if f is not None else None}
 
 
 def _odometry(dataset: str) -> VisualOdometry:
@@ -174,4 +314,12 @@ def _feed_planner(ep: Endpoint, latest: _Latest, period: float) -> None:
     except PeerFailedError:  # the planner is gone: only this loop ends, tracking goes on
         pass
     except RoleStopped:
+        pass
+
+
+def _take_wheels(ep: Endpoint, fusion: Fusion) -> None:
+    try:
+        while True:
+            fusion.odometry(ep.recv("Gazebo").payload)
+    except (PeerFailedError, RoleStopped):  # the simulator is gone, or the run stops: the camera goes on alone
         pass

@@ -13,7 +13,7 @@ from anodize import Endpoint, PeerFailedError, RoleStopped, lower_thread_priorit
 
 from ..cameras import LiveCamera, RecordedCamera
 from ..faults import blinded, start_faults
-from ..messages import Header, PoseStamped, Twist, seconds, stamp_now
+from ..messages import Header, PoseStamped, Twist, odometry_message, seconds, stamp_now
 from ..outcome import CAMERA_TRUTH
 from ..picture import draw_run
 from ..records import records_folder, save_record
@@ -21,6 +21,7 @@ from ..scanner import beam_angles, cast, scan_message
 from ..settings import Settings, current
 from ..sim import DiffDrive
 from ..tum import write_trajectory
+from ..wheels import WheelOdometry
 from ..world import DEFAULT_WORLD
 
 __all__ = ["gazebo", "visualizer", "REDRAW_PERIOD", "SCAN_RATE"]
@@ -32,7 +33,7 @@ SWITCH_INTERVAL = 0.001  # seconds a thread of Gazebo's process may hold the int
 
 
 def gazebo(ep: Endpoint) -> None:
-    """The robot in the room, the camera on it, and its range scanner.
+    """The robot in the room, the camera on it, its range scanner and its wheel odometry.
 
     Each command drives the robot for one control period (lockstep). The range scanner's
     ray sensor reads the room from the robot's true pose and Gazebo hands Move each scan
@@ -42,7 +43,11 @@ def gazebo(ep: Endpoint) -> None:
     frames at its own rate: rendered from the robot's true pose (or a recording played
     back, with ``--dataset``) and handed to the Camera role's driver. In
     ``TinManParallel`` the two run side by side (the camera in a thread of its own); in
-    Fig. 16's single loop, a frame then a command, in turn.
+    Fig. 16's single loop, a frame then a command, in turn. The wheels' encoders integrate
+    every step the robot truly made, with their errors (:mod:`tinman.wheels`), and Gazebo
+    hands VisOdom the pose they give (``nav_msgs/Odometry``, as a diff-drive plugin
+    publishes it): in ``TinManParallel`` at the control rate in a thread of its own, in
+    Fig. 16's single loop, one with every frame.
     """
     settings = current()
     start_faults("Gazebo")
@@ -50,7 +55,7 @@ def gazebo(ep: Endpoint) -> None:
     # the interpreter over every millisecond, not every 5 ms (Python's default), so a scan or a
     # step is not held up several times 5 ms behind a rendering.
     sys.setswitchinterval(SWITCH_INTERVAL)
-    robot = _Robot(DiffDrive(DEFAULT_WORLD))
+    robot = _Robot(DiffDrive(DEFAULT_WORLD), WheelOdometry(DEFAULT_WORLD.start, seed=settings.seed))
     # The camera is set up in its own thread: building the room's look takes seconds, and Move
     # waits for the first scan before it sends a command.
     films: list[_Film] = []
@@ -61,6 +66,8 @@ def gazebo(ep: Endpoint) -> None:
         threading.Thread(target=_run_camera, args=(ep, robot, films, settings), name="Gazebo-camera",
                          daemon=True).start()
         threading.Thread(target=_run_scanner, args=(ep, robot, settings.seed), name="Gazebo-scanner",
+                         daemon=True).start()
+        threading.Thread(target=_run_wheels, args=(ep, robot, 1.0 / settings.control_rate), name="Gazebo-wheels",
                          daemon=True).start()
     period = 1.0 / settings.control_rate
     start = time.monotonic()
@@ -73,6 +80,7 @@ def gazebo(ep: Endpoint) -> None:
             if settings.paper and not films[0].shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
             if settings.paper:
+                _wheels(ep, robot)
                 _scan(ep, robot, angles, noise, period)
             twist: Twist = ep.recv("Move").payload
             bumps = robot.drive.bumps
@@ -90,7 +98,8 @@ def gazebo(ep: Endpoint) -> None:
         if film is not None:
             film.save(settings)
         save_record("Gazebo", {"trajectory": trace, "odometer_m": robot.drive.odometer, "bumps": robot.drive.bumps,
-                               "bump_events": bumped,
+                               "bump_events": bumped, "wheel_odometry_pose": list(robot.wheels.pose),
+                               "wheel_scales": list(robot.wheels.scales),
                                "columns": ["t", "x", "y", "theta", "v", "w"],
                                # The physics' seconds against the wall's, from the first step to the last
                                # (the robot's start and the run's stop are not the world's to keep up with).
@@ -100,15 +109,25 @@ def gazebo(ep: Endpoint) -> None:
 
 
 class _Robot:
-    """The simulated robot, shared by Gazebo's control loop and its camera thread."""
+    """The simulated robot and its wheels' odometry, shared by Gazebo's control loop and its threads."""
 
-    def __init__(self, drive: DiffDrive) -> None:
+    def __init__(self, drive: DiffDrive, wheels: WheelOdometry) -> None:
         self.drive = drive
+        self.wheels = wheels
         self._lock = threading.Lock()
 
     def step(self, v: float, w: float, dt: float) -> tuple[float, float, float]:
+        """Drive one step; the wheels measure the motion the robot really made (none after a bump)."""
         with self._lock:
-            return self.drive.step(v, w, dt)
+            pose = self.drive.step(v, w, dt)
+            if dt > 0:
+                self.wheels.step(*self.drive.velocity, dt)
+            return pose
+
+    def odometry(self) -> tuple[tuple[float, float, float], tuple[float, float]]:
+        """The wheel odometry's pose and measured velocity, read together."""
+        with self._lock:
+            return self.wheels.pose, self.wheels.velocity
 
     def state(self) -> tuple[tuple[float, float, float], tuple[float, float]]:
         """The pose and the velocity ``(v, w)``, read together."""
@@ -212,6 +231,28 @@ def _run_scanner(ep: Endpoint, robot: _Robot, seed: int) -> None:
                 due = now
             ep.sleep(due - now)
     except (RoleStopped, PeerFailedError):  # the run stops, or Move is gone
+        pass
+
+
+def _wheels(ep: Endpoint, robot: _Robot) -> None:
+    """The wheel odometry's latest reading, to VisOdom (in the ``odom`` frame, which starts at the dock)."""
+    pose, velocity = robot.odometry()
+    ep.send("VisOdom", "Odometry", odometry_message(Header(stamp=stamp_now(), frame_id="odom"), pose, velocity))
+
+
+def _run_wheels(ep: Endpoint, robot: _Robot, period: float) -> None:
+    """The wheel odometry at the control rate, as a diff-drive plugin publishes it: due times on a
+    fixed grid, a reading that fell behind skipped rather than sent late."""
+    due = time.monotonic()
+    try:
+        while True:
+            _wheels(ep, robot)
+            due += period
+            now = time.monotonic()
+            if now - due > period:
+                due = now
+            ep.sleep(due - now)
+    except (RoleStopped, PeerFailedError):  # the run stops, or perception is gone
         pass
 
 
