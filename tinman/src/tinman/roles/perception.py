@@ -320,6 +320,8 @@ def _feed_planner(ep: Endpoint, latest: _Latest, period: float) -> None:
 def _take_wheels(ep: Endpoint, fusion: Fusion) -> None:
     try:
         while True:
-            fusion.odometry(ep.recv("Gazebo").payload)
+            reading = ep.recv("Gazebo").payload
+            ep.now()  # a clock reading before the shared estimator: a replay orders the threads' turns by them
+            fusion.odometry(reading)
     except (PeerFailedError, RoleStopped):  # the simulator is gone, or the run stops: the camera goes on alone
         pass
