@@ -18,6 +18,7 @@ share: exact type at once, real subclasses by the full check).
 from __future__ import annotations
 
 import json
+import re
 import os
 import select
 import signal
@@ -234,8 +235,18 @@ def test_generated_mutations_by_a_payloads_code_never_crash_either_core(
     for core in ("python", "compiled"):
         for outcome in found[core]:
             assert outcome[0] not in ("SystemError", "MemoryError"), (core, outcome)
-    if all(where != "monitor" for where, _, _ in plan):  # the monitor's own tables are the compiled core's cache
-        assert found["python"] == found["compiled"], plan
+    if any(where == "monitor" for where, _, _ in plan):  # the monitor's own tables are the compiled core's cache
+        return
+    if any(field == "_monitor" for _, field, _ in plan):
+        # Another object as the monitor: each core fails on the first of its methods that it lacks,
+        # and the two look them up in different orders. The same kind of outcome is what must agree.
+        assert [o[0] for o in found["python"]] == [o[0] for o in found["compiled"]], plan
+    else:  # an object put in by the plan is named by its repr, whose address differs between the runs
+        assert _without_addresses(found["python"]) == _without_addresses(found["compiled"]), plan
+
+
+def _without_addresses(outcomes: Any) -> str:
+    return re.sub(r" at 0x[0-9a-f]+", " at 0x…", json.dumps(outcomes))
 
 
 def test_the_hostile_cases_run_here_too() -> None:
