@@ -18,8 +18,8 @@ share: exact type at once, real subclasses by the full check).
 from __future__ import annotations
 
 import json
-import re
 import os
+import re
 import select
 import signal
 import subprocess
