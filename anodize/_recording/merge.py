@@ -133,11 +133,20 @@ class _Part:
         self.priority = ""  # what the part's writer ran at (its group's side-work priority)
 
     def _records(self) -> Iterator[Any]:
+        from mcap.records import Chunk
         from mcap.stream_reader import StreamReader
 
         with self.path.open("rb") as stream:
             try:
-                yield from StreamReader(stream, skip_magic=False).records
+                for record in StreamReader(stream, skip_magic=False, emit_chunks=True).records:
+                    if isinstance(record, Chunk):
+                        # A group writes its part unchunked and uncompressed (tap.Recorder); a chunk
+                        # is not its recorder's, and decompressing it could take any amount of memory.
+                        self.notes.append(f"part {self.path.name} holds an MCAP chunk ({record.compression or 'not'} "
+                                          f"compressed, {record.uncompressed_size} bytes declared), which a group's "
+                                          "recorder never writes: the rest of the part was not read")
+                        return
+                    yield record
             except Exception as error:  # a part cut short: its group was killed mid-write
                 note = f"part {self.path.name} ends early ({type(error).__name__}); kept what was whole"
                 if note not in self.notes:

@@ -123,3 +123,25 @@ def test_a_chunk_within_the_limit_is_read(tmp_path: Path, compression: str) -> N
     status_over, stderr_over = _verify(tmp_path, {"ANODIZE_MAX_CHUNK_BYTES": f"{limit - 1}"})
     assert status_over == 1
     assert f"at most {limit - 1} bytes are read per chunk" in stderr_over
+
+
+def test_a_groups_part_file_holding_a_chunk_is_not_decompressed_when_the_run_is_merged(tmp_path: Path) -> None:
+    """A group writes its part of the recording itself, so a hostile group can write anything there;
+    its recorder never writes a chunk, and merging the parts after the run decompressed one whole."""
+    from mcap.records import Channel, Chunk, DataEnd, Header, Message, Schema
+
+    from anodize._recording.merge import merge_parts
+
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    bomb = _bytes(Chunk(compression="zstd", data=_zeros_zstd(2**27), message_start_time=1, message_end_time=1,
+                        uncompressed_crc=0, uncompressed_size=64))
+    (parts / "hostile.mcap").write_bytes(
+        MCAP_MAGIC + _bytes(Header(profile="", library="hostile"))
+        + _bytes(Schema(id=1, name="S", encoding="jsonschema", data=b"{}"))
+        + _bytes(Channel(id=1, topic="/t", message_encoding="json", metadata={}, schema_id=1))
+        + _bytes(Message(channel_id=1, sequence=0, log_time=1, publish_time=1, data=b"{}"))
+        + bomb + _bytes(DataEnd(data_section_crc=0)) + MCAP_MAGIC)
+    result = merge_parts(parts, tmp_path / "r.mcap", {"global": "G"})
+    assert ("part hostile.mcap holds an MCAP chunk (zstd compressed, 64 bytes declared), which a group's "
+            "recorder never writes: the rest of the part was not read") in result.notes, result.notes
