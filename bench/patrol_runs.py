@@ -10,8 +10,8 @@ anodize and TinMan), read back from its ``report.json``. The loads alternate run
 
 Per load: patrol completed (runs), time to complete (median and range, of the completed),
 waypoints reached, bumps (the issue's target: 0 in every run), safety stops, recoveries,
-VO-only and fused ATE (as % of the path; medians and range; "-" where the report has no such
-key: the fused estimator is another item of issue 28) and the control period's p99.
+the longest time to recover, VO-only and fused ATE (as % of the path; medians and range) and
+the control period's p99.
 """
 
 from __future__ import annotations
@@ -33,11 +33,6 @@ __all__ = ["LOADS", "hogs", "run_patrol", "summarise", "table"]
 REPO = Path(__file__).resolve().parents[1]
 LOADS = ("quiet", "hogs")
 LOAD_NAMES = {"quiet": "quiet", "hogs": "two CPU hogs (nice 0)"}
-# Where a fused (wheel odometry + VO) estimate's ATE may be in report.json: read defensively,
-# as the estimator lands separately (issue 28 item 2).
-FUSED_KEYS = (("fused_ate_percent",), ("fused", "ate_percent"), ("pose", "fused_ate_percent"),
-              ("estimator", "ate_percent"), ("fused_ate", "percent"))
-
 
 @contextlib.contextmanager
 def hogs(count: int = 2) -> Iterator[None]:
@@ -67,7 +62,6 @@ def _number(value: Any) -> float | None:
 def read_run(report: dict[str, Any], exit_status: int) -> dict[str, Any]:
     """One run's numbers from its report.json (None where the report does not have them)."""
     mission = report.get("mission") or {}
-    fused = next((v for keys in FUSED_KEYS if (v := _number(_dig(report, keys))) is not None), None)
     return {
         "exit": exit_status,
         "completed": bool(mission.get("patrol_completed")),
@@ -77,8 +71,9 @@ def read_run(report: dict[str, Any], exit_status: int) -> dict[str, Any]:
         "bumps": _number(mission.get("bumps")),
         "safety_stops": _number(mission.get("safety_stops")),
         "recoveries": _number(mission.get("recoveries")),
-        "vo_ate_percent": _number(report.get("ate_percent")),
-        "fused_ate_percent": fused,
+        "vo_ate_percent": _number(report.get("vo_ate_percent")),
+        "fused_ate_percent": _number(report.get("fused_ate_percent")),
+        "recover_max_s": _number(_dig(report, ("recovery", "time_to_recover_s", "max"))),
         "control_p99_ms": _number((report.get("control_period_ms") or {}).get("p99")),
         "duration_s": _number(report.get("duration_s")),
         "problems": list(report.get("problems") or []),
@@ -129,8 +124,8 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
         "waypoints": _spread(_values(good, "waypoints")),
         "bumps_total": sum(_values(good, "bumps")) if _values(good, "bumps") else None,
         "runs_with_bumps": sum(1 for v in _values(good, "bumps") if v > 0),
-        **{key: _spread(_values(good, key)) for key in ("bumps", "safety_stops", "recoveries", "vo_ate_percent",
-                                                         "fused_ate_percent", "control_p99_ms")},
+        **{key: _spread(_values(good, key)) for key in ("bumps", "safety_stops", "recoveries", "recover_max_s",
+                                                         "vo_ate_percent", "fused_ate_percent", "control_p99_ms")},
     }
 
 
@@ -144,7 +139,8 @@ def _cell(spread: dict[str, float | None], form: Callable[[float], str]) -> str:
 def table(summary: dict[str, dict[str, Any]]) -> list[list[str]]:
     """One row per load: medians with their range."""
     rows = [["load", "runs", "patrol completed", "time to complete, s", "waypoints reached", "bumps (runs with any)",
-             "safety stops", "recoveries", "VO ATE / path", "fused ATE / path", "control period p99, ms"]]
+             "safety stops", "recoveries", "longest recovery, s", "VO ATE / path", "fused ATE / path",
+             "control period p99, ms"]]
     for load, s in summary.items():
         bumps = "-" if s["bumps_total"] is None else f"{s['bumps_total']:.0f} ({s['runs_with_bumps']})"
         rows.append([
@@ -155,6 +151,7 @@ def table(summary: dict[str, dict[str, Any]]) -> list[list[str]]:
             bumps,
             _cell(s["safety_stops"], lambda v: f"{v:g}"),
             _cell(s["recoveries"], lambda v: f"{v:g}"),
+            _cell(s["recover_max_s"], lambda v: f"{v:.2f}"),
             _cell(s["vo_ate_percent"], lambda v: f"{v:.2f}%"),
             _cell(s["fused_ate_percent"], lambda v: f"{v:.2f}%"),
             _cell(s["control_p99_ms"], lambda v: f"{v:.1f}"),
