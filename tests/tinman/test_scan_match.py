@@ -33,7 +33,7 @@ def _perturbed(pose: tuple[float, float, float], rng: np.random.Generator) -> tu
 def test_the_expected_ranges_are_the_scanners_without_noise_for_several_poses_at_once() -> None:
     poses = np.array([[1.0, 1.0, 0.0], [4.0, 1.0, 1.0], [7.0, 5.0, -2.0]])
     ranges = expected_ranges(DEFAULT_WORLD, poses, ANGLES)
-    for pose, row in zip(poses, ranges):
+    for pose, row in zip(poses, ranges, strict=True):
         scanned = cast(DEFAULT_WORLD, tuple(pose), ANGLES)
         near = np.isfinite(scanned)
         assert np.allclose(row[near], scanned[near], atol=1e-4)

@@ -3,8 +3,9 @@
 A real robot that knows its room localises against the room's map with its laser
 (ROS's AMCL). TinMan knows its room (:data:`tinman.world.DEFAULT_WORLD`, which the
 Planner plans on) and its start (the dock), and its fused pose is never far wrong, so
-no particle filter is needed: from the fused pose as the prior, Gauss-Newton with a
-Levenberg-Marquardt damping moves ``(x, y, theta)`` until the ranges the map predicts
+no particle filter is needed: from the fused pose as the prior, Gauss-Newton (with
+Marquardt's diagonal damping, and each step clipped to a trust region) moves ``(x, y, theta)``
+until the ranges the map predicts
 (:func:`expected_ranges`, the scanner's ray casting without noise, for several poses at
 once) match the ranges read. The Jacobian is numeric (the map's ranges jump at box
 corners, so there is no useful closed form); beams that the map cannot explain
@@ -36,6 +37,7 @@ Pose = tuple[float, float, float]
 BEAM_SIGMA = 0.02      # metres: one beam's error against the map (the reading's 5 mm, the map's own, the beams' width)
 HUBER_M = 0.03         # metres: residuals beyond this weigh linearly, not quadratically
 GATE_M = 0.25          # metres: a beam further off than this at the end is not on the map (or not this pose)
+SEARCH_GATE_M = 0.5    # metres: the same while searching, wider: a prior 0.3 m off puts good beams that far off
 MAX_RMS = 0.03         # metres: the inliers' residual of a match worth taking
 MIN_BEAMS = 12         # beams explained: a third of the scanner's 36
 MIN_INLIERS = 0.6      # of the beams with a reading
@@ -95,7 +97,7 @@ def match_scan(world: World, prior: Pose, ranges: np.ndarray, angles: np.ndarray
     read, angles = read[valid], angles[valid]
     pose = np.array(prior, dtype=np.float64)
     steps = np.diag(STEP)
-    damping = 1e-3
+    damping = 1e-3  # Marquardt's, fixed: the clipped steps below keep the iteration from overshooting
     weights = np.ones(len(read))
     residual = np.zeros(len(read))
     jacobian = np.zeros((len(read), 3))
@@ -103,12 +105,11 @@ def match_scan(world: World, prior: Pose, ranges: np.ndarray, angles: np.ndarray
         # The pose and its three nudged copies in one cast: the residuals and their numeric Jacobian.
         cast = expected_ranges(world, np.vstack([pose, pose + steps]), angles)
         residual = read - cast[0]
-        jacobian = -(cast[1:] - cast[0]) / np.array(STEP)[:, np.newaxis]
-        jacobian = jacobian.T
+        jacobian = (-(cast[1:] - cast[0]) / np.array(STEP)[:, np.newaxis]).T  # beams x 3: d residual / d pose
         usable = np.isfinite(residual) & np.all(np.isfinite(jacobian), axis=1) & (cast[0] < RANGE_MAX)
         magnitude = np.abs(np.where(usable, residual, np.inf))
         weights = np.where(magnitude <= HUBER_M, 1.0, HUBER_M / np.maximum(magnitude, 1e-12))
-        weights = np.where(usable & (magnitude <= max(GATE_M, 4.0 * HUBER_M) * 2.0), weights, 0.0)
+        weights = np.where(usable & (magnitude <= SEARCH_GATE_M), weights, 0.0)
         r = np.where(weights > 0, residual, 0.0)
         j = np.where(weights[:, np.newaxis] > 0, jacobian, 0.0)
         hessian = j.T @ (weights[:, np.newaxis] * j)
@@ -121,7 +122,7 @@ def match_scan(world: World, prior: Pose, ranges: np.ndarray, angles: np.ndarray
         delta[2] = float(np.clip(delta[2], -0.1, 0.1))
         pose = pose + delta
         pose[2] = math.remainder(float(pose[2]), math.tau)
-        if np.all(np.abs(delta) < np.array([1e-4, 1e-4, 1e-4])):
+        if np.all(np.abs(delta) < 1e-4):  # a tenth of a millimetre, a hundredth of a degree: converged
             break
     cast0 = expected_ranges(world, pose[np.newaxis, :], angles)[0]
     residual = read - cast0
