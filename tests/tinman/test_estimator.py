@@ -139,3 +139,62 @@ def test_with_the_camera_tracking_throughout_the_fused_pose_is_still_the_nearer(
     vo, fused = _fused_and_vo_errors(seed, blind=False)
     assert np.sqrt(np.mean(fused ** 2)) < np.sqrt(np.mean(vo ** 2))
     assert fused.max() < vo.max()
+
+
+def test_a_pose_found_on_the_map_is_counted_apart_and_never_as_the_cameras_refusal() -> None:
+    fused = PoseFilter((0.0, 0.0, 0.0))
+    fused.odometry(0.0, (0.0, 0.0, 0.0))
+    fused.odometry(1.0, (1.0, 0.0, 0.0))
+    tight = np.diag([1e-6, 1e-6, 1e-6])
+    assert fused.locate(1.0, (1.04, 0.01, 0.0), tight)
+    assert 1.0 < fused.pose[0] < 1.04 and fused.located == 1 and fused.updates == 0
+    assert not fused.locate(1.0, (3.0, 2.0, 1.0), tight)  # another place: the gate refuses it
+    assert fused.map_refused == 1 and fused.refused == fused.refused_in_a_row == 0
+
+
+def _patrol_errors(seed: int, on_the_map: bool) -> tuple[float, float]:
+    """The offline whole patrol (mission.py) fused as VisOdom fuses it: the simulator's wheel odometry,
+    a camera odometry whose heading drifts (as VO's does facing plain walls) and, with ``on_the_map``,
+    a scan every 5th wheel reading matched on the known map; the fused pose's final and largest
+    position errors."""
+    from tinman.scan_match import match_scan
+    from tinman.scanner import beam_angles, cast
+
+    rate, camera_every, latency = 50.0, 2, 2
+    trace = simulate_mission(duration=70.0, rate=rate, dock=START[:2])
+    truth, dt = trace.poses, 1.0 / rate
+    wheels = WheelOdometry(START, seed=seed)
+    fused = PoseFilter(START)
+    fused.odometry(0.0, wheels.pose)
+    noise = np.random.default_rng(seed)
+    angles = beam_angles()
+    drift = np.zeros(3)
+    worst = 0.0
+    for i in range(1, len(truth)):
+        step = between(tuple(truth[i - 1]), tuple(truth[i]))
+        wheels.step(math.copysign(math.hypot(step[0], step[1]), step[0]) / dt, step[2] / dt, dt)
+        fused.odometry(i * dt, wheels.pose)
+        worst = max(worst, math.hypot(fused.pose[0] - truth[i][0], fused.pose[1] - truth[i][1]))
+        if on_the_map and i % 5 == 0:
+            found = match_scan(DEFAULT_WORLD, fused.pose, cast(DEFAULT_WORLD, tuple(truth[i]), angles, noise), angles)
+            if found is not None:
+                fused.locate(i * dt, found.pose, found.covariance)
+        if i % camera_every or i < latency:
+            continue
+        moved = math.hypot(step[0], step[1])
+        drift += noise.normal(0.0, [0.002, 0.002, 0.001]) + np.array([0.0, 0.0, 0.02 * moved * camera_every])
+        seen = truth[i - latency] + drift + noise.normal(0.0, [0.02, 0.02, 0.02])
+        c, s = math.cos(drift[2]), math.sin(drift[2])  # a heading off turns the path travelled since the dock
+        offset = truth[i - latency][:2] - np.array(START[:2])
+        seen[:2] = np.array(START[:2]) + np.array([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1]]) \
+            + drift[:2]
+        fused.measure((i - latency) * dt, (float(seen[0]), float(seen[1]), float(seen[2])))
+    return math.hypot(fused.pose[0] - truth[-1][0], fused.pose[1] - truth[-1][1]), worst
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_matched_on_the_map_the_whole_patrols_error_is_bounded_whatever_vo_drifts(seed: int) -> None:
+    final, worst = _patrol_errors(seed, on_the_map=True)
+    assert final < 0.1 and worst < 0.1, (final, worst)
+    _, unbounded = _patrol_errors(seed, on_the_map=False)
+    assert unbounded > 0.1  # what the map bounds: VO's drift, which the wheels alone cannot refuse

@@ -38,7 +38,9 @@ def _write_run(records: Path) -> None:
     for stamp, failed in ((1.0, True), (1.1, False), (3.0, True), (4.0, True), (5.0, False), (6.0, False)):
         recoveries.frame(stamp, failed)
     (records / "VisOdom.json").write_text(json.dumps({"frames_processed": 100, "frames_dropped": 0, "lost_frames": 3,
-                                                      "fused": True, "wheel_readings": 500, **recoveries.record()}))
+                                                      "fused": True, "wheel_readings": 500, "scan_matches": 98,
+                                                      "scan_matches_gated": 1, "scans_unmatched": 1,
+                                                      "scan_match_ms": {"p50": 0.8}, **recoveries.record()}))
     (records / "Move.json").write_text(json.dumps({"period_ms": {"p50": 20.0, "p99": 21.0}, "commands": 500,
                                                    "recovering_commands": 40, "stops_for_lost_tracking": 0}))
     (records / "Gazebo.json").write_text(json.dumps({"trajectory": [[0.0, 1.0, 1.0, 0.0, 0.0, 0.0]],
@@ -57,6 +59,9 @@ def test_the_report_gives_raw_vo_and_fused_ate_and_the_time_to_recover(tmp_path:
     assert data["recovery"] == {"recoveries": 2, "time_to_recover_s": {"p50": 1.05, "max": 2.0},
                                 "lost_at_the_end": False}
     assert data["mission"]["recoveries"] == 2
+    fusion = data["fusion"]  # the scans matched on the map: taken, refused by the filter's gate, by the matcher
+    assert (fusion["scan_matches"], fusion["scan_matches_gated"], fusion["scans_unmatched"]) == (98, 1, 1)
+    assert fusion["scan_match_ms_p50"] == 0.8
     ok, problems = _judge(data, settings)
     assert ok, problems
     text = "\n".join(_lines(data, problems))

@@ -539,7 +539,7 @@ def test_lint_tinman_by_name_prints_its_inversions(
                                        or "can wait on VisOdom" in line for line in unbounded)
     assert "Gazebo (group simulation, no priority (normal scheduling, nice -10), CPUs any)" in analysis
     assert "  chain: Move ?Gazebo(LaserScan) [state 0.2.0] -> Gazebo" in analysis  # never state 0.1.x: control
-    assert analysis.endswith("6 priority inversions (5 unbounded) among 13 waits; "
+    assert analysis.endswith("6 priority inversions (5 unbounded) among 14 waits; "
                              "priority inheritance is turned off in some groups\n")
 
 

@@ -1,4 +1,5 @@
-"""One estimate of the robot's pose: an EKF on ``(x, y, theta)`` fusing wheel and visual odometry.
+"""One estimate of the robot's pose: an EKF on ``(x, y, theta)`` fusing wheel and visual odometry
+and the poses the range scan finds on the known map.
 
 Wheel odometry (:mod:`tinman.wheels`, ``nav_msgs/Odometry``) comes often and never loses
 track, but drifts: each motion it reports is the prediction, the motion between two of
@@ -12,6 +13,10 @@ A late measurement is carried forward to the estimate's time by what the wheels
 measured since its capture (the odometry's own poses are kept for ``HISTORY`` seconds):
 the pose at capture composed with the wheels' motion from then to now. That adds the
 wheels' error over tens of milliseconds, which is far below the camera's.
+
+The range scanner's poses on the known map (:mod:`tinman.scan_match`, AMCL's part on a real
+robot) are measurements of the whole pose too, each with its own covariance (:meth:`PoseFilter.locate`):
+they bound the drift of both odometries, which nothing absolute bounded before.
 
 A measurement further than ``GATE`` (Mahalanobis, chi-square with 3 degrees of freedom
 at 0.999) from the estimate is refused as a false fix. The gate widens as the wheels
@@ -32,13 +37,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["OdometryNoise", "PoseFilter", "compose", "between", "GATE", "MAX_REFUSED", "HISTORY"]
+__all__ = ["OdometryNoise", "PoseFilter", "compose", "between", "GATE", "MAX_REFUSED", "HISTORY",
+           "MAP_SIGMA_FLOOR"]
 
 Pose = tuple[float, float, float]
 
 GATE = 16.27  # chi-square, 3 degrees of freedom, 0.999
 MAX_REFUSED = 15  # measurements refused in a row before the camera is believed (half a second at 30 fps)
 HISTORY = 2.0  # seconds of wheel odometry kept to carry late measurements forward
+# The least sigma of a pose found on the map (metres, metres, radians): the matcher's own covariance
+# takes the beams as independent, which they are not (one wall, one map error), and is far smaller.
+MAP_SIGMA_FLOOR = (0.01, 0.01, 0.01)
 
 
 def compose(a: Pose, b: Pose) -> Pose:
@@ -86,6 +95,7 @@ class PoseFilter:
         predictions, updates, refused: how many odometry motions were applied, VO poses taken,
             VO poses refused by the gate.
         refused_in_a_row: VO poses refused since the last one taken.
+        located, map_refused: poses found on the map (:meth:`locate`) taken, refused by the gate.
     """
 
     def __init__(self, start: Pose, vo_sigma: Pose = (0.03, 0.03, 0.03), noise: OdometryNoise | None = None) -> None:
@@ -95,6 +105,7 @@ class PoseFilter:
         self.noise = noise or OdometryNoise()
         self.measurement_covariance = np.diag(np.square(vo_sigma))
         self.predictions = self.updates = self.refused = 0
+        self.located = self.map_refused = 0
         self.refused_in_a_row = 0
         self._odometry_stamps: list[float] = []
         self._odometry_poses: list[Pose] = []
@@ -145,15 +156,38 @@ class PoseFilter:
 
         Carried forward to the estimate's time by the wheels' motion since ``stamp``; refused
         when it lies beyond ``GATE``."""
+        if not self._update(stamp, pose, self.measurement_covariance):
+            self.refused_in_a_row += 1
+            self.refused += 1
+            return False
+        self.refused_in_a_row = 0
+        self.updates += 1
+        return True
+
+    def locate(self, stamp: float, pose: Pose, covariance: np.ndarray) -> bool:
+        """A pose found on the known map (:mod:`tinman.scan_match`) from a scan taken at ``stamp``,
+        with its ``covariance`` (floored at ``MAP_SIGMA_FLOOR``): whether it was taken.
+
+        An absolute measurement, as the camera's, carried forward and gated the same way; it is
+        counted apart (``located``, ``map_refused``) and never counts towards ``refused_in_a_row``,
+        which is the camera's odometry's business."""
+        floor = np.diag(np.square(MAP_SIGMA_FLOOR))
+        if not self._update(stamp, pose, np.asarray(covariance, dtype=np.float64) + floor):
+            self.map_refused += 1
+            return False
+        self.located += 1
+        return True
+
+    def _update(self, stamp: float, pose: Pose, measurement_covariance: np.ndarray) -> bool:
+        """The Kalman update by a whole-pose measurement (``H = I``) captured at ``stamp``;
+        False, and the estimate untouched, when it lies beyond ``GATE``."""
         now = self._odometry_at(self.stamp) if self.stamp is not None else None
         measured = pose if now is None else compose(pose, between(self._odometry_at(stamp), now))
         innovation = np.array([measured[0] - self.pose[0], measured[1] - self.pose[1],
                                math.remainder(measured[2] - self.pose[2], math.tau)])
-        spread = self.covariance + self.measurement_covariance
+        spread = self.covariance + measurement_covariance
         distance = float(innovation @ np.linalg.solve(spread, innovation))
         if distance > GATE:
-            self.refused_in_a_row += 1
-            self.refused += 1
             return False
         gain = self.covariance @ np.linalg.inv(spread)
         correction = gain @ innovation
@@ -162,9 +196,7 @@ class PoseFilter:
         identity = np.eye(3)
         # Joseph form: stays symmetric and positive definite whatever the rounding.
         self.covariance = ((identity - gain) @ self.covariance @ (identity - gain).T
-                           + gain @ self.measurement_covariance @ gain.T)
-        self.refused_in_a_row = 0
-        self.updates += 1
+                           + gain @ measurement_covariance @ gain.T)
         return True
 
     def _odometry_at(self, stamp: float) -> Pose:

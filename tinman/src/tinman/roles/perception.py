@@ -18,6 +18,7 @@ from ..geometry import FR1, camera_pose, depth_metres, robot_pose
 from ..messages import (
     Header,
     Image,
+    LaserScan,
     Odometry,
     PoseStamped,
     image_array,
@@ -28,14 +29,16 @@ from ..messages import (
 )
 from ..outcome import FUSED_ESTIMATE, VO_ESTIMATE
 from ..records import percentiles, records_folder, save_record
+from ..scan_match import match_scan
 from ..settings import current
 from ..tum import write_trajectory
 from ..vo import VisualOdometry
-from ..world import DEFAULT_WORLD
+from ..world import DEFAULT_WORLD, World
 
-__all__ = ["camera", "visodom", "STALE_FRAMES", "Lateness", "Recoveries", "Fusion"]
+__all__ = ["camera", "visodom", "STALE_FRAMES", "MATCH_EVERY", "Lateness", "Recoveries", "Fusion"]
 
 STALE_FRAMES = 2.0  # a frame later than this many frame periods is dropped, not tracked
+MATCH_EVERY = 5  # scans per match on the map: 10 Hz of the wheels' 50 (a match costs about a millisecond)
 
 cv2.setNumThreads(1)  # one core per role: the group's CPU use stays what its threads are
 
@@ -66,7 +69,9 @@ def visodom(ep: Endpoint) -> None:
 
     The estimator (:mod:`tinman.estimator`) takes every wheel odometry reading (Gazebo's
     ``nav_msgs/Odometry``) as its prediction and every pose the camera's odometry tracks as a
-    measurement; its pose is the one VisOdom publishes, to the Visualizer, Move and the Planner.
+    measurement, and so is the pose a range scan finds on the room's known map (every
+    ``MATCH_EVERY``-th scan, :mod:`tinman.scan_match`), which bounds both odometries' drift; its
+    pose is the one VisOdom publishes, to the Visualizer, Move and the Planner.
     When the camera's odometry loses track the estimate goes on with the wheels alone (the pose
     is then published in the ``odom`` frame: Move drives slower while it is), and the camera's
     odometry relocalises from the estimate: against the keyframe it saw before, else a new one
@@ -78,7 +83,8 @@ def visodom(ep: Endpoint) -> None:
     settings = current()
     start_faults("VisOdom")
     odometry = _odometry(settings.dataset)
-    fusion = Fusion(None if settings.dataset else DEFAULT_WORLD.start)
+    # Fig. 16's single loop brings a scan with every frame, already at the camera's rate: match each.
+    fusion = Fusion(None if settings.dataset else DEFAULT_WORLD.start, match_every=1 if settings.paper else MATCH_EVERY)
     latest = _Latest()
     period = 1.0 / (TumSequence.open(settings.dataset).frame_rate if settings.dataset else settings.camera_rate)
     if not settings.paper:  # the planning loop (the latest pose at the planner's rate) and the wheels' loop
@@ -104,6 +110,7 @@ def visodom(ep: Endpoint) -> None:
             depth: Image = ep.recv("Camera").payload
             if settings.paper:  # Fig. 16's single loop: a wheel odometry reading with every frame
                 fusion.odometry(ep.recv("Gazebo").payload)
+                fusion.scan(ep.recv("Gazebo").payload)
             captured = seconds(color.header.stamp)
             # Late against its capture stamp, not a publish stamp (an Image has none): see Lateness.
             late = lateness(captured, ep.now())  # the endpoint's clock: a replay gives back the run's
@@ -202,11 +209,19 @@ class Fusion:
 
     Args:
         start: the robot's dock, where the estimate starts; None for a recorded camera.
+        match_every: every how many scans one is matched on the room's map.
+        world: the known map (the room the Planner plans on).
     """
 
-    def __init__(self, start: tuple[float, float, float] | None) -> None:
+    def __init__(self, start: tuple[float, float, float] | None, match_every: int = MATCH_EVERY,
+                 world: World = DEFAULT_WORLD) -> None:
         self.filter = PoseFilter(start) if start is not None else None
         self.readings = 0
+        self.scans = 0
+        self.scans_unmatched = 0  # matched, but the matcher refused the result (see tinman.scan_match)
+        self.match_ms: list[float] = []
+        self._match_every = match_every
+        self._world = world
         self.reanchor: np.ndarray | None = None  # where the camera's odometry should be, at the last capture
         self._lock = threading.Lock()
 
@@ -216,6 +231,28 @@ class Fusion:
             self.readings += 1
             if self.filter is not None:
                 self.filter.odometry(seconds(message.header.stamp), odometry_planar(message))
+
+    def scan(self, message: LaserScan) -> None:
+        """A range scan: every ``match_every``-th is matched on the map near the estimate, and the
+        pose found is a measurement of it. The matching runs outside the lock (about a millisecond):
+        the tracking thread may update the estimate meanwhile, which the late measurement allows."""
+        with self._lock:
+            self.scans += 1
+            if self.filter is None or self.filter.stamp is None or self.scans % self._match_every:
+                return
+            stamp = seconds(message.header.stamp)
+            prior = self.filter.pose_at(stamp)
+        ranges = np.asarray(message.ranges, dtype=np.float64)
+        angles = message.angle_min + np.arange(len(ranges)) * message.angle_increment
+        began = time.perf_counter()
+        found = match_scan(self._world, prior, ranges, angles)
+        spent = (time.perf_counter() - began) * 1000.0
+        with self._lock:
+            self.match_ms.append(spent)
+            if found is None:
+                self.scans_unmatched += 1
+            else:
+                self.filter.locate(stamp, found.pose, found.covariance)
 
     def prior(self, captured: float) -> np.ndarray | None:
         """The camera's pose at ``captured`` by the estimate; None before the wheels' first reading."""
@@ -243,7 +280,10 @@ class Fusion:
             f = self.filter
             return {"fused": f is not None, "wheel_readings": self.readings,
                     "fused_updates": f.updates if f is not None else None,
-                    "fused_refused": f.refused if f is not None else None}
+                    "fused_refused": f.refused if f is not None else None,
+                    "scans": self.scans, "scan_matches": f.located if f is not None else None,
+                    "scan_matches_gated": f.map_refused if f is not None else None,
+                    "scans_unmatched": self.scans_unmatched, "scan_match_ms": percentiles(self.match_ms)}
 
 
 def _odometry(dataset: str) -> VisualOdometry:
@@ -321,7 +361,9 @@ def _take_wheels(ep: Endpoint, fusion: Fusion) -> None:
     try:
         while True:
             reading = ep.recv("Gazebo").payload
+            scan = ep.recv("Gazebo").payload  # taken with the reading, at its instant
             ep.now()  # a clock reading before the shared estimator: a replay orders the threads' turns by them
             fusion.odometry(reading)
+            fusion.scan(scan)
     except (PeerFailedError, RoleStopped):  # the simulator is gone, or the run stops: the camera goes on alone
         pass

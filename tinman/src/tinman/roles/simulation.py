@@ -29,6 +29,7 @@ __all__ = ["gazebo", "visualizer", "REDRAW_PERIOD", "SCAN_RATE"]
 REDRAW_PERIOD = 5.0  # seconds between two live pictures
 MAX_BUMP_EVENTS = 1000  # bumps whose place the Gazebo record keeps (the count is kept whole)
 SCAN_RATE = 25.0  # Hz: the range scanner's (a 2-D lidar's 10 to 40 Hz)
+LOCALISATION_STREAM = 2  # the scans to VisOdom draw their noise from a stream of their own (seeded)
 SWITCH_INTERVAL = 0.001  # seconds a thread of Gazebo's process may hold the interpreter while another waits
 
 
@@ -47,7 +48,8 @@ def gazebo(ep: Endpoint) -> None:
     every step the robot truly made, with their errors (:mod:`tinman.wheels`), and Gazebo
     hands VisOdom the pose they give (``nav_msgs/Odometry``, as a diff-drive plugin
     publishes it): in ``TinManParallel`` at the control rate in a thread of its own, in
-    Fig. 16's single loop, one with every frame.
+    Fig. 16's single loop, one with every frame. Each reading goes with a scan taken at the same
+    instant, which VisOdom matches against the room's map (:mod:`tinman.scan_match`).
     """
     settings = current()
     start_faults("Gazebo")
@@ -67,20 +69,21 @@ def gazebo(ep: Endpoint) -> None:
                          daemon=True).start()
         threading.Thread(target=_run_scanner, args=(ep, robot, settings.seed), name="Gazebo-scanner",
                          daemon=True).start()
-        threading.Thread(target=_run_wheels, args=(ep, robot, 1.0 / settings.control_rate), name="Gazebo-wheels",
-                         daemon=True).start()
+        threading.Thread(target=_run_wheels, args=(ep, robot, 1.0 / settings.control_rate, settings.seed),
+                         name="Gazebo-wheels", daemon=True).start()
     period = 1.0 / settings.control_rate
     start = time.monotonic()
     trace: list[list[float]] = []
     bumped: list[list[float]] = []  # [t, x, y] of each refused step, for the map (the first MAX_BUMP_EVENTS)
     angles = beam_angles()
     noise = np.random.default_rng(settings.seed)
+    localisation_noise = np.random.default_rng([settings.seed, LOCALISATION_STREAM])
     try:
         while True:
             if settings.paper and not films[0].shoot(ep, *robot.state()):
                 ep.sleep(math.inf)  # a recording is over: the camera, hence the single loop, stops
             if settings.paper:
-                _wheels(ep, robot)
+                _wheels(ep, robot, angles, localisation_noise, period)
                 _scan(ep, robot, angles, noise, period)
             twist: Twist = ep.recv("Move").payload
             bumps = robot.drive.bumps
@@ -128,6 +131,11 @@ class _Robot:
         """The wheel odometry's pose and measured velocity, read together."""
         with self._lock:
             return self.wheels.pose, self.wheels.velocity
+
+    def sensed(self) -> tuple[tuple[tuple[float, float, float], tuple[float, float]], tuple[float, float, float]]:
+        """The wheel odometry's pose and velocity, and the true pose the scanner reads from, together."""
+        with self._lock:
+            return (self.wheels.pose, self.wheels.velocity), self.drive.pose
 
     def state(self) -> tuple[tuple[float, float, float], tuple[float, float]]:
         """The pose and the velocity ``(v, w)``, read together."""
@@ -234,19 +242,24 @@ def _run_scanner(ep: Endpoint, robot: _Robot, seed: int) -> None:
         pass
 
 
-def _wheels(ep: Endpoint, robot: _Robot) -> None:
-    """The wheel odometry's latest reading, to VisOdom (in the ``odom`` frame, which starts at the dock)."""
-    pose, velocity = robot.odometry()
-    ep.send("VisOdom", "Odometry", odometry_message(Header(stamp=stamp_now(), frame_id="odom"), pose, velocity))
+def _wheels(ep: Endpoint, robot: _Robot, angles: np.ndarray, noise: np.random.Generator, period: float) -> None:
+    """The wheel odometry's latest reading, to VisOdom (in the ``odom`` frame, which starts at the dock),
+    then a scan taken at the same instant, for the localisation on the map (one stamp for both)."""
+    (pose, velocity), truth = robot.sensed()
+    stamp = stamp_now()
+    ep.send("VisOdom", "Odometry", odometry_message(Header(stamp=stamp, frame_id="odom"), pose, velocity))
+    ep.send("VisOdom", "LaserScan", scan_message(cast(DEFAULT_WORLD, truth, angles, noise),
+                                                 Header(stamp=stamp, frame_id="base_scan"), period))
 
 
-def _run_wheels(ep: Endpoint, robot: _Robot, period: float) -> None:
-    """The wheel odometry at the control rate, as a diff-drive plugin publishes it: due times on a
-    fixed grid, a reading that fell behind skipped rather than sent late."""
+def _run_wheels(ep: Endpoint, robot: _Robot, period: float, seed: int) -> None:
+    """The wheel odometry at the control rate, as a diff-drive plugin publishes it, each reading with
+    its scan: due times on a fixed grid, a reading that fell behind skipped rather than sent late."""
+    angles, noise = beam_angles(), np.random.default_rng([seed, LOCALISATION_STREAM])
     due = time.monotonic()
     try:
         while True:
-            _wheels(ep, robot)
+            _wheels(ep, robot, angles, noise, period)
             due += period
             now = time.monotonic()
             if now - due > period:
