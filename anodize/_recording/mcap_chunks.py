@@ -23,13 +23,12 @@ from typing import IO, Any
 
 from sessiontypes.limits import MCAP_CHUNK
 
-from ..errors import AnodizeError
-
 __all__ = ["ChunkTooLargeError", "iter_messages"]
 
 
-class ChunkTooLargeError(AnodizeError):
-    """A chunk larger than the limit, by its declaration or by what it expands to."""
+class ChunkTooLargeError(ValueError):
+    """A chunk larger than the limit, by its declaration or by what it expands to (the reader says
+    it to the user as a ``RecordingError``: this is not one of anodize's public errors)."""
 
 
 def iter_messages(stream: IO[bytes], path: str) -> Iterator[tuple[Any, Any]]:

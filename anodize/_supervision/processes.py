@@ -273,6 +273,13 @@ class ProcessRunner:
             case control.MemoryExceeded():  # the peak is measured here, as for the group's line
                 if not inc.failed and inc.ready and inc.pid is not None:
                     self._measure(inc, time.monotonic())
+                # Our samples (every 0.1 s) may miss a quick allocation on a busy machine, and the
+                # process may be gone by now: the group measured its own growth when it met its bound.
+                reported = error_from_data(message.error)
+                if isinstance(reported, MemoryBoundError) and reported.peak > inc.peak:
+                    inc.peak = reported.peak
+                    self.pending.append(Counts(group=name, incarnation=number, at=time.monotonic(),
+                                               memory=inc.resident, peak=inc.peak))
                 self._fail(inc, MemoryBoundError(name, inc.group.memory or 0, inc.peak))
             case control.Crash():
                 self._fail(inc, error_from_data(message.error))
