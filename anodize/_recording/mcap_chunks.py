@@ -25,6 +25,9 @@ from sessiontypes.limits import MCAP_CHUNK
 
 __all__ = ["ChunkTooLargeError", "iter_messages"]
 
+_RECORD_HEAD = 1 + 8  # a record's opcode and length, before its content
+_RECORD_SLACK = 2**16  # a chunk record's own fields beyond its data (its compression's name, times, sizes)
+
 
 class ChunkTooLargeError(ValueError):
     """A chunk larger than the limit, by its declaration or by what it expands to (the reader says
@@ -49,20 +52,31 @@ def iter_messages(stream: IO[bytes], path: str) -> Iterator[tuple[Any, Any]]:
     # (log time, chunk offset, message's place in it or -1 for a chunk not read yet, tie, item)
     queue: list[tuple[int, int, int, int, Any]] = []
     tie = 0
+    chunks: dict[int, Any] = {}
     for index in summary.chunk_indexes:
-        queue.append((index.message_start_time, index.chunk_start_offset, -1, tie, index))
+        chunks.setdefault(index.chunk_start_offset, index)  # a chunk the index lists twice is read once
+    for offset, index in chunks.items():
+        queue.append((index.message_start_time, offset, -1, tie, index))
         tie += 1
     heapq.heapify(queue)
+    held = 0  # bytes of messages read from chunks and not yet given out
     while queue:
         _, offset, place, _, item = heapq.heappop(queue)
         if place >= 0:
+            held -= len(item[1].data)
             yield item
             continue
         _check_declared(path, offset, item.uncompressed_size, item.compressed_size, limit)
-        stream.seek(offset + 1 + 8, io.SEEK_SET)
-        record = stream.read(item.chunk_length - 1 - 8)  # the chunk record, read no further
+        if not _RECORD_HEAD < item.chunk_length <= limit + _RECORD_SLACK:
+            raise ChunkTooLargeError(f"{_where(path, offset)} has a length of {item.chunk_length} bytes in the "
+                                     f"index, which no chunk within the limit of {limit} bytes has "
+                                     f"({MCAP_CHUNK.variable} raises the limit)")
+        stream.seek(offset + _RECORD_HEAD, io.SEEK_SET)
+        record = stream.read(item.chunk_length - _RECORD_HEAD)  # the chunk record, read no further
         for number, (channel, message) in enumerate(_chunk_messages(record, path, offset, limit,
                                                                     summary.channels)):
+            held += len(message.data)
+            _check_held(path, held, limit)
             heapq.heappush(queue, (message.log_time, offset, number, tie, (channel, message)))
             tie += 1
 
@@ -90,6 +104,7 @@ def _unindexed(stream: IO[bytes], path: str) -> Iterator[tuple[Any, Any]]:
     stream.seek(0, io.SEEK_SET)
     channels: dict[int, Any] = {}
     found: list[tuple[Any, Any]] = []
+    held = 0  # a file without an index is sorted whole: bounded as the chunks' messages held at once are
     for record in StreamReader(stream, skip_magic=False, emit_chunks=True).records:
         inner_records = [record]
         if isinstance(record, Chunk):
@@ -100,8 +115,20 @@ def _unindexed(stream: IO[bytes], path: str) -> Iterator[tuple[Any, Any]]:
                 channels[inner.id] = inner
             elif isinstance(inner, Message):
                 found.append((channels[inner.channel_id], inner))
+                held += len(inner.data)
+                _check_held(path, held, limit)
     found.sort(key=lambda pair: pair[1].log_time)
     return iter(found)
+
+
+def _check_held(path: str, held: int, limit: int) -> None:
+    """Chunks whose times overlap are all open at once to give their messages in log-time order:
+    what they hold together is bounded as one chunk is."""
+    if held > limit:
+        raise ChunkTooLargeError(
+            f"{path}: giving the messages in log-time order would hold more than {limit} bytes of them at "
+            f"once (chunks whose times overlap, or a file without chunk indexes); {MCAP_CHUNK.variable} "
+            "raises the limit")
 
 
 def _where(path: str, offset: int | None) -> str:

@@ -145,3 +145,64 @@ def test_a_groups_part_file_holding_a_chunk_is_not_decompressed_when_the_run_is_
     result = merge_parts(parts, tmp_path / "r.mcap", {"global": "G"})
     assert ("part hostile.mcap holds an MCAP chunk (zstd compressed, 64 bytes declared), which a group's "
             "recorder never writes: the rest of the part was not read") in result.notes, result.notes
+
+
+def _chunks_mcap(path: Path, count: int, payload: int, *, length: int | None = None, listed: int = 1) -> None:
+    """``count`` uncompressed chunks of one ``payload``-byte message each, every chunk starting at
+    log time 1 and its message later (their times overlap); the index gives each chunk's length as
+    ``length`` if given, and lists each chunk ``listed`` times."""
+    from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, Schema
+
+    body = MCAP_MAGIC + _bytes(Header(profile="", library="hostile"))
+    indexes = b""
+    for number in range(count):
+        plain = (_bytes(Channel(id=1, topic="/t", message_encoding="json", metadata={}, schema_id=1))
+                 + _bytes(Message(channel_id=1, sequence=number, log_time=100 + number, publish_time=1,
+                                  data=b"x" * payload)))
+        chunk = _bytes(Chunk(compression="", data=plain, message_start_time=1, message_end_time=100 + number,
+                             uncompressed_crc=0, uncompressed_size=len(plain)))
+        indexes += listed * _bytes(ChunkIndex(
+            message_start_time=1, message_end_time=100 + number, chunk_start_offset=len(body),
+            chunk_length=len(chunk) if length is None else length, message_index_offsets={},
+            message_index_length=0, compression="", compressed_size=len(plain), uncompressed_size=len(plain)))
+        body += chunk
+    body += _bytes(DataEnd(data_section_crc=0))
+    summary = (_bytes(Schema(id=1, name="S", encoding="jsonschema", data=b"{}"))
+               + _bytes(Channel(id=1, topic="/t", message_encoding="json", metadata={}, schema_id=1)) + indexes)
+    footer = _bytes(Footer(summary_start=len(body), summary_offset_start=0, summary_crc=0))
+    path.write_bytes(body + summary + footer + MCAP_MAGIC)
+
+
+def _read_all(path: Path) -> list[object]:
+    from anodize._recording.mcap_chunks import iter_messages
+
+    with path.open("rb") as stream:
+        return list(iter_messages(stream, str(path)))
+
+
+def test_chunks_whose_times_overlap_hold_no_more_messages_at_once_than_one_chunk_may(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every chunk starting at one time must all be open before the first message is given: a
+    file of a few kilobytes could otherwise hold a chunk's limit many times over."""
+    from anodize._recording.mcap_chunks import ChunkTooLargeError
+
+    _chunks_mcap(tmp_path / "r.mcap", count=10, payload=1000)
+    monkeypatch.setenv("ANODIZE_MAX_CHUNK_BYTES", "4000")  # each chunk is within it; the ten are not
+    with pytest.raises(ChunkTooLargeError, match="would hold more than 4000 bytes of them at once"):
+        _read_all(tmp_path / "r.mcap")
+    monkeypatch.setenv("ANODIZE_MAX_CHUNK_BYTES", "20000")
+    assert len(_read_all(tmp_path / "r.mcap")) == 10
+
+
+def test_a_chunk_the_index_lists_twice_is_read_once(tmp_path: Path) -> None:
+    _chunks_mcap(tmp_path / "r.mcap", count=3, payload=10, listed=2)
+    assert len(_read_all(tmp_path / "r.mcap")) == 3
+
+
+@pytest.mark.parametrize("length", [0, 2**62])
+def test_a_chunk_length_in_the_index_that_no_chunk_within_the_limit_has_is_refused(
+        tmp_path: Path, length: int) -> None:
+    _chunks_mcap(tmp_path / "r.mcap", count=1, payload=10, length=length)
+    status, stderr = _verify(tmp_path)
+    assert status == 1
+    assert f"has a length of {length} bytes in the index, which no chunk within the limit" in stderr, stderr

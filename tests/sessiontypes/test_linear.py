@@ -480,7 +480,7 @@ def test_races_remembered_across_globals_are_those_each_global_has_on_its_own(te
 
 
 @given(scribble_files())
-@settings(deadline=None, max_examples=examples(200))
+@settings(deadline=None, max_examples=examples(60))
 def test_each_global_of_a_scribble_file_means_what_it_means_alone(protocols: list[tuple[object, ...]]) -> None:
     """Expansions shared between the globals of one file change none of them."""
     indices = range(len(protocols))

@@ -66,7 +66,8 @@ def test_the_report_gives_raw_vo_and_fused_ate_and_the_time_to_recover(tmp_path:
     assert ok, problems
     text = "\n".join(_lines(data, problems))
     assert "visual odometry: ATE RMSE 0.100 m over 4.00 m (2.50%), 100 frames tracked" in text, text
-    assert "fused pose (wheels and VO, what the robot steers by): ATE RMSE 0.020 m over 4.00 m (0.50%)" in text, text
+    assert ("fused pose (wheels, VO and the map, what the robot steers by): ATE RMSE 0.020 m over 4.00 m (0.50%); "
+            "98 scans matched on the map") in text, text
     assert "robot (steered by the fused pose)" in text, text
     assert ("visual odometry lost track on 3 frames: 2 recoveries, time to recover p50 1.05 s, max 2.00 s; "
             "40 path commands on the wheels alone") in text, text

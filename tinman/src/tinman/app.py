@@ -289,8 +289,12 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
                      f"{data['frames_dropped']} dropped")
     fused = data.get("fused") or {}  # absent from a report written before the fused pose
     if fused.get("ate_rmse_m") is not None:
-        lines.append(f"fused pose (wheels and VO, what the robot steers by): ATE RMSE {fused['ate_rmse_m']:.3f} m "
-                     f"over {fused['trajectory_length_m']:.2f} m ({fused['ate_percent']:.2f}%)")
+        fusion = data.get("fusion") or {}
+        matched = fusion.get("scan_matches")
+        on_the_map = f"; {counted(matched, 'scan')} matched on the map" if isinstance(matched, int) else ""
+        lines.append(f"fused pose (wheels, VO and the map, what the robot steers by): ATE RMSE "
+                     f"{fused['ate_rmse_m']:.3f} m over {fused['trajectory_length_m']:.2f} m "
+                     f"({fused['ate_percent']:.2f}%){on_the_map}")
     period = data["control_period_ms"]
     if period.get("p50") is not None:
         lines.append(f"control loop: period p50 {period['p50']:.1f} ms, p99 {period['p99']:.1f} ms "
