@@ -63,9 +63,10 @@ class Turnstile:
         if not self.active:
             self._pop(key)
             return
-        with self._turn:
+        began = time.monotonic()  # patience counts from the later of this wait's start and the last turn:
+        with self._turn:          # a role that computed for a while before it waits has not lost its turn
             while self.active and not self._stopped and not self._ready(key):
-                if time.monotonic() - self._last_event > PATIENCE:
+                if time.monotonic() - max(self._last_event, began) > PATIENCE:
                     self.out_of_order = self.out_of_order or (
                         f"a thread of {role} ({threading.current_thread().name}) waited {PATIENCE:g} s for its "
                         "recorded turn while no other took one: the role no longer acts as it did in the run, and "

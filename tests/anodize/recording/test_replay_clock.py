@@ -256,3 +256,24 @@ def test_record_inside_needs_record(capsys: pytest.CaptureFixture[str], tmp_path
     path = tmp_path / "run.mcap"
     assert main(["run", str(system), "--record", str(path), "--record-inside", "--quiet"]) == 0
     assert "on 6 channels between and inside groups" in capsys.readouterr().out
+
+
+def test_a_thread_s_patience_counts_from_when_it_starts_to_wait(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A role that computes for longer than the patience before its first wait (or between two
+    turns) has not lost its order: the wait starts counting when it starts."""
+    monkeypatch.setattr(turnstile, "PATIENCE", 0.5)
+    gate = turnstile.Turnstile({"first": [1], "second": [2]}, active=True)
+    gate._last_event -= 60.0  # the last turn was a minute ago: the role computed meanwhile
+    taken: list[bool] = []  # whether the first's turn had come when the second took its own
+
+    def second() -> None:
+        gate.take("second", "A")
+        taken.append(not gate._streams.get("first"))
+
+    waiter = threading.Thread(target=second)
+    waiter.start()
+    time.sleep(0.1)  # the second's thread waits for the first's turn (well within its patience)
+    gate.take("first", "A")
+    waiter.join(timeout=10)
+    assert not waiter.is_alive()
+    assert gate.out_of_order == "" and taken == [True]
