@@ -353,9 +353,15 @@ class Supervisor:
         """Stop every group once the caller's ``stop_when`` gives a reason (asked only while running)."""
         if self.stop_when is None or self.state is not RunState.RUNNING:
             return
-        why = self.stop_when()
+        try:
+            why = self.stop_when()
+        except Exception as error:  # the caller's code: its failure ends neither supervision nor the run
+            self.notes.append(f"stop_when raised {type(error).__name__}: {error}; it is asked no more, and the "
+                              "run goes on to its timeout")
+            self.stop_when = None
+            return
         if why:
-            self._stop_all(why)
+            self._stop_all(str(why))
 
     def _live(self) -> bool:
         return any(not r.ended for r in self.records.values())

@@ -198,3 +198,18 @@ def test_matched_on_the_map_the_whole_patrols_error_is_bounded_whatever_vo_drift
     assert final < 0.1 and worst < 0.1, (final, worst)
     _, unbounded = _patrol_errors(seed, on_the_map=False)
     assert unbounded > 0.1  # what the map bounds: VO's drift, which the wheels alone cannot refuse
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_a_reading_or_a_measurement_that_is_not_a_number_never_poisons_the_estimate(bad: float) -> None:
+    """Wheel odometry and poses may come from the network (an external ROS node playing Gazebo):
+    a NaN compares false with the gate, so it would have been taken."""
+    estimate = PoseFilter((0.0, 0.0, 0.0))
+    estimate.odometry(0.0, (0.0, 0.0, 0.0))
+    estimate.odometry(0.1, (0.1, bad, 0.0))
+    estimate.odometry(bad, (0.2, 0.0, 0.0))
+    assert estimate.measure(0.1, (bad, 0.0, 0.0)) is False
+    assert estimate.locate(0.1, (0.1, 0.0, bad), np.eye(3) * 1e-4) is False
+    assert all(math.isfinite(v) for v in estimate.pose) and np.isfinite(estimate.covariance).all()
+    estimate.odometry(0.2, (0.1, 0.0, 0.0))
+    assert estimate.pose == pytest.approx((0.1, 0.0, 0.0))

@@ -52,3 +52,17 @@ def test_stop_when_without_a_reason_leaves_the_timeout_to_stop_the_run() -> None
     report = _run([], never, timeout=1.2)
     assert "stopping every group: the timeout passed" in report.notes
     assert asked  # it was asked while the run went
+
+
+def test_a_stop_when_that_raises_is_reported_and_asked_no_more_and_the_run_ends_at_its_timeout() -> None:
+    asked: list[int] = []
+
+    def broken() -> str | None:
+        asked.append(1)
+        raise KeyError("mission")
+
+    report = _run([], broken, timeout=1.5)
+    assert "stop_when raised KeyError: 'mission'; it is asked no more, and the run goes on to its timeout" \
+        in report.notes, report.notes
+    assert "stopping every group: the timeout passed" in report.notes
+    assert asked == [1]

@@ -117,6 +117,9 @@ class PoseFilter:
 
         The motion since the last reading moves the estimate; an older stamp than the last
         one's is ignored (readings come in order; a repeated one is no news)."""
+        if not (math.isfinite(stamp) and all(math.isfinite(v) for v in pose)):
+            self.refused += 1  # a reading from the network may say anything: none may poison the estimate
+            return
         if self._odometry_stamps and stamp <= self._odometry_stamps[-1]:
             return
         if self._odometry_poses:
@@ -180,14 +183,16 @@ class PoseFilter:
 
     def _update(self, stamp: float, pose: Pose, measurement_covariance: np.ndarray) -> bool:
         """The Kalman update by a whole-pose measurement (``H = I``) captured at ``stamp``;
-        False, and the estimate untouched, when it lies beyond ``GATE``."""
+        False, and the estimate untouched, when it lies beyond ``GATE`` or is not a number."""
+        if not (math.isfinite(stamp) and all(math.isfinite(v) for v in pose)):
+            return False
         now = self._odometry_at(self.stamp) if self.stamp is not None else None
         measured = pose if now is None else compose(pose, between(self._odometry_at(stamp), now))
         innovation = np.array([measured[0] - self.pose[0], measured[1] - self.pose[1],
                                math.remainder(measured[2] - self.pose[2], math.tau)])
         spread = self.covariance + measurement_covariance
         distance = float(innovation @ np.linalg.solve(spread, innovation))
-        if distance > GATE:
+        if not math.isfinite(distance) or distance > GATE:  # NaN compares False with anything: refuse it
             return False
         gain = self.covariance @ np.linalg.inv(spread)
         correction = gain @ innovation

@@ -106,6 +106,8 @@ def visodom(ep: Endpoint) -> None:
     last: PoseStamped | None = None
     try:
         while True:
+            if fusion.broken is not None:  # the wheels' thread failed: say so as this role's failure
+                raise fusion.broken
             color: Image = ep.recv("Camera").payload  # the protocol's order: colour, then depth
             depth: Image = ep.recv("Camera").payload
             if settings.paper:  # Fig. 16's single loop: a wheel odometry reading with every frame
@@ -223,6 +225,7 @@ class Fusion:
         self._match_every = match_every
         self._world = world
         self.reanchor: np.ndarray | None = None  # where the camera's odometry should be, at the last capture
+        self.broken: Exception | None = None  # what ended the wheels' thread, if not the run's end
         self._lock = threading.Lock()
 
     def odometry(self, message: Odometry) -> None:
@@ -367,3 +370,5 @@ def _take_wheels(ep: Endpoint, fusion: Fusion) -> None:
             fusion.scan(scan)
     except (PeerFailedError, RoleStopped):  # the simulator is gone, or the run stops: the camera goes on alone
         pass
+    except Exception as error:  # a bug, or a reading no estimator takes: the role fails, not this thread alone
+        fusion.broken = error
