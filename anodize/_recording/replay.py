@@ -30,6 +30,7 @@ alone from there.
 from __future__ import annotations
 
 import json
+import math
 import sys
 import threading
 import traceback
@@ -352,7 +353,8 @@ def _reading(message: RecordedMessage, done: int, readings: dict[str, list[tuple
         found = json.loads(codec_for_sort(None).ros.deserialize(bytes(message.data)).data)  # type: ignore[attr-defined]
         branch = found.pop("branch")
         (kind, value), = found.items()
-        if not isinstance(branch, str) or kind not in ("now", "wall") or not isinstance(value, float):
+        if (not isinstance(branch, str) or kind not in ("now", "wall") or not isinstance(value, float)
+                or not math.isfinite(value)):  # JSON may say NaN or Infinity: no clock reads that
             raise ValueError(f"not a reading: {found!r}")
     except (AnodizeError, ValueError, TypeError, KeyError, AttributeError, RecursionError) as error:
         notes.append(f"clock: reading {done + 1} on {message.topic.topic} does not decode ({error}): "

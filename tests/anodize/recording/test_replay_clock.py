@@ -277,3 +277,19 @@ def test_a_thread_s_patience_counts_from_when_it_starts_to_wait(monkeypatch: pyt
     waiter.join(timeout=10)
     assert not waiter.is_alive()
     assert gate.out_of_order == "" and taken == [True]
+
+
+@pytest.mark.parametrize("value", ["NaN", "Infinity", "-Infinity", "1"])
+def test_a_recorded_reading_that_no_clock_reads_is_not_given_back(value: str) -> None:
+    """A recording is untrusted: JSON may say NaN or Infinity (or an integer), which no clock reads."""
+    from anodize._recording.reader import RecordedMessage, RecordedTopic
+    from anodize._recording.encoding import codec_for_sort
+    from anodize._recording.replay import _reading
+
+    codec = codec_for_sort(None)
+    data = codec.ros.serialize(codec.ros.cls(data='{"branch": "", "now": %s}' % value))
+    message = RecordedMessage(RecordedTopic("/anodize/clock/A", "std_msgs/msg/String"), 1, 1, data)
+    readings: dict[str, list[tuple[str, float, int]]] = {}
+    notes: list[str] = []
+    assert _reading(message, 0, readings, notes) == -1
+    assert notes and notes[0].startswith("clock: reading 1 on /anodize/clock/A does not decode (not a reading: ")
