@@ -282,8 +282,8 @@ def test_a_thread_s_patience_counts_from_when_it_starts_to_wait(monkeypatch: pyt
 @pytest.mark.parametrize("value", ["NaN", "Infinity", "-Infinity", "1"])
 def test_a_recorded_reading_that_no_clock_reads_is_not_given_back(value: str) -> None:
     """A recording is untrusted: JSON may say NaN or Infinity (or an integer), which no clock reads."""
-    from anodize._recording.reader import RecordedMessage, RecordedTopic
     from anodize._recording.encoding import codec_for_sort
+    from anodize._recording.reader import RecordedMessage, RecordedTopic
     from anodize._recording.replay import _reading
 
     codec = codec_for_sort(None)
