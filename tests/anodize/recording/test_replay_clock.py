@@ -287,7 +287,7 @@ def test_a_recorded_reading_that_no_clock_reads_is_not_given_back(value: str) ->
     from anodize._recording.replay import _reading
 
     codec = codec_for_sort(None)
-    data = codec.ros.serialize(codec.ros.cls(data='{"branch": "", "now": %s}' % value))
+    data = codec.ros.serialize(codec.ros.cls(data='{"branch": "", "now": ' + value + "}"))
     message = RecordedMessage(RecordedTopic("/anodize/clock/A", "std_msgs/msg/String"), 1, 1, data)
     readings: dict[str, list[tuple[str, float, int]]] = {}
     notes: list[str] = []
