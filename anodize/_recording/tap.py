@@ -397,10 +397,13 @@ class Recorder:
             self.unrecorded[f"{pair[0]}->{pair[1]}"] = [count, behind]
         with contextlib.suppress(Exception):  # best effort: a broken writer fails again (the merge notes it)
             self._writer.add_metadata(f"{META}.side_work", {"writer_priority": self.priority})
-            if self.unrecorded:
-                self._writer.add_metadata(f"{META}.unrecorded", {
-                    key: f"{count} messages not recorded; the first: {reason}"
-                    for key, (count, reason) in self.unrecorded.items()})
+            said = {key: f"{count} messages not recorded; the first: {reason}"
+                    for key, (count, reason) in self.unrecorded.items()}
+            said.update({f"clock of {role}": f"{count} clock readings not recorded (the writer was behind): a "
+                                             f"replay of {role} follows message time from the first"
+                         for role, count in sorted(self.clock_lost.items())})
+            if said:
+                self._writer.add_metadata(f"{META}.unrecorded", said)
             self._writer.finish()  # type: ignore[no-untyped-call]
             self._file.close()
 

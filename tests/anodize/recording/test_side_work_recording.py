@@ -169,3 +169,22 @@ def test_side_work_runs_below_every_group_yet_above_what_is_not_real_time() -> N
         assert (described, policy, rt) == ("SCHED_FIFO 1", os.SCHED_FIFO, 1)
     else:  # the group got a nice value instead: so does its side work, the weakest one
         assert (described, policy, nice) == ("nice 19", os.SCHED_OTHER, 19)
+
+
+def test_clock_readings_the_writer_could_not_take_are_said_in_the_runs_notes(tmp_path: Path) -> None:
+    """A role's clock readings share the writer's backlog with its messages: those it could not take
+    leave the replay on message time from the first, and the run's notes say so."""
+    global_type = load_global(TEXTS, "Texts")
+    machines = machines_of(global_type)
+    plan = record_plan(str(tmp_path / "parts"), machines, {"Talker": "t", "Listener": "l"}, {})
+    recorder = recording_tap.Recorder(plan, "t", 0, "Texts", {"Talker": machines["Talker"]}, memory=8 * 2**20)
+    recorder.reading("Talker", "", "now", 1.0)
+    recorder._pending_bytes = recorder.backlog  # the backlog is full (images, say): no room for a reading
+    for _ in range(3):
+        recorder.reading("Talker", "", "now", 2.0)
+    recorder._pending_bytes = 0
+    recorder.close(within=5.0)
+    assert recorder.clock_lost == {"Talker": 3}
+    result = merge_parts(tmp_path / "parts", tmp_path / "r.mcap", {"global": "Texts"})
+    assert ("clock of Talker: 3 clock readings not recorded (the writer was behind): a replay of Talker follows "
+            "message time from the first") in result.notes, result.notes
