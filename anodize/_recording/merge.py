@@ -110,7 +110,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
         if ran_at:
             result.notes.append("the groups' writers ran at " + "; ".join(
                 f"{priority} ({', '.join(parts)})" for priority, parts in sorted(ran_at.items())))
-        if result.messages == 0:
+        if result.messages + result.readings == 0:  # nothing was written: no time span
             start = end = 0
         bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings)
         writer.add_metadata("rosbag2", {"serialized_metadata": _yaml(bag)})
