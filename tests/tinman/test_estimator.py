@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from tinman.estimator import GATE, MAX_REFUSED, PoseFilter, between, compose
+from tinman.estimator import GATE, MAP_RELOCATE, MAX_REFUSED, PoseFilter, between, compose
 from tinman.mission import simulate_mission
 from tinman.wheels import WheelNoise, WheelOdometry
 from tinman.world import DEFAULT_WORLD
@@ -213,3 +213,20 @@ def test_a_reading_or_a_measurement_that_is_not_a_number_never_poisons_the_estim
     assert all(math.isfinite(v) for v in estimate.pose) and np.isfinite(estimate.covariance).all()
     estimate.odometry(0.2, (0.1, 0.0, 0.0))
     assert estimate.pose == pytest.approx((0.1, 0.0, 0.0))
+
+
+def test_an_estimate_the_map_keeps_refusing_is_relocalised_on_the_map() -> None:
+    """The camera's poses, each within the gate, can pull the estimate away from where the robot
+    is; the map, whose matches then fall outside the gate, would be refused for good. Refused
+    ``MAP_RELOCATE`` times in a row, the map's pose is taken as the estimate."""
+    estimate = PoseFilter((0.0, 0.0, 0.0))
+    estimate.odometry(0.0, (0.0, 0.0, 0.0))
+    estimate.odometry(1.8, (0.0, 0.0, 0.0))
+    estimate.pose = (0.0, 0.4, 0.0)  # where poses astray took it, sure of itself
+    estimate.covariance = np.diag([1e-4, 1e-4, 1e-4])
+    tight = np.eye(3) * 1e-4
+    taken = [estimate.locate(1.8, (0.0, 0.0, 0.0), tight) for _ in range(MAP_RELOCATE)]
+    assert taken == [False] * (MAP_RELOCATE - 1) + [True]
+    assert estimate.relocated == 1 and estimate.map_refused == MAP_RELOCATE - 1
+    assert estimate.pose == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+    assert estimate.locate(1.8, (0.005, 0.0, 0.0), tight)  # from there, the map is taken as it comes

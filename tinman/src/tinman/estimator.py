@@ -38,11 +38,12 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["OdometryNoise", "PoseFilter", "compose", "between", "GATE", "MAX_REFUSED", "HISTORY",
-           "MAP_SIGMA_FLOOR"]
+           "MAP_SIGMA_FLOOR", "MAP_RELOCATE"]
 
 Pose = tuple[float, float, float]
 
 GATE = 16.27  # chi-square, 3 degrees of freedom, 0.999
+MAP_RELOCATE = 5  # map matches refused in a row (half a second of scans) before the map sets the estimate
 MAX_REFUSED = 15  # measurements refused in a row before the camera is believed (half a second at 30 fps)
 HISTORY = 2.0  # seconds of wheel odometry kept to carry late measurements forward
 # The least sigma of a pose found on the map (metres, metres, radians): the matcher's own covariance
@@ -106,6 +107,8 @@ class PoseFilter:
         self.measurement_covariance = np.diag(np.square(vo_sigma))
         self.predictions = self.updates = self.refused = 0
         self.located = self.map_refused = 0
+        self.map_refused_in_a_row = 0
+        self.relocated = 0  # times the map, refused MAP_RELOCATE times in a row, set the estimate
         self.refused_in_a_row = 0
         self._odometry_stamps: list[float] = []
         self._odometry_poses: list[Pose] = []
@@ -175,19 +178,40 @@ class PoseFilter:
         counted apart (``located``, ``map_refused``) and never counts towards ``refused_in_a_row``,
         which is the camera's odometry's business."""
         floor = np.diag(np.square(MAP_SIGMA_FLOOR))
-        if not self._update(stamp, pose, np.asarray(covariance, dtype=np.float64) + floor):
+        measurement_covariance = np.asarray(covariance, dtype=np.float64) + floor
+        if self._update(stamp, pose, measurement_covariance):
+            self.located += 1
+            self.map_refused_in_a_row = 0
+            return True
+        self.map_refused_in_a_row += 1
+        # The map has disagreed, match after match, with an estimate that the camera's poses kept
+        # pulling away (each within the gate, all of them astray): the estimate went wrong, not the
+        # room. Relocalise on the map: its pose, with its uncertainty, from here on.
+        carried = self._carried(stamp, pose)
+        if (self.map_refused_in_a_row < MAP_RELOCATE or carried is None
+                or not np.isfinite(measurement_covariance).all()):
             self.map_refused += 1
             return False
-        self.located += 1
+        self.pose = carried
+        self.covariance = measurement_covariance
+        self.map_refused_in_a_row = 0
+        self.relocated += 1
         return True
+
+    def _carried(self, stamp: float, pose: Pose) -> Pose | None:
+        """``pose``, measured at ``stamp``, carried forward to the estimate's time by the wheels'
+        motion since; None when it is not a number."""
+        if not (math.isfinite(stamp) and all(math.isfinite(v) for v in pose)):
+            return None
+        now = self._odometry_at(self.stamp) if self.stamp is not None else None
+        return pose if now is None else compose(pose, between(self._odometry_at(stamp), now))
 
     def _update(self, stamp: float, pose: Pose, measurement_covariance: np.ndarray) -> bool:
         """The Kalman update by a whole-pose measurement (``H = I``) captured at ``stamp``;
         False, and the estimate untouched, when it lies beyond ``GATE`` or is not a number."""
-        if not (math.isfinite(stamp) and all(math.isfinite(v) for v in pose)):
+        measured = self._carried(stamp, pose)
+        if measured is None:
             return False
-        now = self._odometry_at(self.stamp) if self.stamp is not None else None
-        measured = pose if now is None else compose(pose, between(self._odometry_at(stamp), now))
         innovation = np.array([measured[0] - self.pose[0], measured[1] - self.pose[1],
                                math.remainder(measured[2] - self.pose[2], math.tau)])
         spread = self.covariance + measurement_covariance

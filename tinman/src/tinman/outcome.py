@@ -98,7 +98,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "fusion": {"fused": vo.get("fused"), "wheel_readings": vo.get("wheel_readings"),
                    "updates": vo.get("fused_updates"), "refused": vo.get("fused_refused"),
                    "scan_matches": vo.get("scan_matches"), "scan_matches_gated": vo.get("scan_matches_gated"),
-                   "scans_unmatched": vo.get("scans_unmatched"),
+                   "scans_unmatched": vo.get("scans_unmatched"), "relocated_on_the_map": vo.get("relocated_on_the_map"),
                    "scan_match_ms_p50": (vo.get("scan_match_ms") or {}).get("p50")},
         "robot": {"distance_m": _round(gazebo.get("odometer_m")), "bumps": gazebo.get("bumps"),
                   "waypoints_reached": len(mission["waypoints_reached"])},

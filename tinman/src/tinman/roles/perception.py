@@ -286,6 +286,7 @@ class Fusion:
                     "fused_refused": f.refused if f is not None else None,
                     "scans": self.scans, "scan_matches": f.located if f is not None else None,
                     "scan_matches_gated": f.map_refused if f is not None else None,
+                    "relocated_on_the_map": f.relocated if f is not None else None,
                     "scans_unmatched": self.scans_unmatched, "scan_match_ms": percentiles(self.match_ms)}
 
 
