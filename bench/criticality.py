@@ -48,7 +48,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -56,7 +56,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import criticality_roles  # noqa: E402
-from runs import LoadWatch, bench_env, print_table, source_state, write_results  # noqa: E402
+from runs import LoadWatch, bench_env, hogs, print_table, source_state, write_results  # noqa: E402
 
 ROOT = HERE.parent
 SCENARIOS = ("quiet", "hogs", "storm", "foxglove", "record")
@@ -65,18 +65,6 @@ VERDICT = re.compile(r"heartbeat|unresponsive|frozen", re.IGNORECASE)
 
 
 # ---- the loads --------------------------------------------------------------------------------
-@contextlib.contextmanager
-def hogs(count: int = 2) -> Iterator[None]:
-    """``count`` processes spinning at normal priority while the block runs."""
-    spinning = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
-    try:
-        yield
-    finally:
-        for process in spinning:
-            process.kill()
-            process.wait(timeout=10)
-
-
 class FoxgloveClient:
     """A WebSocket client subscribed to every channel the server advertises, reading all it gets."""
 

@@ -24,27 +24,18 @@ import statistics
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["LOADS", "hogs", "run_patrol", "summarise", "table"]
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # beside runs.py, however it is loaded
+from runs import hogs
+
+__all__ = ["LOADS", "run_patrol", "summarise", "table"]
 
 REPO = Path(__file__).resolve().parents[1]
 LOADS = ("quiet", "hogs")
 LOAD_NAMES = {"quiet": "quiet", "hogs": "two CPU hogs (nice 0)"}
-
-@contextlib.contextmanager
-def hogs(count: int = 2) -> Iterator[None]:
-    """``count`` processes spinning at normal priority while the block runs, killed after."""
-    spinning = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
-    try:
-        yield
-    finally:
-        for process in spinning:
-            process.kill()
-            process.wait(timeout=10)
-
 
 def _dig(report: dict[str, Any], keys: Sequence[str]) -> Any:
     value: Any = report

@@ -8,6 +8,7 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator
@@ -15,7 +16,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-__all__ = ["BUSY_PER_CPU", "LoadWatch", "bench_env", "print_table", "source_state", "write_results"]
+__all__ = ["BUSY_PER_CPU", "LoadWatch", "bench_env", "hogs", "print_table", "source_state", "write_results"]
 
 
 @contextmanager
@@ -36,6 +37,18 @@ def bench_env(variable: str, **settings: Any) -> Iterator[tuple[str, Callable[[s
     finally:
         os.environ.pop(variable, None)
         shutil.rmtree(out, ignore_errors=True)
+
+
+@contextmanager
+def hogs(count: int = 2) -> Iterator[None]:
+    """``count`` processes spinning at normal priority (nice 0) while the block runs, killed after."""
+    spinning = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
+    try:
+        yield
+    finally:
+        for process in spinning:
+            process.kill()
+            process.wait(timeout=10)
 
 
 def print_table(rows: list[list[str]], text_columns: tuple[int, ...]) -> None:
