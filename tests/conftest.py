@@ -6,6 +6,9 @@
   a database, so every CI run tries the same examples and a green run stays green.
 - ``thorough``: ten times the examples of every property test, for a hunting campaign:
   ``pytest --hypothesis-profile=thorough tests``.
+- ``rerun``: a quarter of the examples, derandomized: the suite's second pass over the
+  endpoint tests on the pure-Python core (a differential check; the first pass, on the
+  compiled core, tried the full count).
 
 Property tests scale their own example counts with :func:`budget.examples`, so the
 profile's multiplier reaches tests that set ``max_examples`` explicitly.
@@ -21,4 +24,5 @@ settings.register_profile("dev", deadline=None)
 settings.register_profile("ci", deadline=None, derandomize=True, database=None, print_blob=True)
 settings.register_profile("thorough", deadline=None, max_examples=1000,
                           suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("rerun", deadline=None, max_examples=25, derandomize=True, database=None)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")  # --hypothesis-profile overrides

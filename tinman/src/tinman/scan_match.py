@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scanner import RANGE_MAX, RANGE_MIN
+from .scanner import RANGE_MAX, RANGE_MIN, ray_ranges
 from .world import World
 
 __all__ = ["Match", "expected_ranges", "match_scan", "BEAM_SIGMA", "GATE_M", "MAX_RMS", "MIN_INFORMATION",
@@ -69,21 +69,7 @@ def expected_ranges(world: World, poses: np.ndarray, angles: np.ndarray) -> np.n
     """The ranges a noiseless scanner reads from each of ``poses`` (``k x 3``): ``k x beams``, not
     clipped to the scanner's range (the matcher decides what a beam beyond it means)."""
     poses = np.atleast_2d(np.asarray(poses, dtype=np.float64))
-    x, y = poses[:, 0:1], poses[:, 1:2]
-    heading = poses[:, 2:3] + angles[np.newaxis, :]
-    dx, dy = np.cos(heading), np.sin(heading)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        to_x = np.where(dx > 0, (world.width - x) / dx, np.where(dx < 0, -x / dx, np.inf))
-        to_y = np.where(dy > 0, (world.depth - y) / dy, np.where(dy < 0, -y / dy, np.inf))
-        ranges = np.minimum(to_x, to_y)
-        for box in world.boxes:  # the slab method, as scanner.cast
-            tx0, tx1 = (box.x0 - x) / dx, (box.x1 - x) / dx
-            ty0, ty1 = (box.y0 - y) / dy, (box.y1 - y) / dy
-            near = np.maximum(np.minimum(tx0, tx1), np.minimum(ty0, ty1))
-            far = np.minimum(np.maximum(tx0, tx1), np.maximum(ty0, ty1))
-            hit = (near <= far) & (far > 0)
-            ranges = np.where(hit, np.minimum(ranges, np.maximum(near, 0.0)), ranges)
-    return ranges
+    return ray_ranges(world, poses[:, 0:1], poses[:, 1:2], poses[:, 2:3] + angles[np.newaxis, :])
 
 
 def match_scan(world: World, prior: Pose, ranges: np.ndarray, angles: np.ndarray) -> Match | None:

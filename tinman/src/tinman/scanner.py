@@ -20,7 +20,8 @@ import numpy as np
 from .messages import Header, LaserScan
 from .world import World
 
-__all__ = ["BEAMS", "RANGE_MIN", "RANGE_MAX", "NOISE", "beam_angles", "cast", "scan_message", "scan_points"]
+__all__ = ["BEAMS", "RANGE_MIN", "RANGE_MAX", "NOISE", "beam_angles", "cast", "ray_ranges", "scan_message",
+           "scan_points"]
 
 BEAMS = 36          # one every 10 degrees: at 0.5 m two beams are 9 cm apart, half the robot's radius
 RANGE_MIN = 0.12    # metres: the TurtleBot LDS's (nearer than the robot's own radius: never read)
@@ -48,7 +49,17 @@ def cast(world: World, pose: tuple[float, float, float], angles: np.ndarray,
         float32 ranges; ``+inf`` where nothing lies within ``RANGE_MAX``.
     """
     x, y, theta = pose
-    heading = theta + angles
+    ranges = ray_ranges(world, x, y, theta + angles)
+    if rng is not None:
+        ranges = ranges + rng.normal(0.0, NOISE, ranges.shape)
+    ranges = np.where(ranges > RANGE_MAX, np.inf, np.maximum(ranges, RANGE_MIN))
+    return ranges.astype(np.float32)
+
+
+def ray_ranges(world: World, x: float | np.ndarray, y: float | np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """How far each ray from ``(x, y)`` along ``heading`` (radians, in the map) travels before it
+    meets a wall or a box of ``world``; the arguments broadcast together (several poses at once),
+    and nothing is clipped to the scanner's range."""
     dx, dy = np.cos(heading), np.sin(heading)
     with np.errstate(divide="ignore", invalid="ignore"):
         # The room's walls, seen from inside: each beam leaves through one of them.
@@ -62,10 +73,7 @@ def cast(world: World, pose: tuple[float, float, float], angles: np.ndarray,
             far = np.minimum(np.maximum(tx0, tx1), np.maximum(ty0, ty1))
             hit = (near <= far) & (far > 0)
             ranges = np.where(hit, np.minimum(ranges, np.maximum(near, 0.0)), ranges)
-    if rng is not None:
-        ranges = ranges + rng.normal(0.0, NOISE, ranges.shape)
-    ranges = np.where(ranges > RANGE_MAX, np.inf, np.maximum(ranges, RANGE_MIN))
-    return ranges.astype(np.float32)
+    return np.asarray(ranges, dtype=np.float64)
 
 
 def scan_message(ranges: np.ndarray, header: Header, scan_time: float) -> LaserScan:

@@ -6,6 +6,7 @@ import math
 import sys
 import threading
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -226,20 +227,9 @@ def _scan(ep: Endpoint, robot: _Robot, angles: np.ndarray, noise: np.random.Gene
 
 
 def _run_scanner(ep: Endpoint, robot: _Robot, seed: int) -> None:
-    """The range scanner at ``SCAN_RATE``, as a lidar's driver publishes: due times on a fixed
-    grid, and a scan that fell behind is skipped rather than sent late."""
+    """The range scanner at ``SCAN_RATE``, as a lidar's driver publishes (to Move)."""
     angles, noise, period = beam_angles(), np.random.default_rng(seed), 1.0 / SCAN_RATE
-    due = time.monotonic()
-    try:
-        while True:
-            _scan(ep, robot, angles, noise, period)
-            due += period
-            now = time.monotonic()
-            if now - due > period:  # behind by more than a scan: start again from now
-                due = now
-            ep.sleep(due - now)
-    except (RoleStopped, PeerFailedError):  # the run stops, or Move is gone
-        pass
+    _at_a_fixed_rate(ep, period, lambda: _scan(ep, robot, angles, noise, period))  # ends when Move is gone
 
 
 def _wheels(ep: Endpoint, robot: _Robot, angles: np.ndarray, noise: np.random.Generator, period: float) -> None:
@@ -254,18 +244,24 @@ def _wheels(ep: Endpoint, robot: _Robot, angles: np.ndarray, noise: np.random.Ge
 
 def _run_wheels(ep: Endpoint, robot: _Robot, period: float, seed: int) -> None:
     """The wheel odometry at the control rate, as a diff-drive plugin publishes it, each reading with
-    its scan: due times on a fixed grid, a reading that fell behind skipped rather than sent late."""
+    its scan (to VisOdom)."""
     angles, noise = beam_angles(), np.random.default_rng([seed, LOCALISATION_STREAM])
+    _at_a_fixed_rate(ep, period, lambda: _wheels(ep, robot, angles, noise, period))  # ends when VisOdom is gone
+
+
+def _at_a_fixed_rate(ep: Endpoint, period: float, step: Callable[[], None]) -> None:
+    """``step`` every ``period`` seconds until the run stops or the peer it sends to is gone: due times
+    on a fixed grid, and a step that fell behind by more than a period is skipped, not made late."""
     due = time.monotonic()
     try:
         while True:
-            _wheels(ep, robot, angles, noise, period)
+            step()
             due += period
             now = time.monotonic()
-            if now - due > period:
+            if now - due > period:  # behind by more than a step: start again from now
                 due = now
             ep.sleep(due - now)
-    except (RoleStopped, PeerFailedError):  # the run stops, or perception is gone
+    except (RoleStopped, PeerFailedError):
         pass
 
 
