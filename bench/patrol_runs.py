@@ -28,7 +28,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # beside runs.py, however it is loaded
+# Beside runs.py, however this is loaded; appended, not put first, as bench/tinman.py does: that
+# script must not hide the tinman package from whatever imports it later in this interpreter.
+if str(Path(__file__).resolve().parent) not in sys.path:
+    sys.path.append(str(Path(__file__).resolve().parent))
 from runs import hogs
 
 __all__ = ["LOADS", "run_patrol", "summarise", "table"]
