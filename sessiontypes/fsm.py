@@ -15,6 +15,7 @@ from typing import Any, Literal
 
 from . import dot
 from . import local_types as lt
+from .constraints import Expr, Timing
 from .deep import run_deep
 from .local_types import describe_local
 from .location import Location
@@ -37,6 +38,8 @@ class Transition:
     sort: Sort | None
     target: int
     location: Location = field(compare=False)
+    timing: Timing | None = None  # the interaction's time constraints (sessiontypes.constraints)
+    refinement: Expr | None = None  # the payload's predicate: the message's and its fields', joined by ``and``
 
     def __str__(self) -> str:
         """The action in local-type notation: ``!Peer(msg)``, or ``!Sort`` in binary form."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from .constraints import Timing
 from .location import NOWHERE, Location
 from .sorts import Interaction
 
@@ -39,6 +40,7 @@ class Choice:
     branches: tuple[Branch, ...]
     location: Location = field(default=NOWHERE, compare=False, repr=False)
     receiver_location: Location = field(default=NOWHERE, compare=False, repr=False)
+    timing: Timing | None = None  # ``within``/``every`` written on the interaction (all its branches)
 
 
 @dataclass(frozen=True, slots=True)

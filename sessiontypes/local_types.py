@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from .constraints import Timing
 from .location import NOWHERE, Location
 from .printing import Printer, PrintTooLongError, run_print
 from .sorts import Interaction, print_message
@@ -64,6 +65,7 @@ class Send(_Printable):
     message: Interaction
     continuation: LocalTerm
     location: Location = field(default=NOWHERE, compare=False)
+    timing: Timing | None = None  # the global interaction's, if this role owns any of it
 
     def __repr__(self) -> str:
         return f"Send({str(self)!r})"
@@ -77,6 +79,7 @@ class Recv(_Printable):
     message: Interaction
     continuation: LocalTerm
     location: Location = field(default=NOWHERE, compare=False)
+    timing: Timing | None = None  # the global interaction's, if this role owns any of it
 
     def __repr__(self) -> str:
         return f"Recv({str(self)!r})"
@@ -89,6 +92,7 @@ class Select(_Printable):
     peer: str | None
     branches: tuple[Branch, ...]
     location: Location = field(default=NOWHERE, compare=False)
+    timing: Timing | None = None  # the global interaction's, if this role owns any of it
 
     def __repr__(self) -> str:
         return f"Select({str(self)!r})"
@@ -101,6 +105,7 @@ class Offer(_Printable):
     peer: str | None
     branches: tuple[Branch, ...]
     location: Location = field(default=NOWHERE, compare=False)
+    timing: Timing | None = None  # the global interaction's, if this role owns any of it
 
     def __repr__(self) -> str:
         return f"Offer({str(self)!r})"

@@ -9,6 +9,10 @@ field's sort.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .constraints import Expr
 
 __all__ = ["BUILTIN_SORTS", "Sort", "Field", "Interaction", "builtin_sort", "record_sort", "print_message"]
 
@@ -68,6 +72,7 @@ class Field:
 
     name: str
     sort: Sort
+    refinement: Expr | None = None  # ``price: int{price > 0}``: the predicate written on the field
 
 
 def builtin_sort(spelling: str) -> Sort:
@@ -97,6 +102,7 @@ class Interaction:
     label: str
     sort: Sort | None = None
     empty_parens: bool = field(default=False, compare=False)
+    refinement: Expr | None = None  # ``Twist{abs(linear.x) <= 1.5}``: the predicate written on the payload
 
 
 def print_message(message: Interaction) -> str:
