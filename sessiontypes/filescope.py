@@ -71,12 +71,16 @@ class SortTable:
         """Apply the abbreviation rule: a bare sort name labels a value of that sort."""
         if syntax.fields is not None:
             return Interaction(syntax.label.text, self.record(syntax.label, syntax.fields))
+        refinement = syntax.refinement
         if syntax.parens:
             if syntax.sort is None:
                 return Interaction(syntax.label.text, None, self.is_sort(syntax.label.text))
-            return Interaction(syntax.label.text, self.sort(syntax.sort))
+            return Interaction(syntax.label.text, self.sort(syntax.sort), refinement=refinement)
         if self.is_sort(syntax.label.text):
-            return Interaction(syntax.label.text, self.sort(syntax.label))
+            return Interaction(syntax.label.text, self.sort(syntax.label), refinement=refinement)
+        if refinement is not None:
+            self.reporter.error(refinement.location, f"a refinement constrains a payload, and label "
+                                f"'{syntax.label.text}' carries none (it names no sort)")
         return Interaction(syntax.label.text)
 
     def record(self, label: s.Name, fields: tuple[s.FieldSyntax, ...]) -> Sort | None:
@@ -90,7 +94,7 @@ class SortTable:
             seen.add(f.name.text)
             sort = self.sort(f.sort)
             if sort is not None:
-                resolved.append(Field(f.name.text, sort))
+                resolved.append(Field(f.name.text, sort, f.refinement))
         if len(resolved) < len(fields) or len(seen) < len(fields):
             return None  # already reported
         return record_sort(tuple(resolved))

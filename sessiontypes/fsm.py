@@ -19,10 +19,11 @@ from .constraints import Expr, Timing
 from .deep import run_deep
 from .local_types import describe_local
 from .location import Location
+from .refine import conjunction, print_expr
 from .sorts import Interaction, Sort, print_message
 from .work import METER
 
-__all__ = ["Action", "Transition", "StateMachine", "LazyStateMachine", "build_term_machine"]
+__all__ = ["Action", "Transition", "StateMachine", "LazyStateMachine", "build_term_machine", "predicate_of"]
 
 Action = Literal["send", "recv"]
 Key = tuple[Action, "str | None", str]
@@ -139,7 +140,10 @@ class StateMachine:
                     "transitions": [
                         {"action": t.action, "peer": t.peer, "label": t.label,
                          "sort": t.sort.spelling if t.sort else None, "target": t.target,
-                         "location": str(t.location)}
+                         "location": str(t.location),
+                         # only where written, so that unconstrained machines export as before
+                         **({"timing": str(t.timing)} if t.timing is not None else {}),
+                         **({"refinement": print_expr(t.refinement)} if t.refinement is not None else {})}
                         for t in self.expected(state)
                     ],
                     **({"fork": [m.to_dict() for m in self.forks[state]]} if state in self.forks else {}),
@@ -294,25 +298,35 @@ class _Builder:
 
     def fill(self, term: lt.LocalTerm, env: dict[str, int], state: int) -> None:
         match term:
-            case lt.Send(peer=peer, message=message, continuation=cont, location=location):
-                self.add(state, "send", peer, message.label, message.sort, self.state_of(cont, env), location)
-            case lt.Recv(peer=peer, message=message, continuation=cont, location=location):
-                self.add(state, "recv", peer, message.label, message.sort, self.state_of(cont, env), location)
+            case lt.Send(continuation=cont) | lt.Recv(continuation=cont):
+                action: Action = "send" if isinstance(term, lt.Send) else "recv"
+                self.add(state, action, term.peer, term.message, self.state_of(cont, env), term.location,
+                         term.timing)
             case lt.Select(peer=peer, branches=branches) | lt.Offer(peer=peer, branches=branches):
-                action: Action = "send" if isinstance(term, lt.Select) else "recv"
+                action = "send" if isinstance(term, lt.Select) else "recv"
                 for b in branches:
-                    self.add(state, action, peer, b.message.label, b.message.sort,
-                             self.state_of(b.continuation, env), b.location)
+                    self.add(state, action, peer, b.message, self.state_of(b.continuation, env), b.location,
+                             term.timing)
             case lt.SelectAmong(branches=actions) | lt.OfferAmong(branches=actions):
                 kind: Action = "send" if isinstance(term, lt.SelectAmong) else "recv"
                 for a in actions:
-                    self.add(state, kind, a.peer, a.message.label, a.message.sort,
-                             self.state_of(a.continuation, env), a.location)
+                    self.add(state, kind, a.peer, a.message, self.state_of(a.continuation, env), a.location,
+                             a.timing)
             case lt.Parallel(branches=parts):
                 self.forks[state] = tuple([_Builder(self.role, self.protocol).build(p) for p in parts])
             case _:
                 raise AssertionError(f"unexpected local term {term!r}")
 
-    def add(self, state: int, action: Action, peer: str | None, label: str, sort: Sort | None,
-            target: int, location: Location) -> None:
-        self.table[state][(action, peer, label)] = Transition(action, peer, label, sort, target, location)
+    def add(self, state: int, action: Action, peer: str | None, message: Interaction,
+            target: int, location: Location, timing: Timing | None) -> None:
+        self.table[state][(action, peer, message.label)] = Transition(
+            action, peer, message.label, message.sort, target, location, timing, predicate_of(message))
+
+
+def predicate_of(message: Interaction) -> Expr | None:
+    """The predicate a payload of ``message`` must satisfy: its own refinement and its
+    fields', joined by ``and`` in that order (None if there is none)."""
+    parts: list[Expr] = [] if message.refinement is None else [message.refinement]
+    if message.sort is not None and message.sort.fields is not None:
+        parts.extend([f.refinement for f in message.sort.fields if f.refinement is not None])
+    return conjunction(parts)

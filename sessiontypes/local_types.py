@@ -29,7 +29,7 @@ from .sorts import Interaction, print_message
 
 __all__ = [
     "Branch", "Send", "Recv", "Select", "Offer", "SelectAmong", "OfferAmong", "Rec", "Var", "End",
-    "Parallel", "LocalTerm", "select", "offer", "select_among", "offer_among", "sends_of", "receives_of",
+    "Parallel", "LocalTerm", "select", "offer", "select_among", "offer_among", "one_timing", "sends_of", "receives_of",
     "print_local", "describe_local",
 ]
 
@@ -186,36 +186,50 @@ class Parallel(_Printable):
 LocalTerm = Send | Recv | Select | Offer | SelectAmong | OfferAmong | Rec | Var | End | Parallel
 
 
-def select(peer: str | None, branches: tuple[Branch, ...], location: Location = NOWHERE) -> LocalTerm:
+def select(peer: str | None, branches: tuple[Branch, ...], location: Location = NOWHERE,
+           timing: Timing | None = None) -> LocalTerm:
     """Build an internal choice; one branch gives a :class:`Send`."""
     if len(branches) == 1:
         only = branches[0]
-        return Send(peer, only.message, only.continuation, only.location)
-    return Select(peer, branches, location)
+        return Send(peer, only.message, only.continuation, only.location, timing)
+    return Select(peer, branches, location, timing)
 
 
-def offer(peer: str | None, branches: tuple[Branch, ...], location: Location = NOWHERE) -> LocalTerm:
+def offer(peer: str | None, branches: tuple[Branch, ...], location: Location = NOWHERE,
+          timing: Timing | None = None) -> LocalTerm:
     """Build an external choice; one branch gives a :class:`Recv`."""
     if len(branches) == 1:
         only = branches[0]
-        return Recv(peer, only.message, only.continuation, only.location)
-    return Offer(peer, branches, location)
+        return Recv(peer, only.message, only.continuation, only.location, timing)
+    return Offer(peer, branches, location, timing)
 
 
 def select_among(branches: tuple[Send, ...], location: Location = NOWHERE) -> LocalTerm:
-    """Build an internal choice over (peer, label); one peer gives :func:`select`."""
+    """Build an internal choice over (peer, label); one peer gives :func:`select`.
+
+    The branches to one peer are one interaction and share its timing (the first's is kept;
+    :func:`one_timing` says whether they agree)."""
     if len({b.peer for b in branches}) == 1:
         return select(branches[0].peer, tuple([Branch(b.message, b.continuation, b.location)
-                                              for b in branches]), location)
+                                              for b in branches]), location, branches[0].timing)
     return SelectAmong(branches, location)
 
 
 def offer_among(branches: tuple[Recv, ...], location: Location = NOWHERE) -> LocalTerm:
-    """Build an external choice over (peer, label); one peer gives :func:`offer`."""
+    """Build an external choice over (peer, label); one peer gives :func:`offer` (see :func:`select_among`)."""
     if len({b.peer for b in branches}) == 1:
         return offer(branches[0].peer, tuple([Branch(b.message, b.continuation, b.location)
-                                             for b in branches]), location)
+                                             for b in branches]), location, branches[0].timing)
     return OfferAmong(branches, location)
+
+
+def one_timing(branches: tuple[Send, ...] | tuple[Recv, ...]) -> bool:
+    """Whether the branches to (or from) each peer carry the same timing: one interaction has one."""
+    seen: dict[str | None, Timing | None] = {}
+    for branch in branches:
+        if seen.setdefault(branch.peer, branch.timing) != branch.timing:
+            return False
+    return True
 
 
 def sends_of(term: Send | Select | SelectAmong) -> tuple[Send, ...]:
@@ -225,8 +239,8 @@ def sends_of(term: Send | Select | SelectAmong) -> tuple[Send, ...]:
             return (term,)
         case SelectAmong(branches=sends):
             return sends
-        case Select(peer=peer, branches=branches):
-            return tuple([Send(peer, b.message, b.continuation, b.location) for b in branches])
+        case Select(peer=peer, branches=branches, timing=timing):
+            return tuple([Send(peer, b.message, b.continuation, b.location, timing) for b in branches])
     raise AssertionError(term)
 
 
@@ -237,8 +251,8 @@ def receives_of(term: Recv | Offer | OfferAmong) -> tuple[Recv, ...]:
             return (term,)
         case OfferAmong(branches=recvs):
             return recvs
-        case Offer(peer=peer, branches=branches):
-            return tuple([Recv(peer, b.message, b.continuation, b.location) for b in branches])
+        case Offer(peer=peer, branches=branches, timing=timing):
+            return tuple([Recv(peer, b.message, b.continuation, b.location, timing) for b in branches])
     raise AssertionError(term)
 
 
@@ -297,9 +311,9 @@ def _local(term: LocalTerm, printer: Printer) -> str:
     while isinstance(term, (Send, Recv)):
         arrow = "!" if isinstance(term, Send) else "?"
         if term.peer is None:
-            parts.append(f"{arrow}{term.message.sort or term.message.label}")
+            parts.append(f"{arrow}{term.message.sort or term.message.label}{_timed(term.timing)}")
         else:
-            parts.append(f"{arrow}{term.peer}({print_message(term.message)})")
+            parts.append(f"{arrow}{term.peer}({print_message(term.message)}){_timed(term.timing)}")
         term = term.continuation
     match term:
         case End():
@@ -313,7 +327,7 @@ def _local(term: LocalTerm, printer: Printer) -> str:
         case Select(peer=peer, branches=branches) | Offer(peer=peer, branches=branches):
             symbol = "+" if isinstance(term, Select) else "&"
             inner = ", ".join([_local_branch(b, printer) for b in branches])
-            tail = f"{symbol}{peer or ''}{{{inner}}}"
+            tail = f"{symbol}{peer or ''}{{{inner}}}{_timed(term.timing)}"
         case SelectAmong(branches=actions) | OfferAmong(branches=actions):
             symbol = "+" if isinstance(term, SelectAmong) else "&"
             tail = f"{symbol}{{{', '.join([_local(a, printer) for a in actions])}}}"
@@ -323,6 +337,11 @@ def _local(term: LocalTerm, printer: Printer) -> str:
             raise AssertionError(f"unexpected local term {term!r}")
     parts.append(tail)
     return printer.checked(start, ".".join(parts))
+
+
+def _timed(timing: Timing | None) -> str:
+    """The time clause after an action or a choice, with its leading space; "" for none."""
+    return "" if timing is None else f" {timing}"
 
 
 def _local_branch(branch: Branch, printer: Printer) -> str:

@@ -12,7 +12,7 @@ that two spellings of one recursive behaviour merge instead of looping.
 "Identical" is taken up to the spelling of recursion (see
 :func:`sessiontypes.recursion.equivalent`): ``mu t.!B(x).t`` and
 ``mu u.!B(x).!B(x).u`` are the same behaviour. A label carries the same sort
-on both sides or the two do not merge.
+(and refinement) and the same time clause on both sides or the two do not merge.
 """
 
 from __future__ import annotations
@@ -90,8 +90,10 @@ def _merge_receives(terms: list[_Offers]) -> lt.LocalTerm:
                         merged[key] = branch
                         continue
                     _same_sort(twin.message, branch.message)
+                    _same_timing(twin, branch)
                     merged[key] = lt.Recv(twin.peer, twin.message, merge(twin.continuation, branch.continuation),
-                                          twin.location)
+                                          twin.location, twin.timing)
+                _one_timing(tuple(merged.values()))
             except MergeError as error:
                 error.index = index
                 raise
@@ -113,7 +115,7 @@ class _Merger:
         start = left
         prefix: list[lt.Send | lt.Recv] = []
         while (left is not right and isinstance(left, (lt.Send, lt.Recv)) and type(left) is type(right)
-               and left.peer == right.peer and left.message == right.message):
+               and left.peer == right.peer and left.message == right.message and left.timing == right.timing):
             prefix.append(left)
             left, right = left.continuation, right.continuation
         self.steps += len(prefix) + 1
@@ -121,7 +123,7 @@ class _Merger:
         if merged is left:  # nothing new: keep the original term (and its sharing)
             return start
         for step in reversed(prefix):
-            merged = type(step)(step.peer, step.message, merged, step.location)
+            merged = type(step)(step.peer, step.message, merged, step.location, step.timing)
         return merged
 
     def _merge_node(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
@@ -149,9 +151,12 @@ class _Merger:
                 merged.append(branch)
                 continue
             _same_sort(branch.message, twin.message)
+            _same_timing(branch, twin)
             merged.append(lt.Recv(branch.peer, branch.message,
-                                  self.merge(branch.continuation, twin.continuation), branch.location))
+                                  self.merge(branch.continuation, twin.continuation), branch.location,
+                                  branch.timing))
         merged.extend(right_branches.values())
+        _one_timing(tuple(merged))
         return lt.offer_among(tuple(merged), left.location)
 
     def _merge_selections(self, left: _Selections, right: _Selections) -> lt.LocalTerm:
@@ -171,8 +176,10 @@ class _Merger:
         for branch in left_branches:  # in the first one's order
             twin = theirs[branch.peer, branch.message.label]
             _same_sort(branch.message, twin.message)
+            _same_timing(branch, twin)
             merged.append(lt.Send(branch.peer, branch.message,
-                                  self.merge(branch.continuation, twin.continuation), branch.location))
+                                  self.merge(branch.continuation, twin.continuation), branch.location,
+                                  branch.timing))
         return lt.select_among(tuple(merged), left.location)
 
     def _merge_recursive(self, left: lt.LocalTerm, right: lt.LocalTerm) -> lt.LocalTerm:
@@ -212,6 +219,23 @@ def _same_sort(ours: Interaction, theirs: Interaction) -> None:
     if ours != theirs:
         raise MergeError(f"label '{ours.label}' carries {_sort_name(ours)} in one and "
                          f"{_sort_name(theirs)} in the other")
+
+
+def _same_timing(ours: lt.Send | lt.Recv, theirs: lt.Send | lt.Recv) -> None:
+    if ours.timing != theirs.timing:
+        raise MergeError(f"label '{ours.message.label}' has {_timing_name(ours)} in one and "
+                         f"{_timing_name(theirs)} in the other")
+
+
+def _one_timing(receives: tuple[lt.Recv, ...]) -> None:
+    """Receives from one peer join into one choice, which has one time clause."""
+    if not lt.one_timing(receives):
+        peer = next(r.peer for r in receives if any(o.peer == r.peer and o.timing != r.timing for o in receives))
+        raise MergeError(f"the receives from {peer} have different time clauses")
+
+
+def _timing_name(action: lt.Send | lt.Recv) -> str:
+    return f"'{action.timing}'" if action.timing is not None else "no time clause"
 
 
 def _labels(branches: tuple[lt.Send | lt.Recv, ...]) -> str:

@@ -11,6 +11,7 @@ import bisect
 import re
 import threading
 from collections.abc import Iterator
+from fractions import Fraction
 from importlib import resources
 from typing import Any, cast
 
@@ -18,12 +19,13 @@ import lark
 from lark import Token, Transformer
 from lark.lexer import Lexer
 
+from . import constraints as c
 from . import syntax as s
 from .deep import run_deep
 from .errors import ProtocolSyntaxError, shortened
 from .location import Location
 
-__all__ = ["parse_file"]
+__all__ = ["parse_file", "parse_expression"]
 
 # What each terminal is called in an error message.
 TERMINAL_WORDS: dict[str, str] = {
@@ -34,6 +36,11 @@ TERMINAL_WORDS: dict[str, str] = {
     "QUERY": "'?'", "PAR": "'||'", "LPAR": "'('", "RPAR": "')'", "LBRACE": "'{'",
     "RBRACE": "'}'", "COMMA": "','", "COLON": "':'", "DOT": "'.'", "EQ": "'='",
     "SEMI": "';'", "$END": "end of file",
+    "WITHIN": "'within'", "EVERY": "'every'", "ELSE": "'else'", "TIMEOUT": "'timeout'",
+    "AND": "'and'", "OR": "'or'", "NOT": "'not'", "TRUE": "'true'", "FALSE": "'false'",
+    "PLUSMINUS": "'+-'", "EQEQ": "'=='", "NE": "'!='", "LE": "'<='", "GE": "'>='", "LT": "'<'",
+    "GT": "'>'", "MINUS": "'-'", "STAR": "'*'", "SLASH": "'/'", "PERCENT": "'%'",
+    "DURATION": "a duration such as 100ms", "NUMBER": "a number",
 }
 # Alternative spellings of one token: name only the ASCII one in "expected".
 _SYNONYMS = {"REC": "MU", "MU_SYMBOL": "MU", "BOTTOM": "END", "OPLUS": "PLUS"}
@@ -86,34 +93,144 @@ class _Builder(Transformer[Token, Any]):
     def msg_paren(self, children: list[Any]) -> s.MessageSyntax:
         names = _tokens(children, "NAME")
         sort = self._name(names[1]) if len(names) > 1 else None
-        return s.MessageSyntax(self._name(names[0]), sort, parens=True)
+        refinement = _nodes(children)
+        return s.MessageSyntax(self._name(names[0]), sort, parens=True,
+                               refinement=refinement[0] if refinement else None)
 
     def msg_fields(self, children: list[Any]) -> s.MessageSyntax:
         return s.MessageSyntax(self._name(children[0]), None, parens=True, fields=tuple(_nodes(children)))
 
     def field(self, children: list[Any]) -> s.FieldSyntax:
-        return s.FieldSyntax(self._name(children[0]), self._name(children[2]))
+        return s.FieldSyntax(self._name(children[0]), self._name(children[2]),
+                             children[3] if len(children) > 3 else None)
 
     def msg_bare(self, children: list[Any]) -> s.MessageSyntax:
-        return s.MessageSyntax(self._name(children[0]), None, parens=False)
+        return s.MessageSyntax(self._name(children[0]), None, parens=False,
+                               refinement=children[1] if len(children) > 1 else None)
+
+    # ---- time clauses ----
+    def within(self, children: list[Any]) -> list[tuple[str, int, Location]]:
+        return [("within", self._duration(children[1]), _location(self.path, children[0]))]
+
+    def every(self, children: list[Any]) -> list[tuple[str, int, Location]]:
+        parts = [("every", self._duration(children[1]), _location(self.path, children[0]))]
+        if len(children) > 2:
+            parts.append(("jitter", self._duration(children[3]), _location(self.path, children[2])))
+        return parts
+
+    def on_expiry(self, children: list[Any]) -> list[tuple[str, int, Location]]:
+        return [("else", 0, _location(self.path, children[0]))]
+
+    def timing(self, children: list[Any]) -> s.TimingSyntax:
+        values: dict[str, int] = {}
+        parts: list[tuple[str, Location]] = []
+        for part in children:
+            for name, value, location in part:
+                if name in values:
+                    word = "else timeout" if name == "else" else name
+                    raise ProtocolSyntaxError(location, f"'{word}' again",
+                                              ["each of 'every', 'within' and 'else timeout' at most once"],
+                                              self.line(location.line), "a time clause says each part once")
+                values[name] = value
+                parts.append((name, location))
+        timing = c.Timing(values.get("within"), values.get("every"), values.get("jitter", 0), "else" in values,
+                          parts[0][1])
+        return s.TimingSyntax(timing, tuple(parts))
+
+    def _duration(self, token: Token) -> int:
+        """A duration's whole nanoseconds; one that is not whole is an error."""
+        match = re.fullmatch(r"([0-9.]+)(.*)", str(token))
+        assert match is not None
+        unit = "us" if match[2] in ("µs", "μs") else match[2]
+        nanos = Fraction(match[1]) * c.NANOS[unit]
+        if nanos.denominator != 1:
+            location = _location(self.path, token)
+            raise ProtocolSyntaxError(location, f"'{token}'", ["a whole number of nanoseconds"],
+                                      self.line(location.line),
+                                      f"{token} is {float(nanos)}ns; durations are exact in nanoseconds")
+        return int(nanos)
+
+    # ---- refinements ----
+    def refinement(self, children: list[Any]) -> c.Expr:
+        return children[1]  # type: ignore[no-any-return]
+
+    def expression_only(self, children: list[Any]) -> c.Expr:
+        return children[0]  # type: ignore[no-any-return]
+
+    def _fold(self, children: list[Any]) -> c.Expr:
+        """``a op b op c`` as ``(a op b) op c``: left-associative, as in Python."""
+        left: c.Expr = children[0]
+        for index in range(1, len(children), 2):
+            left = c.Binary(str(children[index]), left, children[index + 1], _expr_location(children[0]))
+        return left
+
+    or_expr = and_expr = sum = product = _fold
+
+    def negation(self, children: list[Any]) -> c.Expr:
+        return c.Unary("not", children[1], _location(self.path, children[0]))
+
+    def minus(self, children: list[Any]) -> c.Expr:
+        return c.Unary("-", children[1], _location(self.path, children[0]))
+
+    def comparison(self, children: list[Any]) -> c.Expr:
+        return c.Compare(tuple([str(op) for op in children[1::2]]), tuple(children[0::2]),
+                         _expr_location(children[0]))
+
+    def number(self, children: list[Any]) -> c.Expr:
+        text = str(children[0])
+        value: int | float = int(text) if text.isdigit() else float(text)
+        return c.Number(value, _location(self.path, children[0]))
+
+    def text(self, children: list[Any]) -> c.Expr:
+        return c.Text(_unescape(str(children[0])[1:-1]), _location(self.path, children[0]))
+
+    def truth(self, children: list[Any]) -> c.Expr:
+        return c.Truth(children[0].type == "TRUE", _location(self.path, children[0]))
+
+    def call(self, children: list[Any]) -> c.Expr:
+        name = children[0]
+        location = _location(self.path, name)
+        args = tuple(_nodes(children))
+        arity = {"abs": "one argument", "len": "one argument", "min": "two or more arguments",
+                 "max": "two or more arguments"}
+        if str(name) not in c.FUNCTIONS:
+            raise ProtocolSyntaxError(location, f"'{name}('", ["one of the functions abs, min, max, len"],
+                                      self.line(location.line), "a refinement calls only these functions")
+        if (len(args) == 1) != (str(name) in ("abs", "len")):
+            raise ProtocolSyntaxError(location, f"{name} of {len(args)} argument{'s' * (len(args) != 1)}",
+                                      [f"{name} of {arity[str(name)]}"], self.line(location.line), "")
+        return c.Call(str(name), args, location)
+
+    def name_path(self, children: list[Any]) -> c.Expr:
+        return c.Path(tuple([str(n) for n in _tokens(children, "NAME")]), _location(self.path, children[0]))
+
+    def parenthesised(self, children: list[Any]) -> c.Expr:
+        return children[1]  # type: ignore[no-any-return]
 
     # ---- global ----
     def ginteraction(self, children: list[Any]) -> s.GInteraction:
-        # NAME ARROW NAME COLON msg [DOT gtype]: the hottest rule, indexed directly
+        # NAME ARROW NAME COLON msg [timing] [DOT gtype]: the hottest rule, indexed directly
+        timing = None
+        if len(children) > 5 and isinstance(children[-1], s.TimingSyntax):
+            timing = children.pop()
+        elif len(children) > 6 and isinstance(children[-3], s.TimingSyntax):
+            timing = children.pop(-3)
         if children[3].type != "COLON":  # a multicast: NAME ARROW NAME (COMMA NAME)+ COLON ...
             colon = next(i for i, c in enumerate(children) if isinstance(c, Token) and c.type == "COLON")
             receivers = self._receivers(children[2:colon])
             rest = children[colon + 3] if len(children) > colon + 3 else None
             return self._multicast(self._name(children[0]), receivers,
-                                   (s.GBranchSyntax(children[colon + 1], rest),), braced=False)
+                                   (s.GBranchSyntax(children[colon + 1], rest),), braced=False, timing=timing)
         sender, receiver = self._name(children[0]), self._name(children[2])
         branch = s.GBranchSyntax(children[4], children[6] if len(children) > 6 else None)
-        return s.GInteraction(sender, receiver, (branch,), False, sender.location)
+        return s.GInteraction(sender, receiver, (branch,), False, sender.location, timing)
 
     def gchoice(self, children: list[Any]) -> s.GInteraction:
         colon = next(i for i, c in enumerate(children) if isinstance(c, Token) and c.type == "COLON")
+        nodes = _nodes(children)
+        timing = nodes.pop() if isinstance(nodes[-1], s.TimingSyntax) else None
         return self._multicast(self._name(children[0]), self._receivers(children[2:colon]),
-                               tuple(_nodes(children)), braced=True)
+                               tuple(nodes), braced=True, timing=timing)
 
     def _receivers(self, tokens: list[Any]) -> list[s.Name]:
         """The receivers of ``A -> B, C``, each once (a repeated one is an error)."""
@@ -128,11 +245,12 @@ class _Builder(Transformer[Token, Any]):
         return receivers
 
     def _multicast(self, sender: s.Name, receivers: list[s.Name], branches: tuple[s.GBranchSyntax, ...],
-                   braced: bool) -> s.GInteraction:
+                   braced: bool, timing: s.TimingSyntax | None = None) -> s.GInteraction:
         """``p -> q1, ..., qn : {l_i. G_i}`` as ``p -> q1 : {l_i. p -> q2 : l_i. ... p -> qn : l_i. G_i}``.
 
         The message of each branch goes to the receivers in written order; every
-        interaction of the expansion is located at the multicast's sender.
+        interaction of the expansion is located at the multicast's sender, and carries
+        the multicast's time clause (each send is one interaction of its own).
         """
         first, *others = receivers
         expanded: list[s.GBranchSyntax] = []
@@ -140,9 +258,9 @@ class _Builder(Transformer[Token, Any]):
             rest = branch.continuation
             for receiver in reversed(others):
                 rest = s.GInteraction(sender, receiver, (s.GBranchSyntax(branch.message, rest),), False,
-                                      sender.location)
+                                      sender.location, timing)
             expanded.append(s.GBranchSyntax(branch.message, rest))
-        return s.GInteraction(sender, first, tuple(expanded), braced, sender.location)
+        return s.GInteraction(sender, first, tuple(expanded), braced, sender.location, timing)
 
     def grouted(self, children: list[Any]) -> s.GRouted:
         sender = self._name(children[0])
@@ -181,6 +299,8 @@ class _Builder(Transformer[Token, Any]):
     def _action(self, children: list[Any], direction: str, binary: bool) -> s.LAction:
         names = _tokens(children, "NAME")
         nodes = _nodes(children)
+        timing = next((n for n in nodes if isinstance(n, s.TimingSyntax)), None)
+        nodes = [n for n in nodes if not isinstance(n, s.TimingSyntax)]
         if binary:
             peer = None
             message = s.MessageSyntax(self._name(names[0]), None, parens=False)
@@ -189,7 +309,7 @@ class _Builder(Transformer[Token, Any]):
             peer = self._name(names[0])
             message, rest = nodes[0], nodes[1:]
         return s.LAction(direction, peer, message, rest[0] if rest else None,  # type: ignore[arg-type]
-                         _location(self.path, children[0]))
+                         _location(self.path, children[0]), timing)
 
     def lsend(self, children: list[Any]) -> s.LAction:
         return self._action(children, "!", binary=False)
@@ -206,8 +326,10 @@ class _Builder(Transformer[Token, Any]):
     def _choice(self, children: list[Any], kind: str) -> s.LChoice:
         peers = _tokens(children, "NAME")
         peer = self._name(peers[0]) if peers else None
-        return s.LChoice(kind, peer, tuple(_nodes(children)),  # type: ignore[arg-type]
-                         _location(self.path, children[0]))
+        nodes = _nodes(children)
+        timing = nodes.pop() if isinstance(nodes[-1], s.TimingSyntax) else None
+        return s.LChoice(kind, peer, tuple(nodes),  # type: ignore[arg-type]
+                         _location(self.path, children[0]), timing)
 
     def lselect(self, children: list[Any]) -> s.LChoice:
         return self._choice(children, "+")
@@ -276,10 +398,13 @@ _TOKEN = re.compile(r"""
     (?:[\s\ufeff]+|//[^\n]*|/\*(?:[^*]|\*(?!/))*\*/)*    # skipped: white space (WS), comments
     (?:
       (?P<NAME>[A-Za-z_][A-Za-z0-9_]*'*)
+    | (?P<DURATION>[0-9]+(?:\.[0-9]+)?(?:ns|us|µs|μs|ms|s)(?![A-Za-z0-9_']))
+    | (?P<NUMBER>[0-9]+(?:\.[0-9]+)?(?:[eE][+-]?[0-9]+)?)
     | (?P<STRING>"(?:[^"\\\n]|\\.)*")
     | (?P<ARROW>->|→)
     | (?P<PAR>\|\|)
-    | (?P<PUNCT>[(){},:.=;!?&+⊕μ⊥])
+    | (?P<OPERATOR>\+-|==|!=|<=|>=)
+    | (?P<PUNCT>[(){},:.=;!?&+⊕μ⊥±<>*/%-])
     | (?P<BAD>.)
     | \Z                                           # trailing skipped text
     )
@@ -287,20 +412,34 @@ _TOKEN = re.compile(r"""
 _PUNCTUATION = {
     "(": "LPAR", ")": "RPAR", "{": "LBRACE", "}": "RBRACE", ",": "COMMA", ":": "COLON",
     ".": "DOT", "=": "EQ", ";": "SEMI", "!": "BANG", "?": "QUERY", "&": "AMP", "+": "PLUS",
-    "⊕": "OPLUS", "μ": "MU_SYMBOL", "⊥": "BOTTOM",
+    "⊕": "OPLUS", "μ": "MU_SYMBOL", "⊥": "BOTTOM", "±": "PLUSMINUS", "<": "LT", ">": "GT",
+    "*": "STAR", "/": "SLASH", "%": "PERCENT", "-": "MINUS",
+    "+-": "PLUSMINUS", "==": "EQEQ", "!=": "NE", "<=": "LE", ">=": "GE",
 }
 _KEYWORD_TYPES = {"type": "TYPE", "global": "GLOBAL", "local": "LOCAL", "at": "AT",
                   "mu": "MU", "rec": "REC", "end": "END"}
+# Keywords only where the parser can take one (time clauses, refinements): a protocol that
+# names a role or a label ``timeout`` or ``every`` means the name everywhere else.
+_CONTEXTUAL_TYPES = {"within": "WITHIN", "every": "EVERY", "else": "ELSE", "timeout": "TIMEOUT",
+                     "and": "AND", "or": "OR", "not": "NOT", "true": "TRUE", "false": "FALSE"}
 
 
 class _FastLexer(Lexer):
     """Tokens for the grammar's terminals; an unknown character becomes a BAD
-    token, which the parser rejects with the set of tokens it expected there."""
+    token, which the parser rejects with the set of tokens it expected there.
+
+    It is told the parser's state (lark's interface 1), for the contextual keywords."""
+
+    __future_interface__ = 1
 
     def __init__(self, lexer_conf: Any) -> None:
         pass
 
-    def lex(self, data: str) -> Iterator[Token]:  # type: ignore[override]
+    def lex(self, lexer_state: Any, parser_state: Any) -> Iterator[Token]:  # type: ignore[override]
+        data = lexer_state.text
+        if not isinstance(data, str):  # lark's TextSlice of the whole text
+            data = data.text
+        states = parser_state.parse_conf.states
         newlines = [i for i, char in enumerate(data) if char == "\n"]
         for match in _TOKEN.finditer(data):
             kind = match.lastgroup
@@ -310,16 +449,27 @@ class _FastLexer(Lexer):
             value = match.group(kind)
             if kind == "NAME":
                 kind = _KEYWORD_TYPES.get(value, "NAME")
-            elif kind == "PUNCT":
+                contextual = _CONTEXTUAL_TYPES.get(value)
+                if contextual is not None and contextual in states[parser_state.position]:
+                    kind = contextual
+            elif kind in ("PUNCT", "OPERATOR"):
                 kind = _PUNCTUATION[value]
-            line = bisect.bisect_left(newlines, start)
-            line_start = newlines[line - 1] + 1 if line else 0
-            # Token(...) goes through a slow keyword-argument constructor; fill the slots.
-            token = str.__new__(Token, value)
-            token.type, token.value, token.start_pos = kind, value, start
-            token.line, token.column = line + 1, start - line_start + 1
-            token.end_line = token.end_column = token.end_pos = None
-            yield token
+                if value == "+-" and "PLUSMINUS" not in states[parser_state.position]:
+                    # ``a +-b`` in a refinement: plus, then minus
+                    yield _token("PLUS", "+", start, data, newlines)
+                    kind, value, start = "MINUS", "-", start + 1
+            yield _token(kind, value, start, data, newlines)
+
+
+def _token(kind: str, value: str, start: int, data: str, newlines: list[int]) -> Token:
+    line = bisect.bisect_left(newlines, start)
+    line_start = newlines[line - 1] + 1 if line else 0
+    # Token(...) goes through a slow keyword-argument constructor; fill the slots.
+    token = str.__new__(Token, value)
+    token.type, token.value, token.start_pos = kind, value, start
+    token.line, token.column = line + 1, start - line_start + 1
+    token.end_line = token.end_column = token.end_pos = None
+    return token
 
 
 _builder = _Builder()
@@ -327,6 +477,7 @@ _parser = lark.Lark(
     resources.files(__package__).joinpath("grammar.lark").read_text(encoding="utf-8"),
     parser="lalr",
     lexer=_FastLexer,
+    start=["start", "expression_only"],
     transformer=_builder,
     maybe_placeholders=False,
 )
@@ -343,13 +494,32 @@ def parse_file(text: str, path: str = "<string>") -> s.SourceFile:
     return run_deep(_parse, text, path)
 
 
+def parse_expression(text: str, path: str = "<string>") -> c.Expr:
+    """Parse ``text`` as one refinement predicate (the language inside ``{...}``).
+
+    Raises:
+        ProtocolSyntaxError: the text is not one expression.
+    """
+    lines = _lines(text)
+    with _lock:
+        _builder.path, _builder.lines = path, lines
+        try:
+            return cast("c.Expr", _parser.parse(text, start="expression_only"))
+        except lark.exceptions.UnexpectedInput as error:
+            raise _syntax_error(error, text, lines, path) from None
+
+
+def _expr_location(node: Any) -> Location:
+    return node.location  # type: ignore[no-any-return]
+
+
 def _parse(text: str, path: str) -> s.SourceFile:
     lines = _lines(text)
     with _lock:
         _builder.path, _builder.lines = path, lines
         try:
             # The builder's start() turns the tree into the declarations.
-            declarations = cast("tuple[s.Declaration, ...]", _parser.parse(text))
+            declarations = cast("tuple[s.Declaration, ...]", _parser.parse(text, start="start"))
         except lark.exceptions.UnexpectedInput as error:
             raise _syntax_error(error, text, lines, path) from None
     return s.SourceFile(path, lines, declarations)
@@ -395,7 +565,7 @@ def _syntax_error(
         acceptable = set(error.interactive_parser.accepts()) or set(error.expected)  # type: ignore[no-untyped-call]
     except Exception:  # defensive: fall back to LALR's own set
         acceptable = set(error.expected)
-    if token.type == "BAD":
+    if token.type == "BAD" or (token.type == "SLASH" and text.startswith("/*", token.start_pos or 0)):
         location = _location(path, token)
         hint = ""
         if text.startswith("/*", token.start_pos or 0):

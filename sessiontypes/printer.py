@@ -17,6 +17,7 @@ module prints global terms and gathers all three under one name.
 from __future__ import annotations
 
 from . import global_types as g
+from .constraints import Timing
 from .local_types import describe_local, print_local  # re-exported: the print of local terms
 from .printing import Printer, PrintTooLongError, run_print
 from .sorts import print_message  # re-exported
@@ -41,7 +42,7 @@ def _global(term: g.GlobalTerm, printer: Printer) -> str:
     parts: list[str] = []
     while isinstance(term, g.Choice) and len(term.branches) == 1:
         only = term.branches[0]
-        parts.append(f"{term.sender}->{term.receiver}:{print_message(only.message)}")
+        parts.append(f"{term.sender}->{term.receiver}:{print_message(only.message)}{_timed(term.timing)}")
         term = only.continuation
     match term:
         case g.End():
@@ -54,7 +55,7 @@ def _global(term: g.GlobalTerm, printer: Printer) -> str:
             tail = f"mu {var}.{_global(body, printer)}"
         case g.Choice(sender=sender, receiver=receiver, branches=branches):
             inner = ", ".join([_global_branch(b, printer) for b in branches])
-            tail = f"{sender}->{receiver}:{{{inner}}}"
+            tail = f"{sender}->{receiver}:{{{inner}}}{_timed(term.timing)}"
         case g.Routed(sender=sender, branches=routes):
             inner = ", ".join([f"{r.receiver}:{_global_branch(g.Branch(r.message, r.continuation), printer)}"
                                for r in routes])
@@ -65,6 +66,11 @@ def _global(term: g.GlobalTerm, printer: Printer) -> str:
             raise AssertionError(f"unexpected global term {term!r}")
     parts.append(tail)
     return printer.checked(start, ".".join(parts))
+
+
+def _timed(timing: Timing | None) -> str:
+    """The time clause after a message or a choice's ``}``, with its leading space; "" for none."""
+    return "" if timing is None else f" {timing}"
 
 
 def _global_branch(branch: g.Branch, printer: Printer) -> str:

@@ -133,7 +133,8 @@ class _Projector:
             only = term.branches[0]
             make = lt.Send if term.sender == role else lt.Recv
             peer = term.receiver if term.sender == role else term.sender
-            return make(peer, only.message, self.project(only.continuation), term.location)
+            # sender and receiver keep the timing (each reads its own part); others never see it
+            return make(peer, only.message, self.project(only.continuation), term.location, term.timing)
         match term:
             case g.End(location=location):
                 return lt.End(location)
@@ -154,9 +155,9 @@ class _Projector:
                 return kept[0] if len(kept) == 1 else lt.Parallel(kept, location)
             case g.Choice(sender=sender, receiver=receiver, branches=branches, location=location):
                 if self.role == sender:
-                    return lt.select(receiver, self._branches(branches, location), location)
+                    return lt.select(receiver, self._branches(branches, location), location, term.timing)
                 if self.role == receiver:
-                    return lt.offer(sender, self._branches(branches, location), location)
+                    return lt.offer(sender, self._branches(branches, location), location, term.timing)
                 if len(branches) == 1:
                     return self.project(branches[0].continuation)
                 return self._merge_branches(branches, location)

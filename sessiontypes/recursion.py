@@ -22,19 +22,19 @@ def substitute(term: lt.LocalTerm, name: str, replacement: lt.LocalTerm) -> lt.L
         case lt.End():
             return term
         case lt.Send(peer=peer, message=message, continuation=cont, location=location):
-            return lt.Send(peer, message, substitute(cont, name, replacement), location)
+            return lt.Send(peer, message, substitute(cont, name, replacement), location, term.timing)
         case lt.Recv(peer=peer, message=message, continuation=cont, location=location):
-            return lt.Recv(peer, message, substitute(cont, name, replacement), location)
+            return lt.Recv(peer, message, substitute(cont, name, replacement), location, term.timing)
         case lt.Select(peer=peer, branches=branches, location=location):
-            return lt.Select(peer, _substitute_branches(branches, name, replacement), location)
+            return lt.Select(peer, _substitute_branches(branches, name, replacement), location, term.timing)
         case lt.Offer(peer=peer, branches=branches, location=location):
-            return lt.Offer(peer, _substitute_branches(branches, name, replacement), location)
+            return lt.Offer(peer, _substitute_branches(branches, name, replacement), location, term.timing)
         case lt.SelectAmong(branches=sends, location=location):
             return lt.SelectAmong(tuple([lt.Send(b.peer, b.message, substitute(b.continuation, name, replacement),
-                                                 b.location) for b in sends]), location)
+                                                 b.location, b.timing) for b in sends]), location)
         case lt.OfferAmong(branches=recvs, location=location):
             return lt.OfferAmong(tuple([lt.Recv(b.peer, b.message, substitute(b.continuation, name, replacement),
-                                                b.location) for b in recvs]), location)
+                                                b.location, b.timing) for b in recvs]), location)
         case lt.Parallel(branches=parts, location=location):
             return lt.Parallel(tuple([substitute(p, name, replacement) for p in parts]), location)
         case lt.Rec(var=var, body=body, location=location):
@@ -92,7 +92,7 @@ class _Equivalence:
         # Messages both start with are walked in a loop: comparing what is left as
         # whole terms at every message would make long sequences quadratic.
         while (left is not right and isinstance(left, (lt.Send, lt.Recv)) and type(left) is type(right)
-               and left.peer == right.peer and left.message == right.message):
+               and left.peer == right.peer and left.message == right.message and left.timing == right.timing):
             left, right = left.continuation, right.continuation
         if left is right or left == right:
             return True
@@ -104,11 +104,11 @@ class _Equivalence:
             return self.check(unfold(left), unfold(right))
         if ((isinstance(left, lt.Send) and isinstance(right, lt.Send))
                 or (isinstance(left, lt.Recv) and isinstance(right, lt.Recv))):
-            return (left.peer == right.peer and left.message == right.message
+            return (left.peer == right.peer and left.message == right.message and left.timing == right.timing
                     and self.check(left.continuation, right.continuation))
         if ((isinstance(left, lt.Select) and isinstance(right, lt.Select))
                 or (isinstance(left, lt.Offer) and isinstance(right, lt.Offer))):
-            if left.peer != right.peer:
+            if left.peer != right.peer or left.timing != right.timing:
                 return False
             theirs = {b.message.label: b for b in right.branches}
             if len(left.branches) != len(theirs):
@@ -128,7 +128,7 @@ class _Equivalence:
                 return False
             for action in left.branches:
                 other = pairs.get((action.peer, action.message.label))
-                if (other is None or action.message != other.message
+                if (other is None or action.message != other.message or action.timing != other.timing
                         or not self.check(action.continuation, other.continuation)):
                     return False
             return True

@@ -20,8 +20,10 @@ from collections.abc import Iterable, Mapping
 from . import global_types as g
 from . import local_types as lt
 from . import syntax as s
+from .constraints import Timing, format_duration
 from .expand import Binder, Scope, Walk
 from .filescope import Reporter, SortTable  # re-exported
+from .location import Location
 from .sorts import Interaction
 
 __all__ = ["Reporter", "SortTable", "global_walk", "local_walk", "resolve_global", "resolve_local"]
@@ -41,6 +43,33 @@ def _check_pairs(reporter: Reporter, pairs: Iterable[tuple[s.Name, s.Name]]) -> 
         if (peer.text, label.text) in seen:
             reporter.error(label.location, f"duplicate label '{label.text}' for {peer.text} in one choice")
         seen.add((peer.text, label.text))
+
+
+def _timing(reporter: Reporter, clause: s.TimingSyntax | None, labels: Iterable[s.Name]) -> Timing | None:
+    """The time clause's :class:`Timing`, reporting what the language rules out.
+
+    Durations are more than 0, the jitter is less than the period, ``else timeout`` needs
+    a deadline, and a choice that times out has no label ``timeout`` (the receiver gets a
+    timeout under that name).
+    """
+    if clause is None:
+        return None
+    timing = clause.timing
+    for part, value in (("within", timing.within), ("every", timing.every)):
+        if value == 0:
+            reporter.error(clause.where(part), f"'{part} 0': a duration must be more than 0")
+    if timing.every and timing.jitter >= timing.every:
+        reporter.error(clause.where("jitter"), f"the jitter {format_duration(timing.jitter)} must be less "
+                       f"than the period {format_duration(timing.every)}")
+    if timing.on_expiry:
+        if timing.within is None:
+            reporter.error(clause.where("else"), "'else timeout' needs a deadline: "
+                           "write 'within D else timeout'")
+        for label in labels:
+            if label.text == "timeout":
+                reporter.error(label.location, "label 'timeout' in a choice with 'else timeout': "
+                               "the receiver takes a timeout under that name; rename the label")
+    return timing
 
 
 # ---- global ------------------------------------------------------------------------
@@ -88,11 +117,12 @@ def _resolve_g(walk: GlobalWalk, node: s.GSyntax | None,
             if sender.text == receiver.text:
                 walk.reporter.error(receiver.location, f"role {sender.text} sends a message to itself")
             _check_labels(walk.reporter, ([b.message.label for b in branches]))
+            timing = _timing(walk.reporter, node.timing, [b.message.label for b in branches])
             return g.Choice(sender.text, receiver.text, tuple([
                 g.Branch(walk.sorts.message(b.message),
                          _resolve_g(walk, b.continuation, scope, depth + 1, parallel_depth),
                          b.message.label.location)
-                for b in branches]), location, receiver.location)
+                for b in branches]), location, receiver.location, timing)
         case s.GRouted(sender=sender, branches=routes, location=location):
             _check_pairs(walk.reporter, [(r.receiver, r.branches[0].message.label) for r in routes])
             resolved: list[g.RoutedBranch] = []
@@ -126,6 +156,14 @@ def _resolve_g(walk: GlobalWalk, node: s.GSyntax | None,
 
 
 # ---- local -------------------------------------------------------------------------
+
+def _check_one_timing(reporter: Reporter, branches: tuple[lt.Send, ...] | tuple[lt.Recv, ...],
+                      location: Location) -> None:
+    """The branches of a choice to or from one peer are one interaction: one time clause."""
+    if not lt.one_timing(branches):
+        reporter.error(location, "the branches with one peer have different time clauses; "
+                       "they are one interaction, which has one")
+
 
 LocalWalk = Walk[s.LocalDecl, lt.LocalTerm]
 
@@ -164,25 +202,30 @@ def _resolve_l(walk: LocalWalk, node: s.LSyntax | None,
                 resolved = Interaction(message.label.text)
             else:
                 resolved = walk.sorts.message(message)
+            timing = _timing(walk.reporter, node.timing, [message.label])
             cont = _resolve_l(walk, rest, scope, depth + 1, parallel_depth)
             make = lt.Send if direction == "!" else lt.Recv
-            return make(peer.text if peer else None, resolved, cont, location)
+            return make(peer.text if peer else None, resolved, cont, location, timing)
         case s.LChoice(kind=kind, peer=peer, branches=branches, location=location):
             _check_labels(walk.reporter, ([b.message.label for b in branches]))
+            timing = _timing(walk.reporter, node.timing, [b.message.label for b in branches])
             resolved_branches = tuple([
                 lt.Branch(walk.sorts.message(b.message),
                           _resolve_l(walk, b.continuation, scope, depth + 1, parallel_depth),
                           b.message.label.location)
                 for b in branches])
             make_choice = lt.select if kind == "+" else lt.offer
-            return make_choice(peer.text if peer else None, resolved_branches, location)
+            return make_choice(peer.text if peer else None, resolved_branches, location, timing)
         case s.LChoiceAmong(kind=kind, branches=actions, location=location):
             _check_pairs(walk.reporter, [(a.peer, a.message.label) for a in actions if a.peer is not None])
+            resolved_actions = [_resolve_l(walk, a, scope, depth, parallel_depth) for a in actions]
             if kind == "+":
-                sends = [_resolve_l(walk, a, scope, depth, parallel_depth) for a in actions]
-                return lt.select_among(tuple([a for a in sends if isinstance(a, lt.Send)]), location)
-            recvs = [_resolve_l(walk, a, scope, depth, parallel_depth) for a in actions]
-            return lt.offer_among(tuple([a for a in recvs if isinstance(a, lt.Recv)]), location)
+                sends = tuple([a for a in resolved_actions if isinstance(a, lt.Send)])
+                _check_one_timing(walk.reporter, sends, location)
+                return lt.select_among(sends, location)
+            recvs = tuple([a for a in resolved_actions if isinstance(a, lt.Recv)])
+            _check_one_timing(walk.reporter, recvs, location)
+            return lt.offer_among(recvs, location)
         case s.LRec(var=var, body=body, location=location):
             return walk.with_mu(var.text, body, scope, depth, parallel_depth,
                                 lambda name: lt.Rec(name, _resolve_l(walk, body, scope, depth,

@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from .refine import print_expr
+
 if TYPE_CHECKING:
     from .constraints import Expr
 
@@ -81,10 +83,18 @@ def builtin_sort(spelling: str) -> Sort:
 
 
 def record_sort(fields: tuple[Field, ...]) -> Sort:
-    """The record sort of ``fields`` (distinct names, in written order; not records themselves)."""
-    key = ", ".join([f"{f.name}: {f.sort.key}" for f in fields])
-    spelling = ", ".join([f"{f.name}: {f.sort.spelling}" for f in fields])
+    """The record sort of ``fields`` (distinct names, in written order; not records themselves).
+
+    A field's refinement is part of its sort: ``price: int{price > 0}`` is another record
+    than ``price: int`` (the key and the spelling say so).
+    """
+    key = ", ".join([f"{f.name}: {f.sort.key}{_refined(f)}" for f in fields])
+    spelling = ", ".join([f"{f.name}: {f.sort.spelling}{_refined(f)}" for f in fields])
     return Sort(key, spelling, None, fields)
+
+
+def _refined(field_: Field) -> str:
+    return "" if field_.refinement is None else f"{{{print_expr(field_.refinement)}}}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,12 +116,14 @@ class Interaction:
 
 
 def print_message(message: Interaction) -> str:
-    """``Sort``, ``label(Sort)``, ``label(f: Sort, ...)`` or ``label``."""
+    """``Sort``, ``label(Sort)``, ``label(f: Sort, ...)`` or ``label``; a refinement in braces
+    after the sort (``Twist{abs(linear.x) <= 1.5}``, ``label(f: int{f > 0})``)."""
     if message.sort is None:
         # 'int' alone would read back as label int carrying an int.
         if message.empty_parens or message.label in BUILTIN_SORTS:
             return f"{message.label}()"
         return message.label
+    refined = "" if message.refinement is None else f"{{{print_expr(message.refinement)}}}"
     if message.label == message.sort.spelling:  # never for a record: its spelling has ':'
-        return message.label
-    return f"{message.label}({message.sort.spelling})"
+        return message.label + refined
+    return f"{message.label}({message.sort.spelling}{refined})"

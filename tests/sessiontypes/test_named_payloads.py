@@ -78,7 +78,7 @@ def test_local_types_write_named_payloads() -> None:
      ("q.proto:1:26: error: unknown sort 'Twist'; expected a builtin sort (int, nat, bool, str, float, bytes) "
      "or a declared type")),
     ("global P = A -> B : q(a: int,)", "q.proto:1:30: error: syntax error; expected a name, got ')'"),
-    ("global P = A -> B : q(a int)", ("q.proto:1:25: error: syntax error; expected one of ')', ':', got 'int' "
+    ("global P = A -> B : q(a int)", ("q.proto:1:25: error: syntax error; expected one of ')', ':', '{', got 'int' "
       "(a named payload is written 'name: Sort')")),
     ("global P = C -> A : {l1. A -> B : q(a: int), l2. A -> B : q(b: int)}",
      ("q.proto:1:12: error: global P is not projectable onto role B: branches 'l1' and 'l2' give B different "
