@@ -1,7 +1,8 @@
 """Well-formedness of a parsed file (LANGUAGE.md section 6), all errors at once.
 
 :func:`check_file` resolves every declaration (see :mod:`sessiontypes.resolve`),
-checks roles, parallel channels and projectability, and returns the checked
+checks roles, parallel channels, projectability, refinements
+(:mod:`sessiontypes.refinecheck`) and periods (:mod:`sessiontypes.timecheck`), and returns the checked
 :class:`ProtocolModule` together with every diagnostic found.
 """
 
@@ -17,9 +18,11 @@ from .declarations import GlobalType, LocalType
 from .deep import run_deep
 from .errors import Diagnostic, ProjectionError
 from .location import Location
+from .refinecheck import check_refinements
 from .resolve import Reporter, SortTable, global_walk, local_walk, resolve_global, resolve_local
 from .sharing import Sharing
 from .sorts import BUILTIN_SORTS, Sort
+from .timecheck import check_timing
 from .work import METER
 
 __all__ = ["ProtocolModule", "check_file"]
@@ -76,7 +79,12 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
                                    source.lines, shared)
         global_types[decl.name.text] = global_type
         if not _has_error(reporter.diagnostics[before:]):
+            for location, message in check_refinements(body):
+                reporter.error(location, message)
             _check_projectable(global_type, reporter, unprojectable)
+        if not _has_error(reporter.diagnostics[before:]):
+            for location, message in check_timing(global_type):
+                reporter.error(location, message)
 
     locals_walk = local_walk(reporter, sorts, locals_, names["global"] | names["type"])
     shared_l = Sharing(locals_walk.shared)

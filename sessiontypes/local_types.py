@@ -226,10 +226,7 @@ def offer_among(branches: tuple[Recv, ...], location: Location = NOWHERE) -> Loc
 def one_timing(branches: tuple[Send, ...] | tuple[Recv, ...]) -> bool:
     """Whether the branches to (or from) each peer carry the same timing: one interaction has one."""
     seen: dict[str | None, Timing | None] = {}
-    for branch in branches:
-        if seen.setdefault(branch.peer, branch.timing) != branch.timing:
-            return False
-    return True
+    return all(seen.setdefault(branch.peer, branch.timing) == branch.timing for branch in branches)
 
 
 def sends_of(term: Send | Select | SelectAmong) -> tuple[Send, ...]:

@@ -147,7 +147,7 @@ class _Builder(Transformer[Token, Any]):
             location = _location(self.path, token)
             raise ProtocolSyntaxError(location, f"'{token}'", ["a whole number of nanoseconds"],
                                       self.line(location.line),
-                                      f"{token} is {float(nanos)}ns; durations are exact in nanoseconds")
+                                      "durations are whole nanoseconds")
         return int(nanos)
 
     # ---- refinements ----
@@ -435,7 +435,7 @@ class _FastLexer(Lexer):
     def __init__(self, lexer_conf: Any) -> None:
         pass
 
-    def lex(self, lexer_state: Any, parser_state: Any) -> Iterator[Token]:  # type: ignore[override]
+    def lex(self, lexer_state: Any, parser_state: Any) -> Iterator[Token]:
         data = lexer_state.text
         if not isinstance(data, str):  # lark's TextSlice of the whole text
             data = data.text
