@@ -19,7 +19,9 @@ from dataclasses import dataclass, replace
 
 from hypothesis import strategies as st
 
+from sessiontypes import constraints as c
 from sessiontypes import global_types as g
+from sessiontypes.refine import print_expr
 from sessiontypes.sorts import BUILTIN_SORTS, Field, Interaction, Sort, builtin_sort, record_sort
 
 __all__ = ["GeneratedGlobal", "global_protocols", "protocol_texts", "mutated_texts",
@@ -34,6 +36,26 @@ SORT_SPELLINGS = ("int", "Int", "nat", "bool", "str", "float", "bytes", "String"
 VAR_POOL = ("t", "u", "v", "t'")
 # Names of the fields of named payloads (``l0(x: int, when': str)``).
 FIELD_NAMES = ("x", "y", "price", "when'", "int")
+# Deadlines and periods, in nanoseconds, as a time clause may write them.
+DURATIONS = (7, 1_500_000, 20_000_000, 100_000_000, 2_000_000_000)
+
+
+def refinement_of(name: str, key: str, pick: int) -> c.Expr:
+    """A predicate on field ``name`` of builtin sort ``key`` that names only the field and
+    whose types agree (so that it is well-formed wherever the field is)."""
+    field = c.Path((name,))
+    if key in ("str", "bytes"):
+        return c.Compare((">",), (c.Call("len", (field,)), c.Number(pick % 3)))
+    if key == "bool":
+        return c.Binary("or", field, c.Unary("not", field)) if pick % 2 else c.Compare(("!=",), (field, c.Truth(False)))
+    shapes: list[c.Expr] = [
+        c.Compare((">=",), (field, c.Number(0))),
+        c.Compare(("<=", "<"), (c.Number(0), field, c.Number(10.5))),
+        c.Compare(("<=",), (c.Call("abs", (c.Binary("-", field, c.Number(1)),)), c.Number(100))),
+        c.Binary("and", c.Compare((">",), (c.Binary("*", field, c.Number(2)), c.Unary("-", c.Number(3)))),
+                 c.Unary("not", c.Compare(("==",), (c.Binary("%", field, c.Number(7)), c.Number(1))))),
+    ]
+    return shapes[pick % len(shapes)]
 
 Channel = tuple[str, str]
 
@@ -121,12 +143,23 @@ class _Generator:
 
     # ---- small draws ----
     def message(self, label: str) -> Interaction:
-        if self.draw(st.integers(0, 7)) == 0:  # now and then named payloads
+        if self.draw(st.integers(0, 7)) == 0:  # now and then named payloads, now and then refined
             names = self.draw(st.lists(st.sampled_from(FIELD_NAMES), min_size=1, max_size=3, unique=True))
-            return Interaction(label, record_sort(tuple(
-                Field(name, builtin_sort(self.draw(st.sampled_from(SORT_SPELLINGS)))) for name in names)))
+            fields = []
+            for name in names:
+                sort = builtin_sort(self.draw(st.sampled_from(SORT_SPELLINGS)))
+                refined = self.draw(st.integers(0, 5))
+                fields.append(Field(name, sort, refinement_of(name, sort.key, refined) if refined < 2 else None))
+            return Interaction(label, record_sort(tuple(fields)))
         spelling = self.draw(st.none() | st.sampled_from(SORT_SPELLINGS))
         return Interaction(label, builtin_sort(spelling) if spelling else None)
+
+    def timing(self) -> c.Timing | None:
+        """Now and then a deadline (``else timeout`` sometimes); periods need loops, and are
+        tried by tests/sessiontypes/test_timed.py."""
+        if self.draw(st.integers(0, 3)) != 0:
+            return None
+        return c.Timing(within=self.draw(st.sampled_from(DURATIONS)), on_expiry=self.draw(st.booleans()))
 
     def labels(self, count: int) -> list[str]:
         pool = LABELS + (SORT_LABELS if self.draw(st.integers(0, 5)) == 0 else ())
@@ -164,8 +197,9 @@ class _Generator:
             if also and self.draw(st.integers(0, 3)) == 0:
                 receivers += self.draw(st.lists(st.sampled_from(also), min_size=1, unique=True))
             rest = self.term(scope.after_interaction(), depth - 1)
+            timing = self.timing()
             for receiver in reversed(receivers):
-                rest = g.Choice(p, receiver, (g.Branch(message, rest),))
+                rest = g.Choice(p, receiver, (g.Branch(message, rest),), timing=timing)
             return rest
         if kind == "choice":
             return self.choice(scope, depth)
@@ -240,7 +274,7 @@ class _Generator:
             for sender, receiver, notes in reversed(prefix):
                 rest = g.Choice(sender, receiver, tuple(g.Branch(note, rest) for note in notes))
             branches.append(g.Branch(message, rest))
-        return g.Choice(p, q, tuple(branches))
+        return g.Choice(p, q, tuple(branches), timing=self.timing())
 
     def routed(self, scope: _Scope, depth: int) -> g.GlobalTerm:
         """``p -> {q1 : l1. G1, q2 : l2. G2, ...}``: branches to different receivers.
@@ -365,7 +399,7 @@ def substitute(term: g.GlobalTerm, name: str, replacement: g.GlobalTerm) -> g.Gl
             return term if var == name else g.Rec(var, substitute(body, name, replacement))
         case g.Choice(sender=p, receiver=q, branches=branches):
             return g.Choice(p, q, tuple(g.Branch(b.message, substitute(b.continuation, name, replacement))
-                                        for b in branches))
+                                        for b in branches), timing=term.timing)
         case g.Routed(sender=p, branches=routes):
             return g.Routed(p, tuple(g.RoutedBranch(r.receiver, r.message,
                                                     substitute(r.continuation, name, replacement))
@@ -471,7 +505,41 @@ class _Writer:
         if sort.fields is None:
             return sort.spelling
         return f"{self.gap()},{self.gap()}".join(f"{f.name}{self.gap()}:{self.gap()}{f.sort.spelling}"
+                                                 f"{self.refinement(f.refinement)}"
                                                  for f in sort.fields)
+
+    def refinement(self, expr: c.Expr | None) -> str:
+        """``{predicate}``, canonical or with extra parentheses and spaces."""
+        if expr is None:
+            return ""
+        text = print_expr(expr)
+        if self.chance(3):
+            text = f"({self.gap()}{text}{self.gap()})"
+        return f"{self.gap()}{{{self.gap()}{text}{self.gap()}}}"
+
+    def timing(self, timing: c.Timing | None) -> str:
+        """The time clause with its leading space, its parts in any order, ``±`` or ``+-``."""
+        if timing is None:
+            return ""
+        parts: list[str] = []
+        if timing.every is not None:
+            jitter = f" {self.pick('+-', ['+-', '±'])} {c.format_duration(timing.jitter)}" if timing.jitter else ""
+            parts.append(f"every {c.format_duration(timing.every)}{jitter}")
+        if timing.within is not None:
+            parts.append(f"within {self.duration(timing.within)}")
+        if timing.on_expiry:
+            parts.append(f"else{self.word_gap()}timeout")
+        if self.fancy:
+            self.rng.shuffle(parts)
+        return self.word_gap() + self.word_gap().join(parts)
+
+    def duration(self, nanos: int) -> str:
+        """A duration, now and then in another unit than the shortest (``0.1s`` for ``100ms``)."""
+        if self.chance(3) and nanos % 1_000_000 == 0:
+            return f"{nanos / 1_000_000_000:g}s" if nanos < 10**12 else c.format_duration(nanos)
+        if self.chance(3):
+            return f"{nanos}ns"
+        return c.format_duration(nanos)
 
     def term(self, term: g.GlobalTerm) -> str:
         text = self._term(term)
@@ -501,10 +569,10 @@ class _Writer:
                 written = f"{gap()},{gap()}".join(receivers)
                 head = f"{p}{gap()}{arrow}{gap()}{written}{gap()}:{gap()}"
                 if len(branches) == 1 and not self.chance(4):
-                    return head + self.sequel(branches[0])
+                    return head + self.sequel(branches[0], term.timing)
                 inner = f"{gap()},{gap()}".join(self.branch(b) for b in branches)
                 comma = self.pick("", ["", ","])
-                return f"{head}{{{gap()}{inner}{comma}{gap()}}}"
+                return f"{head}{{{gap()}{inner}{comma}{gap()}}}{self.timing(term.timing)}"
             case g.Routed(sender=p, branches=routes):
                 arrow = self.pick("->", ["->", "→"])
                 inner = f"{gap()},{gap()}".join(
@@ -514,9 +582,9 @@ class _Writer:
                 return f"{p}{gap()}{arrow}{gap()}{{{gap()}{inner}{comma}{gap()}}}"
         raise AssertionError(term)
 
-    def sequel(self, branch: g.Branch) -> str:
-        """``msg`` or ``msg.G``."""
-        head = self.message(branch.message)
+    def sequel(self, branch: g.Branch, timing: c.Timing | None = None) -> str:
+        """``msg`` or ``msg.G``, the time clause after the message."""
+        head = self.message(branch.message) + self.timing(timing)
         if isinstance(branch.continuation, g.End) and not self.chance(2):
             return head
         return f"{head}{self.gap()}.{self.gap()}{self.term(branch.continuation)}"
@@ -537,7 +605,7 @@ def _multicast(choice: g.Choice) -> tuple[list[str], tuple[g.Branch, ...]]:
     while True:
         nexts = [b.continuation for b in branches]
         if not all(isinstance(n, g.Choice) and len(n.branches) == 1 and n.sender == choice.sender
-                   and n.branches[0].message == b.message
+                   and n.branches[0].message == b.message and n.timing == choice.timing
                    and str(n.branches[0].message.sort) == str(b.message.sort)  # spelled alike
                    for n, b in zip(nexts, branches, strict=True)):
             return receivers, branches
