@@ -208,8 +208,8 @@ def test_merge_compares_refinements() -> None:
 
 def test_third_party_branches_with_different_timings_do_not_merge() -> None:
     message = _error("global G = A -> B : { l. C -> D : x within 5ms, r. C -> D : x }")
-    assert "different behaviours that do not merge (label 'x' has 'within 5ms' in one and no time clause " \
-           "in the other)" in message
+    assert ("different behaviours that do not merge (label 'x' has 'within 5ms' in one and no time clause "
+            "in the other)") in message
 
 
 def test_receives_from_one_peer_with_different_timings_do_not_merge() -> None:
