@@ -13,6 +13,7 @@ import warnings
 from typing import TYPE_CHECKING
 
 from .check import ProtocolModule
+from .constraints import Timing
 from .declarations import GlobalType, LocalType
 from .errors import (
     Diagnostic,
@@ -33,7 +34,7 @@ _RENAMED = {"Message": "Interaction"}
 
 __all__ = [
     "load", "loads", "read_source", "ProtocolModule", "GlobalType", "LocalType", "StateMachine", "Transition",
-    "Interaction", "Sort", "Location", "Diagnostic", "ProtocolError", "ProtocolSyntaxError",
+    "Interaction", "Sort", "Timing", "Location", "Diagnostic", "ProtocolError", "ProtocolSyntaxError",
     "ProtocolEncodingError", "ProtocolCheckError", "ProjectionError", "UnknownRoleError",
 ]
 
