@@ -15,7 +15,7 @@ from sessiontypes.merge import MergeError, merge
 from sessiontypes.parse import parse_expression
 from sessiontypes.printer import print_global
 from sessiontypes.refine import print_expr
-from sessiontypes.sorts import Interaction
+from sessiontypes.sorts import Field, Interaction, builtin_sort, record_sort
 
 TYPES = 'type Twist = "m:Twist"\ntype Pose = "m:Pose"\n'
 MS = 1_000_000
@@ -204,6 +204,13 @@ def test_merge_compares_refinements() -> None:
     with pytest.raises(MergeError):
         merge(lt.Recv("C", Interaction("n"), refined), lt.Recv("C", Interaction("n"), plain))
     assert merge(choice, refined) == lt.Offer("B", (*choice.branches, lt.Branch(refined.message, lt.End())))
+    # a field's refinement is part of its record's sort
+    positive = record_sort((Field("x", builtin_sort("int"), Compare((">",), (Path(("x",)), Number(0)))),))
+    anything = record_sort((Field("x", builtin_sort("int")),))
+    assert positive != anything and str(positive) == "x: int{x > 0}"
+    with pytest.raises(MergeError) as caught:
+        merge(lt.Recv("C", Interaction("n", positive), lt.End()), lt.Recv("C", Interaction("n", anything), lt.End()))
+    assert caught.value.reason == "label 'n' carries x: int{x > 0} in one and x: int in the other"
 
 
 def test_third_party_branches_with_different_timings_do_not_merge() -> None:
