@@ -8,6 +8,7 @@ line, a caret, and what was expected in words (never lark's token names).
 from __future__ import annotations
 
 import bisect
+import math
 import re
 import threading
 from collections.abc import Iterator
@@ -179,7 +180,11 @@ class _Builder(Transformer[Token, Any]):
     def number(self, children: list[Any]) -> c.Expr:
         text = str(children[0])
         value: int | float = int(text) if text.isdigit() else float(text)
-        return c.Number(value, _location(self.path, children[0]))
+        location = _location(self.path, children[0])
+        if math.isinf(value):
+            raise ProtocolSyntaxError(location, f"'{shortened(text)}'", ["a number a float can hold"],
+                                      self.line(location.line), "it is too large to compare with")
+        return c.Number(value, location)
 
     def text(self, children: list[Any]) -> c.Expr:
         return c.Text(_unescape(str(children[0])[1:-1]), _location(self.path, children[0]))
@@ -456,12 +461,19 @@ class _FastLexer(Lexer):
                 kind = _PUNCTUATION[value]
                 if value == "+-" and "PLUSMINUS" not in states[parser_state.position]:
                     # ``a +-b`` in a refinement: plus, then minus
-                    yield _token("PLUS", "+", start, data, newlines)
+                    yield _token("PLUS", "+", start, newlines)
                     kind, value, start = "MINUS", "-", start + 1
-            yield _token(kind, value, start, data, newlines)
+            # inlined _token: lexing dominates parse time
+            line = bisect.bisect_left(newlines, start)
+            line_start = newlines[line - 1] + 1 if line else 0
+            token = str.__new__(Token, value)
+            token.type, token.value, token.start_pos = kind, value, start
+            token.line, token.column = line + 1, start - line_start + 1
+            token.end_line = token.end_column = token.end_pos = None
+            yield token
 
 
-def _token(kind: str, value: str, start: int, data: str, newlines: list[int]) -> Token:
+def _token(kind: str, value: str, start: int, newlines: list[int]) -> Token:
     line = bisect.bisect_left(newlines, start)
     line_start = newlines[line - 1] + 1 if line else 0
     # Token(...) goes through a slow keyword-argument constructor; fill the slots.
@@ -607,6 +619,8 @@ def _hint(token: Token, expected: set[str]) -> str:
         return "write 'Sender -> Receiver : label'"
     if token.type == "ARROW" and "EQ" in expected:
         return "a declaration starts 'global Name = ...'"
+    if token.type == "NUMBER" and "DURATION" in expected:
+        return "a duration is a number with its unit right after it: ns, us, ms or s, as in 100ms"
     if token.type in {"BANG", "QUERY", "PLUS", "AMP"} and "NAME" in expected and "LBRACE" not in expected:
         return "'!', '?', '+' and '&' belong in local types"
     return ""

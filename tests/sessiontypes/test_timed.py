@@ -366,3 +366,17 @@ def test_untimed_protocols_are_unchanged() -> None:
     assert all(t.timing is None and t.refinement is None
                for role in ("A", "B") for t in _global("mu t. A -> B : {m(int). t, stop}").project(role)
                .fsm().all_transitions())
+
+
+def test_a_duration_needs_its_unit_attached() -> None:
+    assert _error("global G = A -> B : m within 5 ms") == (
+        "t.proto:1:30: error: syntax error; expected a duration such as 100ms, got '5' (a duration is a number "
+        "with its unit right after it: ns, us, ms or s, as in 100ms)\n"
+        "    global G = A -> B : m within 5 ms\n"
+        "                                 ^")
+
+
+def test_a_number_too_large_for_a_float_is_refused() -> None:
+    """``1e999`` would be infinity, which prints as ``inf``: a name when read back."""
+    assert _error("global G = A -> B : m(x: float{x < 1e999})").startswith(
+        "t.proto:1:36: error: syntax error; expected a number a float can hold, got '1e999'")
