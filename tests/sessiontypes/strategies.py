@@ -652,6 +652,9 @@ _TOKENS = [
     "!", "?", "||", "|", "(", ")", "{", "}", ",", ":", ".", "=", ";", "G", "H", "L", "A", "B",
     "C", "t", "l0", "int", "Int", "nat", "Twist", "A'", '"m:C"', '"ros:p/msg/T"', '"bad',
     "/*", "*/", "//", "\n", " ", "0", "-", "\\", "'", '"', "é", "\x00", "\ufeff", "\u2028",
+    # time clauses and refinements
+    "within", "every", "else", "timeout", "100ms", "1.5s", "0ms", "1.5ns", "+-", "±", "and", "or", "not",
+    "true", "false", "<=", "==", "!=", "<", "*", "/", "%", "1e999", "abs", "len", "min",
 ]
 
 _SEEDS = [
@@ -665,6 +668,8 @@ _SEEDS = [
     "local L at A = mu t. !B(l0(int)). &B{l1. t, l2}\n",
     "global M = A -> B, C : m(int). B -> A, C : {ok. end, no: end}\n",
     "global Q = A -> B : quote(price: nat, date: str). B -> A : {ok(at: int), no}\n",
+    ("global T = mu t. A -> B : m(x: float{0 <= x <= 1.5 and abs(x - 1) < 2}) every 20ms +- 2ms. "
+     "B -> A : {ok(n: int{n == len(s)}). t, no} within 100ms else timeout\n"),
 ]
 
 
