@@ -199,6 +199,11 @@ class _ChannelCheck:
             self._check(message, label, codecs, None)
             return
         taken, payload = self._check(message, label, codecs, held)
+        if payload is None and held.refined:  # not decoded (the channel broke): its fields still count later
+            try:
+                payload = codecs.decode(message.topic, message.data)
+            except (AnodizeError, ValueError, KeyError, TypeError):
+                payload = None
         held.record(self, message, taken, payload)  # the message happened, conforming or not
 
     def _check(self, message: RecordedMessage, label: str, codecs: _Codecs, held: _Held | None
@@ -302,7 +307,8 @@ class _Held:
     """The time and value constraints judged across channels (:mod:`.held`): each role's
     previous action and the latest fields of the record payloads it saw, in log-time order."""
 
-    def __init__(self, machines: Mapping[str, StateMachine], timed_roles: frozenset[str]) -> None:
+    def __init__(self, machines: Mapping[str, StateMachine], timed_roles: frozenset[str], refined: bool) -> None:
+        self.refined = refined
         self.times = RoleTimes(machines)
         self.earlier = Earlier()
         self.timed_roles = timed_roles  # roles whose every channel is in the recording: their deadlines are judged
@@ -520,7 +526,7 @@ def _constraints(report: VerifyReport, machines: Mapping[str, StateMachine], pai
             channels = ", ".join(f"{s}->{r}" for s, r in absent)
             report.notes.append(f"deadlines of {role} not judged: its channel(s) {channels} are not in the recording "
                                 "(its previous action may be one of theirs; record with --record-inside)")
-    return _Held(machines, frozenset(complete))
+    return _Held(machines, frozenset(complete), refined)
 
 
 def _note_gap(report: VerifyReport, checks: Mapping[tuple[str, str], _ChannelCheck], message: RecordedMessage) -> None:

@@ -1,0 +1,212 @@
+"""``anodize verify`` judges a protocol's time and value constraints on a recording.
+
+The constrained machines are made here by giving transitions their constraints (the
+front end that parses them is written in parallel): ``tick`` every 200 ms +- 20 ms with
+``abs(v) <= 1.5``, ``pose`` within 100 ms, ``ack`` with ``n == seq`` (``seq`` from the
+earlier ``tick`` the receiver of ``tick`` saw). Recordings are written as anodize writes
+them: one MCAP channel per label, anodize's metadata, JSON payloads, numbered messages.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from role_drivers import load_global, machines_of
+
+from anodize._recording.encoding import codec_for_sort
+from anodize._recording.plan import META, ChannelLabel
+from anodize._recording.reader import open_recording
+from anodize._recording.tap import channel_metadata
+from anodize._recording.verify import VerifyReport, Violation, verify
+from sessiontypes import StateMachine
+from sessiontypes.constraints import Call, Compare, Expr, Number, Timing
+from sessiontypes.constraints import Path as Name
+from sessiontypes.location import Location
+
+LOOP = """
+global Loop(C, M, O) =
+  mu t. C -> M : tick(v: float, seq: int). C -> O : go. O -> M : pose(x: float). M -> C : ack(n: int). t
+"""
+MS = 1_000_000
+BASE = 1_800_000_000 * 10**9  # log times: ns since the epoch
+PERIOD = Timing(every=200 * MS, jitter=20 * MS, location=Location("loop.proto", 3, 40))
+DEADLINE = Timing(within=100 * MS, location=Location("loop.proto", 3, 80))
+SPEED = Compare(("<=",), (Call("abs", (Name(("v",)),)), Number(1.5)), Location("loop.proto", 3, 30))
+ECHO = Compare(("==",), (Name(("n",)), Name(("seq",))), Location("loop.proto", 3, 95))
+
+
+def _constrain(machines: dict[str, StateMachine], label: str, timing: Timing | None = None,
+               refinement: Expr | None = None) -> None:
+    """Give every transition of ``label`` (sender's and receiver's) these constraints, in place."""
+    for machine in machines.values():
+        for row in machine.table:
+            for key, t in row.items():
+                if t.label == label:
+                    row[key] = replace(t, timing=timing, refinement=refinement)
+
+
+def _machines(deadline: Timing = DEADLINE) -> dict[str, StateMachine]:
+    machines = machines_of(load_global(LOOP, "Loop"))
+    _constrain(machines, "tick", PERIOD, SPEED)
+    _constrain(machines, "pose", deadline)
+    _constrain(machines, "ack", None, ECHO)
+    return machines
+
+
+Message = tuple[str, str, str, int, object]  # sender, receiver, label, log time, payload
+
+
+def _rounds(count: int) -> list[Message]:
+    """``count`` conforming rounds: tick, go, pose, ack, 200 ms apart."""
+    found: list[Message] = []
+    for i in range(count):
+        at = BASE + i * 200 * MS
+        found += [("C", "M", "tick", at, {"v": 0.5, "seq": i}), ("C", "O", "go", at + 1 * MS, None),
+                  ("O", "M", "pose", at + 10 * MS, {"x": float(i)}), ("M", "C", "ack", at + 12 * MS, {"n": i})]
+    return found
+
+
+def _retime(messages: list[Message], label: str, index: int, at: int, payload: object = "same") -> None:
+    """Move the ``index``-th message of ``label`` to log time ``at`` (and give it ``payload``)."""
+    spots = [i for i, m in enumerate(messages) if m[2] == label]
+    s, r, lab, _, old = messages[spots[index]]
+    messages[spots[index]] = (s, r, lab, at, old if payload == "same" else payload)
+
+
+def _record(path: Path, messages: list[Message], external: frozenset[str] = frozenset()) -> Path:
+    """An MCAP file as anodize records: per label a channel with anodize's metadata, JSON payloads."""
+    from mcap.writer import Writer
+
+    codec = codec_for_sort(None)
+    groups = {role: role.lower() for role in ("C", "M", "O") if role not in external}
+    with path.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start(profile="ros2", library="test")
+        schema = writer.register_schema(codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+        channels: dict[tuple[str, str, str], int] = {}
+        numbers: dict[tuple[str, str], int] = {}
+        for sender, receiver, label, at, payload in sorted(messages, key=lambda m: m[3]):
+            key = (sender, receiver, label)
+            if key not in channels:
+                metadata = channel_metadata(ChannelLabel(sender, receiver, label, None), codec, "Loop", groups)
+                channels[key] = writer.register_channel(f"/anodize/{sender}/{receiver}/{label}", "cdr", schema,
+                                                        metadata)
+            number = numbers[sender, receiver] = numbers.get((sender, receiver), 0) + 1
+            writer.add_message(channels[key], at, codec.encode(payload), at, number)
+        writer.add_metadata(META, {"recorded_channels": "C->M C->O O->M M->C"})
+        writer.finish()
+    return path
+
+
+def _verify(tmp_path: Path, messages: list[Message], deadline: Timing = DEADLINE,
+            external: frozenset[str] = frozenset()) -> VerifyReport:
+    with open_recording(_record(tmp_path / "run.mcap", messages, external)) as recording:
+        return verify(recording, load_global(LOOP, "Loop"), machines=_machines(deadline))
+
+
+def _only_violation(report: VerifyReport, channel: str) -> Violation:
+    assert not report.conforms
+    broken = {name: r.violation for name, r in report.channels.items() if r.violation is not None}
+    assert list(broken) == [channel], report.text()
+    return broken[channel]
+
+
+def test_a_recording_that_keeps_every_constraint_conforms(tmp_path: Path) -> None:
+    report = _verify(tmp_path, _rounds(5))
+    assert report.conforms, report.text()
+    assert {name: r.messages for name, r in report.channels.items()} == {
+        "C->M": 5, "C->O": 5, "M->C": 5, "O->M": 5}
+
+
+def test_a_message_that_reached_its_receiver_late_is_blamed_on_its_sender(tmp_path: Path) -> None:
+    messages = _rounds(4)
+    _retime(messages, "go", 2, BASE + 400 * MS + 50 * MS)     # O's previous action: 70 ms before its pose
+    _retime(messages, "pose", 2, BASE + 400 * MS + 120 * MS)  # M's: the tick, 120 ms before: 20 ms late
+    _retime(messages, "ack", 2, BASE + 400 * MS + 125 * MS)
+    violation = _only_violation(_verify(tmp_path, messages), "O->M")
+    assert (violation.index, violation.blamed, violation.role, violation.kind) == (2, "O", "M", "deadline")
+    assert violation.late == 20 * MS and violation.log_time == BASE + 520 * MS
+    assert violation.location == "loop.proto:3:80"
+    assert "it reached M 120.000 ms after M's previous action, but within 100ms (20.000 ms late)" in violation.reason
+
+
+def test_a_message_its_sender_sent_late_is_blamed_on_its_sender_at_the_sender(tmp_path: Path) -> None:
+    messages = _rounds(4)
+    _retime(messages, "pose", 1, BASE + 200 * MS + 151 * MS)  # 150 ms after O received go
+    _retime(messages, "ack", 1, BASE + 200 * MS + 155 * MS)
+    violation = _only_violation(_verify(tmp_path, messages), "O->M")
+    assert (violation.index, violation.blamed, violation.role, violation.kind) == (1, "O", "O", "deadline")
+    assert violation.late == 50 * MS
+    assert "O sent it 150.000 ms after O's previous action" in violation.reason
+
+
+def test_with_else_timeout_a_late_message_is_nobodys_fault(tmp_path: Path) -> None:
+    messages = _rounds(4)
+    _retime(messages, "pose", 1, BASE + 200 * MS + 151 * MS)
+    _retime(messages, "ack", 1, BASE + 200 * MS + 155 * MS)
+    report = _verify(tmp_path, messages, deadline=replace(DEADLINE, on_expiry=True))
+    assert report.conforms, report.text()
+
+
+@pytest.mark.parametrize(("shift", "side", "off"), [(-30, "early", 10), (35, "late", 15)])
+def test_a_period_broken_early_or_late_is_blamed_on_the_sender(tmp_path: Path, shift: int, side: str,
+                                                               off: int) -> None:
+    at = BASE + 600 * MS + shift * MS
+    messages = [(s, r, label, t + shift * MS if t >= BASE + 600 * MS else t, p)  # rounds 3 and 4 move
+                for s, r, label, t, p in _rounds(5)]
+    violation = _only_violation(_verify(tmp_path, messages), "C->M")
+    assert (violation.index, violation.blamed, violation.role, violation.kind) == (3, "C", "C", "period")
+    assert violation.late == off * MS and violation.log_time == at
+    assert violation.location == "loop.proto:3:40"
+    assert f"but every 200ms +- 20ms ({off:.0f}.000 ms {side})" in violation.reason
+
+
+def test_a_period_is_not_judged_on_the_log_times_of_an_external_senders_channel(tmp_path: Path) -> None:
+    messages = _rounds(5)
+    _retime(messages, "tick", 3, BASE + 570 * MS)  # what the receiver took when: not the sender's pace
+    assert _verify(tmp_path, messages, external=frozenset({"C"})).conforms
+
+
+def test_a_payload_out_of_range_is_blamed_on_its_sender_with_the_refinement(tmp_path: Path) -> None:
+    messages = _rounds(4)
+    _retime(messages, "tick", 2, BASE + 400 * MS, {"v": -2.0, "seq": 2})
+    violation = _only_violation(_verify(tmp_path, messages), "C->M")
+    assert (violation.index, violation.blamed, violation.kind) == (2, "C", "refinement")
+    assert violation.location == "loop.proto:3:30"
+    assert violation.reason == "refinement {abs(v) <= 1.5} is false for tick({'v': -2.0, 'seq': 2})"
+
+
+def test_a_name_of_an_earlier_payload_is_its_latest_value_in_log_time_order(tmp_path: Path) -> None:
+    messages = _rounds(4)
+    _retime(messages, "ack", 1, BASE + 212 * MS, {"n": 0})  # the latest seq M saw is 1
+    violation = _only_violation(_verify(tmp_path, messages), "M->C")
+    assert (violation.index, violation.blamed, violation.kind) == (1, "M", "refinement")
+    assert "refinement {n == seq} is false" in violation.reason
+
+
+def test_the_report_shows_a_constraint_violation_in_text_and_json(tmp_path: Path) -> None:
+    messages = _rounds(3)
+    _retime(messages, "tick", 1, BASE + 200 * MS, {"v": 9.0, "seq": 1})
+    report = _verify(tmp_path, messages)
+    text = report.text()
+    assert "violation: channel C->M, message 1 (log time " in text
+    assert "refinement {abs(v) <= 1.5} is false" in text and "blamed: C; see loop.proto:3:30" in text
+    found = json.loads(json.dumps(report.to_dict()))["channels"]["C->M"]["violation"]
+    assert (found["index"], found["blamed"], found["kind"], found["location"]) == (1, "C", "refinement",
+                                                                                  "loop.proto:3:30")
+
+
+def test_deadlines_of_a_role_with_a_channel_not_recorded_are_not_judged_and_the_report_says_so(
+        tmp_path: Path) -> None:
+    messages = [m for m in _rounds(4) if m[2] != "go"]  # C->O not in the recording: O's previous action unknown
+    _retime(messages, "pose", 1, BASE + 200 * MS + 60 * MS)
+    path = _record(tmp_path / "run.mcap", messages)
+    with open_recording(path) as recording:
+        recording.info["recorded_channels"] = "C->M O->M M->C"
+        report = verify(recording, load_global(LOOP, "Loop"), machines=_machines())
+    assert report.channels["O->M"].violation is None
+    assert any(note.startswith("deadlines of O not judged: its channel(s) C->O are not in the recording")
+               for note in report.notes), report.notes
