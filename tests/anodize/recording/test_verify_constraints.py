@@ -168,6 +168,7 @@ def test_a_period_is_not_judged_on_the_log_times_of_an_external_senders_channel(
     messages = _rounds(5)
     _retime(messages, "tick", 3, BASE + 570 * MS)  # what the receiver took when: not the sender's pace
     assert _verify(tmp_path, messages, external=frozenset({"C"})).conforms
+    assert _only_violation(_verify(tmp_path, messages), "C->M").kind == "period"  # the sender's own log times
 
 
 def test_a_payload_out_of_range_is_blamed_on_its_sender_with_the_refinement(tmp_path: Path) -> None:
