@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import hashlib
 import keyword
+import math
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
@@ -314,6 +315,8 @@ def _paths(expr: Expr) -> list[Path]:
 
 def _expr_code(expr: Expr) -> str:
     """Python that builds ``expr`` (the module's ``_c`` is :mod:`sessiontypes.constraints`)."""
+    if isinstance(expr, Number) and isinstance(expr.value, float) and not math.isfinite(expr.value):
+        return f"_c.Number(float({str(expr.value)!r}))"  # 1e999 reads as inf, which has no literal
     if isinstance(expr, Number | Text | Truth):
         return f"_c.{type(expr).__name__}({expr.value!r})"
     if isinstance(expr, Path):

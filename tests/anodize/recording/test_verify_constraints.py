@@ -14,6 +14,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from budget import examples
+from hypothesis import HealthCheck, given, note, settings
+from hypothesis import strategies as st
 from role_drivers import load_global, machines_of
 
 from anodize._recording.encoding import codec_for_sort
@@ -211,3 +214,66 @@ def test_deadlines_of_a_role_with_a_channel_not_recorded_are_not_judged_and_the_
     assert report.channels["O->M"].violation is None
     assert any(note.startswith("deadlines of O not judged: its channel(s) C->O are not in the recording")
                for note in report.notes), report.notes
+
+
+# ---- against an executable reference of the written semantics ------------------------------
+
+def _reference(messages: list[Message]) -> dict[str, tuple[int, str, str]]:
+    """Per channel, its first violation (index, kind, role) by docs/recording.md's reading of
+    the constraints, written directly for Loop: every channel recorded, one machine per role."""
+    previous: dict[str, int] = {}
+    seen_seq: dict[str, object] = {}
+    last_tick: int | None = None
+    counts: dict[str, int] = {}
+    found: dict[str, tuple[int, str, str]] = {}
+    for sender, receiver, label, at, payload in sorted(messages, key=lambda m: m[3]):
+        channel = f"{sender}->{receiver}"
+        index = counts[channel] = counts.get(channel, 0) + 1
+        if channel not in found:
+            broken: tuple[str, str] | None = None
+            if label == "tick":
+                assert isinstance(payload, dict)
+                if abs(payload["v"]) > 1.5:
+                    broken = ("refinement", sender)
+                elif last_tick is not None and not 180 * MS <= at - last_tick <= 220 * MS:
+                    broken = ("period", sender)
+                else:
+                    last_tick = at
+            elif label == "pose":
+                for role in (sender, receiver):  # the sender's deadline first, then the receiver's
+                    if role in previous and at - previous[role] > 100 * MS:
+                        broken = ("deadline", role)
+                        break
+            elif label == "ack":
+                assert isinstance(payload, dict)
+                if "seq" not in seen_seq or payload["n"] != seen_seq["seq"]:
+                    broken = ("refinement", sender)
+            if broken is not None:
+                found[channel] = (index - 1, *broken)
+        for role in (sender, receiver):
+            previous[role] = at
+            if isinstance(payload, dict):
+                seen_seq.update({k: v for k, v in payload.items() if k == "seq"} if role == "M" else {})
+    return found
+
+
+@settings(deadline=None, max_examples=examples(25), suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(rounds=st.lists(st.tuples(st.integers(150, 250), st.integers(0, 120), st.integers(0, 150),
+                                 st.floats(-1.8, 1.8, allow_nan=False), st.integers(-1, 1)),
+                       min_size=1, max_size=6))
+def test_verify_finds_what_the_written_semantics_find(tmp_path_factory: pytest.TempPathFactory,
+                                                      rounds: list[tuple[int, int, int, float, int]]) -> None:
+    messages: list[Message] = []
+    at = BASE
+    for seq, (gap, go, pose, v, off) in enumerate(rounds):
+        at += gap * MS if seq else 0
+        messages += [("C", "M", "tick", at, {"v": v, "seq": seq}), ("C", "O", "go", at + go * MS + 1, None),
+                     ("O", "M", "pose", at + go * MS + pose * MS + 2, {"x": 0.0}),
+                     ("M", "C", "ack", at + go * MS + pose * MS + 3, {"n": seq + off})]
+        at = max(at, messages[-1][3] - gap * MS + 4)  # the next tick comes after this round's ack
+    path = tmp_path_factory.mktemp("rec")
+    report = _verify(path, messages)
+    found = {name: (r.violation.index, r.violation.kind, r.violation.role)
+             for name, r in report.channels.items() if r.violation is not None}
+    note(report.text())
+    assert found == _reference(messages)

@@ -215,3 +215,18 @@ def test_constrained_modules_and_a_program_using_them_pass_mypy_strict(tmp_path:
     errors = [line for line in result.stdout.splitlines() if ": error:" in line]
     assert [e.split(":")[0] for e in errors] == ["broken_loop_program.py"], result.stdout + result.stderr
     assert 'Argument 1 to "send_tick" of "State0" has incompatible type "str"; expected "float"' in errors[0]
+
+
+def test_the_predicates_written_into_a_module_build_the_protocols_own_trees() -> None:
+    from anodize._tools.codegen import _expr_code
+    from sessiontypes import constraints
+    from sessiontypes.constraints import Binary, Text, Truth, Unary
+
+    trees: list[Expr] = [
+        SPEED, LIMIT, ECHO, Number(float("inf")), Number(-0.0), Number(10**30),
+        Binary("or", Unary("not", Truth(True)), Compare(("==",), (Text('say "hi"\n\\'), Name(("a", "b"))))),
+        Compare(("<=", "<"), (Number(0), Binary("%", Unary("-", Name(("p",))), Number(3)), Number(1))),
+        Call("max", (Number(1), Number(2.5), Call("len", (Name(("s",)),)))),
+    ]
+    for tree in trees:
+        assert eval(_expr_code(tree), {"_c": constraints}) == tree
