@@ -32,10 +32,10 @@ from dataclasses import dataclass
 
 from sessiontypes import StateMachine, Transition
 from sessiontypes.constraints import Expr, format_duration
-from sessiontypes.refine import Predicate, compile_predicate
+from sessiontypes.refine import Predicate, compile_predicate, print_expr
 
 __all__ = ["Breach", "RoleTimes", "Earlier", "judge_refinement", "judge_deadline", "judge_period",
-           "constrained", "machines_of"]
+           "constrained", "machines_of", "Held", "constraints_of"]
 
 _SHOWN = 200  # characters of a payload a reason quotes
 
@@ -55,6 +55,72 @@ class Breach:
     reason: str
     location: str
     late: int = 0
+
+
+@dataclass
+class Held:
+    """One constraint of one label of a channel, and how it held on the messages judged
+    (those before the channel's first violation, if it has one).
+
+    Attributes:
+        channel: ``"Sender->Receiver"``.
+        label: the interaction's label.
+        constraint: its canonical print: ``within 100ms``, ``every 20ms +- 2ms``, ``{abs(v) <= 1.5}``.
+        judged: on how many messages it was judged.
+        least: for a period, the shortest time between two messages, in ns (None: none judged).
+        most: for a deadline, the longest time since the previous action; for a period, the
+            longest between two messages; in ns (None: none judged).
+    """
+
+    channel: str
+    label: str
+    constraint: str
+    judged: int = 0
+    least: int | None = None
+    most: int | None = None
+
+    def measured(self, span: int) -> None:
+        self.least = span if self.least is None else min(self.least, span)
+        self.most = span if self.most is None else max(self.most, span)
+
+    def __str__(self) -> str:
+        head = f"{self.channel} {self.label} {self.constraint}"
+        if not self.judged:
+            return f"{head}: judged on no message"
+        held = f"{head}: held on {self.judged} message(s)"
+        if self.constraint.startswith("within") and self.most is not None:
+            return f"{held}, at most {_span(self.most)} after the previous action"
+        if self.constraint.startswith("every") and self.least is not None and self.most is not None:
+            return f"{held}, {_span(self.least)} to {_span(self.most)} apart"
+        return held
+
+
+def constraints_of(machines: Mapping[str, StateMachine]) -> dict[tuple[str, str, str], Held]:
+    """Every constraint ``verify`` judges, from the senders' transitions, keyed by (channel,
+    label, constraint): ``within`` without ``else timeout``, ``every``, refinements."""
+    found: dict[tuple[str, str, str], Held] = {}
+    for role, machine in sorted(machines.items()):
+        for t in machine.all_transitions():
+            if t.action != "send" or t.peer is None:
+                continue
+            channel = f"{role}->{t.peer}"
+            for text in constraint_texts(t):
+                found.setdefault((channel, t.label, text), Held(channel, t.label, text))
+    return dict(sorted(found.items()))
+
+
+def constraint_texts(t: Transition) -> list[str]:
+    """The prints of ``t``'s constraints that ``verify`` judges: period, deadline, refinement."""
+    texts: list[str] = []
+    timing = t.timing
+    if timing is not None and timing.every is not None:
+        texts.append(f"every {format_duration(timing.every)}"
+                     + (f" +- {format_duration(timing.jitter)}" if timing.jitter else ""))
+    if timing is not None and timing.within is not None and not timing.on_expiry:
+        texts.append(f"within {format_duration(timing.within)}")
+    if t.refinement is not None:
+        texts.append("{" + print_expr(t.refinement) + "}")
+    return texts
 
 
 def constrained(machines: Mapping[str, StateMachine]) -> tuple[bool, bool]:
@@ -156,8 +222,7 @@ def judge_period(t: Transition, previous: int | None, log_time: int) -> Breach |
     if low <= gap <= high:
         return None
     off, side = (low - gap, "early") if gap < low else (gap - high, "late")
-    every = f"every {format_duration(timing.every)}"
-    every += f" +- {format_duration(timing.jitter)}" if timing.jitter else ""
+    every = constraint_texts(t)[0]
     return Breach("period", f"period missed: sent {_span(gap)} after the previous {t.label}, but "
                   f"{every} ({_span(off)} {side})", _where(timing.location, t), off)
 

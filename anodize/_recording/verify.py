@@ -32,7 +32,18 @@ from ..errors import AnodizeError
 from .by_name import sort_text, validator_by_name
 from .channel_view import ChannelView, Node, sort_key
 from .encoding import JSON_TYPE, SortCodec, UnknownObject, class_sorts, codec_for_sort
-from .held import Breach, Earlier, RoleTimes, constrained, judge_deadline, judge_period, judge_refinement
+from .held import (
+    Breach,
+    Earlier,
+    Held,
+    RoleTimes,
+    constrained,
+    constraint_texts,
+    constraints_of,
+    judge_deadline,
+    judge_period,
+    judge_refinement,
+)
 from .metadata import recorded_channels
 from .plan import CLOCK_KEY, META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
@@ -131,6 +142,7 @@ class VerifyReport:
         inside: channels an anodize recording leaves out by design (both ends in one group).
         gaps: messages the recorder marked as not recorded (the recording's, not a violation).
         notes: what else the reader should know (payload classes checked by name only, ...).
+        constraints: each time or value constraint of the protocol, and how it held.
     """
 
     recording: str
@@ -142,6 +154,7 @@ class VerifyReport:
     inside: list[str] = field(default_factory=list)
     gaps: list[Gap] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    constraints: list[Held] = field(default_factory=list)
     messages: int = 0
     bytes: int = 0
     seconds: float = 0.0
@@ -164,6 +177,7 @@ class VerifyReport:
         lines.extend(f"gap: {gap}" for gap in self.gaps)
         if self.inside:
             lines.append(f"not recorded (both ends in one group): {', '.join(self.inside)}")
+        lines.extend(f"constraint: {held}" for held in self.constraints)
         lines.extend(f"note: {note}" for note in self.notes)
         return "\n".join(lines)
 
@@ -174,6 +188,7 @@ class VerifyReport:
                              for name, r in self.channels.items()},
                 "unknown": self.unknown, "unmapped": self.unmapped, "missing": self.missing, "inside": self.inside,
                 "gaps": [gap.__dict__ for gap in self.gaps], "notes": self.notes,
+                "constraints": [held.__dict__ for held in self.constraints],
                 "messages": self.messages, "bytes": self.bytes, "seconds": self.seconds}
 
 
@@ -312,6 +327,7 @@ class _Held:
         self.times = RoleTimes(machines)
         self.earlier = Earlier()
         self.timed_roles = timed_roles  # roles whose every channel is in the recording: their deadlines are judged
+        self.held = constraints_of(machines)  # how each constraint held, for the report
 
     def judge(self, check: _ChannelCheck, side: int, node: Node, t: Transition, label: str,
               message: RecordedMessage, payload: object) -> Breach | None:
@@ -332,6 +348,8 @@ class _Held:
     def record(self, check: _ChannelCheck, message: RecordedMessage,
                taken: list[list[tuple[Node, Transition]]] | None, payload: object) -> None:
         """The message happened: it is its sender's and its receiver's latest action."""
+        if taken is not None:
+            self._tally(check, message, taken)
         for side, role in enumerate((check.sender, check.receiver)):
             machines = {node[0] for node, _ in taken[side]} if taken is not None else set()
             self.times.act(role, machines.pop() if len(machines) == 1 else None, message.log_time)
@@ -340,6 +358,33 @@ class _Held:
             for node, t in taken[0]:
                 if t.timing is not None and t.timing.every is not None:
                     check.periods[node, t.label] = message.log_time
+
+
+    def _tally(self, check: _ChannelCheck, message: RecordedMessage,
+               taken: list[list[tuple[Node, Transition]]]) -> None:
+        """Count the constraints the message was judged by and kept (the first path it took stands for all)."""
+        (node, t), (their_node, _) = taken[0][0], taken[1][0]
+        texts = constraint_texts(t)
+        if not texts:
+            return
+        at = message.log_time
+        for text in texts:
+            held = self.held[check.name, t.label, text]
+            if text.startswith("every"):
+                previous = check.periods.get((node, t.label)) if _at_sender(message) else None
+                if previous is not None:
+                    held.judged += 1
+                    held.measured(at - previous)
+            elif text.startswith("within"):
+                before = [self.times.previous(role, n[0]) for role, n in ((check.sender, node),
+                                                                        (check.receiver, their_node))
+                          if role in self.timed_roles]
+                spans = [at - b for b in before if b is not None]
+                if spans:
+                    held.judged += 1
+                    held.measured(max(spans))
+            else:
+                held.judged += 1
 
 
 def _at_sender(message: RecordedMessage) -> bool:
@@ -498,6 +543,8 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
         elif message.topic.id in gap_topics:
             _note_gap(report, checks, message)
     report.channels = {check.name: check.result for check in checks.values()}
+    if held is not None:
+        report.constraints = list(held.held.values())
     # An anodize recording says which channels it records: those inside one group it does not.
     expected = sorted(pairs) if recorded is None else sorted(pair for pair in pairs if pair in recorded)
     report.missing = [f"{s}->{r}" for s, r in expected

@@ -122,6 +122,11 @@ def test_a_recording_that_keeps_every_constraint_conforms(tmp_path: Path) -> Non
     assert report.conforms, report.text()
     assert {name: r.messages for name, r in report.channels.items()} == {
         "C->M": 5, "C->O": 5, "M->C": 5, "O->M": 5}
+    assert [line for line in report.text().splitlines() if line.startswith("constraint: ")] == [
+        "constraint: C->M tick every 200ms +- 20ms: held on 4 message(s), 200.000 ms to 200.000 ms apart",
+        "constraint: C->M tick {abs(v) <= 1.5}: held on 5 message(s)",
+        "constraint: M->C ack {n == seq}: held on 5 message(s)",
+        "constraint: O->M pose within 100ms: held on 5 message(s), at most 10.000 ms after the previous action"]
 
 
 def test_a_message_that_reached_its_receiver_late_is_blamed_on_its_sender(tmp_path: Path) -> None:
@@ -198,9 +203,14 @@ def test_the_report_shows_a_constraint_violation_in_text_and_json(tmp_path: Path
     text = report.text()
     assert "violation: channel C->M, message 1 (log time " in text
     assert "refinement {abs(v) <= 1.5} is false" in text and "blamed: C; see loop.proto:3:30" in text
-    found = json.loads(json.dumps(report.to_dict()))["channels"]["C->M"]["violation"]
+    data = json.loads(json.dumps(report.to_dict()))
+    found = data["channels"]["C->M"]["violation"]
     assert (found["index"], found["blamed"], found["kind"], found["location"]) == (1, "C", "refinement",
                                                                                   "loop.proto:3:30")
+    held = {(c["channel"], c["constraint"]): c for c in data["constraints"]}
+    assert held["C->M", "{abs(v) <= 1.5}"]["judged"] == 1  # up to the violation
+    assert (held["C->M", "every 200ms +- 20ms"]["least"], held["C->M", "every 200ms +- 20ms"]["most"]) == (
+        None, None)  # the second tick broke the refinement: no period was judged
 
 
 def test_deadlines_of_a_role_with_a_channel_not_recorded_are_not_judged_and_the_report_says_so(
