@@ -85,6 +85,8 @@ class Held:
 
     def __str__(self) -> str:
         head = f"{self.channel} {self.label} {self.constraint}"
+        if self.constraint.endswith("else timeout"):
+            return f"{head}: not judged (a late message was a timeout the recording does not show: nobody's fault)"
         if not self.judged:
             return f"{head}: judged on no message"
         held = f"{head}: held on {self.judged} message(s)"
@@ -96,8 +98,8 @@ class Held:
 
 
 def constraints_of(machines: Mapping[str, StateMachine]) -> dict[tuple[str, str, str], Held]:
-    """Every constraint ``verify`` judges, from the senders' transitions, keyed by (channel,
-    label, constraint): ``within`` without ``else timeout``, ``every``, refinements."""
+    """Every constraint of the senders' transitions, keyed by (channel, label, constraint):
+    ``every``, ``within`` (with ``else timeout``: listed, never judged), refinements."""
     found: dict[tuple[str, str, str], Held] = {}
     for role, machine in sorted(machines.items()):
         for t in machine.all_transitions():
@@ -110,14 +112,14 @@ def constraints_of(machines: Mapping[str, StateMachine]) -> dict[tuple[str, str,
 
 
 def constraint_texts(t: Transition) -> list[str]:
-    """The prints of ``t``'s constraints that ``verify`` judges: period, deadline, refinement."""
+    """The prints of ``t``'s constraints: period, deadline, refinement."""
     texts: list[str] = []
     timing = t.timing
     if timing is not None and timing.every is not None:
         texts.append(f"every {format_duration(timing.every)}"
                      + (f" +- {format_duration(timing.jitter)}" if timing.jitter else ""))
-    if timing is not None and timing.within is not None and not timing.on_expiry:
-        texts.append(f"within {format_duration(timing.within)}")
+    if timing is not None and timing.within is not None:
+        texts.append(f"within {format_duration(timing.within)}" + (" else timeout" if timing.on_expiry else ""))
     if t.refinement is not None:
         texts.append("{" + print_expr(t.refinement) + "}")
     return texts

@@ -375,6 +375,8 @@ class _Held:
                 if previous is not None:
                     held.judged += 1
                     held.measured(at - previous)
+            elif text.endswith("else timeout"):
+                continue  # the receiver's alone, and a timeout is in no recording
             elif text.startswith("within"):
                 before = [self.times.previous(role, n[0]) for role, n in ((check.sender, node),
                                                                         (check.receiver, their_node))

@@ -615,7 +615,10 @@ class _Writer:
             notes.append("The refinement names an earlier payload: the endpoint's monitor checks it.")
         elif refinements:
             notes.append("The endpoint's monitor checks the refinement on arrival (blaming the sender).")
-        if timings and not timeout:
+        receivers_own = all(t.timing is None or (t.timing.on_expiry and t.timing.every is None) for t in transitions)
+        if timings and sending and receivers_own:
+            notes.append("With ``else timeout`` the deadline is the receiver's: nothing is timed on sending.")
+        elif timings and not timeout:
             notes.append("The endpoint's monitor checks the time constraints (``DeadlineMissedError``).")
         if timeout:
             notes.append(f"When the deadline passes with nothing arrived: ``{timeout}`` (this state again).")

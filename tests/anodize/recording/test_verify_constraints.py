@@ -157,6 +157,8 @@ def test_with_else_timeout_a_late_message_is_nobodys_fault(tmp_path: Path) -> No
     _retime(messages, "ack", 1, BASE + 200 * MS + 155 * MS)
     report = _verify(tmp_path, messages, deadline=replace(DEADLINE, on_expiry=True))
     assert report.conforms, report.text()
+    assert ("constraint: O->M pose within 100ms else timeout: not judged (a late message was a timeout the "
+            "recording does not show: nobody's fault)") in report.text().splitlines()
 
 
 @pytest.mark.parametrize(("shift", "side", "off"), [(-30, "early", 10), (35, "late", 15)])

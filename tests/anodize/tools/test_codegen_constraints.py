@@ -83,6 +83,8 @@ def test_docstrings_carry_the_constraints_in_their_canonical_print() -> None:
     assert "A payload for which the refinement is false is refused here, before anything is sent" in c
     assert "The refinement names an earlier payload: the endpoint's monitor checks it." in m
     assert "The endpoint's monitor checks the refinement on arrival (blaming the sender)." in m
+    assert "With ``else timeout`` the deadline is the receiver's: nothing is timed on sending." in o
+    assert "The endpoint's monitor checks the time constraints (``DeadlineMissedError``)." in c
 
 
 def test_a_refined_parameter_is_annotated_with_its_predicate() -> None:
