@@ -37,7 +37,7 @@ from sessiontypes.refine import Predicate, compile_predicate, print_expr
 __all__ = ["Breach", "RoleTimes", "Earlier", "judge_refinement", "judge_deadline", "judge_period",
            "constrained", "machines_of", "Held", "constraints_of"]
 
-_SHOWN = 200  # characters of a payload a reason quotes
+_SHOWN = 120  # characters of a payload a reason quotes (as the live monitor's)
 
 
 @dataclass(frozen=True)
@@ -196,8 +196,8 @@ def judge_refinement(t: Transition, label: str, payload: object, earlier: Mappin
     if reason is None:
         return None
     shown = repr(payload)
-    shown = shown if len(shown) <= _SHOWN else shown[:_SHOWN] + " ..."
-    return Breach("refinement", f"{reason} for {label}({shown})", _where(t.refinement.location, t))
+    shown = shown if len(shown) <= _SHOWN else shown[:_SHOWN - 3] + "..."
+    return Breach("refinement", f"{reason} for {label} {shown}", _where(t.refinement.location, t))
 
 
 def judge_deadline(t: Transition, role: str, sender: bool, previous: int | None, log_time: int) -> Breach | None:
@@ -209,9 +209,9 @@ def judge_deadline(t: Transition, role: str, sender: bool, previous: int | None,
     if gap <= timing.within:
         return None
     late = gap - timing.within
-    what = f"{role} sent it" if sender else f"it reached {role}"
-    return Breach("deadline", f"deadline missed: {what} {_span(gap)} after {role}'s previous action, but "
-                  f"within {format_duration(timing.within)} ({_span(late)} late)", _where(timing.location, t), late)
+    what = "sent" if sender else f"it reached {role}"
+    return Breach("deadline", f"deadline missed: {what} {_span(gap)} after {role}'s previous action, later than "
+                  f"within {_span(timing.within)}", _where(timing.location, t), late)
 
 
 def judge_period(t: Transition, previous: int | None, log_time: int) -> Breach | None:
@@ -224,13 +224,20 @@ def judge_period(t: Transition, previous: int | None, log_time: int) -> Breach |
     if low <= gap <= high:
         return None
     off, side = (low - gap, "early") if gap < low else (gap - high, "late")
-    every = constraint_texts(t)[0]
-    return Breach("period", f"period missed: sent {_span(gap)} after the previous {t.label}, but "
-                  f"{every} ({_span(off)} {side})", _where(timing.location, t), off)
+    return Breach("period", f"period missed: sent {_span(gap)} after the previous {t.label}, {_span(off)} too "
+                  f"{side} for {timing}", _where(timing.location, t), off)
 
 
 def _span(nanos: int) -> str:
-    return f"{nanos / 1e6:.3f} ms"
+    """A duration as the live monitor says it: ``12.345 ms``, ``1.500 s``, ``850.0 us``, ``40 ns``."""
+    size = abs(nanos)
+    if size >= 1_000_000_000:
+        return f"{nanos / 1_000_000_000:.3f} s"
+    if size >= 1_000_000:
+        return f"{nanos / 1_000_000:.3f} ms"
+    if size >= 1_000:
+        return f"{nanos / 1_000:.1f} us"
+    return f"{nanos} ns"
 
 
 def _where(location: object, t: Transition) -> str:

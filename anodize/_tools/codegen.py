@@ -78,8 +78,8 @@ _RESERVED = frozenset({
 })
 # The label a receive with ``else timeout`` gets when its deadline passes (anodize.TIMEOUT).
 _TIMEOUT = "timeout"
-# Characters of a refused payload the error quotes.
-_SHOWN = 200
+# Characters of a refused payload the error quotes (as the monitor's).
+_SHOWN = 120
 # Docstrings quote the remaining local type; a very long one is cut here.
 _MAX_TYPE_TEXT = 400
 
@@ -342,10 +342,10 @@ def _refused_function(protocol: str, role: str) -> list[str]:
             "             reason: str, location: str) -> _ProtocolViolationError:",
             f'    """A payload whose refinement is false: nothing was sent, and {_escape(role)} is blamed."""',
             "    shown = repr(payload)",
-            f"    shown = shown if len(shown) <= {_SHOWN} else shown[:{_SHOWN}] + \" ...\"",
+            f"    shown = shown if len(shown) <= {_SHOWN} else shown[:{_SHOWN - 3}] + \"...\"",
             '    actual = _Action("send", peer, label, type(payload).__name__)',
             (f"    return _ProtocolViolationError({_quote(protocol)}, {_quote(role)}, peer, state, expected, actual, "
-             f'{_quote(role)}, location, f"{{reason}} for {{label}}({{shown}})")')]
+             f'{_quote(role)}, location, f"{{reason}} for {{label}} {{shown}}")')]
 
 
 # ---- writing ------------------------------------------------------------------------
