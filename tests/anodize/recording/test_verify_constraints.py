@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 from budget import examples
@@ -19,6 +20,7 @@ from hypothesis import HealthCheck, given, note, settings
 from hypothesis import strategies as st
 from role_drivers import load_global, machines_of
 
+from anodize import Recording, System
 from anodize._recording.encoding import codec_for_sort
 from anodize._recording.plan import META, ChannelLabel
 from anodize._recording.reader import open_recording
@@ -292,3 +294,60 @@ def test_verify_finds_what_the_written_semantics_find(tmp_path_factory: pytest.T
              for name, r in report.channels.items() if r.violation is not None}
     note(report.text())
     assert found == _reference(messages)
+
+
+# ---- on a recording of a real run ------------------------------------------------------------
+
+COUNT = """
+global Count(A, B) =
+  mu t. A -> B : { num(n: int). B -> A : ok. t, stop. end }
+"""
+
+
+def _count_a(ep: Any) -> None:
+    for n in range(5):
+        ep.send("B", "num", {"n": n})
+        ep.recv("B")
+    ep.send("B", "stop")
+
+
+def _count_b(ep: Any) -> None:
+    while ep.recv("A").label == "num":
+        ep.send("A", "ok")
+
+
+@pytest.fixture(scope="module")
+def counted(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A recording of Count run by anodize, A and B in groups of their own."""
+    path = tmp_path_factory.mktemp("count") / "run.mcap"
+    system = System(load_global(COUNT, "Count"))
+    system.group("a").role("A", _count_a)
+    system.group("b").role("B", _count_b)
+    report = system.run(timeout=20, taps=[Recording(path)])
+    assert report.ok, report.summary()
+    return path
+
+
+def _verify_count(path: Path, timing: Timing | None = None, refinement: Expr | None = None) -> VerifyReport:
+    global_type = load_global(COUNT, "Count")
+    machines = machines_of(global_type)
+    _constrain(machines, "num", timing, refinement)
+    with open_recording(path) as recording:
+        return verify(recording, global_type, machines=machines)
+
+
+def test_a_recorded_run_that_keeps_its_constraints_conforms(counted: Path) -> None:
+    report = _verify_count(counted, Timing(within=60 * 10**9), Compare((">=",), (Name(("n",)), Number(0))))
+    assert report.conforms, report.text()
+    held = {held.constraint: held for held in report.constraints}
+    assert (held["within 60s"].judged, held["{n >= 0}"].judged) == (4, 5)  # the first num: no previous action
+
+
+def test_a_recorded_run_out_of_range_or_too_fast_is_blamed_on_its_sender(counted: Path) -> None:
+    violation = _only_violation(_verify_count(counted, refinement=Compare(("<=",), (Name(("n",)), Number(2)))), "A->B")
+    assert (violation.index, violation.blamed, violation.kind) == (3, "A", "refinement")
+    assert violation.reason == "refinement {n <= 2} is false for num {'n': 3}"
+    # Each num follows the previous one's ok at once: far sooner than a period of 60 s +- 1 s allows.
+    violation = _only_violation(_verify_count(counted, Timing(every=60 * 10**9, jitter=10**9)), "A->B")
+    assert (violation.index, violation.blamed, violation.kind) == (1, "A", "period")
+    assert "too early for every 60s +- 1s" in violation.reason
