@@ -14,6 +14,11 @@ channel starts again from the protocol's beginning). A gap the recorder itself m
 (on :data:`~.tap.GAP_TOPIC`: its writer fell behind and the sender did not wait for it)
 is the recording's, reported as a gap, not as a violation: the channel's check goes on
 after it from every state the missing messages could have led to.
+
+The protocol's time and value constraints (``within``, ``every``, refinements) are judged
+too, across channels in log-time order (:mod:`.held` says how a recording stands for the
+roles' clocks): a message that breaks one is its channel's violation, blaming the sender, and
+the report says how each constraint held. A protocol without constraints pays nothing for it.
 """
 
 from __future__ import annotations
