@@ -85,6 +85,17 @@ class ChannelView:
                 if move.label == label and (sorts is None or sort_key(move.transition) in sorts))
         return found
 
+    def candidates(self, nodes: frozenset[Node], label: str,
+                   sorts: frozenset[str | None] | None = None) -> list[tuple[Node, Transition]]:
+        """The transitions ``label`` may take from ``nodes`` (through one of ``sorts``, if given),
+        each with the state it leaves (for constraints that narrow them down: :meth:`advance`)."""
+        return [(node, move.transition) for node in sorted(nodes) for move in self._moves[node]
+                if move.label == label and (sorts is None or sort_key(move.transition) in sorts)]
+
+    def advance(self, taken: list[tuple[Node, Transition]]) -> frozenset[Node]:
+        """The states after taking ``taken`` (some of :meth:`candidates`)."""
+        return self.closure((node[0], t.target) for node, t in taken)
+
     def allowed(self, nodes: frozenset[Node]) -> list[Transition]:
         """The channel's transitions possible next, one per label, sorted by label."""
         found: dict[str, Transition] = {}

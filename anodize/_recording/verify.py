@@ -14,6 +14,11 @@ channel starts again from the protocol's beginning). A gap the recorder itself m
 (on :data:`~.tap.GAP_TOPIC`: its writer fell behind and the sender did not wait for it)
 is the recording's, reported as a gap, not as a violation: the channel's check goes on
 after it from every state the missing messages could have led to.
+
+The protocol's time and value constraints (``within``, ``every``, refinements) are judged
+too, across channels in log-time order (:mod:`.held` says how a recording stands for the
+roles' clocks): a message that breaks one is its channel's violation, blaming the sender, and
+the report says how each constraint held. A protocol without constraints pays nothing for it.
 """
 
 from __future__ import annotations
@@ -32,6 +37,18 @@ from ..errors import AnodizeError
 from .by_name import sort_text, validator_by_name
 from .channel_view import ChannelView, Node, sort_key
 from .encoding import JSON_TYPE, SortCodec, UnknownObject, class_sorts, codec_for_sort
+from .held import (
+    Breach,
+    Earlier,
+    Held,
+    RoleTimes,
+    constrained,
+    constraint_texts,
+    constraints_of,
+    judge_deadline,
+    judge_period,
+    judge_refinement,
+)
 from .metadata import recorded_channels
 from .plan import CLOCK_KEY, META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
@@ -60,6 +77,9 @@ class Violation:
         actual: what was recorded.
         location: the ``.proto`` location of the interaction concerned.
         reason: what is wrong with the payload, or the recording, when that is the fault.
+        kind: for a broken time or value constraint, ``"deadline"``, ``"period"`` or
+            ``"refinement"`` (else "").
+        late: for a broken time constraint, how far outside it the message was, in ns.
     """
 
     channel: str
@@ -73,6 +93,8 @@ class Violation:
     actual: str
     location: str
     reason: str = ""
+    kind: str = ""
+    late: int = 0
 
     def __str__(self) -> str:
         expected = ", ".join(self.expected) or "nothing more"
@@ -125,6 +147,7 @@ class VerifyReport:
         inside: channels an anodize recording leaves out by design (both ends in one group).
         gaps: messages the recorder marked as not recorded (the recording's, not a violation).
         notes: what else the reader should know (payload classes checked by name only, ...).
+        constraints: each time or value constraint of the protocol, and how it held.
     """
 
     recording: str
@@ -136,6 +159,7 @@ class VerifyReport:
     inside: list[str] = field(default_factory=list)
     gaps: list[Gap] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    constraints: list[Held] = field(default_factory=list)
     messages: int = 0
     bytes: int = 0
     seconds: float = 0.0
@@ -158,6 +182,7 @@ class VerifyReport:
         lines.extend(f"gap: {gap}" for gap in self.gaps)
         if self.inside:
             lines.append(f"not recorded (both ends in one group): {', '.join(self.inside)}")
+        lines.extend(f"constraint: {held}" for held in self.constraints)
         lines.extend(f"note: {note}" for note in self.notes)
         return "\n".join(lines)
 
@@ -168,6 +193,7 @@ class VerifyReport:
                              for name, r in self.channels.items()},
                 "unknown": self.unknown, "unmapped": self.unmapped, "missing": self.missing, "inside": self.inside,
                 "gaps": [gap.__dict__ for gap in self.gaps], "notes": self.notes,
+                "constraints": [held.__dict__ for held in self.constraints],
                 "messages": self.messages, "bytes": self.bytes, "seconds": self.seconds}
 
 
@@ -178,6 +204,7 @@ class _ChannelCheck:
         self.sender, self.receiver = sender, receiver
         self.name = f"{sender}->{receiver}"
         self.views = (ChannelView(machines[sender], "send", receiver), ChannelView(machines[receiver], "recv", sender))
+        self.periods: dict[tuple[Node, str], int] = {}  # an interaction with a period -> its last message's log time
         self.reset()
         self.result = ChannelResult(self.name)
         self.sequence = 0
@@ -185,31 +212,76 @@ class _ChannelCheck:
 
     def reset(self) -> None:
         self.states: list[frozenset[Node]] = [view.start for view in self.views]
+        self.periods.clear()
 
-    def check(self, message: RecordedMessage, label: str, codecs: _Codecs) -> None:
-        if self.result.violation is not None:
+    def check(self, message: RecordedMessage, label: str, codecs: _Codecs, held: _Held | None = None) -> None:
+        if held is None:
+            self._check(message, label, codecs, None)
             return
+        taken, payload = self._check(message, label, codecs, held)
+        if payload is None and held.refined:  # not decoded (the channel broke): its fields still count later
+            try:
+                payload = codecs.decode(message.topic, message.data)
+            except (AnodizeError, ValueError, KeyError, TypeError):
+                payload = None
+        held.record(self, message, taken, payload)  # the message happened, conforming or not
+
+    def _check(self, message: RecordedMessage, label: str, codecs: _Codecs, held: _Held | None
+               ) -> tuple[list[list[tuple[Node, Transition]]] | None, object]:
+        """Check one message; with constraints, also the transitions it took on each side and its payload."""
+        if self.result.violation is not None:
+            return None, None
         index = self.result.messages
         self.result.messages += 1
         problem = self._numbering(message.sequence)
         if problem:
             self._fail(message, index, label, 0, RECORDING_FAULT, problem)
-            return
+            return None, None
         # The label's sorts that the payload fits: a label may carry different sorts on different paths.
         taken = self.views[0].taken(self.states[0], label)
         if not taken:
             self._fail(message, index, label, 0, self.sender)
-            return
-        fits, reason = _fitting_sorts(message, taken, codecs)
+            return None, None
+        fits, reason, payload = _fitting_sorts(message, taken, codecs)
         if not fits:
             self._fail(message, index, label, 0, self.sender, reason)
-            return
+            return None, payload
+        if held is not None:
+            return self._judged(message, index, label, fits, payload, held), payload
         for side, view in enumerate(self.views):
             after = view.step(self.states[side], label, fits)
             if not after:
                 self._fail(message, index, label, side, self.sender)
-                return
+                return None, payload
             self.states[side] = after
+        return None, payload
+
+    def _judged(self, message: RecordedMessage, index: int, label: str, fits: frozenset[str | None],
+                payload: object, held: _Held) -> list[list[tuple[Node, Transition]]] | None:
+        """Step both sides through the transitions whose constraints the message keeps (a path
+        whose constraints it breaks is not one it took); if there are none, the first breach is
+        the channel's violation, blaming the sender."""
+        kept_by_side: list[list[tuple[Node, Transition]]] = []
+        for side, view in enumerate(self.views):
+            options = view.candidates(self.states[side], label, fits)
+            if not options:
+                self._fail(message, index, label, side, self.sender)
+                return None
+            kept: list[tuple[Node, Transition]] = []
+            first: Breach | None = None
+            for node, t in options:
+                breach = held.judge(self, side, node, t, label, message, payload)
+                if breach is None:
+                    kept.append((node, t))
+                elif first is None:
+                    first = breach
+            if first is not None and not kept:
+                self._fail(message, index, label, side, self.sender, first.reason, first)
+                return None
+            kept_by_side.append(kept)
+        for side, kept in enumerate(kept_by_side):
+            self.states[side] = self.views[side].advance(kept)
+        return kept_by_side
 
     def _numbering(self, sequence: int) -> str:
         if sequence == 0:  # not numbered (not recorded by anodize)
@@ -236,17 +308,95 @@ class _ChannelCheck:
             self.states[side] = _after_any(view, self.states[side], count)
 
     def _fail(self, message: RecordedMessage, index: int, label: str, side: int, blamed: str,
-              reason: str = "") -> None:
+              reason: str = "", breach: Breach | None = None) -> None:
         view = self.views[side]
         nodes = self.states[side]
         allowed = view.allowed(nodes)
         taken = view.taken(nodes, label)
         concerned = taken[0] if taken else (allowed[0] if allowed else None)
         role = self.sender if side == 0 else self.receiver
+        location = str(concerned.location) if concerned is not None else ""
         self.result.violation = Violation(
             self.name, index, message.log_time, message.topic.topic, blamed, role, view.describe(nodes),
             tuple(str(t) for t in allowed), _actual(side, self, label, message.topic),
-            str(concerned.location) if concerned is not None else "", reason)
+            breach.location if breach is not None else location, reason,
+            breach.kind if breach is not None else "", breach.late if breach is not None else 0)
+
+
+class _Held:
+    """The time and value constraints judged across channels (:mod:`.held`): each role's
+    previous action and the latest fields of the record payloads it saw, in log-time order."""
+
+    def __init__(self, machines: Mapping[str, StateMachine], timed_roles: frozenset[str], refined: bool) -> None:
+        self.refined = refined
+        self.times = RoleTimes(machines)
+        self.earlier = Earlier()
+        self.timed_roles = timed_roles  # roles whose every channel is in the recording: their deadlines are judged
+        self.held = constraints_of(machines)  # how each constraint held, for the report
+
+    def judge(self, check: _ChannelCheck, side: int, node: Node, t: Transition, label: str,
+              message: RecordedMessage, payload: object) -> Breach | None:
+        """The first constraint of ``t`` (on ``side``: 0 the sender's, 1 the receiver's) the message breaks."""
+        at = message.log_time
+        if side == 1:
+            receiver = check.receiver
+            previous = self.times.previous(receiver, node[0]) if receiver in self.timed_roles else None
+            return judge_deadline(t, receiver, False, previous, at)
+        sender = check.sender
+        breach = judge_refinement(t, label, payload, self.earlier.of(sender))
+        if breach is None and sender in self.timed_roles:
+            breach = judge_deadline(t, sender, True, self.times.previous(sender, node[0]), at)
+        if breach is None and _at_sender(message):
+            breach = judge_period(t, check.periods.get((node, label)), at)
+        return breach
+
+    def record(self, check: _ChannelCheck, message: RecordedMessage,
+               taken: list[list[tuple[Node, Transition]]] | None, payload: object) -> None:
+        """The message happened: it is its sender's and its receiver's latest action."""
+        if taken is not None:
+            self._tally(check, message, taken)
+        for side, role in enumerate((check.sender, check.receiver)):
+            machines = {node[0] for node, _ in taken[side]} if taken is not None else set()
+            self.times.act(role, machines.pop() if len(machines) == 1 else None, message.log_time)
+            self.earlier.saw(role, payload)
+        if taken is not None:
+            for node, t in taken[0]:
+                if t.timing is not None and t.timing.every is not None:
+                    check.periods[node, t.label] = message.log_time
+
+
+    def _tally(self, check: _ChannelCheck, message: RecordedMessage,
+               taken: list[list[tuple[Node, Transition]]]) -> None:
+        """Count the constraints the message was judged by and kept (the first path it took stands for all)."""
+        (node, t), (their_node, _) = taken[0][0], taken[1][0]
+        texts = constraint_texts(t)
+        if not texts:
+            return
+        at = message.log_time
+        for text in texts:
+            held = self.held[check.name, t.label, text]
+            if text.startswith("every"):
+                previous = check.periods.get((node, t.label)) if _at_sender(message) else None
+                if previous is not None:
+                    held.judged += 1
+                    held.measured(at - previous)
+            elif text.endswith("else timeout"):
+                continue  # the receiver's alone, and a timeout is in no recording
+            elif text.startswith("within"):
+                before = [self.times.previous(role, n[0]) for role, n in ((check.sender, node),
+                                                                        (check.receiver, their_node))
+                          if role in self.timed_roles]
+                spans = [at - b for b in before if b is not None]
+                if spans:
+                    held.judged += 1
+                    held.measured(max(spans))
+            else:
+                held.judged += 1
+
+
+def _at_sender(message: RecordedMessage) -> bool:
+    """Whether the message's log time is its sender's (not the time an external role's message was taken)."""
+    return message.topic.metadata.get(f"{META}.sender_group") != "external"
 
 
 def _after_any(view: ChannelView, nodes: frozenset[Node], count: int) -> frozenset[Node]:
@@ -304,8 +454,9 @@ class _Codecs:
 
 
 def _fitting_sorts(message: RecordedMessage, taken: list[Transition], codecs: _Codecs
-                   ) -> tuple[frozenset[str | None], str]:
-    """The sorts (keys) among ``taken``'s that the message's payload is of, and if none, why not.
+                   ) -> tuple[frozenset[str | None], str, object]:
+    """The sorts (keys) among ``taken``'s that the message's payload is of, if none, why not, and
+    the payload (None if it was not decoded).
 
     The payload is decoded once, whatever the number of sorts its label may carry.
     """
@@ -318,12 +469,12 @@ def _fitting_sorts(message: RecordedMessage, taken: list[Transition], codecs: _C
             continue
         candidates.append((sort, codecs.check(sort)))  # before decoding: the check may import the sort's class
     if not candidates:
-        return frozenset(), "; ".join(reasons)
+        return frozenset(), "; ".join(reasons), None
     try:
         payload = codecs.decode(message.topic, message.data)
     except (AnodizeError, ValueError, KeyError, TypeError) as error:
         expected = " or ".join(sort_text(sort) for sort, _ in candidates)
-        return frozenset(), "; ".join([*reasons, f"the payload does not decode as {expected}: {error}"])
+        return frozenset(), "; ".join([*reasons, f"the payload does not decode as {expected}: {error}"]), None
     fits: set[str | None] = set()
     for sort, check in candidates:
         reason = _payload_problem(payload, sort, check)
@@ -331,7 +482,7 @@ def _fitting_sorts(message: RecordedMessage, taken: list[Transition], codecs: _C
             reasons.append(reason)
         else:
             fits.add(sort.key if sort is not None else None)
-    return frozenset(fits), "; ".join(reasons)
+    return frozenset(fits), "; ".join(reasons), payload
 
 
 def _payload_problem(payload: object, sort: Sort | None, check: Validator | str) -> str:
@@ -348,7 +499,7 @@ def _payload_problem(payload: object, sort: Sort | None, check: Validator | str)
 
 
 def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, tuple[str, str, str]] | None = None,
-           import_classes: bool = True) -> VerifyReport:
+           import_classes: bool = True, machines: Mapping[str, StateMachine] | None = None) -> VerifyReport:
     """Check ``recording`` against ``global_type``.
 
     Args:
@@ -358,12 +509,14 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
             imported to check payloads: False when it is the protocol the recording carries
             (untrusted data; the payloads are then checked by their recorded class names, and
             the report says so).
+        machines: the roles' state machines, if not ``global_type``'s projections.
 
     Raises:
         RecordingError: the recording cannot be read, or its metadata is not anodize's.
     """
     began = time.perf_counter()
-    machines = {role: global_type.project(role).fsm() for role in global_type.roles}
+    if machines is None:
+        machines = {role: global_type.project(role).fsm() for role in global_type.roles}
     labels = channel_labels(machines)
     pairs = {(s, r) for s, r, _ in labels}
     report = VerifyReport(str(recording.path), global_type.name)
@@ -387,15 +540,18 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
             keys[topic.id] = key
     checks = {pair: _ChannelCheck(*pair, machines) for pair in sorted({k[:2] for k in keys.values()})}
     codecs = _Codecs(import_classes)
+    held = _constraints(report, machines, pairs, recorded if recorded is not None else {k[:2] for k in keys.values()})
     for message in recording.messages():
         report.messages += 1
         report.bytes += len(message.data)
         key = keys.get(message.topic.id)
         if key is not None:
-            checks[key[:2]].check(message, key[2], codecs)
+            checks[key[:2]].check(message, key[2], codecs, held)
         elif message.topic.id in gap_topics:
             _note_gap(report, checks, message)
     report.channels = {check.name: check.result for check in checks.values()}
+    if held is not None:
+        report.constraints = list(held.held.values())
     # An anodize recording says which channels it records: those inside one group it does not.
     expected = sorted(pairs) if recorded is None else sorted(pair for pair in pairs if pair in recorded)
     report.missing = [f"{s}->{r}" for s, r in expected
@@ -403,6 +559,28 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
     report.inside = [f"{s}->{r}" for s, r in sorted(pairs) if (s, r) not in expected]
     report.seconds = time.perf_counter() - began
     return report
+
+
+def _constraints(report: VerifyReport, machines: Mapping[str, StateMachine], pairs: set[tuple[str, str]],
+                 recorded: set[tuple[str, str]]) -> _Held | None:
+    """What judges the protocol's time and value constraints (None: it has none: nothing to pay).
+
+    A role's deadlines are judged only if each of its channels is in the recording: its
+    previous action could otherwise be one the recording does not have (the report says so).
+    """
+    timed, refined = constrained(machines)
+    if not timed and not refined:
+        return None
+    complete: set[str] = set()
+    for role, machine in machines.items():
+        absent = sorted(pair for pair in pairs if role in pair and pair not in recorded)
+        if not absent:
+            complete.add(role)
+        elif any(t.timing is not None and t.timing.within is not None for t in machine.all_transitions()):
+            channels = ", ".join(f"{s}->{r}" for s, r in absent)
+            report.notes.append(f"deadlines of {role} not judged: its channel(s) {channels} are not in the recording "
+                                "(its previous action may be one of theirs; record with --record-inside)")
+    return _Held(machines, frozenset(complete), refined)
 
 
 def _note_gap(report: VerifyReport, checks: Mapping[tuple[str, str], _ChannelCheck], message: RecordedMessage) -> None:

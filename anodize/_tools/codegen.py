@@ -26,7 +26,14 @@ Names in a generated module (all deterministic):
 - named payloads (``quote(price: int, date: str)``) are a ``TypedDict`` per label,
   ``<Label>Fields`` (``QuoteFields``): the send method takes the fields as parameters
   (``send_quote(price, date)``, a field name that is not a Python name is spelled as
-  a method name is, a keyword gets ``_2``), a receive returns the dict typed.
+  a method name is, a keyword gets ``_2``), a receive returns the dict typed;
+- time and value constraints (docs/decisions, "constraints in generated code"): each method's
+  docstring says them in their canonical print; a refined payload's parameter is
+  ``Annotated[T, "{predicate}"]`` (a record field: its own predicate); a send whose predicate
+  names only its payload checks it before anything is sent (``_REFINEMENT<n>``, built once
+  per module) and raises ``ProtocolViolationError`` blaming the role, the state staying
+  unused; a receive with ``else timeout`` returns ``<State>Timeout`` (its ``next_state``: the
+  same state again) when the endpoint gives the timeout (label ``"timeout"``).
 
 Should two names still coincide, the later one gets ``_2``, ``_3``, ... .
 """
@@ -35,12 +42,15 @@ from __future__ import annotations
 
 import hashlib
 import keyword
+import math
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 
 from sessiontypes import Diagnostic, GlobalType, Location, ProtocolError, ProtocolModule, Sort, StateMachine, Transition
 from sessiontypes import local_types as lt
+from sessiontypes.constraints import Binary, Call, Compare, Expr, Number, Path, Text, Truth, Unary
+from sessiontypes.refine import print_expr
 
 from .._ros import DEFAULT_DISTRO, rosbags_class
 from .._session import State
@@ -63,8 +73,13 @@ _STATE_IMPORT = f"from {__name__.partition('.')[0]} import {State.__name__} as _
 _RESERVED = frozenset({
     "annotations", "TYPE_CHECKING", "Any", "final", "dataclass", "Endpoint", "Message",
     "LinearityError", "Initial", "End", "_State", "int", "str", "bool", "float", "bytes",
-    "tuple", "type", "AssertionError", "TimeoutError", "TypedDict",
+    "tuple", "type", "AssertionError", "TimeoutError", "TypedDict", "Annotated",
+    "_c", "_compile_predicate", "_Action", "_ProtocolViolationError", "_refused",
 })
+# The label a receive with ``else timeout`` gets when its deadline passes (anodize.TIMEOUT).
+_TIMEOUT = "timeout"
+# Characters of a refused payload the error quotes (as the monitor's).
+_SHOWN = 120
 # Docstrings quote the remaining local type; a very long one is cut here.
 _MAX_TYPE_TEXT = 400
 
@@ -148,7 +163,8 @@ def generate_modules(module: ProtocolModule, source_text: str,
     return generated
 
 
-def generate_module(global_type: GlobalType, role: str, *, source_path: str, digest: str) -> str:
+def generate_module(global_type: GlobalType, role: str, *, source_path: str, digest: str,
+                    machine: StateMachine | None = None) -> str:
     """The text of the typed endpoint module of ``role`` in ``global_type``.
 
     Args:
@@ -156,12 +172,14 @@ def generate_module(global_type: GlobalType, role: str, *, source_path: str, dig
         role: one of its roles.
         source_path: the ``.proto`` path to name in the header.
         digest: :func:`input_digest` of the ``.proto`` text.
+        machine: the role's state machine, if not its projection's.
 
     Raises:
         CodegenError: a payload type is bound to a name Python cannot import.
         UnknownRoleError: ``role`` is not a role of ``global_type``.
     """
-    machine = global_type.project(role).fsm()
+    if machine is None:
+        machine = global_type.project(role).fsm()
     return _Writer(global_type, role, source_path, digest).write(machine)
 
 
@@ -273,6 +291,63 @@ def _quote(text: str | None) -> str:
     return f'"{_escape(text)}"'
 
 
+def _docstring(summary: str, notes: list[str]) -> list[str]:
+    """A method's docstring: its summary line, then the notes (on the constraints) if any."""
+    if not notes:
+        return [f'        """{summary}"""']
+    return [f'        """{summary}', "", *(f"        {note}" for note in notes), '        """']
+
+
+def _paths(expr: Expr) -> list[Path]:
+    """Every name ``expr`` reads."""
+    if isinstance(expr, Path):
+        return [expr]
+    if isinstance(expr, Unary):
+        return _paths(expr.operand)
+    if isinstance(expr, Binary):
+        return [*_paths(expr.left), *_paths(expr.right)]
+    if isinstance(expr, Compare):
+        return [p for operand in expr.operands for p in _paths(operand)]
+    if isinstance(expr, Call):
+        return [p for arg in expr.args for p in _paths(arg)]
+    return []
+
+
+def _expr_code(expr: Expr) -> str:
+    """Python that builds ``expr`` (the module's ``_c`` is :mod:`sessiontypes.constraints`)."""
+    if isinstance(expr, Number) and isinstance(expr.value, float) and not math.isfinite(expr.value):
+        return f"_c.Number(float({str(expr.value)!r}))"  # 1e999 reads as inf, which has no literal
+    if isinstance(expr, Number | Text | Truth):
+        return f"_c.{type(expr).__name__}({expr.value!r})"
+    if isinstance(expr, Path):
+        return f"_c.Path({_tuple(repr(p) for p in expr.parts)})"
+    if isinstance(expr, Unary):
+        return f"_c.Unary({expr.op!r}, {_expr_code(expr.operand)})"
+    if isinstance(expr, Binary):
+        return f"_c.Binary({expr.op!r}, {_expr_code(expr.left)}, {_expr_code(expr.right)})"
+    if isinstance(expr, Compare):
+        return f"_c.Compare({_tuple(repr(op) for op in expr.ops)}, {_tuple(_expr_code(o) for o in expr.operands)})"
+    return f"_c.Call({expr.function!r}, {_tuple(_expr_code(a) for a in expr.args)})"
+
+
+def _tuple(items: Iterable[str]) -> str:
+    found = list(items)
+    return f"({found[0]},)" if len(found) == 1 else f"({', '.join(found)})"
+
+
+def _refused_function(protocol: str, role: str) -> list[str]:
+    """The module's ``_refused``: the error of a payload whose refinement is false, as the monitor words it."""
+    return ["", "",
+            "def _refused(state: str, expected: tuple[_Action, ...], peer: str, label: str, payload: object,",
+            "             reason: str, location: str) -> _ProtocolViolationError:",
+            f'    """A payload whose refinement is false: nothing was sent, and {_escape(role)} is blamed."""',
+            "    shown = repr(payload)",
+            f"    shown = shown if len(shown) <= {_SHOWN} else shown[:{_SHOWN - 3}] + \"...\"",
+            '    actual = _Action("send", peer, label, type(payload).__name__)',
+            (f"    return _ProtocolViolationError({_quote(protocol)}, {_quote(role)}, peer, state, expected, actual, "
+             f'{_quote(role)}, location, f"{{reason}} for {{label}} {{shown}}")')]
+
+
 # ---- writing ------------------------------------------------------------------------
 
 class _Writer:
@@ -287,11 +362,18 @@ class _Writer:
         self.actions: dict[int, str] = {}    # id(Send or Recv term) -> its single action's print
         self.records: dict[tuple[str, str], str] = {}   # (label, record sort key) -> its TypedDict
         self.record_lines: list[str] = []
+        self.uses_annotated = False
+        self.predicates: dict[Expr, str] = {}  # refinement -> the module's compiled predicate
+        self.check_lines: list[str] = []
+        self.record_fields: frozenset[str] = frozenset()  # every field name of the role's record payloads
+        self.timeouts: list[str] = []  # the result classes of receives with ``else timeout``
 
     def write(self, machine: StateMachine) -> str:
         top = _name_machine(machine, "", "", self.names)
         _name_members(top, self.names)
         machines = _all_machines(top)
+        self.record_fields = frozenset(f.name for t in machine.all_transitions()
+                                       if t.sort is not None and t.sort.fields is not None for f in t.sort.fields)
         body: list[str] = []
         for named in machines:
             for state in named.machine.states:
@@ -302,8 +384,10 @@ class _Writer:
             exported.append("End")
         exported += [c for named in machines for s in named.machine.states
                      for c in (named.classes[s], *self.result_names(named, s))]
+        exported += self.timeouts
         exported += self.records.values()
-        return "\n".join(self.head(machine, exported) + self.record_lines + body + self.tail(top, finals)) + "\n"
+        return "\n".join(self.head(machine, exported) + self.record_lines + self.check_lines + body
+                         + self.tail(top, finals)) + "\n"
 
     def result_names(self, named: _Machine, state: int) -> list[str]:
         return [named.results[state, t.peer, t.label] for t in named.machine.table[state].values()
@@ -311,7 +395,7 @@ class _Writer:
 
     def head(self, machine: StateMachine, exported: list[str]) -> list[str]:
         g, role = self.global_type.name, self.role
-        typing_names = [*(["TYPE_CHECKING"] if self.imports else []),
+        typing_names = [*(["TYPE_CHECKING"] if self.imports else []), *(["Annotated"] if self.uses_annotated else []),
                         *(["Any"] if self.uses_any else []), *(["TypedDict"] if self.records else []), "final"]
         lines = [
             (f"# DO NOT EDIT: generated by anodize from {_escape(self.source_path)}, global {g}, "
@@ -330,6 +414,11 @@ class _Writer:
             "",
             _STATE_IMPORT,
         ]
+        if self.predicates:  # a refinement checked before sending: the same error the monitor raises
+            lines += ["from anodize.errors import Action as _Action",
+                      "from anodize.errors import ProtocolViolationError as _ProtocolViolationError",
+                      "from sessiontypes import constraints as _c",
+                      "from sessiontypes.refine import compile_predicate as _compile_predicate"]
         by_module: dict[str, list[str]] = {}
         for (module, name), local in sorted(self.imports.items()):
             by_module.setdefault(module, []).append(name if local == name else f"{name} as {local}")
@@ -409,7 +498,7 @@ class _Writer:
         """``(parameter, field name)`` for each field of a record sort, in order."""
         assert sort.fields is not None
         # Nothing the method's body names may be shadowed: the module's names, self, endpoint.
-        names = _Names(self.names.taken | {"self", "endpoint"})
+        names = _Names(self.names.taken | {"self", "endpoint", "_payload", "_reason"})
         return [(names.claim(f.name.replace("'", "_prime")), f.name) for f in sort.fields]
 
     def imported(self, module: str, name: str, wanted: str) -> str:
@@ -440,58 +529,157 @@ class _Writer:
         lines += ["", "    __slots__ = ()"]
         results: list[str] = []
         assert len({t.action for t in transitions}) <= 1, "one direction"
+        expiring = [t.timing for t in transitions if t.action == "recv" and t.timing is not None and t.timing.on_expiry]
+        timeout = ""
+        if expiring and state not in machine.forks:
+            timeout = self.names.claim(f"{name}Timeout")
+            self.timeouts.append(timeout)
+            results += ["", "", "@final", "@dataclass(frozen=True, slots=True)", f"class {timeout}:",
+                        (f'    """What ``{name}`` gives when ``{expiring[0]}`` passed with nothing arrived: '
+                         '``next_state`` is that state again."""'), "", f"    next_state: {name}"]
         if state in machine.forks:
             lines += self.fork_method(named, state)
         elif len(transitions) == 1:
-            lines += self.single_method(named, state, transitions[0])
+            lines += self.single_method(named, state, transitions[0], timeout)
         elif transitions and transitions[0].action == "send":
             for t in transitions:
                 lines += self.single_method(named, state, t)
         elif transitions:
-            lines += self.offer_method(named, state, transitions)
+            lines += self.offer_method(named, state, transitions, timeout)
             for t in transitions:
                 results += self.result_class(named, state, t)
         return lines + results
 
-    def single_method(self, named: _Machine, state: int, t: Transition) -> list[str]:
+    def single_method(self, named: _Machine, state: int, t: Transition, timeout: str = "") -> list[str]:
         method = named.methods[state, t.peer, t.label]
         next_class = named.classes[t.target]
-        doc = f'        """``{_escape(str(t))}`` ({_escape(str(t.location))})."""'
+        checked = self.checked_here(t)
+        doc = _docstring(f"``{_escape(str(t))}`` ({_escape(str(t.location))}).",
+                         self.constraint_notes([t], checked, timeout))
         if t.action == "send":
-            parameter = f", payload: {self.payload_type(t.sort, t.label)}" if t.sort else ""
-            argument = ", payload" if t.sort else ""
+            parameter, argument = "", ""
+            if t.sort is not None and t.sort.fields is None:
+                parameter, argument = f", payload: {self.refined_type(t.sort, t.label, t.refinement)}", "payload"
             if t.sort is not None and t.sort.fields is not None:
+                self.payload_type(t.sort, t.label)  # its TypedDict is the module's, even if only sent
                 pairs = list(zip(self.parameters(t.sort), t.sort.fields, strict=True))
-                parameter = "".join(f", {p}: {self.payload_type(f.sort, t.label)}" for (p, _), f in pairs)
-                argument = ", {" + ", ".join(f'"{_escape(name)}": {p}' for (p, name), _ in pairs) + "}"
-            return ["", f"    def {method}(self{parameter}) -> {next_class}:", doc,
-                    "        endpoint = self._use()",
-                    f"        endpoint.send({_quote(t.peer)}, {_quote(t.label)}{argument})",
+                parameter = "".join(f", {p}: {self.refined_type(f.sort, t.label, f.refinement)}" for (p, _), f in pairs)
+                argument = "{" + ", ".join(f'"{_escape(name)}": {p}' for (p, name), _ in pairs) + "}"
+            lines = ["", f"    def {method}(self{parameter}) -> {next_class}:", *doc]
+            if checked and t.refinement is not None:
+                lines += self.refusal(named, state, t, t.refinement, argument)
+                argument = "_payload"
+            return [*lines, "        endpoint = self._use()",
+                    f"        endpoint.send({_quote(t.peer)}, {_quote(t.label)}{', ' if argument else ''}{argument})",
                     f"        return {next_class}(endpoint)"]
-        receive = f"self._recv({_quote(t.peer)}, ({_quote(t.label)},), timeout)"
+        labels = f"({_quote(t.label)}, {_quote(_TIMEOUT)})" if timeout else f"({_quote(t.label)},)"
+        receive = f"self._recv({_quote(t.peer)}, {labels}, timeout)"
         head = f"    def {method}(self, *, timeout: float | None = None) -> "
+        expired = ([f"        if message.label == {_quote(_TIMEOUT)}:",
+                    f"            return {timeout}({named.classes[state]}(self._endpoint))"] if timeout else [])
+        otherwise = f" | {timeout}" if timeout else ""
         if t.sort is None:
-            return ["", f"{head}{next_class}:", doc, f"        {receive}",
-                    f"        return {next_class}(self._endpoint)"]
-        return ["", f"{head}tuple[{self.payload_type(t.sort, t.label)}, {next_class}]:", doc,
-                f"        message = {receive}",
+            return ["", f"{head}{next_class}{otherwise}:", *doc, f"        message = {receive}" if timeout else
+                    f"        {receive}", *expired, f"        return {next_class}(self._endpoint)"]
+        return ["", f"{head}tuple[{self.payload_type(t.sort, t.label)}, {next_class}]{otherwise}:", *doc,
+                f"        message = {receive}", *expired,
                 f"        return message.payload, {next_class}(self._endpoint)"]
 
-    def offer_method(self, named: _Machine, state: int, transitions: list[Transition]) -> list[str]:
+    # ---- constraints ----
+
+    def checked_here(self, t: Transition) -> bool:
+        """Whether the generated send checks ``t``'s refinement itself: it names nothing but its
+        payload (a record's fields; a declared sort's attributes, no name being a record field
+        the role sees, which could be an earlier payload's). Earlier payloads are the monitor's."""
+        if t.action != "send" or t.refinement is None or t.sort is None:
+            return False
+        heads = {path.parts[0] for path in _paths(t.refinement)}
+        if t.sort.fields is not None:
+            return heads <= {f.name for f in t.sort.fields}
+        return t.sort.target is not None and not heads & self.record_fields
+
+    def constraint_notes(self, transitions: list[Transition], checked: bool, timeout: str) -> list[str]:
+        """The docstring's sentences on the constraints of ``transitions`` (one action, or a choice's)."""
+        timings = list(dict.fromkeys(str(t.timing) for t in transitions if t.timing is not None))
+        refinements = list(dict.fromkeys(f"{{{print_expr(t.refinement)}}}" for t in transitions
+                                         if t.refinement is not None))
+        if not timings and not refinements:
+            return []
+        said = ", ".join(f"``{_escape(text)}``" for text in [*timings, *refinements])
+        notes = [f"Constraints: {said}."]
+        sending = transitions[0].action == "send"
+        if refinements and sending and checked:
+            notes.append(f"A payload for which the refinement is false is refused here, before anything is "
+                         f"sent: ``ProtocolViolationError`` blaming {_escape(self.role)}, and this state stays unused.")
+        elif refinements and sending:
+            notes.append("The refinement names an earlier payload: the endpoint's monitor checks it.")
+        elif refinements:
+            notes.append("The endpoint's monitor checks the refinement on arrival (blaming the sender).")
+        receivers_own = all(t.timing is None or (t.timing.on_expiry and t.timing.every is None) for t in transitions)
+        if timings and sending and receivers_own:
+            notes.append("With ``else timeout`` the deadline is the receiver's: nothing is timed on sending.")
+        elif timings and not timeout:
+            notes.append("The endpoint's monitor checks the time constraints (``DeadlineMissedError``).")
+        if timeout:
+            notes.append(f"When the deadline passes with nothing arrived: ``{timeout}`` (this state again).")
+        return notes
+
+    def refined_type(self, sort: Sort, label: str, refinement: Expr | None) -> str:
+        """The parameter type of a payload (or field): ``Annotated`` with its refinement, if any."""
+        plain = self.payload_type(sort, label)
+        if refinement is None:
+            return plain
+        self.uses_annotated = True
+        return f'Annotated[{plain}, "{_escape("{" + print_expr(refinement) + "}")}"]'
+
+    def refusal(self, named: _Machine, state: int, t: Transition, refinement: Expr, payload: str) -> list[str]:
+        """The lines of a send that check its payload's refinement before anything is sent."""
+        check = self.predicate(refinement)
+        machine = named.machine
+        expected = ", ".join(
+            f"_Action({_quote(e.action)}, {_quote(e.peer)}, {_quote(e.label)}, "
+            f"{_quote(e.sort.spelling) if e.sort is not None else 'None'})" for e in machine.expected(state))
+        where = _quote(f"{state} ({machine.describe(state)})")
+        return [f"        _payload = {payload}",
+                f"        _reason = {check}(_payload, {{}})",
+                "        if _reason is not None:",
+                (f"            raise _refused({where}, ({expected},), {_quote(t.peer)}, {_quote(t.label)}, "
+                 f"_payload, _reason, {_quote(str(t.location))})")]
+
+    def predicate(self, expr: Expr) -> str:
+        """The module's compiled predicate of ``expr`` (written once, with ``_refused``)."""
+        name = self.predicates.get(expr)
+        if name is None:
+            if not self.predicates:
+                self.check_lines += _refused_function(self.global_type.name, self.role)
+            name = self.predicates[expr] = self.names.claim(f"_REFINEMENT{len(self.predicates) + 1}")
+            self.check_lines += ["", "", f"# {{{_escape(print_expr(expr))}}}",
+                                 f"{name} = _compile_predicate({_expr_code(expr)})"]
+        return name
+
+    def offer_method(self, named: _Machine, state: int, transitions: list[Transition],
+                     timeout: str = "") -> list[str]:
         peers = list(dict.fromkeys(t.peer for t in transitions))
         results = [named.results[state, t.peer, t.label] for t in transitions]
         where = _escape(", ".join(dict.fromkeys(str(t.location) for t in transitions)))
         choices = _escape(" | ".join(str(t) for t in transitions))
         doc = (f'``{_escape(peers[0] or "")}`` chooses: ``{choices}``' if len(peers) == 1
                else f"The first to arrive of ``{choices}``")
-        lines = ["", f"    def offer(self, *, timeout: float | None = None) -> {' | '.join(results)}:",
-                 f'        """{doc} ({where})."""']
+        returned = " | ".join([*results, *([timeout] if timeout else [])])
+        lines = ["", f"    def offer(self, *, timeout: float | None = None) -> {returned}:",
+                 *_docstring(f"{doc} ({where}).", self.constraint_notes(transitions, False, timeout))]
         if len(peers) == 1:
-            labels = ", ".join(_quote(t.label) for t in transitions)
+            labels = ", ".join(_quote(t.label) for t in [*transitions, *([replace(transitions[0], label=_TIMEOUT)]
+                                                                         if timeout else [])])
             lines.append(f"        message = self._recv({_quote(peers[0])}, ({labels}), timeout)")
         else:  # the first message to come, from whichever of the peers
             pairs = ", ".join(f"({_quote(t.peer)}, {_quote(t.label)})" for t in transitions)
+            if timeout:
+                pairs += "".join(f", ({_quote(peer)}, {_quote(_TIMEOUT)})" for peer in peers)
             lines.append(f"        peer, message = self._recv_any(({pairs}), timeout)")
+        if timeout:
+            lines += [f"        if message.label == {_quote(_TIMEOUT)}:",
+                      f"            return {timeout}({named.classes[state]}(self._endpoint))"]
         for index, (t, result) in enumerate(zip(transitions, results, strict=True)):
             payload = "message.payload, " if t.sort else ""
             value = f"{result}({payload}{named.classes[t.target]}(self._endpoint))"
