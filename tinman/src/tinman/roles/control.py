@@ -62,11 +62,14 @@ def joy(ep: Endpoint) -> None:
                 axes, buttons = _fitted(held)
             ep.send("Control", "Joy", joy_message(Header(stamp=stamp_from_seconds(ep.wall()), frame_id="joy"),
                                                   axes, buttons))
+            sent = ep.now()
             tick += 1
-            late = ep.now() - (start + tick * period)
+            late = sent - (start + tick * period)
             if late > period:  # fell behind (e.g. the machine was busy): do not burst to catch up
                 tick += int(late / period)
-            ep.sleep(start + tick * period - ep.now())
+            # The protocol's period allows half a period either way: after a late send, the next
+            # waits at least half a period rather than follow at once.
+            ep.sleep(max(start + tick * period, sent + period / 2) - ep.now())
     finally:
         if keyboard is not None:
             keyboard.close()
