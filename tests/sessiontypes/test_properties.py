@@ -82,7 +82,7 @@ RENAMED_SENDING_LOOP = GeneratedGlobal(
 
 @pytest.mark.slow
 @SETTINGS
-@given(global_protocols())
+@given(global_protocols(constrained=True))
 def test_parse_builds_the_generated_term(generated: GeneratedGlobal) -> None:
     """Every spelling of the language (ASCII/Unicode, message forms, braces,
     parentheses, comments) parses to the term it denotes."""
@@ -93,7 +93,7 @@ def test_parse_builds_the_generated_term(generated: GeneratedGlobal) -> None:
 @pytest.mark.slow
 @SETTINGS
 @example(ROLES_IN_SECOND_BRANCH_FIRST)
-@given(global_protocols())
+@given(global_protocols(constrained=True))
 def test_roles_are_declared_order_or_first_occurrence(generated: GeneratedGlobal) -> None:
     """A global's roles are its role list, or those that occur in source order."""
     note(generated.text)
@@ -102,7 +102,7 @@ def test_roles_are_declared_order_or_first_occurrence(generated: GeneratedGlobal
 
 @pytest.mark.slow
 @SETTINGS
-@given(global_protocols())
+@given(global_protocols(constrained=True))
 def test_global_print_parse_round_trip(generated: GeneratedGlobal) -> None:
     """``print_global`` reads back as the same term, and printing is stable."""
     original = _load_global(generated.text)
@@ -118,7 +118,7 @@ def test_global_print_parse_round_trip(generated: GeneratedGlobal) -> None:
 
 @pytest.mark.slow
 @SETTINGS
-@given(global_protocols())
+@given(global_protocols(constrained=True))
 def test_local_canonical_print_round_trip(generated: GeneratedGlobal) -> None:
     """The canonical print of every projection parses back as the same local type."""
     global_type = _load_global(generated.text)
@@ -138,7 +138,7 @@ def test_local_canonical_print_round_trip(generated: GeneratedGlobal) -> None:
 @SETTINGS
 @example(LOOP_WITHOUT_C)
 @example(RENAMED_SENDING_LOOP)
-@given(global_protocols())
+@given(global_protocols(constrained=True))
 def test_projection_never_fails(generated: GeneratedGlobal) -> None:
     """Generated protocols are projectable by construction (strategies._Generator):
     loads accepts them and every role gets a local type and a state machine."""
@@ -223,7 +223,7 @@ def _show(local_event: tuple) -> str:
 
 @pytest.mark.slow
 @SETTINGS
-@given(global_protocols(), st.randoms(use_true_random=False))
+@given(global_protocols(constrained=True), st.randoms(use_true_random=False))
 def test_machines_accept_every_global_run(generated: GeneratedGlobal, rng) -> None:
     """(i) The restriction of a global run to a role is a trace of its machine,
     and a run that reaches ``end`` leaves every machine final."""
@@ -254,7 +254,7 @@ def test_machines_accept_every_global_run(generated: GeneratedGlobal, rng) -> No
 
 @pytest.mark.slow
 @SETTINGS
-@given(global_protocols(), st.randoms(use_true_random=False))
+@given(global_protocols(constrained=True), st.randoms(use_true_random=False))
 def test_machine_walks_are_global_prefixes(generated: GeneratedGlobal, rng) -> None:
     """(ii) Every walk of a role's machine is a prefix of the restriction of some
     global run, and the machine is final exactly when no such run lets the role act again."""
