@@ -62,16 +62,16 @@ def test_another_field_of_the_same_payload_is_in_scope() -> None:
 def test_an_unknown_name_is_rejected() -> None:
     term = msg("A", "B", record("quote", ("price", "int", cmp(path("prize", 9), ">", num(0)))))
     assert check_refinements(term) == [
-        (at(9), "refinement names prize: no field of this message is called prize, and neither A nor B saw "
-                "one before this interaction")]
+        (at(9), ("refinement names prize: no field of this message is called prize, and neither A nor B saw "
+                "one before this interaction"))]
 
 
 def test_a_builtin_payload_has_no_names() -> None:
     term = msg("A", "B", Interaction("count", builtin_sort("int"), refinement=cmp(path("x", 12), ">", num(0))))
     assert check_refinements(term) == [
-        (at(12), "refinement names x: no field of this message is called x, and neither A nor B saw one before "
+        (at(12), ("refinement names x: no field of this message is called x, and neither A nor B saw one before "
                  "this interaction (a payload of the builtin sort int has no names: write a named field, as in "
-                 "m(x: int{x > 0}))")]
+                 "m(x: int{x > 0}))"))]
 
 
 # ---- names: (2) earlier record payloads both parties saw ----------------------------------
@@ -144,8 +144,8 @@ def test_routed_and_parallel_branches_flow_their_own_way() -> None:
                         msg("D", "C", record("y", ("j", "int", cmp(path("j"), "==", path("seq", 20))))))))
     assert check_refinements(routed) == []
     assert check_refinements(par) == [
-        (at(20), "refinement names seq: no field of this message is called seq, and neither D nor C saw one "
-                 "before this interaction")]
+        (at(20), ("refinement names seq: no field of this message is called seq, and neither D nor C saw one "
+                 "before this interaction"))]
 
 
 # ---- names: (3) attributes of a declared sort --------------------------------------------
