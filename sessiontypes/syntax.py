@@ -12,10 +12,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
+from .constraints import Expr, Timing
 from .location import NOWHERE, Location
 
 __all__ = [
-    "Name", "FieldSyntax", "MessageSyntax", "GBranchSyntax", "GInteraction", "GRouted", "GRec", "GRef",
+    "Name", "TimingSyntax", "FieldSyntax", "MessageSyntax", "GBranchSyntax", "GInteraction", "GRouted", "GRec", "GRef",
     "GEnd", "GParallel", "GSyntax", "LBranchSyntax", "LAction", "LChoice", "LChoiceAmong", "LRec", "LRef",
     "LEnd", "LParallel", "LSyntax", "TypeDecl", "GlobalDecl", "LocalDecl",
     "Declaration", "SourceFile",
@@ -31,11 +32,29 @@ class Name:
 
 
 @dataclass(frozen=True, slots=True)
+class TimingSyntax:
+    """A time clause as written (``every 20ms +- 2ms within 100ms else timeout``).
+
+    ``timing`` holds its values in nanoseconds, located at the clause's first word;
+    ``parts`` where each part was written (``within``, ``every``, ``jitter``, ``else``),
+    for the errors of the well-formedness rules.
+    """
+
+    timing: Timing
+    parts: tuple[tuple[str, Location], ...] = field(default=(), compare=False)
+
+    def where(self, part: str) -> Location:
+        """Where ``part`` was written (the clause's start if it was not)."""
+        return next((location for name, location in self.parts if name == part), self.timing.location)
+
+
+@dataclass(frozen=True, slots=True)
 class FieldSyntax:
-    """``name: Sort``, one field of a message with named payloads."""
+    """``name: Sort``, one field of a message with named payloads; ``{...}`` its refinement."""
 
     name: Name
     sort: Name
+    refinement: Expr | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,13 +64,15 @@ class MessageSyntax:
     ``parens`` tells the written form apart: with parentheses ``sort`` is the
     payload (``None`` for ``label()``); without, the meaning of the bare name
     depends on whether it names a sort. ``fields`` holds named payloads
-    (``sort`` is then None).
+    (``sort`` is then None). ``refinement`` is the predicate written on the payload's sort
+    (``Twist{abs(linear.x) <= 1.5}``).
     """
 
     label: Name
     sort: Name | None
     parens: bool
     fields: tuple[FieldSyntax, ...] | None = None
+    refinement: Expr | None = None
 
 
 # ---- global ---------------------------------------------------------------
@@ -77,6 +98,7 @@ class GInteraction:
     branches: tuple[GBranchSyntax, ...]
     braced: bool
     location: Location = field(default=NOWHERE, compare=False)
+    timing: TimingSyntax | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -136,6 +158,7 @@ class LAction:
     message: MessageSyntax
     continuation: LSyntax | None
     location: Location = field(default=NOWHERE, compare=False)
+    timing: TimingSyntax | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,6 +169,7 @@ class LChoice:
     peer: Name | None
     branches: tuple[LBranchSyntax, ...]
     location: Location = field(default=NOWHERE, compare=False)
+    timing: TimingSyntax | None = None
 
 
 @dataclass(frozen=True, slots=True)
