@@ -234,7 +234,8 @@ class _Resolver:
             if problem is not None:
                 if sort is not None and sort.target is not None:
                     return None, None  # an attribute of a declared sort's value
-                return None, problem + self._hint(sort)
+                unseen = problem.startswith(f"refinement names {head}: ")  # neither party saw it anywhere
+                return None, problem + (self._hint(sort) if unseen else "")
         if len(path.parts) == 1 or kind is None or kind.startswith("?"):
             return (None if kind is None or kind.startswith("?") else kind), None
         return None, f"refinement names {dotted}, but {head} is {article(kind)}, which has no field {path.parts[1]}"
