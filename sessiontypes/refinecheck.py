@@ -21,14 +21,19 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
-from .constraints import Expr, Path
+from .constraints import Binary, Call, Compare, Expr, Path, Unary
 from .global_types import Choice, End, GlobalTerm, Parallel, Rec, Routed, Var
 from .location import NOWHERE, Location
 from .refinesat import conjuncts, unsatisfiable
 from .refinetypes import article, type_errors
 from .sorts import Interaction, Sort
 
-__all__ = ["check_refinements"]
+__all__ = ["check_refinements", "MAX_SCOPE_WORK"]
+
+# How many (name, interaction) pairs the scope's dataflow may hold: each point of the term
+# keeps what each role saw of each name refinements take from earlier messages. Far beyond
+# a written protocol; a generated one beyond it gets a located error, not an exhausted memory.
+MAX_SCOPE_WORK = 500_000
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,9 +61,14 @@ class _State:
                for role in self.may.keys() | other.may.keys()}
         return _State(must, may)
 
-    def after(self, roles: tuple[str, str], message: Interaction, site: int) -> _State:
-        """The state once both ``roles`` saw ``message`` (``site`` tells that message apart)."""
+    def after(self, roles: tuple[str, str], message: Interaction, site: int, named: frozenset[str]) -> _State:
+        """The state once both ``roles`` saw ``message`` (``site`` tells that message apart).
+
+        Only the fields some refinement names are followed: the state stays as small as
+        the refinements, however many fields the protocol's messages have.
+        """
         fields = message.sort.fields if message.sort is not None else None
+        fields = tuple(item for item in fields if item.name in named) if fields else None
         if not fields:
             return self
         must = dict(self.must)
@@ -85,9 +95,20 @@ def check_refinements(term: GlobalTerm) -> list[tuple[Location, str]]:
     int (x)"), a refinement that can never hold ("unsatisfiable refinement: no value of x has
     x > 5 and x < 3").
     """
-    if not any(_refinements(message) for message in _messages(term)):
+    messages = list(_messages(term))
+    refined = [(message, _refinements(message)) for message in messages if _refinements(message)]
+    if not refined:
         return []
-    flow = _Flow()
+    # Only the names a refinement takes from an earlier message are followed through the term.
+    earlier = frozenset(name for message, predicates in refined for p in predicates for name in _heads(p)
+                        if name not in _field_names(message))
+    if len(earlier) * len(messages) > MAX_SCOPE_WORK:
+        first = refined[0][1][0]
+        problem = (f"the refinements name {len(earlier)} fields of earlier messages in a protocol of "
+                   f"{len(messages)} interactions: more than the {MAX_SCOPE_WORK:,} (names times interactions) "
+                   f"whose scope is checked")
+        return [(first.location, problem)]
+    flow = _Flow(earlier)
     flow.run(term)
     found: dict[tuple[Location, str], None] = {}
     for key, (node, _env) in flow.nodes.items():
@@ -131,6 +152,29 @@ def _refinements(message: Interaction) -> list[Expr]:
     return found + [item.refinement for item in fields if item.refinement is not None]
 
 
+def _field_names(message: Interaction) -> frozenset[str]:
+    fields = message.sort.fields if message.sort is not None and message.sort.fields else ()
+    return frozenset(item.name for item in fields)
+
+
+def _heads(expr: Expr) -> Iterator[str]:
+    """The first names of the paths in ``expr``."""
+    stack = [expr]
+    while stack:
+        node = stack.pop()
+        match node:
+            case Path():
+                yield node.parts[0]
+            case Unary():
+                stack.append(node.operand)
+            case Binary():
+                stack.extend((node.left, node.right))
+            case Compare():
+                stack.extend(node.operands)
+            case Call():
+                stack.extend(node.args)
+
+
 def _branches(node: GlobalTerm) -> Iterator[tuple[str, str, Interaction, Location]]:
     if isinstance(node, Choice):
         for branch in node.branches:
@@ -145,7 +189,8 @@ def _branches(node: GlobalTerm) -> Iterator[tuple[str, str, Interaction, Locatio
 class _Flow:
     """The dataflow: the state at each point (a term under its mu variables), to a fixpoint."""
 
-    def __init__(self) -> None:
+    def __init__(self, named: frozenset[str]) -> None:
+        self.named = named  # the names refinements use: the only fields followed
         self.nodes: dict[_Key, tuple[GlobalTerm, _Env]] = {}
         self.states: dict[_Key, _State] = {}
         self.work: list[_Key] = []
@@ -175,11 +220,11 @@ class _Flow:
             case Choice():
                 for branch in node.branches:
                     self._reach(branch.continuation, env,
-                                state.after((node.sender, node.receiver), branch.message, id(branch)))
+                                state.after((node.sender, node.receiver), branch.message, id(branch), self.named))
             case Routed():
                 for routed in node.branches:
                     self._reach(routed.continuation, env,
-                                state.after((node.sender, routed.receiver), routed.message, id(routed)))
+                                state.after((node.sender, routed.receiver), routed.message, id(routed), self.named))
             case Rec():
                 self._reach(node.body, ((node.var, key), *env), state)
             case Var():

@@ -299,3 +299,17 @@ def test_an_earlier_field_one_party_saw_on_some_paths_only_is_rejected() -> None
                Choice("A", "B", (Branch(record("x", ("seq", "int")), tail), Branch(record("y"), tail))))
     assert check_refinements(term) == [
         (at(20), "refinement names seq, which B did not see on every path to this interaction")]
+
+
+def test_a_protocol_beyond_the_scope_checks_bound_gets_a_located_error_not_an_exhausted_memory() -> None:
+    # Each message's refinement names the field of the message before it: the dataflow's
+    # state grows with the protocol, so its size is bounded (one error, at the first refinement).
+    count = 1001
+    term: GlobalTerm = End()
+    for index in range(count):
+        refinement = cmp(path(f"f{index + 1}"), ">", num(0)) if index < count - 1 else None
+        term = msg("A", "B", record("m", ("f" + str(index), "int", refinement)) if refinement else
+                   record("m", (f"f{index}", "int")), term)
+    (error,) = check_refinements(term)
+    assert error[1] == ("the refinements name 1000 fields of earlier messages in a protocol of 1001 interactions: "
+                        "more than the 500,000 (names times interactions) whose scope is checked")
