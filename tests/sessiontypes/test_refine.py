@@ -173,7 +173,7 @@ def outcome(expr: Expr, payload: dict[str, object], earlier: dict[str, object]) 
     return "false" if reason.endswith(" is false") else "fails"
 
 
-@settings(max_examples=600, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(expressions, payloads, earliers)
 def test_compile_predicate_agrees_with_the_reference(expr: Expr, payload: dict[str, object],
                                                      earlier: dict[str, object]) -> None:
@@ -263,7 +263,7 @@ def _words(text: str) -> list[str]:
     return parts
 
 
-@settings(max_examples=600, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(expressions)
 def test_print_expr_reads_back_through_pythons_precedence(expr: Expr) -> None:
     text = print_expr(expr)
