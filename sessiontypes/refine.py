@@ -4,10 +4,19 @@ A predicate is evaluated by a closure tree built once per predicate (:func:`comp
 no text is evaluated and nothing but the payload's own attribute reads can run code. Every
 failure to evaluate (a missing field, a division by zero, an operator the values do not take)
 makes the predicate false, with the reason saying why: a monitor blames, it never crashes.
+
+The operators take what :mod:`sessiontypes.refinetypes` lets them take, checked again on the
+values (an attribute of a declared sort is only known at run time): arithmetic, unary minus,
+``abs``, ``min`` and ``max`` take numbers, and a bool is no number (``true + 1`` fails, though
+Python would say 2); ``and``, ``or`` and ``not`` take bools (no truthiness); ``==`` and ``!=``
+compare two values of one kind (``1 == true`` fails rather than being true), ``<`` and the
+others two numbers, two strs or two bytes; ``len`` takes anything with a length but a number
+or a bool. Other values (a list, a message) compare with ``==`` among themselves only.
 """
 
 from __future__ import annotations
 
+import numbers
 import operator
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -69,10 +78,23 @@ _Eval = Callable[[object, Mapping[str, object]], Any]
 _ARITHMETIC: dict[str, Callable[[Any, Any], Any]] = {
     "+": operator.add, "-": operator.sub, "*": operator.mul, "/": operator.truediv, "%": operator.mod,
 }
+_FUNCTIONS: dict[str, Callable[..., Any]] = {"abs": abs, "min": min, "max": max}
 _COMPARE: dict[str, Callable[[Any, Any], Any]] = {
     "==": operator.eq, "!=": operator.ne, "<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge,
 }
-_FUNCTIONS: dict[str, Callable[..., Any]] = {"abs": abs, "min": min, "max": max, "len": len}
+
+
+def _kind(value: object) -> str:
+    """The kind an operator sees: number (a real, not a bool), bool, str, bytes, or other."""
+    if isinstance(value, bool):
+        return "bool"
+    if isinstance(value, numbers.Real):
+        return "number"
+    if isinstance(value, str):
+        return "str"
+    if isinstance(value, bytes):
+        return "bytes"
+    return "other"
 
 
 def conjunction(parts: list[Expr]) -> Expr | None:
@@ -116,7 +138,7 @@ def _compile(expr: Expr) -> _Eval:
         operand = _compile(expr.operand)
         if expr.op == "not":
             return lambda payload, earlier: not _truth(operand(payload, earlier), "not")
-        return lambda payload, earlier: _apply(operator.neg, "-", operand(payload, earlier))
+        return lambda payload, earlier: _apply(operator.neg, "-", *_numbers("-", operand(payload, earlier)))
     if isinstance(expr, Binary):
         left, right = _compile(expr.left), _compile(expr.right)
         if expr.op == "and":
@@ -126,7 +148,8 @@ def _compile(expr: Expr) -> _Eval:
             return lambda payload, earlier: (_truth(left(payload, earlier), "or")
                                              or _truth(right(payload, earlier), "or"))
         function, op = _ARITHMETIC[expr.op], expr.op
-        return lambda payload, earlier: _apply(function, op, left(payload, earlier), right(payload, earlier))
+        return lambda payload, earlier: _apply(
+            function, op, *_numbers(op, left(payload, earlier), right(payload, earlier)))
     if isinstance(expr, Compare):
         operands = [_compile(o) for o in expr.operands]
         tests = [(_COMPARE[op], op) for op in expr.ops]
@@ -135,7 +158,7 @@ def _compile(expr: Expr) -> _Eval:
             left = operands[0](payload, earlier)
             for (test, op), right_of in zip(tests, operands[1:], strict=True):
                 right = right_of(payload, earlier)
-                if not _truth(_apply(test, op, left, right), op):
+                if not _compare(test, op, left, right):
                     return False
                 left = right
             return True
@@ -143,8 +166,11 @@ def _compile(expr: Expr) -> _Eval:
         return compare
     assert isinstance(expr, Call)
     args = [_compile(a) for a in expr.args]
-    function, name = _FUNCTIONS[expr.function], expr.function
-    return lambda payload, earlier: _apply(function, name, *[a(payload, earlier) for a in args])
+    name = expr.function
+    if name == "len":
+        return lambda payload, earlier: _apply(len, name, *_sized(name, *[a(payload, earlier) for a in args]))
+    function = _FUNCTIONS[name]
+    return lambda payload, earlier: _apply(function, name, *_numbers(name, *[a(payload, earlier) for a in args]))
 
 
 def _compile_path(parts: tuple[str, ...]) -> _Eval:
@@ -185,3 +211,33 @@ def _apply(function: Callable[..., Any], op: str, *values: object) -> Any:
     except (TypeError, ValueError, OverflowError) as error:
         kinds = ", ".join(type(v).__name__ for v in values)
         raise EvaluationError(f"{op} cannot take {kinds} ({error})") from None
+
+
+def _numbers(op: str, *values: object) -> tuple[object, ...]:
+    for value in values:
+        if _kind(value) != "number":
+            raise EvaluationError(f"{op} takes numbers, not {type(value).__name__} {value!r}")
+    return values
+
+
+def _sized(op: str, *values: object) -> tuple[object, ...]:
+    for value in values:
+        if _kind(value) in ("number", "bool"):
+            raise EvaluationError(f"{op} takes a str, bytes or a sequence, not {type(value).__name__} {value!r}")
+    return values
+
+
+def _compare(test: Callable[[Any, Any], Any], op: str, left: object, right: object) -> bool:
+    """``left op right`` on two values of kinds the comparison takes (as a bool: a numpy
+    scalar's comparison gives a numpy bool)."""
+    kinds = (_kind(left), _kind(right))
+    same = kinds[0] == kinds[1]
+    allowed = same if op in ("==", "!=") else same and kinds[0] in ("number", "str", "bytes")
+    if not allowed:
+        raise EvaluationError(f"{op} cannot compare {type(left).__name__} {left!r} "
+                              f"with {type(right).__name__} {right!r}")
+    result = _apply(test, op, left, right)
+    try:
+        return bool(result)
+    except (TypeError, ValueError) as error:  # an array's elementwise ==
+        raise EvaluationError(f"{op} gives {type(result).__name__}, not a bool ({error})") from None

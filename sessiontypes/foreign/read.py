@@ -15,11 +15,13 @@ from typing import Any, NoReturn
 
 import lark
 
+from ..constraints import Expr
 from ..errors import Diagnostic, ProtocolCheckError, ProtocolSyntaxError
 from ..location import Location
 from ..syntax import Name
 from . import tree as t
 from .errors import UnsupportedConstructError
+from .refinements import location_in, read_expression
 
 __all__ = ["MAX_NESTING", "read_module"]
 
@@ -38,6 +40,13 @@ _WORDS = {
     "LT": "'<'", "MORETHAN": "'>'", "AT_SIGN": "'@'", "$END": "end of file",
     "REFINEMENT": "a refinement '{...}'", "STATE": "'[...]'",
 }
+
+# nuScr's pragmas (nuscr/nuscr lib/utils/pragma.ml). Refinements are always checked on both
+# sides and for satisfiability where that is cheap, so the validation pragmas change nothing.
+_PRAGMAS = frozenset({
+    "NestedProtocols", "ShowPragmas", "PrintUsage", "RefinementTypes", "SenderValidateRefinements",
+    "ReceiverValidateRefinements", "ValidateRefinementSatisfiability", "ValidateRefinementProgress",
+})
 
 
 def _parser(language: str) -> lark.Lark:
@@ -128,6 +137,8 @@ class _Reader:
         self.path = path
         self.lines = lines
         self.language = language
+        self.refinement_types = False  # the pragma RefinementTypes was given
+        self.annotated = False  # a message carries an annotation @"..."
 
     # ---- helpers ----
     def _loc(self, item: lark.Token | lark.Tree[Any]) -> Location:
@@ -152,6 +163,9 @@ class _Reader:
         aliases: list[t.TypeAlias] = []
         protocols: list[t.Protocol] = []
         for item in root.children:
+            if isinstance(item, lark.Token):  # nuScr's pragmas, first in the file
+                self._pragmas(item)
+                continue
             kind = item.data
             if kind == "type_decl":
                 strings = [c for c in item.children if isinstance(c, lark.Token) and c.type == "STRING"]
@@ -165,9 +179,37 @@ class _Reader:
             elif kind == "nested":
                 self._refuse(item, "a nested protocol ('nested protocol')")
             # module and import declarations name where a file sits; nothing to translate
-        imports = any(item.data == "import_decl" for item in root.children)
+        imports = any(isinstance(item, lark.Tree) and item.data == "import_decl" for item in root.children)
         return t.ForeignModule(self.language, tuple(aliases), tuple(protocols),
-                               declares_types=self.language == "scribble", imports=imports)
+                               declares_types=self.language == "scribble", imports=imports,
+                               refinements=self.refinement_types or self.annotated)
+
+    def _pragmas(self, token: lark.Token) -> None:
+        """``(*# RefinementTypes, ... #*)``: each name known to nuScr, ``RefinementTypes`` remembered."""
+        text, start = str(token), self._loc(token)
+        offset = 3
+        for part in text[3:-3].split(","):
+            name = part.split(":", 1)[0].strip()
+            at = location_in(start, text, offset + len(part) - len(part.lstrip()))
+            offset += len(part) + 1
+            if name not in _PRAGMAS:
+                line = self.lines[at.line - 1] if 0 < at.line <= len(self.lines) else ""
+                raise ProtocolCheckError([Diagnostic(
+                    "error", at, f"unknown pragma {name!r}; expected one of nuScr's: {', '.join(sorted(_PRAGMAS))}",
+                    line)])
+            if name == "RefinementTypes":
+                self.refinement_types = True
+
+    def _expression(self, token: lark.Token, what: str) -> Expr:
+        """The nuScr expression inside ``token`` (a refinement's braces, an annotation's quotes)."""
+        start = location_in(self._loc(token), str(token), 1)
+        try:
+            return read_expression(str(token)[1:-1], start, self.lines)
+        except ProtocolSyntaxError as error:
+            if what == "refinement":
+                raise
+            self._refuse(token, "an annotation that is not a refinement predicate ('@\"...\"')",
+                         f"{error.message}; it is read as nuScr's refinement expressions")
 
     def _protocol(self, node: lark.Tree[Any]) -> t.Protocol:
         aux = False
@@ -224,12 +266,18 @@ class _Reader:
     def _i_transfer(self, node: lark.Tree[Any]) -> t.Interaction:
         message, *rest = node.children
         names = [c for c in rest if isinstance(c, lark.Token) and c.type == "NAME"]
+        annotation: Expr | None = None
         for child in rest:
             if isinstance(child, lark.Tree) and child.data == "annotation":
-                self._refuse(child, "an annotation ('@\"...\"')")
+                if self.language != "nuscr":
+                    self._refuse(child, "an annotation ('@\"...\"')")
+                string = child.children[1]
+                assert isinstance(string, lark.Token), string
+                annotation = self._expression(string, "annotation")
+                self.annotated = True
         label, payloads, parens = self._message(message)
         return t.Transfer(label, payloads, parens, self._name(names[0]),
-                          tuple(self._name(n) for n in names[1:]), self._loc(node))
+                          tuple(self._name(n) for n in names[1:]), self._loc(node), annotation)
 
     def _message(self, node: lark.Tree[Any]) -> tuple[Name | None, tuple[t.Payload, ...], bool]:
         if node.data == "bare_message":
@@ -246,12 +294,24 @@ class _Reader:
             elif child.data == "delegation":
                 self._refuse(child, "delegation ('Protocol@Role' payload)")
             elif child.data == "refinement":
-                self._refuse(child, "a refinement type ('x: T{...}')")
+                payloads.append(self._refined(child))
             else:  # payload: [NAME ':'] qname; a name becomes a field's name if there are several
                 named = [c for c in child.children[:-1] if isinstance(c, lark.Token) and c.type == "NAME"]
                 payloads.append(t.Payload(self._qname(child.children[-1]),
                                           self._name(named[0]) if named else None))
         return label, tuple(payloads), True
+
+    def _refined(self, node: lark.Tree[Any]) -> t.Payload:
+        """``x: T{...}``: a refinement, which nuScr reads only under its pragma ``RefinementTypes``."""
+        name, _colon, sort, braces = node.children
+        assert isinstance(braces, lark.Token), braces
+        if not self.refinement_types:
+            location = self._loc(node)
+            line = self.lines[location.line - 1] if 0 < location.line <= len(self.lines) else ""
+            raise ProtocolCheckError([Diagnostic(
+                "error", location, "a refinement type ('x: T{...}') needs the pragma (*# RefinementTypes #*) "
+                "first in the file, as nuScr asks", line)])
+        return t.Payload(self._name(sort), self._name(name), self._expression(braces, "refinement"))
 
     def _i_choice(self, node: lark.Tree[Any]) -> t.Interaction:
         role = next(c for c in node.children if isinstance(c, lark.Token) and c.type == "NAME")

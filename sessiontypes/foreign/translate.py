@@ -22,6 +22,7 @@ from typing import NoReturn, assert_never
 from .. import syntax as s
 from ..errors import Diagnostic, ProtocolCheckError
 from ..location import Location
+from ..refine import conjunction
 from ..sorts import BUILTIN_SORTS
 from ..work import METER
 from . import tree as t
@@ -299,18 +300,32 @@ class _Translator:
     def _message(self, transfer: t.Transfer) -> s.MessageSyntax:
         sorts = [(p, self._sort(p.sort)) for p in transfer.payloads]
         payloads = [(p, sort) for p, sort in sorts if sort is not None]
-        if len(payloads) > 1:  # several payloads: a message with named payloads (fields p1, p2, ... unnamed)
+        # Predicates on no value (a 'unit' payload's refinement, the message's annotation) hold
+        # of the message: they join its payload's refinements.
+        loose = [p.refinement for p, sort in sorts if sort is None and p.refinement is not None]
+        if transfer.annotation is not None:
+            loose.append(transfer.annotation)
+        named = self.module.refinements and any(p.name is not None for p, _ in payloads)
+        if len(payloads) > 1 or named:  # named payloads (fields p1, p2, ... unnamed)
             if transfer.label is None:
                 self._refuse(transfer.location, "several payloads without a label")
-            fields = tuple(s.FieldSyntax(p.name or s.Name(f"p{number}", p.sort.location), sort)
-                           for number, (p, sort) in enumerate(payloads, start=1))
-            return s.MessageSyntax(self._label(transfer.label), None, parens=True, fields=fields)
+            fields = [s.FieldSyntax(p.name or s.Name(f"p{number}", p.sort.location), sort, p.refinement)
+                      for number, (p, sort) in enumerate(payloads, start=1)]
+            if loose:  # checked with the fields' refinements, on the whole payload: on the last field
+                last = fields[-1]
+                fields[-1] = s.FieldSyntax(last.name, last.sort, conjunction([r for r in (last.refinement, *loose)
+                                                                              if r is not None]))
+            return s.MessageSyntax(self._label(transfer.label), None, parens=True, fields=tuple(fields))
         sort = payloads[0][1] if payloads else None
+        if loose and sort is None:
+            self._refuse(loose[0].location, "a refinement of a message without a payload",
+                         "the language refines payloads: give the message a payload for it to constrain")
+        refinement = conjunction(loose)
         if transfer.label is None:  # Scribble's "(Int) from A to B": the sort names the label
             if sort is None:
                 self._refuse(transfer.location, "a message with neither label nor payload")
             return s.MessageSyntax(sort, None, parens=False)
-        return s.MessageSyntax(self._label(transfer.label), sort, parens=True)
+        return s.MessageSyntax(self._label(transfer.label), sort, parens=True, refinement=refinement)
 
     def _choice(self, choice: t.Choice, then: s.GSyntax, scope: _Scope) -> s.GSyntax:
         chooser = self._role(choice.role, scope)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ..constraints import Expr
 from ..location import NOWHERE, Location
 from ..syntax import Name
 
@@ -22,10 +23,12 @@ __all__ = [
 
 @dataclass(frozen=True, slots=True)
 class Payload:
-    """One payload element: a type name, and nuScr's variable name (``x: T``) if written."""
+    """One payload element: a type name, nuScr's variable name (``x: T``) and refinement
+    (``x: T{x > 0}``, read into the language's expressions) if written."""
 
     sort: Name
     name: Name | None = None
+    refinement: Expr | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -34,6 +37,7 @@ class Transfer:
 
     ``label`` is ``None`` for Scribble's empty operator ``(Int) from A to B;``;
     ``parens`` is false for a bare message name (a Scribble ``sig`` or a nuScr label).
+    ``annotation`` is nuScr's ``@"..."`` after the ``;``, read as a predicate.
     """
 
     label: Name | None
@@ -42,6 +46,7 @@ class Transfer:
     sender: Name
     receivers: tuple[Name, ...]
     location: Location = field(default=NOWHERE, compare=False)
+    annotation: Expr | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,7 +124,9 @@ class ForeignModule:
     """A Scribble or nuScr file: its type aliases and protocols, in file order.
 
     ``declares_types`` tells the languages apart: a Scribble payload type must be
-    declared (or builtin), a nuScr payload type is any name.
+    declared (or builtin), a nuScr payload type is any name. ``refinements`` is set when a
+    nuScr file refines (the ``RefinementTypes`` pragma, or an ``@"..."`` on a message): its
+    payloads' variable names are then fields, which refinements name.
     """
 
     language: str
@@ -127,3 +134,4 @@ class ForeignModule:
     protocols: tuple[Protocol, ...]
     declares_types: bool
     imports: bool = False
+    refinements: bool = False

@@ -177,8 +177,6 @@ def _position(text: str, at: str) -> tuple[int, int]:
      "P@B", "delegation ('Protocol@Role' payload)"),
     ("module M; global protocol P(role A, role B) { do P(A, B); }", "p.scr",
      "do P", "a recursive 'do' (P -> P)"),
-    ("global protocol P(role A, role B) { m(x: int{x > 0}) from A to B; }", "p.nuscr",
-     "x: int", "a refinement type ('x: T{...}')"),
     ("global protocol P(role A, role B) { rec X [n<A>: int = 0] { continue X [n]; } }", "p.nuscr",
      "[n<A>", "recursion with state variables ('rec X [...]')"),
     ("global protocol P(role A, role B) @\"A>0\" { m() from A to B; }", "p.nuscr",
