@@ -9,7 +9,7 @@ machines to ``System`` (its projections are primed with them).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 
 import sessiontypes
 from sessiontypes import GlobalType, StateMachine
@@ -43,10 +43,12 @@ def constrain(machine: StateMachine, role: str, constraints: Constraints) -> Sta
     return machine
 
 
-def timed_global(text: str, constraints: Constraints, name: str = "G") -> GlobalType:
-    """The global ``name`` of ``text``, whose roles' machines carry ``constraints``."""
+def timed_global(text: str, constraints: Constraints, name: str = "G",
+                 roles: Collection[str] | None = None) -> GlobalType:
+    """The global ``name`` of ``text``, whose roles' machines (those of ``roles``, default all)
+    carry ``constraints``: leaving a sender out makes it send what only its receiver checks."""
     gt = sessiontypes.loads(text, "timed.proto").globals[name]
-    for role in gt.roles:
+    for role in gt.roles if roles is None else roles:
         local = gt.project(role)
         primed = _Primed(local.name, local.role, local.body, local.protocol, local.location)
         object.__setattr__(primed, "machine", constrain(local.fsm(), role, constraints))
