@@ -162,8 +162,9 @@ class Monitor:
                                        f"period missed: sent {format_nanos(gap)} after the previous {label}, "
                                        f"{format_nanos(abs(off))} too {'early' if early else 'late'} for "
                                        f"{rule.transition.timing}", rule.every, off, "period")
-        elif rule.within is not None and self.previous is not None:  # arrived in time (else: expire)
-            if (margin := rule.within - (now - self.previous)) >= 0:  # a late reader took a message that was there
+        elif rule.within is not None and self.previous is not None:
+            margin = rule.within - (now - self.previous)
+            if margin >= 0:  # else a late reader took a message that was there in time: no margin to tell
                 rule.margin(margin)
         if rule.check is not None:
             reason = rule.check(payload, self.earlier)

@@ -199,7 +199,7 @@ PING = "global G(A, B) = mu t. A -> B : { ping. t, fin. end }"
 
 @pytest.mark.parametrize("core", CORES)
 def test_a_receiver_waiting_past_its_deadline_gets_the_error_then_blaming_the_sender(core: type[Endpoint]) -> None:
-    receiver, network = setup(core, PING, {("A", "ping"): (Timing(within=50 * MS), None)}, "B")
+    receiver, _ = setup(core, PING, {("A", "ping"): (Timing(within=50 * MS), None)}, "B")
     outcome: queue.Queue[BaseException | object] = queue.Queue()
 
     def wait() -> None:
@@ -243,6 +243,24 @@ def test_else_timeout_returns_the_timeout_keeps_the_state_and_restarts_the_deadl
     network.queues[("A", "B")].put(("fin", None))
     assert receiver.recv("A") == ("fin", None)
     assert receiver.statistics().received == {"A": 1}
+
+
+def test_a_typed_state_that_takes_the_protocols_timeout_stays_the_state_to_use() -> None:
+    clock = FakeClock()
+    receiver, network = setup(Endpoint, PING, {("A", "ping"): (Timing(within=10 * MS, on_expiry=True), None)},
+                              "B", clock)
+
+    class Waiting(anodize.State):  # as generated code writes a receiving state
+        def recv(self) -> anodize.Message:
+            return self._recv("A", ("ping", "fin"), None)
+
+    state = Waiting(receiver)
+    clock.advance(10 * MS)
+    assert state.recv() == (TIMEOUT, None)
+    network.queues[("A", "B")].put(("ping", None))
+    assert state.recv() == ("ping", None)
+    with pytest.raises(anodize.LinearityError):
+        state.recv()
 
 
 @pytest.mark.parametrize("core", CORES)
@@ -316,8 +334,8 @@ def test_a_deadline_state_is_left_out_of_the_compiled_cores_blocking_receive() -
 @pytest.mark.parametrize("core", CORES)
 def test_statistics_count_the_checks_and_keep_the_closest_margin(core: type[Endpoint]) -> None:
     clock = FakeClock()
-    sender, _ = setup(core, STREAM, {("A", "num"): (Timing(every=20 * MS, jitter=2 * MS), cmp(">", at("x"), Number(0)))},
-                      "A", clock)
+    constrained = (Timing(every=20 * MS, jitter=2 * MS), cmp(">", at("x"), Number(0)))
+    sender, _ = setup(core, STREAM, {("A", "num"): constrained}, "A", clock)
     for gap in (0, 20 * MS, 19 * MS, 21 * MS + 500_000):
         clock.advance(gap)
         sender.send("B", "num", {"x": 1})
@@ -372,12 +390,14 @@ def reference(constraints: dict[str, tuple[Timing | None, Refinement | None]],
         if label not in allowed:
             return index, "protocol"
         timing, refinement = constraints.get(label, (None, None))
-        if timing is not None and timing.within is not None and not (label != "c" and timing.on_expiry):
-            if when - previous > timing.within:
-                return index, "deadline"
-        if label != "c" and timing is not None and timing.every is not None and label in last_send:
-            if not timing.every - timing.jitter <= when - last_send[label] <= timing.every + timing.jitter:
-                return index, "period"
+        sending = label != "c"
+        within = None if timing is None or (sending and timing.on_expiry) else timing.within
+        if within is not None and when - previous > within:
+            return index, "deadline"
+        every = timing.every if timing is not None and sending else None
+        if every is not None and label in last_send and timing is not None and not (
+                every - timing.jitter <= when - last_send[label] <= every + timing.jitter):
+            return index, "period"
         if refinement is not None and payload is not None and not refinement.holds(payload, earlier):
             return index, "refinement"
         if payload is not None and "x" in payload:
@@ -405,9 +425,8 @@ def run_monitor(constraints: dict[str, tuple[Timing | None, Refinement | None]],
         try:
             if label == "c":
                 due = monitor.deadline("B")
-                if due is not None and due[0] < when:
-                    if "B" in monitor.receives_from[monitor.state]:
-                        monitor.expire("B")
+                if due is not None and due[0] < when and "B" in monitor.receives_from[monitor.state]:
+                    monitor.expire("B")
                 monitor.recv("B", label, payload)
             else:
                 monitor.send("B", label, payload)
