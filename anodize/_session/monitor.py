@@ -20,16 +20,13 @@ from sessiontypes import StateMachine, Transition
 from ..errors import Action, DeadlineMissedError, ProtocolViolationError
 from .payloads import Validator, exact_types_for, identities, real_name, validator_for
 from .statistics import ConstraintCheck
-from .timed import Rule, format_nanos, plan_for, to_nanos
+from .timed import Rule, format_nanos, plan_for
 
 __all__ = ["Monitor", "TIMEOUT"]
 
 TIMEOUT = "timeout"
 """The label ``recv`` returns (with no payload) when a deadline with ``else timeout`` passes."""
 
-
-def _monotonic_nanos() -> int:
-    return to_nanos(time.monotonic())
 
 # (target state, the first type accepted at once (None: none is), full payload check, the transition
 # it came from, all the types accepted at once (the compiled core reads them; they also keep the
@@ -67,7 +64,7 @@ class Monitor:
         self.role = role
         self.machine = machine
         self.state = machine.initial
-        self.clock = clock or _monotonic_nanos
+        self.clock = clock or time.monotonic_ns  # the clock of time.monotonic(), in exact ns
         plan = plan_for(machine)
         self.rules: list[Rule] = [rule for row in plan.rules for rule in row.values()]
         self.deadlines = plan.deadlines
@@ -141,34 +138,18 @@ class Monitor:
 
         A send is checked for its deadline, its period, then its refinement; a receive for its
         refinement (its deadline is the wait's, :meth:`expire`)."""
-        now = self.clock() if rule.timed else 0
         rule.checked += 1
-        if kind == "send":
-            if rule.within is not None:
-                elapsed = now - (self.previous if self.previous is not None else now)
-                rule.margin(rule.within - elapsed)
-                if elapsed > rule.within:
-                    raise self._missed(Action("send", peer, label, _type_name(payload)), rule.transition, blame,
-                                       f"deadline missed: sent {format_nanos(elapsed)} after {self.role}'s previous "
-                                       f"action, later than within {format_nanos(rule.within)}",
-                                       rule.within, elapsed - rule.within, "deadline")
-            if rule.every is not None and rule.last_send is not None:
-                gap = now - rule.last_send
-                rule.margin(min(gap - rule.low, rule.high - gap))
-                if not rule.low <= gap <= rule.high:
-                    early = gap < rule.low
-                    off = gap - rule.low if early else gap - rule.high
-                    raise self._missed(Action("send", peer, label, _type_name(payload)), rule.transition, blame,
-                                       f"period missed: sent {format_nanos(gap)} after the previous {label}, "
-                                       f"{format_nanos(abs(off))} too {'early' if early else 'late'} for "
-                                       f"{rule.transition.timing}", rule.every, off, "period")
-        elif rule.within is not None and self.previous is not None:
-            margin = rule.within - (now - self.previous)
-            if margin >= 0:  # else a late reader took a message that was there in time: no margin to tell
-                rule.margin(margin)
-        if rule.check is not None:
-            reason = rule.check(payload, self.earlier)
-            if reason is not None:
+        now = 0
+        if rule.timed:
+            now = self.clock()
+            self._check_time(rule, kind, now, peer, label, payload, blame)
+        fast = rule.fast
+        if fast is not None:
+            try:
+                held = fast(payload, self.earlier) is True
+            except Exception:  # the reference evaluates it again, and says why
+                held = False
+            if not held and rule.check is not None and (reason := rule.check(payload, self.earlier)) is not None:
                 raise self.violation(Action(kind, peer, label, _type_name(payload)), blame,
                                      f"{reason} for {label} {_short(payload)}", rule.transition)
         if rule.remembers and type(payload) is dict:
@@ -179,6 +160,35 @@ class Monitor:
         if rule.stamps:
             self.previous = now
         self.state = rule.transition.target
+
+    def _check_time(self, rule: Rule, kind: str, now: int, peer: str | None, label: str, payload: object,
+                    blame: str) -> None:
+        """A send's deadline and period at ``now`` (raising DeadlineMissedError); a receive's margin."""
+        if kind != "send":
+            if rule.within is not None and self.previous is not None:
+                margin = rule.within - (now - self.previous)
+                if margin >= 0:  # else a late reader took a message that was there in time: no margin to tell
+                    rule.margin(margin)
+            return
+        if rule.within is not None:
+            elapsed = now - (self.previous if self.previous is not None else now)
+            if rule.closest is None or rule.within - elapsed < rule.closest:
+                rule.closest = rule.within - elapsed
+            if elapsed > rule.within:
+                raise self._missed(Action("send", peer, label, _type_name(payload)), rule.transition, blame,
+                                   f"deadline missed: sent {format_nanos(elapsed)} after {self.role}'s previous "
+                                   f"action, later than within {format_nanos(rule.within)}",
+                                   rule.within, elapsed - rule.within, "deadline")
+        if rule.every is not None and rule.last_send is not None:
+            gap = now - rule.last_send
+            rule.margin(min(gap - rule.low, rule.high - gap))
+            if not rule.low <= gap <= rule.high:
+                early = gap < rule.low
+                off = gap - rule.low if early else gap - rule.high
+                raise self._missed(Action("send", peer, label, _type_name(payload)), rule.transition, blame,
+                                   f"period missed: sent {format_nanos(gap)} after the previous {label}, "
+                                   f"{format_nanos(abs(off))} too {'early' if early else 'late'} for "
+                                   f"{rule.transition.timing}", rule.every, off, "period")
 
     def deadline(self, peer: str | None) -> tuple[int, bool, Transition] | None:
         """When the message awaited from ``peer`` (None: from any peer) is due, on the role's clock

@@ -16,6 +16,7 @@ from sessiontypes import StateMachine, Transition
 from sessiontypes.constraints import Binary, Call, Compare, Expr, Path, Timing, Unary
 from sessiontypes.refine import Predicate, compile_predicate, print_expr
 
+from .predicates import FastCheck, fast_predicate
 from .statistics import ConstraintCheck
 
 __all__ = ["Rule", "Plan", "to_nanos", "format_nanos", "plan_for"]
@@ -50,7 +51,8 @@ class Rule:
             receiver's deadline (enforced while it waits, only counted here).
         every, low, high: the period and the bounds ``every - jitter``, ``every + jitter`` of the
             gap between two sends of this interaction (sender only; None, 0, 0 without one).
-        check: the refinement's compiled predicate, or None.
+        check: the refinement's compiled predicate (the reference, which says why not), or None.
+        fast: the same refinement as one Python function: True when it holds (else: ask ``check``).
         stamps: the action's time becomes the role's previous action (the target state, or
             some state after it before another action, has a deadline).
         remembers: the payload's fields some refinement of the machine reads as an earlier payload.
@@ -60,7 +62,7 @@ class Rule:
             or None if it has no time bound or none was checked.
     """
 
-    __slots__ = ("check", "checked", "closest", "every", "high", "last_send", "low", "remembers", "stamps",
+    __slots__ = ("check", "checked", "closest", "every", "fast", "high", "last_send", "low", "remembers", "stamps",
                  "timed", "transition", "within")
 
     def __init__(self, transition: Transition, stamps: bool, remembers: tuple[str, ...]) -> None:
@@ -71,8 +73,10 @@ class Rule:
         self.every: int | None = timing.every if sending else None
         self.low = (timing.every or 0) - timing.jitter
         self.high = (timing.every or 0) + timing.jitter
-        self.check: Predicate | None = (compile_predicate(transition.refinement)
-                                        if transition.refinement is not None else None)
+        refinement = transition.refinement
+        self.check: Predicate | None = compile_predicate(refinement) if refinement is not None else None
+        self.fast: FastCheck | None = (fast_predicate(refinement, _own_fields(transition))
+                                       if refinement is not None else None)
         self.stamps = stamps
         self.remembers = remembers
         self.timed = self.within is not None or self.every is not None or stamps
@@ -126,15 +130,14 @@ def plan_for(machine: StateMachine) -> Plan:
     """The rules of ``machine``'s own states (its parallel branches have monitors of their own)."""
     timed_states = {state for state, row in enumerate(machine.table)
                     if any(_deadline_at(t) is not None for t in row.values())}
-    heads = _earlier_names(machine)
+    earlier = _earlier_names(machine)
     rules: list[dict[tuple[str, str | None, str], Rule]] = []
     deadlines: list[dict[str | None, tuple[int, bool, Transition]]] = []
     for row in machine.table:
         own: dict[tuple[str, str | None, str], Rule] = {}
         due: dict[str | None, tuple[int, bool, Transition]] = {}
         for key, t in row.items():
-            fields = t.sort.fields if t.sort is not None and t.sort.fields is not None else ()
-            remembers = tuple(f.name for f in fields if f.name in heads)
+            remembers = tuple(name for name in _own_fields(t) if name in earlier)
             stamps = t.target in timed_states
             if t.timing is not None or t.refinement is not None or stamps or remembers:
                 own[key] = Rule(t, stamps, remembers)
@@ -157,13 +160,22 @@ def _deadline_at(t: Transition) -> int | None:
     return timing.within
 
 
+def _own_fields(t: Transition) -> tuple[str, ...]:
+    """The field names of ``t``'s record payload (none for other sorts)."""
+    fields = t.sort.fields if t.sort is not None and t.sort.fields is not None else ()
+    return tuple(f.name for f in fields)
+
+
 def _earlier_names(machine: StateMachine) -> frozenset[str]:
-    """The first names of every path in the machine's refinements (those an earlier payload may give)."""
+    """The first names of the machine's refinements that are not fields of their own payload:
+    those an earlier payload gives (the monitor keeps their latest values)."""
     names: set[str] = set()
     for row in machine.table:
         for t in row.values():
             if t.refinement is not None:
-                _collect(t.refinement, names)
+                heads: set[str] = set()
+                _collect(t.refinement, heads)
+                names |= heads - set(_own_fields(t))
     return frozenset(names)
 
 
