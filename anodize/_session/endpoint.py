@@ -362,6 +362,10 @@ class Endpoint(_Core):
                 except queue.Empty:
                     monitor.expire(frm)  # raises DeadlineMissedError, unless `else timeout` was written
                     return Message(TIMEOUT, None)
+        if type(item) is tuple:  # a message (a signal goes the common way)
+            monitor.recv(frm, item[0], item[1])
+            self.received[frm] += 1
+            return _new_tuple(Message, item)
         return self._accept(frm, item, channel)
 
     def recv_many(self, frm: str, limit: int = 1024, timeout: float | None = None) -> list[Message]:
