@@ -344,11 +344,13 @@ class Endpoint(_Core):
 
         The wait is the deadline less the clock's reading. Live, that is the time left; in a
         replay the readings are the recording's, so the wait is what was left in the recorded
-        run, and a message the recording holds is there at once."""
+        run, and a message the recording holds is there at once. So that a replay is given back
+        the readings in the order they were taken, the clock is read here once whether or not
+        the message is there (and once more by the monitor, for the time of the receive)."""
+        left = (due - monitor.clock()) / 1e9
         try:
             item = channel.get_nowait()
         except queue.Empty:
-            left = (due - monitor.clock()) / 1e9
             wait = left if timeout is None else min(timeout, left)
             try:
                 if wait <= 0:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import queue
 import threading
 from collections.abc import Callable
+from pathlib import Path as FilePath
 from dataclasses import dataclass
 from typing import Any
 
@@ -593,3 +594,32 @@ def test_the_fast_check_holds_only_where_the_reference_holds(expr: Expr, payload
     reference = compile_predicate(expr)(payload, earlier)
     if fast is True:
         assert reference is None, (expr, payload, earlier)
+
+
+# ---- a recorded run with constraints replays: the monitor's clock readings are given back ----
+
+@pytest.mark.parametrize("role", ["C", "M"])
+def test_a_recorded_constrained_run_replays_equal_with_the_monitors_readings(tmp_path: FilePath, role: str) -> None:
+    from anodize._recording.reader import open_recording
+    from anodize._recording.replay import replay
+
+    constraints = {("C", "cmd"): (Timing(within=30_000 * MS), cmp("<=", at("v"), Number(10)))}
+    gt = timed_global(timed_roles.CONTROL, constraints)
+    system = anodize.System(gt)
+    system.group("control").role("C", timed_roles.punctual)
+    system.group("motor").role("M", timed_roles.motor)
+    path = tmp_path / "run.mcap"
+    report = system.run(timeout=30, taps=[anodize.Recording(path)])
+    assert report.ok, report.summary()
+    # Each role read its clock only through its monitor: at the start and after each of the 3
+    # commands (the state they lead to has the deadline), not after stop; M also once as each
+    # of its 4 deadline receives begins (stop comes in the state that waits for cmd), whether or
+    # not the message was there already.
+    note = next(note for note in report.notes if note.startswith("recorded "))
+    assert "and 12 readings of the roles' clocks" in note, note
+    with open_recording(path) as recording:
+        replayed = replay(recording, gt, role, {"C": timed_roles.punctual, "M": timed_roles.motor}[role], timeout=20.0)
+    assert replayed.divergence is None, replayed.text()
+    assert replayed.ok or role == "M", replayed.text()  # M sends nothing: a replay of it compares nothing
+    assert "ended: M returned at the end of its local type" in replayed.text() or role == "C"
+    assert replayed.clock == {"C": (4, 4, 0), "M": (8, 8, 0)}[role]
