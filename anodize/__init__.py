@@ -22,7 +22,7 @@ from ._recording.reader import RecordingError
 from ._recording.replay_network import ReplayDivergenceError
 from ._recording.run import Recording
 from ._ros.messages import RosDecodeError, RosEncodeError
-from ._session import Endpoint, EndpointStatistics, Message, State
+from ._session import TIMEOUT, Endpoint, EndpointStatistics, Message, State
 from ._supervision import (
     Dds,
     Group,
@@ -45,6 +45,7 @@ from .errors import (
     Action,
     AnodizeError,
     ConfigurationError,
+    DeadlineMissedError,
     LinearityError,
     MemoryBoundError,
     MissingExtraError,
@@ -62,6 +63,8 @@ __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
     "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
+    # Time constraints: a missed deadline or period, and the label of an `else timeout`.
+    "DeadlineMissedError", "TIMEOUT",
     "Inproc", "Processes", "Dds", "RosBridge", "ChannelTap", "Transport",
     # The taps a program can hand to System.run itself: a recording, the live view in Foxglove.
     "Recording", "open_live_view", "LiveView",

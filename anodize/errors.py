@@ -12,7 +12,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 __all__ = [
-    "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
+    "AnodizeError", "ConfigurationError", "ProtocolViolationError", "DeadlineMissedError", "PeerFailedError",
+    "MemoryBoundError",
     "LinearityError", "MissingExtraError", "Action", "RoleError", "RoleStopped", "error_to_data", "error_from_data",
 ]
 
@@ -105,6 +106,32 @@ class ProtocolViolationError(AnodizeError):
         reason = f": {self.reason}" if self.reason else ""
         return (f"protocol {self.protocol}, role {self.role}: protocol violation by {self.blame}"
                 f"{reason}; in state {self.state} expected {expected}, got {self.actual}{where}")
+
+
+class DeadlineMissedError(ProtocolViolationError):
+    """A time constraint of the protocol did not hold (``within``, ``every``).
+
+    Raised in a sender whose send came too late after its previous action, or too early or
+    too late after its previous send of a periodic interaction (nothing is sent; blame: the
+    sender), and in a receiver whose deadline passed with nothing arrived (blame: the sender,
+    raised the moment the deadline passes). Times are read on the role's own clock.
+
+    Attributes (besides those of :class:`ProtocolViolationError`):
+        deadline_ns: the bound that was missed, in nanoseconds: ``within``'s duration, or the
+            period's ``every`` for ``kind`` "period".
+        late_ns: how far past the bound, in nanoseconds; for a period sent too early, how far
+            before the earliest allowed moment, as a negative number.
+        kind: ``"deadline"`` (``within``) or ``"period"`` (``every``).
+    """
+
+    def __init__(self, protocol: str, role: str, peer: str | None, state: str,
+                 expected: Sequence[Action], actual: Action, blame: str,
+                 location: str = "", reason: str = "", deadline_ns: int = 0, late_ns: int = 0,
+                 kind: str = "deadline") -> None:
+        self.deadline_ns = deadline_ns
+        self.late_ns = late_ns
+        self.kind = kind
+        super().__init__(protocol, role, peer, state, expected, actual, blame, location, reason)
 
 
 class PeerFailedError(AnodizeError):
@@ -212,6 +239,8 @@ def error_to_data(error: BaseException) -> dict[str, object]:
                              [error.actual.kind, error.actual.peer, error.actual.label,
                               error.actual.payload_type],
                              error.blame, error.location, error.reason]
+        if isinstance(error, DeadlineMissedError):
+            data["deadline"] = [error.deadline_ns, error.late_ns, error.kind]
     elif isinstance(error, PeerFailedError):
         data["peer_failed"] = [error.role, error.peer, error.cause]
     elif isinstance(error, MemoryBoundError):
@@ -224,6 +253,12 @@ def error_from_data(data: dict[str, object]) -> AnodizeError:
     try:
         if "violation" in data:
             protocol, role, peer, state, expected, actual, blame, location, reason = _items(data["violation"])
+            if "deadline" in data:
+                deadline, late, kind = _items(data["deadline"])
+                return DeadlineMissedError(_text(protocol), _text(role), _optional_text(peer), _text(state),
+                                           [_action(a) for a in _items(expected)], _action(actual),
+                                           _text(blame), _text(location), _text(reason), _number(deadline),
+                                           _number(late), _text(kind))
             return ProtocolViolationError(_text(protocol), _text(role), _optional_text(peer), _text(state),
                                           [_action(a) for a in _items(expected)], _action(actual),
                                           _text(blame), _text(location), _text(reason))

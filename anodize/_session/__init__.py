@@ -6,8 +6,8 @@ channels beneath it come from a transport through the small interface of
 """
 
 from .endpoint import Endpoint, Message
-from .monitor import Monitor
+from .monitor import TIMEOUT, Monitor
 from .statistics import EndpointStatistics
 from .typed import State
 
-__all__ = ["Endpoint", "EndpointStatistics", "Message", "Monitor", "State"]
+__all__ = ["TIMEOUT", "Endpoint", "EndpointStatistics", "Message", "Monitor", "State"]

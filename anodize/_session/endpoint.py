@@ -25,12 +25,13 @@ from sessiontypes import StateMachine
 from ..errors import Action, AnodizeError, PeerFailedError, ProtocolViolationError, RoleStopped
 from . import compiled
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
-from .clock import clock_of
+from .clock import LIVE, clock_of
 from .inheriting import Lender, get_lending, inheriting, lend_to_any
-from .monitor import Monitor
+from .monitor import TIMEOUT, Monitor
 from .statistics import EndpointStatistics
+from .timed import to_nanos
 
-__all__ = ["Message", "Endpoint", "EndpointStatistics", "RoleStopped", "peers_of", "put_each"]
+__all__ = ["Message", "Endpoint", "EndpointStatistics", "RoleStopped", "TIMEOUT", "peers_of", "put_each"]
 
 
 _new_tuple = tuple.__new__  # builds a Message without NamedTuple's Python-level __new__
@@ -79,12 +80,17 @@ class Endpoint(_Core):
     """
 
     def __init__(self, role: str, protocol: str, machine: StateMachine, network: Network,
-                 monitored: bool = True, peers: tuple[set[str], set[str]] | None = None) -> None:
+                 monitored: bool = True, peers: tuple[set[str], set[str]] | None = None, branch: str = "") -> None:
         self.role = role
         self.protocol = protocol
         self._machine = machine
         self._network = network
-        self._monitor: Monitor | None = Monitor(machine, protocol, role) if monitored else None
+        self._clock = clock = clock_of(network, role)
+        self._branch = branch  # which endpoint of the role reads the clock: "" the role's, "1", "2", ... a branch's
+        # The monitor reads the role's clock (in ns) where a constraint needs it, and only there.
+        # The machine's clock is read as time.monotonic_ns (the same clock, exact and cheaper).
+        read: Callable[[], int] = time.monotonic_ns if clock is LIVE else lambda: to_nanos(clock.now(branch))
+        self._monitor: Monitor | None = Monitor(machine, protocol, role, read) if monitored else None
         sends_to, receives_from = peers if peers is not None else peers_of(machine)
         queues = network.queues
         # Per peer: the channel and the receiver's doorbell (None for most roles).
@@ -102,8 +108,6 @@ class Endpoint(_Core):
         self.high_water: dict[str, int] = dict.fromkeys(self._waiting, 0)
         self.received: dict[str, int] = dict.fromkeys(self._in, 0)
         self._stop_event = network.stop_event_for(role)
-        self._clock = clock_of(network, role)
-        self._branch = ""  # which endpoint of the role reads the clock: "" the role's, "1", "2", ... a branch's
         self._plain = not machine.forks  # no parallel composition: skip the routing checks
         self._fork_lock = threading.Lock()
         self._doorbell = network.doorbells.get(role)
@@ -306,12 +310,14 @@ class Endpoint(_Core):
             raise self._missing(error) from None
         if not plain and self._forked_now():
             return self._branch_for(self._recv_route, frm, "recv", "").recv(frm, timeout)
-        if monitor is not None and frm not in monitor.recv_peers[monitor.state]:
+        if monitor is not None and frm not in monitor.receives_from[monitor.state]:
             raise monitor.violation(Action("recv", frm, "*"), blame=role)
         channel = inbox.get(frm)
         if channel is None:
             raise AnodizeError(f"role {role} has no channel from {frm}")
         lend = lending.get(frm) if lending else None
+        if monitor is not None and monitor.deadlines[monitor.state] and (due := monitor.deadline(frm)) is not None:
+            return self._recv_due(frm, timeout, channel, lend, monitor, due[0])
         try:
             item = channel.get(timeout=timeout) if lend is None else get_lending(channel, timeout, lend)
         except queue.Empty:
@@ -326,6 +332,41 @@ class Endpoint(_Core):
                 else:
                     monitor.recv(frm, item[0], item[1])
             received[frm] += 1
+            return _new_tuple(Message, item)
+        return self._accept(frm, item, channel)
+
+    def _recv_due(self, frm: str, timeout: float | None, channel: Channel, lend: Any, monitor: Monitor,
+                  due: int) -> Message:
+        """Receive from ``frm`` in a state whose message from it is due at ``due`` (ns, the role's
+        clock): a message already there is taken (a late reader is not the sender's fault); else
+        the wait ends at the deadline, where the monitor blames the sender or, with ``else
+        timeout``, ``Message(TIMEOUT, None)`` is returned and the state stays.
+
+        The wait is the deadline less the clock's reading. Live, that is the time left; in a
+        replay the readings are the recording's, so the wait is what was left in the recorded
+        run, and a message the recording holds is there at once. So that a replay is given back
+        the readings in the order they were taken, the clock is read here once whether or not
+        the message is there (and once more by the monitor, for the time of the receive)."""
+        left = (due - monitor.clock()) / 1e9
+        try:
+            item = channel.get_nowait()
+        except queue.Empty:
+            wait = left if timeout is None else min(timeout, left)
+            try:
+                if wait <= 0:
+                    raise queue.Empty from None
+                item = channel.get(timeout=wait) if lend is None else get_lending(channel, wait, lend)
+            except queue.Empty:
+                if timeout is not None and timeout < left:
+                    raise TimeoutError(f"role {self.role}: no message from {frm} within {timeout} s") from None
+                try:  # a message that is there is always taken before the deadline is judged
+                    item = channel.get_nowait()
+                except queue.Empty:
+                    monitor.expire(frm)  # raises DeadlineMissedError, unless `else timeout` was written
+                    return Message(TIMEOUT, None)
+        if type(item) is tuple:  # a message (a signal goes the common way)
+            monitor.recv(frm, item[0], item[1])
+            self.received[frm] += 1
             return _new_tuple(Message, item)
         return self._accept(frm, item, channel)
 
@@ -427,6 +468,21 @@ class Endpoint(_Core):
                     self._skipped.discard(peer)
                 return peer, message
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
+            due = self._earliest_due(wanted)
+            if due is not None:  # the protocol's deadline may end the wait first
+                left = max(0.0, (due[0] - due[1].clock()) / 1e9)
+                if remaining is None or left < remaining:
+                    try:
+                        peer = self._wait_any(left, wanted)
+                    except TimeoutError:
+                        return self._expire_any(due[1], due[2], wanted)
+                    if not wanted(peer):
+                        self._skipped.add(peer)
+                        continue
+                    channel = self._all_in()[peer]
+                    if channel.empty():
+                        continue
+                    return peer, self._take(peer, channel)
             peer = self._wait_any(remaining, wanted)
             if not wanted(peer):
                 self._skipped.add(peer)
@@ -435,6 +491,32 @@ class Endpoint(_Core):
             if channel.empty():  # a stale ring: that message was taken by recv()
                 continue
             return peer, self._take(peer, channel)
+
+    def _earliest_due(self, wanted: Callable[[str], bool]) -> tuple[int, Monitor, str] | None:
+        """The earliest deadline among the messages ``recv_any`` waits for: when (ns), whose
+        monitor (this endpoint's or a branch's), from which peer; None if none has one."""
+        found: tuple[int, Monitor, str] | None = None
+        for monitor in self._leaf_monitors():
+            if not monitor.deadlines[monitor.state] or monitor.previous is None:
+                continue
+            for peer, (within, _, _) in monitor.deadlines[monitor.state].items():
+                if peer is not None and wanted(peer) and (found is None or monitor.previous + within < found[0]):
+                    found = (monitor.previous + within, monitor, peer)
+        return found
+
+    def _leaf_monitors(self) -> list[Monitor]:
+        if self._branches is not None:
+            return [m for branch in self._branches for m in branch._leaf_monitors()]
+        return [] if self._monitor is None else [self._monitor]
+
+    def _expire_any(self, monitor: Monitor, peer: str, wanted: Callable[[str], bool]) -> tuple[str, Message]:
+        """``recv_any``'s deadline passed: a wanted message that is there is taken first; else the
+        monitor blames ``peer`` or takes the timeout (``else timeout``)."""
+        for other, channel in self._all_in().items():
+            if wanted(other) and not channel.empty():
+                return other, self._take(other, channel)
+        monitor.expire(peer)
+        return peer, Message(TIMEOUT, None)
 
     def _take(self, peer: str, channel: Channel) -> Message:
         item = channel.get_nowait()  # only this role's thread(s) read its channels
@@ -520,7 +602,9 @@ class Endpoint(_Core):
 
     def statistics(self) -> EndpointStatistics:
         """Per peer, the messages sent and received and the most that waited, with the branches'."""
-        own = EndpointStatistics(self.sent, self.received, self.high_water)
+        monitor = self._monitor
+        constraints = monitor.constraint_statistics() if monitor is not None and monitor.rules else {}
+        own = EndpointStatistics(self.sent, self.received, self.high_water, constraints)
         if not self._branches:
             return own
         return EndpointStatistics.combined(own, (branch.statistics() for branch in self._branches))
@@ -623,10 +707,11 @@ class Endpoint(_Core):
             branches = []
             for number, machine in enumerate(self._machine.forks[fork_state], start=1):
                 sends_to, receives_from = peers_of(machine)
+                # Each branch has its own clock sequence and its own previous action (from the fork).
+                name = f"{self._branch}.{number}" if self._branch else str(number)
                 branch = type(self)(self.role, self.protocol, machine, self._network,
-                                  self._monitor is not None, (sends_to, receives_from))
+                                    self._monitor is not None, (sends_to, receives_from), name)
                 branch._doorbell = self._doorbell
-                branch._branch = f"{self._branch}.{number}" if self._branch else str(number)
                 if self._lender is not None:
                     branch._join_pending = True
                     branch._plain = False  # the Python path at first: see _join_pending

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ..errors import AnodizeError, LinearityError
-from .endpoint import Endpoint, Message
+from .endpoint import TIMEOUT, Endpoint, Message
 
 __all__ = ["State", "argument_for"]
 
@@ -45,13 +45,17 @@ class State:
         return self._endpoint
 
     def _recv(self, peer: str, labels: tuple[str, ...], timeout: float | None) -> Message:
-        """Receive from ``peer`` one of ``labels``; a timeout leaves the state unused."""
+        """Receive from ``peer`` one of ``labels``; a timeout leaves the state unused, and so
+        does the protocol's own (``else timeout``: the label ``TIMEOUT``, the role's state unchanged)."""
         endpoint = self._use()
         try:
             message = endpoint.recv(peer, timeout)
         except TimeoutError:
             self._used = False  # nothing arrived, so the state is still unused
             raise
+        if message.label == TIMEOUT and TIMEOUT not in labels:  # (a choice with `else timeout` has no such label)
+            self._used = False  # the role is where it was: this state is still the one to use
+            return message
         if message.label not in labels:
             raise AssertionError(
                 f"{type(self).__name__} expected {' or '.join(labels)} from {peer}, but the "
@@ -67,6 +71,9 @@ class State:
         except TimeoutError:
             self._used = False
             raise
+        if message.label == TIMEOUT and (peer, TIMEOUT) not in choices:
+            self._used = False  # as in _recv: the protocol's timeout leaves the state where it was
+            return peer, message
         if (peer, message.label) not in choices:
             wanted = " or ".join(f"{label} from {p}" for p, label in choices)
             raise AssertionError(
