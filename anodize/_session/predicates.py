@@ -49,6 +49,7 @@ def fast_predicate(expr: Expr, own_fields: Collection[str]) -> FastCheck:
     body = builder.emit(expr)
     source = f"def check(p, e):\n    return {body}\n"
     namespace: dict[str, Any] = {"_head": _head, "_at": _at, "_unknown": _unknown,
+                                 "_n": _number, "_same": _same_kind, "_ordered": _ordered,
                                  "abs": abs, "min": min, "max": max, "len": len, **builder.constants}
     exec(compile(source, "<refinement>", "exec"), namespace)  # built from the tree's shape alone, see above
     check: FastCheck = namespace["check"]
@@ -90,7 +91,7 @@ class _Builder:
                 return self.decide(self.emit(expr.operand), "False", "True")
             if expr.op != "-":
                 raise ValueError(f"refinement: unknown operator {expr.op!r}")
-            return f"(-({self.emit(expr.operand)}))"
+            return f"(-_n({self.emit(expr.operand)}))"
         if isinstance(expr, Binary):
             left, right = self.emit(expr.left), self.emit(expr.right)
             if expr.op == "and":  # L True: R's answer; L False: False; else unknown (None)
@@ -99,7 +100,7 @@ class _Builder:
                 return self.decide(left, "True", self.decide(right, "True", "False"))
             if expr.op not in _ARITHMETIC:
                 raise ValueError(f"refinement: unknown operator {expr.op!r}")
-            return f"(({left}) {expr.op} ({right}))"
+            return f"(_n({left}) {expr.op} _n({right}))"
         if isinstance(expr, Compare):
             if not set(expr.ops) <= set(COMPARISONS):
                 raise ValueError(f"refinement: unknown comparison in {expr.ops!r}")
@@ -109,12 +110,16 @@ class _Builder:
             text = "True"
             for k in reversed(range(len(expr.ops))):
                 left = f"({held[k]} := ({operands[k]}))" if k == 0 else held[k]
-                text = self.decide(f"({left}) {expr.ops[k]} ({held[k + 1]} := ({operands[k + 1]}))", text, "False")
+                guard = "_same" if expr.ops[k] in ("==", "!=") else "_ordered"
+                right = f"({held[k + 1]} := ({operands[k + 1]}))"
+                text = self.decide(f"{guard}({left}, {right}) {expr.ops[k]} {held[k + 1]}", text, "False")
             return text
         assert isinstance(expr, Call)
         if expr.function not in FUNCTIONS:
             raise ValueError(f"refinement: unknown function {expr.function!r}")
-        return f"{expr.function}({', '.join(self.emit(a) for a in expr.args)})"
+        if expr.function == "len":
+            return f"len({', '.join(self.emit(a) for a in expr.args)})"
+        return f"{expr.function}({', '.join(f'_n({self.emit(a)})' for a in expr.args)})"
 
 
 class _UnknownError(Exception):
@@ -122,6 +127,35 @@ class _UnknownError(Exception):
 
 
 def _unknown() -> bool:
+    raise _UnknownError
+
+
+# The kinds the reference's operators take (sessiontypes.refine): a number is an int or a float
+# here (a bool is none; numpy's scalars and other reals are left to the reference).
+_NUMBERS = (int, float)
+_ORDERED = (int, float, str, bytes)
+
+
+def _number(value: object) -> object:
+    """``value`` if arithmetic takes it in the reference, else unknown."""
+    if type(value) in _NUMBERS:
+        return value
+    raise _UnknownError
+
+
+def _same_kind(left: object, right: object) -> object:
+    """``left``, if ``==``/``!=`` compares it with ``right`` in the reference (one kind), else unknown."""
+    kinds = type(left), type(right)
+    if (kinds[0] is kinds[1] and kinds[0] in (bool, str, bytes)) or (kinds[0] in _NUMBERS and kinds[1] in _NUMBERS):
+        return left
+    raise _UnknownError
+
+
+def _ordered(left: object, right: object) -> object:
+    """``left``, if ``<`` and the like compare it with ``right`` in the reference, else unknown."""
+    kinds = type(left), type(right)
+    if (kinds[0] in _NUMBERS and kinds[1] in _NUMBERS) or (kinds[0] is kinds[1] and kinds[0] in _ORDERED):
+        return left
     raise _UnknownError
 
 
