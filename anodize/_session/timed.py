@@ -90,7 +90,9 @@ class Rule:
         if self.transition.timing is not None and str(self.transition.timing):
             parts.append(str(self.transition.timing))
         if self.transition.refinement is not None:
-            parts.append(f"{{{print_expr(self.transition.refinement)}}}")
+            predicate = f"{{{print_expr(self.transition.refinement)}}}"
+            if predicate not in parts[0]:  # a field's refinement is already in the record's print
+                parts.append(predicate)
         return " ".join(parts)
 
     def margin(self, nanos: int) -> None:

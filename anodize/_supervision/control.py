@@ -67,6 +67,10 @@ class Beat:
     received: dict[str, int] = field(default_factory=dict)
     waiting: dict[str, int] = field(default_factory=dict)  # per channel, the most messages waiting so far
     final: bool = False  # the last beat: every role has ended
+    # Per constrained interaction ("Role !Peer(m) within 15ms"): checks so far, and the closest
+    # margin to its time bound in seconds (negative: missed), where it has one.
+    checked: dict[str, int] = field(default_factory=dict)
+    closest: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -267,7 +267,8 @@ class ProcessRunner:
             case control.Beat():  # counts from the group; memory is measured here, from the kernel
                 self.pending.append(Counts(group=name, incarnation=number, at=message.at, sent=message.sent,
                                            received=message.received, waiting=message.waiting,
-                                           memory=inc.resident, peak=inc.peak))
+                                           memory=inc.resident, peak=inc.peak, checked=message.checked,
+                                           closest=message.closest))
             case control.RoleEnded():
                 self.pending.append(RoleEnded(group=name, incarnation=number, report=_role_report(name, message)))
             case control.MemoryExceeded():  # the peak is measured here, as for the group's line

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
+from .._session.statistics import EndpointStatistics
 from ..errors import AnodizeError
 
-__all__ = ["RoleStatus", "GroupState", "RoleReport", "GroupReport", "RunReport", "GroupStatus"]
+__all__ = ["RoleStatus", "GroupState", "RoleReport", "GroupReport", "RunReport", "GroupStatus", "constraint_counts"]
 
 
 class RoleStatus(StrEnum):
@@ -160,6 +162,10 @@ class RunReport:
             in which it was boosted, and the time it ran boosted).
         inheritance_inactive: roles whose group asked for a priority but did not get SCHED_FIFO
             (the fallback is a nice value): their waits lend no priority.
+        constraints: per constrained interaction of a role (``"Control !Move(Twist) within
+            15ms"``), ``{"checked": n, "closest_s": m}``: how often its time and value
+            constraints were checked, and the closest it came to a time bound in seconds
+            (negative: missed; None without a time bound). A violation is the role's failure.
     """
 
     protocol: str
@@ -175,6 +181,7 @@ class RunReport:
     notes: tuple[str, ...] = ()
     boosts: dict[str, dict[str, float]] = field(default_factory=dict)
     inheritance_inactive: tuple[str, ...] = ()
+    constraints: dict[str, dict[str, float | None]] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -216,6 +223,8 @@ class RunReport:
         if self.inheritance_inactive:
             lines.append("  priority inheritance inactive for " + ", ".join(self.inheritance_inactive)
                          + " (no SCHED_FIFO: a nice value was applied instead)")
+        lines.extend(f"  constraint {key}: {int(c['checked'] or 0)} checked" + _closest(c["closest_s"])
+                     for key, c in self.constraints.items())
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)
 
@@ -229,6 +238,7 @@ class RunReport:
             "capacities": dict(self.capacities),
             "boosts": {pair: dict(b) for pair, b in self.boosts.items()},
             "inheritance_inactive": list(self.inheritance_inactive),
+            "constraints": {key: dict(c) for key, c in self.constraints.items()},
             "groups": {name: {
                 "status": str(g.status), "scheduling": g.scheduling, "peak_memory": g.peak_memory,
                 "memory_bound": g.memory_bound, "memory_note": g.memory_note, "notes": list(g.notes),
@@ -276,3 +286,24 @@ def _group_details(group: GroupReport) -> str:
 
 def _mib(size: int | None) -> str:
     return f"{(size or 0) / 2**20:.1f} MiB"
+
+
+def _closest(seconds: float | None) -> str:
+    if seconds is None:
+        return ""
+    if seconds < 0:
+        return f", missed by {-seconds * 1000:.1f} ms"
+    return f", closest {seconds * 1000:.1f} ms inside its time bound"
+
+
+def constraint_counts(statistics: Mapping[str, EndpointStatistics]) -> tuple[dict[str, int], dict[str, float]]:
+    """Per ``"Role interaction"``, the checks of its constraints so far and its closest margin to
+    a time bound in seconds (where it has one): what a group tells the supervisor."""
+    checked: dict[str, int] = {}
+    closest: dict[str, float] = {}
+    for role, st in statistics.items():
+        for key, check in st.constraints.items():
+            checked[f"{role} {key}"] = check.checked
+            if check.closest_ns is not None:
+                closest[f"{role} {key}"] = check.closest_ns / 1e9
+    return checked, closest

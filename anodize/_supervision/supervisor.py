@@ -75,6 +75,8 @@ class Counts:
     waiting: dict[str, int] | None = None  # per channel, the most messages waiting so far
     memory: int | None = None
     peak: int | None = None
+    checked: dict[str, int] | None = None  # per constrained interaction, its checks so far
+    closest: dict[str, float] | None = None  # and its closest margin to a time bound, in seconds
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -268,6 +270,9 @@ class _GroupRecord:
     sent: dict[str, int] = field(default_factory=dict)        # all incarnations
     received: dict[str, int] = field(default_factory=dict)
     sent_before: dict[str, int] = field(default_factory=dict)  # earlier incarnations' totals
+    checked: dict[str, int] = field(default_factory=dict)  # per constrained interaction, all incarnations
+    checked_before: dict[str, int] = field(default_factory=dict)
+    closest: dict[str, float] = field(default_factory=dict)
     received_before: dict[str, int] = field(default_factory=dict)
     high_water: dict[str, int] = field(default_factory=dict)  # all incarnations: the most waiting
     # (time, messages sent so far), in stretches during which every role of the group ran
@@ -444,6 +449,10 @@ class Supervisor:
             record.received[channel] = record.received_before.get(channel, 0) + n
         for channel, n in (counts.waiting or {}).items():
             record.high_water[channel] = max(record.high_water.get(channel, 0), n)
+        for key, n in (counts.checked or {}).items():
+            record.checked[key] = record.checked_before.get(key, 0) + n
+        for key, margin in (counts.closest or {}).items():
+            record.closest[key] = min(record.closest.get(key, margin), margin)
         stretch = record.stretches[-1] if record.steady and self.state is RunState.RUNNING else None
         if stretch is not None and counts.at >= record.steady_since:  # not counted before "go"
             stretch.append((counts.at, sum(record.sent.values())))
@@ -590,6 +599,7 @@ class Supervisor:
             record = self.records[name]
             record.restarts += 1
             record.sent_before = dict(record.sent)
+            record.checked_before = dict(record.checked)
             record.received_before = dict(record.received)
         self._start(marked)
 
@@ -646,15 +656,18 @@ class Supervisor:
         sent = {f"{a}->{b}": 0 for a, b in self.channels}
         received = dict(sent)
         high_water: dict[str, int] = {}
+        constraints: dict[str, dict[str, float | None]] = {}
         for r in self.records.values():
             sent.update({c: n for c, n in r.sent.items() if c in sent})
             received.update({c: n for c, n in r.received.items() if c in received})
             high_water.update({c: n for c, n in r.high_water.items() if c in sent})
+            constraints.update({key: {"checked": n, "closest_s": r.closest.get(key)} for key, n in r.checked.items()})
         # Priority inheritance, where the runner applies it (in-process and process runners).
         inheritance = getattr(self.runner, "inheritance_report", None)
         boosts, inactive = inheritance() if inheritance is not None else ({}, [])
         return RunReport(protocol=self.protocol, roles={role: roles[role] for role in self.roles},
                          groups=groups, messages=sent, received=received, high_water=high_water,
+                         constraints=dict(sorted(constraints.items())),
                          duration=time.monotonic() - self.started, transport=self.runner.transport,
                          interrupted=self.interrupted, notes=tuple(self.notes),
                          boosts={f"{waiter}->{target}": {"episodes": b.episodes, "seconds": round(b.seconds, 6)}

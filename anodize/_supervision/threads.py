@@ -37,7 +37,7 @@ from .._transport.inproc import InprocNetwork
 from ..taps import GroupTap
 from .group import Group, resolve_function
 from .plan import RunPlan
-from .report import RoleReport, RoleStatus
+from .report import RoleReport, RoleStatus, constraint_counts
 from .roles import describe_error, run_role
 from .supervisor import Counts, Event, GroupExited, Ready, RoleEnded, Scope
 
@@ -173,8 +173,9 @@ class ThreadRunner:
             sent = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.sent.items()}
             received = {f"{peer}->{role}": n for role, st in statistics.items() for peer, n in st.received.items()}
             waiting = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.high_water.items()}
+            checked, closest = constraint_counts(statistics)
             counts.append(Counts(group=name, incarnation=inc.number, at=time.monotonic(), sent=sent,
-                                 received=received, waiting=waiting))
+                                 received=received, waiting=waiting, checked=checked, closest=closest))
         return counts
 
     def tell_failed(self, group: str, role: str, cause: str) -> None:
