@@ -21,15 +21,19 @@ class ConstraintCheck:
         checked: how many times its constraints were checked (one per send or receive).
         closest_ns: the smallest margin seen to a time bound (``within``, ``every +- jitter``),
             in nanoseconds; negative if it was missed; None if it has no time bound.
+        timeouts: how many times its deadline passed and the receiver took ``else timeout``
+            (not a miss: the protocol's own way on; not counted in ``closest_ns``).
     """
 
     checked: int = 0
     closest_ns: int | None = None
+    timeouts: int = 0
 
     def joined(self, other: ConstraintCheck) -> ConstraintCheck:
         """Both records as one: counts summed, the closer margin."""
         margins = [m for m in (self.closest_ns, other.closest_ns) if m is not None]
-        return ConstraintCheck(self.checked + other.checked, min(margins) if margins else None)
+        return ConstraintCheck(self.checked + other.checked, min(margins) if margins else None,
+                               self.timeouts + other.timeouts)
 
 
 @dataclass(frozen=True)

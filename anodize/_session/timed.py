@@ -63,7 +63,7 @@ class Rule:
     """
 
     __slots__ = ("check", "checked", "closest", "every", "fast", "high", "last_send", "low", "remembers", "stamps",
-                 "timed", "transition", "within")
+                 "timed", "timeouts", "transition", "within")
 
     def __init__(self, transition: Transition, stamps: bool, remembers: tuple[str, ...]) -> None:
         self.transition = transition
@@ -83,6 +83,7 @@ class Rule:
         self.last_send: int | None = None
         self.checked = 0
         self.closest: int | None = None
+        self.timeouts = 0  # deadlines passed with ``else timeout`` taken
 
     def describe(self) -> str:
         """The transition with its constraints, as a statistics key: ``!Move(cmd) every 20ms +- 2ms``."""
@@ -102,7 +103,7 @@ class Rule:
 
     def statistics(self) -> ConstraintCheck:
         """What was seen so far, as a read-only record."""
-        return ConstraintCheck(self.checked, self.closest)
+        return ConstraintCheck(self.checked, self.closest, self.timeouts)
 
 
 class Plan:

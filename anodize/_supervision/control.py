@@ -71,6 +71,7 @@ class Beat:
     # margin to its time bound in seconds (negative: missed), where it has one.
     checked: dict[str, int] = field(default_factory=dict)
     closest: dict[str, float] = field(default_factory=dict)
+    timeouts: dict[str, int] = field(default_factory=dict)  # ``else timeout`` taken
 
 
 @dataclass(frozen=True, kw_only=True)

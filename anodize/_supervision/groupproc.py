@@ -306,9 +306,9 @@ class _GroupProcess:
         sent = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.sent.items()}
         received = {f"{peer}->{role}": n for role, st in statistics.items() for peer, n in st.received.items()}
         waiting = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.high_water.items()}
-        checked, closest = constraint_counts(statistics)
+        checked, closest, timeouts = constraint_counts(statistics)
         self._send(Beat(at=time.monotonic(), memory=used, peak=self.peak, sent=sent, received=received,
-                        waiting=waiting, final=final, checked=checked, closest=closest))
+                        waiting=waiting, final=final, checked=checked, closest=closest, timeouts=timeouts))
 
     def _memory_exceeded(self, role: str) -> None:
         self.reserve = None  # room to report in

@@ -268,7 +268,7 @@ class ProcessRunner:
                 self.pending.append(Counts(group=name, incarnation=number, at=message.at, sent=message.sent,
                                            received=message.received, waiting=message.waiting,
                                            memory=inc.resident, peak=inc.peak, checked=message.checked,
-                                           closest=message.closest))
+                                           closest=message.closest, timeouts=message.timeouts))
             case control.RoleEnded():
                 self.pending.append(RoleEnded(group=name, incarnation=number, report=_role_report(name, message)))
             case control.MemoryExceeded():  # the peak is measured here, as for the group's line

@@ -165,7 +165,8 @@ class RunReport:
         constraints: per constrained interaction of a role (``"Control !Move(Twist) within
             15ms"``), ``{"checked": n, "closest_s": m}``: how often its time and value
             constraints were checked, and the closest it came to a time bound in seconds
-            (negative: missed; None without a time bound). A violation is the role's failure.
+            (negative: missed; None without a time bound), and ``"timeouts"``, how often its
+            deadline passed and the receiver took ``else timeout``. A violation is the role's failure.
     """
 
     protocol: str
@@ -224,6 +225,7 @@ class RunReport:
             lines.append("  priority inheritance inactive for " + ", ".join(self.inheritance_inactive)
                          + " (no SCHED_FIFO: a nice value was applied instead)")
         lines.extend(f"  constraint {key}: {int(c['checked'] or 0)} checked" + _closest(c["closest_s"])
+                     + (f", {int(c['timeouts'] or 0)} timeouts taken" if c.get("timeouts") else "")
                      for key, c in self.constraints.items())
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)
@@ -296,14 +298,19 @@ def _closest(seconds: float | None) -> str:
     return f", closest {seconds * 1000:.1f} ms inside its time bound"
 
 
-def constraint_counts(statistics: Mapping[str, EndpointStatistics]) -> tuple[dict[str, int], dict[str, float]]:
-    """Per ``"Role interaction"``, the checks of its constraints so far and its closest margin to
-    a time bound in seconds (where it has one): what a group tells the supervisor."""
+def constraint_counts(statistics: Mapping[str, EndpointStatistics],
+                      ) -> tuple[dict[str, int], dict[str, float], dict[str, int]]:
+    """Per ``"Role interaction"``, the checks of its constraints so far, its closest margin to a
+    time bound in seconds (where it has one) and the timeouts it took (where it took any): what a
+    group tells the supervisor."""
     checked: dict[str, int] = {}
     closest: dict[str, float] = {}
+    timeouts: dict[str, int] = {}
     for role, st in statistics.items():
         for key, check in st.constraints.items():
             checked[f"{role} {key}"] = check.checked
             if check.closest_ns is not None:
                 closest[f"{role} {key}"] = check.closest_ns / 1e9
-    return checked, closest
+            if check.timeouts:
+                timeouts[f"{role} {key}"] = check.timeouts
+    return checked, closest, timeouts

@@ -77,6 +77,7 @@ class Counts:
     peak: int | None = None
     checked: dict[str, int] | None = None  # per constrained interaction, its checks so far
     closest: dict[str, float] | None = None  # and its closest margin to a time bound, in seconds
+    timeouts: dict[str, int] | None = None  # and the ``else timeout`` it took
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -273,6 +274,8 @@ class _GroupRecord:
     checked: dict[str, int] = field(default_factory=dict)  # per constrained interaction, all incarnations
     checked_before: dict[str, int] = field(default_factory=dict)
     closest: dict[str, float] = field(default_factory=dict)
+    timeouts: dict[str, int] = field(default_factory=dict)
+    timeouts_before: dict[str, int] = field(default_factory=dict)
     received_before: dict[str, int] = field(default_factory=dict)
     high_water: dict[str, int] = field(default_factory=dict)  # all incarnations: the most waiting
     # (time, messages sent so far), in stretches during which every role of the group ran
@@ -453,6 +456,8 @@ class Supervisor:
             record.checked[key] = record.checked_before.get(key, 0) + n
         for key, margin in (counts.closest or {}).items():
             record.closest[key] = min(record.closest.get(key, margin), margin)
+        for key, n in (counts.timeouts or {}).items():
+            record.timeouts[key] = record.timeouts_before.get(key, 0) + n
         stretch = record.stretches[-1] if record.steady and self.state is RunState.RUNNING else None
         if stretch is not None and counts.at >= record.steady_since:  # not counted before "go"
             stretch.append((counts.at, sum(record.sent.values())))
@@ -600,6 +605,7 @@ class Supervisor:
             record.restarts += 1
             record.sent_before = dict(record.sent)
             record.checked_before = dict(record.checked)
+            record.timeouts_before = dict(record.timeouts)
             record.received_before = dict(record.received)
         self._start(marked)
 
@@ -661,7 +667,8 @@ class Supervisor:
             sent.update({c: n for c, n in r.sent.items() if c in sent})
             received.update({c: n for c, n in r.received.items() if c in received})
             high_water.update({c: n for c, n in r.high_water.items() if c in sent})
-            constraints.update({key: {"checked": n, "closest_s": r.closest.get(key)} for key, n in r.checked.items()})
+            constraints.update({key: {"checked": n, "closest_s": r.closest.get(key), "timeouts": r.timeouts.get(key, 0)}
+                                for key, n in r.checked.items()})
         # Priority inheritance, where the runner applies it (in-process and process runners).
         inheritance = getattr(self.runner, "inheritance_report", None)
         boosts, inactive = inheritance() if inheritance is not None else ({}, [])

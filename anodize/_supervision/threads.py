@@ -173,9 +173,10 @@ class ThreadRunner:
             sent = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.sent.items()}
             received = {f"{peer}->{role}": n for role, st in statistics.items() for peer, n in st.received.items()}
             waiting = {f"{role}->{peer}": n for role, st in statistics.items() for peer, n in st.high_water.items()}
-            checked, closest = constraint_counts(statistics)
+            checked, closest, timeouts = constraint_counts(statistics)
             counts.append(Counts(group=name, incarnation=inc.number, at=time.monotonic(), sent=sent,
-                                 received=received, waiting=waiting, checked=checked, closest=closest))
+                                 received=received, waiting=waiting, checked=checked, closest=closest,
+                                 timeouts=timeouts))
         return counts
 
     def tell_failed(self, group: str, role: str, cause: str) -> None:

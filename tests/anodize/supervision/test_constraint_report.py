@@ -44,3 +44,29 @@ def test_an_unconstrained_run_reports_no_constraints() -> None:
     system.group("motor").role("M", timed_roles.motor)
     report = system.run(timeout=30.0)
     assert report.ok and report.constraints == {} and "constraint" not in report.summary()
+
+
+def test_timeouts_taken_are_counted_apart_from_misses() -> None:
+    """A deadline with ``else timeout`` that passes is the protocol's way on: counted as a
+    timeout taken, not as a margin missed."""
+    gt = sessiontypes.loads("global W(S, M) = mu t. S -> M : { r(c: float). t, stop } within 50ms else timeout",
+                            "w.proto").globals["W"]
+
+    def sensor(ep: anodize.Endpoint) -> None:
+        ep.send("M", "r", {"c": 1.0})
+        ep.sleep(0.3)  # at least five of the monitor's 50 ms pass with nothing
+        ep.send("M", "stop")
+
+    def monitor(ep: anodize.Endpoint) -> None:
+        while ep.recv("S").label != "stop":
+            pass
+
+    system = anodize.System(gt, transport=anodize.Inproc())
+    system.group("s").role("S", sensor)
+    system.group("m").role("M", monitor)
+    report = system.run(timeout=30.0)
+    assert report.ok, report.summary()
+    taken = sum(int(c["timeouts"] or 0) for key, c in report.constraints.items() if key.startswith("M "))
+    assert taken >= 5, report.constraints
+    assert all((c["closest_s"] or 0) >= 0 for c in report.constraints.values()), report.constraints
+    assert f", {taken} timeouts taken" in report.summary()
