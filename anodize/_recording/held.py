@@ -34,6 +34,8 @@ from sessiontypes import StateMachine, Transition
 from sessiontypes.constraints import Expr, format_duration
 from sessiontypes.refine import Predicate, compile_predicate, print_expr
 
+from .._session.timed import format_nanos
+
 __all__ = ["Breach", "RoleTimes", "Earlier", "judge_refinement", "judge_deadline", "judge_period",
            "constrained", "machines_of", "Held", "constraints_of"]
 
@@ -91,9 +93,9 @@ class Held:
             return f"{head}: judged on no message"
         held = f"{head}: held on {self.judged} message(s)"
         if self.constraint.startswith("within") and self.most is not None:
-            return f"{held}, at most {_span(self.most)} after the previous action"
+            return f"{held}, at most {format_nanos(self.most)} after the previous action"
         if self.constraint.startswith("every") and self.least is not None and self.most is not None:
-            return f"{held}, {_span(self.least)} to {_span(self.most)} apart"
+            return f"{held}, {format_nanos(self.least)} to {format_nanos(self.most)} apart"
         return held
 
 
@@ -210,8 +212,8 @@ def judge_deadline(t: Transition, role: str, sender: bool, previous: int | None,
         return None
     late = gap - timing.within
     what = "sent" if sender else f"it reached {role}"
-    return Breach("deadline", f"deadline missed: {what} {_span(gap)} after {role}'s previous action, later than "
-                  f"within {_span(timing.within)}", _where(timing.location, t), late)
+    return Breach("deadline", f"deadline missed: {what} {format_nanos(gap)} after {role}'s previous action, later than "
+                  f"within {format_nanos(timing.within)}", _where(timing.location, t), late)
 
 
 def judge_period(t: Transition, previous: int | None, log_time: int) -> Breach | None:
@@ -224,20 +226,8 @@ def judge_period(t: Transition, previous: int | None, log_time: int) -> Breach |
     if low <= gap <= high:
         return None
     off, side = (low - gap, "early") if gap < low else (gap - high, "late")
-    return Breach("period", f"period missed: sent {_span(gap)} after the previous {t.label}, {_span(off)} too "
-                  f"{side} for {timing}", _where(timing.location, t), off)
-
-
-def _span(nanos: int) -> str:
-    """A duration as the live monitor says it: ``12.345 ms``, ``1.500 s``, ``850.0 us``, ``40 ns``."""
-    size = abs(nanos)
-    if size >= 1_000_000_000:
-        return f"{nanos / 1_000_000_000:.3f} s"
-    if size >= 1_000_000:
-        return f"{nanos / 1_000_000:.3f} ms"
-    if size >= 1_000:
-        return f"{nanos / 1_000:.1f} us"
-    return f"{nanos} ns"
+    return Breach("period", f"period missed: sent {format_nanos(gap)} after the previous {t.label}, "
+                  f"{format_nanos(off)} too {side} for {timing}", _where(timing.location, t), off)
 
 
 def _where(location: object, t: Transition) -> str:
