@@ -9,16 +9,16 @@ from pathlib import Path
 import pytest
 
 from anodize._tools import cli
-from tinman.sequences import generate
 from tinman.settings import ENVIRONMENT_VARIABLE
 
 pytestmark = pytest.mark.slow  # each runs the whole system in processes for seconds
 
 
-@pytest.fixture(scope="module")
-def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 6 s synthetic sequence: the start of the default patrol (runs past its end idle the camera)."""
-    return generate(tmp_path_factory.mktemp("sequence") / "room", duration=6.0)
+@pytest.fixture
+def sequence(tinman_sequence: Path) -> Path:
+    """The session's 6 s synthetic sequence (tests/conftest.py): the start of the default patrol
+    (runs past its end idle the camera)."""
+    return tinman_sequence
 
 
 def run_tinman(monkeypatch: pytest.MonkeyPatch, out: Path, sequence: Path | None, *options: str) -> dict:
