@@ -137,10 +137,19 @@ def hold_the_gil_for_good(ep: Endpoint) -> None:
 
 
 def hold_the_gil_in_stretches(ep: Endpoint) -> None:
-    """Never reaches its endpoint again: a backtracking regular expression (about a second of
-    CPU here, holding the GIL all along: twice the runner's HELD_UP, so each stretch counts), again
-    and again."""
-    import re
+    """Never reaches its endpoint again: a C call that holds the GIL (as a C extension's or a
+    backtracking regular expression's would) for twice the runner's HELD_UP of wall
+    time, again and again, so each stretch counts whatever the machine's speed: libc's
+    ``poll`` with no descriptors, called through ``ctypes.PyDLL`` (which keeps the GIL, unlike
+    ``CDLL``). A fixed amount of work (a backtracking regular expression's) took half a second
+    on one machine and less on a faster one, where no stretch counted."""
+    import ctypes
 
+    from anodize._supervision import threads
+
+    libc = ctypes.PyDLL(None)
     while True:
-        re.match("(a+)+b", "a" * 24)
+        libc.poll(None, 0, round(2 * threads.HELD_UP * 1000))
+        # The GIL free for a moment between two stretches: the supervisor makes a whole step
+        # in it, instead of losing a stretch at each of its own calls that lets the GIL go.
+        time.sleep(0.05)

@@ -128,7 +128,7 @@ def outcome(text: str) -> dict[str, object] | str:
 
 
 @given(reference_files())
-@settings(deadline=None, max_examples=examples(300))
+@settings(deadline=None, max_examples=examples(150))
 def test_references_mean_their_inlining(declarations: dict[str, Body]) -> None:
     referring = "\n".join(f"global {name} = {write(body)}" for name, body in declarations.items())
     inlined = "\n".join(f"global {name} = {inline(declarations, body, frozenset({name}))[0]}"

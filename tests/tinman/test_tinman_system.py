@@ -9,16 +9,17 @@ from pathlib import Path
 import pytest
 
 from anodize._tools import cli
-from tinman.sequences import generate
+from tinman.app import PATROL_HINT
 from tinman.settings import ENVIRONMENT_VARIABLE
 
 pytestmark = pytest.mark.slow  # each runs the whole system in processes for seconds
 
 
-@pytest.fixture(scope="module")
-def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 6 s synthetic sequence: the start of the default patrol (runs past its end idle the camera)."""
-    return generate(tmp_path_factory.mktemp("sequence") / "room", duration=6.0)
+@pytest.fixture
+def sequence(tinman_sequence: Path) -> Path:
+    """The session's 6 s synthetic sequence (tests/conftest.py): the start of the default patrol
+    (runs past its end idle the camera)."""
+    return tinman_sequence
 
 
 def run_tinman(monkeypatch: pytest.MonkeyPatch, out: Path, sequence: Path | None, *options: str) -> dict:
@@ -93,10 +94,14 @@ def test_tinman_runs_on_dds_with_its_channels_as_ros_topics(
         assert report["messages"][channel] > 0, channel
 
 
-def test_the_camera_sees_the_simulated_robot(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+def test_the_camera_sees_the_simulated_robot(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+                                             tmp_path: Path) -> None:
     """No recording: Gazebo renders the camera's view from the robot's true pose, live, and the
-    odometry is measured against the path the simulated camera really took."""
+    odometry is measured against the path the simulated camera really took. The default run (the
+    README's, here shorter), so it also prints how to run the whole patrol, last."""
     report = run_tinman(monkeypatch, tmp_path, None, "--duration", "6")
+    assert not report["patrol"] and report["mission"]["mode"] == "loop"
+    assert capsys.readouterr().out.rstrip().splitlines()[-1] == PATROL_HINT
     assert report["ok"], report["problems"]
     assert report["camera"] == "live" and report["dataset"] == "" and report["violations"] == 0
     assert report["frames_processed"] > 60 and report["robot"]["bumps"] == 0

@@ -82,11 +82,10 @@ def test_a_fast_dds_joy_of_another_type_hash_is_rejected_and_the_external_role_b
     assert not [line for line in twist_out.splitlines() if line.startswith("{")]  # so no Twist went out
 
 
-@pytest.fixture(scope="module")
-def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from tinman.sequences import generate
-
-    return generate(tmp_path_factory.mktemp("sequence") / "room", duration=6.0)
+@pytest.fixture
+def sequence(tinman_sequence: Path) -> Path:
+    """The session's 6 s synthetic TinMan sequence (tests/conftest.py), shared with TinMan's system tests."""
+    return tinman_sequence
 
 
 def run_tinman(monkeypatch: pytest.MonkeyPatch, out: Path, sequence: Path, *options: str) -> dict[str, object]:

@@ -100,7 +100,7 @@ def test_topic_names() -> None:
         assert check_topic_name(bad) is not None, bad
 
 
-@settings(max_examples=examples(300), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(100), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(global_protocols(), st.integers(0, 2**32 - 1))
 def test_the_lane_plan_always_names_the_topic_of_the_label_that_comes(generated: object, seed: int) -> None:
     """For random protocols and random maps of labels to topics: whenever the plan is accepted,
