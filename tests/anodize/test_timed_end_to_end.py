@@ -116,6 +116,34 @@ def test_the_local_types_print_reparse_to_the_same_machines() -> None:
                    for f in dataclasses.fields(mine) if f.name != "protocol"), role
 
 
+def test_a_generated_send_refuses_a_payload_out_of_range_located_at_the_refinement(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """As the monitor and verify locate it (not at the interaction)."""
+    import importlib.util
+
+    out_dir = tmp_path / "gen"
+    proto = _proto(tmp_path)
+    code, out = _cli(capsys, "project", str(proto), "-o", str(out_dir))
+    assert code == 0, out
+    spec = importlib.util.spec_from_file_location("drive_c_generated", out_dir / "drive_c.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while the class is built
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        del sys.modules[spec.name]
+
+    class Unused:  # the refusal comes before the endpoint is touched
+        def __getattr__(self, name: str) -> Any:
+            raise AssertionError(f"the endpoint was used: {name}")
+
+    with pytest.raises(ProtocolViolationError) as info:
+        module.Initial(Unused()).select_cmd(2.0)
+    assert (info.value.blame, info.value.location) == ("C", f"{proto}:3:18")
+    assert info.value.reason == "refinement {abs(v) <= 1.5} is false for cmd {'v': 2.0}"
+
+
 @pytest.mark.slow
 def test_generated_modules_and_a_program_using_them_pass_mypy_strict(tmp_path: Path,
                                                                       capsys: pytest.CaptureFixture[str]) -> None:
