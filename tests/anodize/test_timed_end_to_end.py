@@ -145,7 +145,7 @@ def test_a_generated_send_refuses_a_payload_out_of_range_located_at_the_refineme
 
 
 @pytest.mark.slow
-def test_generated_modules_and_a_program_using_them_pass_mypy_strict(tmp_path: Path,
+def test_the_generated_modules_pass_mypy_strict(tmp_path: Path,
                                                                       capsys: pytest.CaptureFixture[str]) -> None:
     proto = _proto(tmp_path)
     out_dir = tmp_path / "gen"

@@ -164,7 +164,7 @@ def _by_environment(gt: GlobalType, transport: object, path: Path) -> anodize.Ru
 
 
 @pytest.mark.slow
-@settings(SETTINGS, max_examples=examples(6))
+@settings(SETTINGS, max_examples=examples(3))
 @given(global_protocols(max_depth=4, max_nodes=12, constrained=True), st.integers(0, 2**32 - 1))
 def test_on_processes_the_monitor_refuses_what_the_reference_refuses_blaming_the_sender(
         tmp_path_factory: pytest.TempPathFactory, generated: GeneratedGlobal, seed: int) -> None:
