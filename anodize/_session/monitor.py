@@ -151,7 +151,8 @@ class Monitor:
                 held = False
             if not held and rule.check is not None and (reason := rule.check(payload, self.earlier)) is not None:
                 raise self.violation(Action(kind, peer, label, _type_name(payload)), blame,
-                                     f"{reason} for {label} {_short(payload)}", rule.transition)
+                                     f"{reason} for {label} {_short(payload)}", rule.transition,
+                                     _where(rule.transition.refinement, rule.transition))
         if rule.remembers and type(payload) is dict:
             for name in rule.remembers:
                 self.earlier[name] = payload[name]
@@ -240,7 +241,7 @@ class Monitor:
 
     def _missed(self, actual: Action, transition: Transition, blame: str, reason: str, deadline: int, late: int,
                 kind: str) -> DeadlineMissedError:
-        plain = self.violation(actual, blame, reason, transition)
+        plain = self.violation(actual, blame, reason, transition, _where(transition.timing, transition))
         return DeadlineMissedError(plain.protocol, plain.role, plain.peer, plain.state, plain.expected, actual,
                                    blame, plain.location, reason, deadline, late, kind)
 
@@ -257,16 +258,23 @@ class Monitor:
         return peer in self.receives_from[self.state]
 
     def violation(self, actual: Action, blame: str, reason: str = "",
-                  transition: Transition | None = None) -> ProtocolViolationError:
-        """Describe ``actual`` against what the current state allows."""
+                  transition: Transition | None = None, where: str | None = None) -> ProtocolViolationError:
+        """Describe ``actual`` against what the current state allows (``where``: the location of
+        the constraint it broke, else the interaction's)."""
         allowed = self.machine.expected(self.state)
         expected = [Action(t.action, t.peer, t.label, t.sort.spelling if t.sort else None) for t in allowed]
         if transition is None and allowed:  # no interaction of its own: point at the first one allowed
             transition = allowed[0]
-        location = str(transition.location) if transition is not None else ""
+        location = where if where is not None else str(transition.location) if transition is not None else ""
         state = f"{self.state} ({self.machine.describe(self.state)})"
         return ProtocolViolationError(self.protocol, self.role, actual.peer, state, expected, actual,
                                       blame, location, reason)
+
+
+def _where(constraint: object, transition: Transition) -> str:
+    """Where a broken constraint is written (as verify reports it), else its interaction."""
+    location = getattr(constraint, "location", None)
+    return str(location) if getattr(location, "line", 0) > 0 else str(transition.location)
 
 
 def _short(payload: object) -> str:

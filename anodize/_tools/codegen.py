@@ -644,7 +644,7 @@ class _Writer:
                 f"        _reason = {check}(_payload, {{}})",
                 "        if _reason is not None:",
                 (f"            raise _refused({where}, ({expected},), {_quote(t.peer)}, {_quote(t.label)}, "
-                 f"_payload, _reason, {_quote(str(t.location))})")]
+                 f"_payload, _reason, {_quote(_where(refinement, t))})")]
 
     def predicate(self, expr: Expr) -> str:
         """The module's compiled predicate of ``expr`` (written once, with ``_refused``)."""
@@ -713,3 +713,9 @@ class _Writer:
                 f"        {', '.join(variables)} = endpoint.fork()",
                 f"        return {', '.join(f'{c}({v})' for c, v in zip(initials, variables, strict=True))}"]
 
+
+def _where(refinement: Expr, t: Transition) -> str:
+    """Where a refinement is written (as the monitor and verify locate its violation), else its
+    interaction."""
+    location = refinement.location
+    return str(location) if location.line > 0 else str(t.location)

@@ -203,7 +203,7 @@ class RoleDriver:
             if sends:
                 assert len(sends) == len(transitions), f"state {state} both sends and receives"
                 t = self._choose(sends, dist, steps, rng)
-                payload = payload_for(t.sort, rng)
+                payload = self.payload(t, rng)
                 assert t.peer is not None
                 if self.pause:
                     time.sleep(self.pause)
@@ -222,6 +222,10 @@ class RoleDriver:
                 t = found
             state = t.target
             steps += 1
+
+    def payload(self, t: Transition, rng: random.Random) -> object:
+        """The payload of send ``t`` (a subclass may pick values that keep or break its refinement)."""
+        return payload_for(t.sort, rng)
 
     def _choose(self, sends: list[Transition], dist: list[float], steps: int,
                 rng: random.Random) -> Transition:
