@@ -125,7 +125,10 @@ class Endpoint(_Core):
         """Send ``label`` (with ``payload``) to role ``to``.
 
         Raises:
-            ProtocolViolationError: the local type does not allow it now (nothing is sent).
+            ProtocolViolationError: the local type does not allow it now, or a refinement of
+                the message is false of ``payload`` (nothing is sent).
+            DeadlineMissedError: later than the message's ``within`` after this role's previous
+                action, or outside its period ``every T +- J`` (nothing is sent).
             PeerFailedError: ``to`` has failed.
         """
         try:  # what this send uses, read once: whatever a payload's code does to them counts from the next call
@@ -292,9 +295,16 @@ class Endpoint(_Core):
     def recv(self, frm: str, timeout: float | None = None) -> Message:
         """Receive the next message from role ``frm``.
 
+        Where the protocol gives the message a deadline (``within``), the wait ends there: a
+        message already there is taken; else ``DeadlineMissedError`` blames ``frm`` the moment
+        the deadline passes, or, with ``else timeout``, ``Message(TIMEOUT, None)`` is returned
+        and the role waits for the same message again.
+
         Raises:
             ProtocolViolationError: this role may not receive from ``frm`` now (blame: this
-                role), or the message is not allowed (blame: ``frm``).
+                role), or the message is not allowed (blame: ``frm``; a refinement that is
+                false of it, too).
+            DeadlineMissedError: the message's deadline passed with nothing from ``frm``.
             PeerFailedError: ``frm`` failed before sending.
             TimeoutError: nothing arrived within ``timeout`` seconds.
         """
@@ -437,6 +447,8 @@ class Endpoint(_Core):
         how a role takes a choice it learns from several peers (``&{?A(m).T, ?C(n).U}``).
         ``peers``, when given, narrows the wait to those peers (what an unmonitored
         endpoint, which does not know its state, needs).
+        A deadline of a message it waits for ends the wait as in :meth:`recv` (the earliest,
+        if several have one): ``(peer, Message(TIMEOUT, None))`` with ``else timeout``.
 
         Returns:
             ``(peer, message)``.

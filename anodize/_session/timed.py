@@ -116,17 +116,15 @@ class Plan:
             ``(within ns, else timeout, transition)``; empty where nothing is timed.
         stamps_initial: the initial state has a deadline: the endpoint's start is the first
             previous action.
-        constrained: whether there is anything at all to check.
     """
 
-    __slots__ = ("constrained", "deadlines", "rules", "stamps_initial")
+    __slots__ = ("deadlines", "rules", "stamps_initial")
 
     def __init__(self, rules: list[dict[tuple[str, str | None, str], Rule]],
                  deadlines: list[dict[str | None, tuple[int, bool, Transition]]], stamps_initial: bool) -> None:
         self.rules = rules
         self.deadlines = deadlines
         self.stamps_initial = stamps_initial
-        self.constrained = any(rules)
 
 
 def plan_for(machine: StateMachine) -> Plan:

@@ -237,9 +237,9 @@ def test_else_timeout_returns_the_timeout_keeps_the_state_and_restarts_the_deadl
     receiver, network = setup(core, PING, {("A", "ping"): (Timing(within=10 * MS, on_expiry=True), None)}, "B", clock)
     clock.advance(10 * MS)
     state = receiver.state
-    assert receiver.recv("A") == (TIMEOUT, None)
+    assert receiver.recv("A", 30) == (TIMEOUT, None)
     assert receiver.state == state
-    assert receiver.recv("A") == (TIMEOUT, None)  # measured from the timeout: still due (0 left), still none
+    assert receiver.recv("A", 30) == (TIMEOUT, None)  # measured from the timeout: still due (0 left), still none
     clock.advance(3 * MS)
     network.queues[("A", "B")].put(("fin", None))
     assert receiver.recv("A") == ("fin", None)
@@ -253,7 +253,7 @@ def test_a_typed_state_that_takes_the_protocols_timeout_stays_the_state_to_use()
 
     class Waiting(anodize.State):  # as generated code writes a receiving state
         def recv(self) -> anodize.Message:
-            return self._recv("A", ("ping", "fin"), None)
+            return self._recv("A", ("ping", "fin"), 30)
 
     state = Waiting(receiver)
     clock.advance(10 * MS)
