@@ -226,7 +226,7 @@ def judge_period(t: Transition, previous: int | None, log_time: int) -> Breach |
     if low <= gap <= high:
         return None
     off, side = (low - gap, "early") if gap < low else (gap - high, "late")
-    return Breach("period", f"period missed: sent {format_nanos(gap)} after the previous {t.label}, "
+    return Breach("period", f"period missed: sent {format_nanos(gap)} after the interaction's previous send, "
                   f"{format_nanos(off)} too {side} for {timing}", _where(timing.location, t), off)
 
 

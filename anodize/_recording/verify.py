@@ -204,7 +204,8 @@ class _ChannelCheck:
         self.sender, self.receiver = sender, receiver
         self.name = f"{sender}->{receiver}"
         self.views = (ChannelView(machines[sender], "send", receiver), ChannelView(machines[receiver], "recv", sender))
-        self.periods: dict[tuple[Node, str], int] = {}  # an interaction with a period -> its last message's log time
+        # An interaction with a period (all its labels: one clock) -> its last message's log time.
+        self.periods: dict[Node, int] = {}
         self.reset()
         self.result = ChannelResult(self.name)
         self.sequence = 0
@@ -347,7 +348,7 @@ class _Held:
         if breach is None and sender in self.timed_roles:
             breach = judge_deadline(t, sender, True, self.times.previous(sender, node[0]), at)
         if breach is None and _at_sender(message):
-            breach = judge_period(t, check.periods.get((node, label)), at)
+            breach = judge_period(t, check.periods.get(node), at)
         return breach
 
     def record(self, check: _ChannelCheck, message: RecordedMessage,
@@ -362,7 +363,7 @@ class _Held:
         if taken is not None:
             for node, t in taken[0]:
                 if t.timing is not None and t.timing.every is not None:
-                    check.periods[node, t.label] = message.log_time
+                    check.periods[node] = message.log_time
 
 
     def _tally(self, check: _ChannelCheck, message: RecordedMessage,
@@ -376,7 +377,7 @@ class _Held:
         for text in texts:
             held = self.held[check.name, t.label, text]
             if text.startswith("every"):
-                previous = check.periods.get((node, t.label)) if _at_sender(message) else None
+                previous = check.periods.get(node) if _at_sender(message) else None
                 if previous is not None:
                     held.judged += 1
                     held.measured(at - previous)

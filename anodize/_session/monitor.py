@@ -156,8 +156,8 @@ class Monitor:
         if rule.remembers and type(payload) is dict:
             for name in rule.remembers:
                 self.earlier[name] = payload[name]
-        if rule.every is not None:
-            rule.last_send = now
+        if rule.period is not None:
+            rule.period.last = now
         if rule.stamps:
             self.previous = now
         self.state = rule.transition.target
@@ -180,14 +180,14 @@ class Monitor:
                                    f"deadline missed: sent {format_nanos(elapsed)} after {self.role}'s previous "
                                    f"action, later than within {format_nanos(rule.within)}",
                                    rule.within, elapsed - rule.within, "deadline")
-        if rule.every is not None and rule.last_send is not None:
-            gap = now - rule.last_send
+        if rule.period is not None and rule.period.last is not None and rule.every is not None:
+            gap = now - rule.period.last
             rule.margin(min(gap - rule.low, rule.high - gap))
             if not rule.low <= gap <= rule.high:
                 early = gap < rule.low
                 off = gap - rule.low if early else gap - rule.high
                 raise self._missed(Action("send", peer, label, _type_name(payload)), rule.transition, blame,
-                                   f"period missed: sent {format_nanos(gap)} after the previous {label}, "
+                                   f"period missed: sent {format_nanos(gap)} after the interaction's previous send, "
                                    f"{format_nanos(abs(off))} too {'early' if early else 'late'} for "
                                    f"{rule.transition.timing}", rule.every, off, "period")
 

@@ -56,16 +56,18 @@ class Rule:
         stamps: the action's time becomes the role's previous action (the target state, or
             some state after it before another action, has a deadline).
         remembers: the payload's fields some refinement of the machine reads as an earlier payload.
-        last_send: when this interaction was last sent (for the period), or None.
+        period: the clock of this interaction's period, shared by all its branches (a choice's
+            period runs from its previous send, whichever label that was), or None.
         checked: how many times its constraints were checked.
         closest: the smallest margin seen, in ns to the nearest time bound (negative: missed),
             or None if it has no time bound or none was checked.
     """
 
-    __slots__ = ("check", "checked", "closest", "every", "fast", "high", "last_send", "low", "remembers", "stamps",
+    __slots__ = ("check", "checked", "closest", "every", "fast", "high", "low", "period", "remembers", "stamps",
                  "timed", "timeouts", "transition", "within")
 
-    def __init__(self, transition: Transition, stamps: bool, remembers: tuple[str, ...]) -> None:
+    def __init__(self, transition: Transition, stamps: bool, remembers: tuple[str, ...],
+                 period: PeriodClock | None = None) -> None:
         self.transition = transition
         timing = transition.timing or Timing()
         sending = transition.action == "send"
@@ -80,7 +82,7 @@ class Rule:
         self.stamps = stamps
         self.remembers = remembers
         self.timed = self.within is not None or self.every is not None or stamps
-        self.last_send: int | None = None
+        self.period = period if self.every is not None else None
         self.checked = 0
         self.closest: int | None = None
         self.timeouts = 0  # deadlines passed with ``else timeout`` taken
@@ -104,6 +106,15 @@ class Rule:
     def statistics(self) -> ConstraintCheck:
         """What was seen so far, as a read-only record."""
         return ConstraintCheck(self.checked, self.closest, self.timeouts)
+
+
+class PeriodClock:
+    """When an interaction with a period was last sent (ns on the role's clock), shared by its branches."""
+
+    __slots__ = ("last",)
+
+    def __init__(self) -> None:
+        self.last: int | None = None
 
 
 class Plan:
@@ -137,11 +148,12 @@ def plan_for(machine: StateMachine) -> Plan:
     for row in machine.table:
         own: dict[tuple[str, str | None, str], Rule] = {}
         due: dict[str | None, tuple[int, bool, Transition]] = {}
+        period = PeriodClock()  # a state's sends are the branches of one interaction: one period
         for key, t in row.items():
             remembers = tuple(name for name in _own_fields(t) if name in earlier)
             stamps = t.target in timed_states
             if t.timing is not None or t.refinement is not None or stamps or remembers:
-                own[key] = Rule(t, stamps, remembers)
+                own[key] = Rule(t, stamps, remembers, period)
             if t.action == "recv" and t.timing is not None and t.timing.within is not None:
                 known = due.get(t.peer)
                 if known is None or t.timing.within < known[0]:

@@ -175,8 +175,8 @@ def test_a_period_broken_early_or_late_is_blamed_on_the_sender(tmp_path: Path, s
     assert (violation.index, violation.blamed, violation.role, violation.kind) == (3, "C", "C", "period")
     assert violation.late == off * MS and violation.log_time == at
     assert violation.location == "loop.proto:3:40"
-    assert violation.reason == (f"period missed: sent {200 + shift}.000 ms after the previous tick, {off}.000 ms too "
-                                f"{side} for every 200ms +- 20ms")
+    assert violation.reason == (f"period missed: sent {200 + shift}.000 ms after the interaction's previous send, "
+                                f"{off}.000 ms too {side} for every 200ms +- 20ms")
 
 
 def test_a_period_is_not_judged_on_the_log_times_of_an_external_senders_channel(tmp_path: Path) -> None:

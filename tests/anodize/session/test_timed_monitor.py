@@ -125,7 +125,8 @@ def test_a_period_sent_early_or_late_is_refused_and_one_within_the_jitter_leaves
     early = raised(sender.send, "B", "num", {"x": 1})
     assert isinstance(early, DeadlineMissedError)
     assert (early.blame, early.kind, early.deadline_ns, early.late_ns) == ("A", "period", 20 * MS, -1)
-    assert "period missed: sent 18.000 ms after the previous num, 1 ns too early for every 20ms +- 2ms" in str(early)
+    assert ("period missed: sent 18.000 ms after the interaction's previous send, 1 ns too early for every 20ms +- 2ms"
+            in str(early))
     clock.advance(1)
     sender.send("B", "num", {"x": 1})  # 18 ms: the earliest allowed
     clock.advance(22 * MS + 1000)
@@ -381,9 +382,10 @@ def reference(constraints: dict[str, tuple[Timing | None, Refinement | None]],
     ("deadline", "period", "refinement", "protocol"), or None if all is accepted. Written from
     timed-spec.md: the previous action is the last send or receive (the start first); within
     binds a send, and a receive (it must have arrived by then); every binds the gap between two
-    sends of the label; a refinement reads the payload, then the latest earlier x."""
+    sends of the interaction (a, b and stop are one choice: the previous send of any of its labels
+    that has a period); a refinement reads the payload, then the latest earlier x."""
     previous = 0
-    last_send: dict[str, int] = {}
+    last_send: int | None = None
     earlier: dict[str, int] = {}
     waiting = False  # after b, A receives c
     for index, (when, label, payload) in enumerate(trace):
@@ -396,15 +398,15 @@ def reference(constraints: dict[str, tuple[Timing | None, Refinement | None]],
         if within is not None and when - previous > within:
             return index, "deadline"
         every = timing.every if timing is not None and sending else None
-        if every is not None and label in last_send and timing is not None and not (
-                every - timing.jitter <= when - last_send[label] <= every + timing.jitter):
+        if every is not None and last_send is not None and timing is not None and not (
+                every - timing.jitter <= when - last_send <= every + timing.jitter):
             return index, "period"
         if refinement is not None and payload is not None and not refinement.holds(payload, earlier):
             return index, "refinement"
         if payload is not None and "x" in payload:
             earlier["x"] = payload["x"]
-        if label != "c":
-            last_send[label] = when
+        if every is not None:
+            last_send = when
         previous = when
         waiting = label == "b"
         if label == "stop":
