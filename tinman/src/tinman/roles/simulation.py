@@ -13,6 +13,7 @@ import numpy as np
 from anodize import Endpoint, PeerFailedError, RoleStopped, lower_thread_priority
 
 from ..cameras import LiveCamera, RecordedCamera
+from ..contract import contract_of
 from ..faults import blinded, start_faults
 from ..messages import Header, PoseStamped, Twist, odometry_message, seconds, stamp_now
 from ..outcome import CAMERA_TRUTH
@@ -107,7 +108,7 @@ def gazebo(ep: Endpoint) -> None:
                                "columns": ["t", "x", "y", "theta", "v", "w"],
                                # The physics' seconds against the wall's, from the first step to the last
                                # (the robot's start and the run's stop are not the world's to keep up with).
-                               "simulated_s": round(len(trace) * period, 6),
+                               "simulated_s": round(len(trace) * period, 6), "contract": contract_of(ep),
                                "wall_s": round(trace[-1][0] - trace[0][0] + period, 6) if trace else 0.0,
                                **(film.record(ended) if film is not None else {})})
 
