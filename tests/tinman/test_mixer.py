@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import math
 
-from tinman.messages import Header, Path, Time, path_through, twist_planar
+import numpy as np
+
+from tinman.messages import Header, LaserScan, Path, Time, path_through, twist_planar
 from tinman.mixer import Mixer
+from tinman.scanner import beam_angles, cast, scan_message
 from tinman.world import DEFAULT_WORLD
 
 PERIOD = 0.02
@@ -43,6 +46,12 @@ def test_teleop_wins_over_the_path_while_it_commands_anything() -> None:
     command, source = mixer.step(twist_planar(0.0, 0.0))  # the stick is back in the centre: the path resumes
     assert source == "path" and command.linear.x >= 0.0
     assert mixer.sources == {"teleop": 1, "path": 1, "idle": 0, "lost": 0}
+
+
+def open_scan() -> LaserScan:
+    """A noiseless scan from the dock, where the way ahead (east) is clear."""
+    ranges = cast(DEFAULT_WORLD, DEFAULT_WORLD.start, beam_angles(), np.random.default_rng(0))
+    return scan_message(ranges, Header(stamp=Time(sec=0, nanosec=0), frame_id="base_scan"), PERIOD)
 
 
 class Clock:
@@ -122,3 +131,34 @@ def test_path_following_drives_no_further_toward_a_box_it_believes_it_is_about_t
     free.set_path(path_of([(1.0, 1.0), (2.0, 1.0)]))
     command, _ = free.step(twist_planar(0.0, 0.0))
     assert command.linear.x > 0.0 and free.held_back == 0
+
+
+def test_a_pose_deadline_s_timeout_stops_path_following_at_once_until_a_fresh_pose() -> None:
+    """The protocol's ``VisOdom -> Move : Pose within 500ms else timeout``: Move's estimates thread
+    takes the timeout and path following stops the next step, not ``LOST_AFTER`` later by the
+    mixer's own clock (which here never moves); a fresh pose resumes it."""
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0)  # by its own clock the estimate is never stale
+    x, y, theta = DEFAULT_WORLD.start
+    mixer.set_path(path_of([(x, y), (x + 3.0, y)]))
+    assert mixer.step(twist_planar(0.0, 0.0))[1] == "path"
+    mixer.estimate_timed_out()
+    command, source = mixer.step(twist_planar(0.0, 0.0))
+    assert (command, source) == (twist_planar(0.0, 0.0), "lost")
+    assert (mixer.estimate_timeouts, mixer.stops) == (1, 1)
+    assert mixer.step(twist_planar(0.0, 0.5))[1] == "teleop"  # a person driving is not stopped
+    mixer.set_estimate(1.0, (x, y, theta))
+    assert mixer.step(twist_planar(0.0, 0.0))[1] == "path"
+    assert mixer.resumed == 1
+
+
+def test_a_scan_deadline_s_timeout_makes_the_safety_layer_blind_until_the_next_scan() -> None:
+    """``Gazebo -> Move : LaserScan within 250ms else timeout``: the latest scan is forgotten, so a
+    forward command is held (the robot may turn), and the next scan lets it drive again."""
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=lambda: 0.0, scanned=True)
+    mixer.set_scan(open_scan())
+    assert mixer.step(twist_planar(0.2, 0.0))[0] == twist_planar(0.2, 0.0)
+    mixer.scan_timed_out()
+    assert mixer.step(twist_planar(0.2, 0.3))[0] == twist_planar(0.0, 0.3)
+    assert (mixer.scan_timeouts, mixer.safety.blind) == (1, 1)
+    mixer.set_scan(open_scan())
+    assert mixer.step(twist_planar(0.2, 0.0))[0] == twist_planar(0.2, 0.0)

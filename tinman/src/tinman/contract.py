@@ -45,7 +45,8 @@ def _split(role: str, key: str) -> tuple[str, str, str]:
 def contract_report(records: dict[str, dict[str, Any]], report: RunReport) -> list[dict[str, Any]]:
     """The contract section of ``report.json``: one entry per constrained interaction and side
     (the sender checks periods, deadlines and values; the receiver deadlines and values), with
-    the timeouts Move took and the violations blamed on either party."""
+    the timeouts Move took and the violations, each on the side whose monitor raised it (the
+    sender's for a refused send, the receiver's for a deadline that passed), with whom it blames."""
     violations = contract_violations(report)
     move = records.get("Move", {})
     timeouts = {"VisOdom -> Move": move.get("estimate_timeouts"), "Gazebo -> Move": move.get("scan_timeouts")}
@@ -59,7 +60,7 @@ def contract_report(records: dict[str, dict[str, Any]], report: RunReport) -> li
                 continue
             interaction, constraints, side = _split(role, key)
             pair = interaction.split(":")[0]
-            blamed = [v for v in violations if v["interaction"] == pair]
+            blamed = [v for v in violations if v["interaction"] == pair and v["raised_at"] == role]
             entries.append({"interaction": interaction, "constraints": constraints, "checked_by": role,
                             "side": side, "checked": check.get("checked"), "closest_ms": check.get("closest_ms"),
                             "timeouts": timeouts.get(pair) if side == "receives" and "else timeout" in constraints
