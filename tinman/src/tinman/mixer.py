@@ -8,10 +8,10 @@ the estimate is the wheels' alone (the camera's odometry lost track and relocali
 pose comes in the ``odom`` frame), path following drives at ``RECOVERING_SPEED`` of its
 speed. When no fresh estimate has come for ``LOST_AFTER`` seconds (perception is gone),
 path following stops the robot and counts the stop; it resumes with the next fresh estimate.
-The protocol says the same as a deadline (``VisOdom -> Move : Pose within 500ms else timeout``):
-when Move's estimates thread takes that timeout it calls :meth:`Mixer.estimate_timed_out`, and
-path following stops at once, whatever the mixer's own clock says; likewise a scan's timeout
-(:meth:`Mixer.scan_timed_out`) forgets the latest scan, so the safety layer's blind rule holds.
+The protocol states the same bound as Move's patience (``VisOdom -> Move : Pose within 500ms else
+timeout``): when Move's estimates thread takes that timeout (:meth:`Mixer.estimate_timed_out`),
+path following has stopped by this rule already; likewise a scan's timeout (250 ms) finds the
+safety layer's blind rule in force.
 
 Path following looks ahead before it drives: if the arc commanded would, in
 ``CLEAR_AHEAD`` seconds, bring the robot (by Move's pose, in the room's known map)
@@ -127,17 +127,19 @@ class Mixer:
             self.estimates += 1
 
     def estimate_timed_out(self) -> None:
-        """No pose came within the protocol's deadline: path following stops from now until a
-        fresh estimate comes (the estimate is as stale as :data:`LOST_AFTER` allows)."""
+        """No pose came within the protocol's deadline (Move's estimates thread took the timeout).
+
+        Counted only: the deadline, 500 ms from the branch's previous pose, is ``LOST_AFTER`` from
+        the last *fresh* one at the latest, so path following has already stopped by the mixer's
+        own rule, judged on the clock (which a replay gives back; a timeout it cannot)."""
         with self._lock:
-            self._fresh_at = -float("inf")
             self.estimate_timeouts += 1
 
     def scan_timed_out(self) -> None:
-        """No scan came within the protocol's deadline: the latest is forgotten, so the safety
-        layer lets the robot turn, not drive, until the next scan (its blind rule)."""
+        """No scan came within the protocol's deadline: counted only, as for a pose. The deadline
+        (250 ms) is the safety layer's ``STALE_SCAN``: from then on it lets the robot turn, not
+        drive (its blind rule), until the next scan."""
         with self._lock:
-            self._scan = None
             self.scan_timeouts += 1
 
     def tracking(self) -> bool:
