@@ -169,5 +169,6 @@ def test_a_perception_stall_times_move_out_and_path_following_stops(
     assert control["estimate_timeouts"] >= 3  # 2 s of stall is four deadlines of 500 ms
     assert control["stops_for_lost_tracking"] >= 1 and control["sources"]["lost"] > 0
     assert report["robot"]["bumps"] == 0 and report["violations"] == 0
-    [entry] = [e for e in report["contract"] if e["interaction"].startswith("VisOdom -> Move") and e["side"] == "receives"]
+    [entry] = [e for e in report["contract"]
+               if e["interaction"].startswith("VisOdom -> Move") and e["side"] == "receives"]
     assert entry["held"] and entry["timeouts"] == control["estimate_timeouts"]

@@ -56,7 +56,7 @@ def contract_report(records: dict[str, dict[str, Any]], report: RunReport) -> li
         if not isinstance(contract, dict):
             continue
         for key, check in sorted(contract.items()):
-            if not isinstance(key, str) or not key[:1] in ("!", "?") or not isinstance(check, dict):
+            if not isinstance(key, str) or key[:1] not in ("!", "?") or not isinstance(check, dict):
                 continue
             interaction, constraints, side = _split(role, key)
             pair = interaction.split(":")[0]

@@ -8,6 +8,7 @@ import numpy as np
 
 from anodize import TIMEOUT, Endpoint, PeerFailedError, RoleStopped, client_input
 
+from ..contract import contract_of
 from ..faults import overspeed, start_faults
 from ..geometry import robot_pose
 from ..joystick import AXES, BUTTONS, scripted_joy, twist_from_joy
@@ -27,7 +28,6 @@ from ..messages import (
 from ..messages import joy as joy_message
 from ..mission import patrol_pursuit
 from ..mixer import Mixer
-from ..contract import contract_of
 from ..records import percentiles, save_record
 from ..settings import current
 from ..world import DEFAULT_WORLD

@@ -11,9 +11,9 @@ import numpy as np
 
 from anodize import TIMEOUT, Endpoint, PeerFailedError, RoleStopped
 
+from ..contract import contract_of
 from ..dataset import TumSequence
 from ..estimator import MAX_REFUSED, PoseFilter
-from ..contract import contract_of
 from ..faults import STALL_FOR, lied, stalled, start_faults
 from ..geometry import FR1, camera_pose, depth_metres, robot_pose
 from ..messages import (
