@@ -14,7 +14,7 @@ from anodize import TIMEOUT, Endpoint, PeerFailedError, RoleStopped
 from ..contract import contract_of
 from ..dataset import TumSequence
 from ..estimator import MAX_REFUSED, PoseFilter
-from ..faults import STALL_FOR, lied, stalled, start_faults
+from ..faults import STALL_FOR, STALL_FROM, lied, start_faults
 from ..geometry import FR1, camera_pose, depth_metres, robot_pose
 from ..messages import (
     Header,
@@ -109,7 +109,8 @@ def visodom(ep: Endpoint) -> None:
     recoveries = Recoveries()
     lateness = Lateness()
     last: PoseStamped | None = None
-    began_at = ep.now()
+    stall = settings.fault_for("VisOdom") == "stalled-pose"  # read the clock for it only when injected
+    began_at = ep.now() if stall else 0.0
     stalls = 0
     try:
         while True:
@@ -160,7 +161,7 @@ def visodom(ep: Endpoint) -> None:
             ep.send("Visualizer", "Pose", last)
             if settings.paper:
                 ep.send("Planner", "Pose", last)
-            if not stalls and stalled("VisOdom", ep.now() - began_at):  # "stalled-pose": Move waits in vain
+            if stall and not stalls and ep.now() - began_at >= STALL_FROM:  # "stalled-pose": Move waits in vain
                 stalls += 1
                 ep.sleep(STALL_FOR)
             ep.send("Move", "Pose", last)
