@@ -98,7 +98,8 @@ def contract_lines(contract: list[dict[str, Any]]) -> list[str]:
         closest = entry["closest_ms"]
         margin = f", closest margin {closest:.1f} ms" if isinstance(closest, (int, float)) else ""
         timeouts = entry.get("timeouts")
-        took = f", {timeouts:,} timeouts taken" if isinstance(timeouts, int) and timeouts else ""
+        took = (f", {timeouts:,} timeout{'s' if timeouts != 1 else ''} taken" if isinstance(timeouts, int) and timeouts
+                else "")
         verdict = "held" if entry["held"] else "VIOLATED: " + "; ".join(
             f"blamed on {v['blame']}: {v['message']}" for v in entry["violations"])
         constraints = entry["constraints"]
