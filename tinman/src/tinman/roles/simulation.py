@@ -252,16 +252,19 @@ def _run_wheels(ep: Endpoint, robot: _Robot, period: float, seed: int) -> None:
 
 def _at_a_fixed_rate(ep: Endpoint, period: float, step: Callable[[], None]) -> None:
     """``step`` every ``period`` seconds until the run stops or the peer it sends to is gone: due times
-    on a fixed grid, and a step that fell behind by more than a period is skipped, not made late."""
+    on a fixed grid, and a step that fell behind by more than a period is skipped, not made late.
+    After a late step the next waits at least half a period (as Joy does): a sensor that fell
+    behind does not burst to catch up, so a period with a jitter of half the period holds on
+    the early side."""
     due = time.monotonic()
     try:
         while True:
             step()
+            done = time.monotonic()
             due += period
-            now = time.monotonic()
-            if now - due > period:  # behind by more than a step: start again from now
-                due = now
-            ep.sleep(due - now)
+            if done - due > period:  # behind by more than a step: start again from now
+                due = done
+            ep.sleep(max(due, done + period / 2) - time.monotonic())
     except (RoleStopped, PeerFailedError):
         pass
 
