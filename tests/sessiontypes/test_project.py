@@ -32,10 +32,13 @@ def test_fig16_projects_to_fig17() -> None:
 
 def test_parallel_tinman_separates_the_loops() -> None:
     parallel = sessiontypes.load(ROOT / "protocols" / "tinman.proto").globals["TinManParallel"]
+    limits = ("{abs(linear.x) <= 0.5 and abs(angular.z) <= 1.5 and linear.y == 0 and linear.z == 0 and "
+              "angular.x == 0 and angular.y == 0}")  # the contract: tinman.proto
     assert str(parallel.project("Move")) == (
-        "(mu c.?Control(Twist).!Gazebo(Twist).c || mu s.?Gazebo(LaserScan).s || mu v.?VisOdom(Pose).v"
+        f"(mu c.?Control(Twist{limits}) within 100ms.!Gazebo(Twist{limits}) within 500ms.c"
+        " || mu s.?Gazebo(LaserScan) within 250ms else timeout.s || mu v.?VisOdom(Pose) within 500ms else timeout.v"
         " || mu p.?Planner(Path).p)")
-    assert str(parallel.project("Joy")) == "mu c.!Control(Joy).c"
+    assert str(parallel.project("Joy")) == "mu c.!Control(Joy) every 20ms +- 10ms.c"
 
 
 def test_sender_selects_receiver_offers_in_source_order() -> None:

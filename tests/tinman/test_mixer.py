@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import math
 
-from tinman.messages import Header, Path, Time, path_through, twist_planar
+import numpy as np
+
+from tinman.messages import Header, LaserScan, Path, Time, path_through, twist_planar
 from tinman.mixer import Mixer
+from tinman.safety import STALE_SCAN
+from tinman.scanner import beam_angles, cast, scan_message
 from tinman.world import DEFAULT_WORLD
 
 PERIOD = 0.02
@@ -43,6 +47,12 @@ def test_teleop_wins_over_the_path_while_it_commands_anything() -> None:
     command, source = mixer.step(twist_planar(0.0, 0.0))  # the stick is back in the centre: the path resumes
     assert source == "path" and command.linear.x >= 0.0
     assert mixer.sources == {"teleop": 1, "path": 1, "idle": 0, "lost": 0}
+
+
+def open_scan() -> LaserScan:
+    """A noiseless scan from the dock, where the way ahead (east) is clear."""
+    ranges = cast(DEFAULT_WORLD, DEFAULT_WORLD.start, beam_angles(), np.random.default_rng(0))
+    return scan_message(ranges, Header(stamp=Time(sec=0, nanosec=0), frame_id="base_scan"), PERIOD)
 
 
 class Clock:
@@ -122,3 +132,38 @@ def test_path_following_drives_no_further_toward_a_box_it_believes_it_is_about_t
     free.set_path(path_of([(1.0, 1.0), (2.0, 1.0)]))
     command, _ = free.step(twist_planar(0.0, 0.0))
     assert command.linear.x > 0.0 and free.held_back == 0
+
+
+def test_by_a_pose_deadline_s_timeout_path_following_has_stopped_and_the_timeout_is_counted() -> None:
+    """The protocol's ``VisOdom -> Move : Pose within 500ms else timeout`` is the mixer's
+    ``LOST_AFTER``: when the estimates thread takes the timeout (500 ms after its last pose, fresh
+    or not), the mixer has stopped path following by its own clock, and counts the timeout."""
+    clock = Clock()
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=clock)
+    x, y, theta = DEFAULT_WORLD.start
+    mixer.set_path(path_of([(x, y), (x + 3.0, y)]))
+    mixer.set_estimate(0.0, (x, y, theta))
+    assert mixer.step(twist_planar(0.0, 0.0))[1] == "path"
+    clock.now = 0.3
+    mixer.set_estimate(0.0, (x, y, theta))  # a repeated stamp: a pose, but no news
+    clock.now = 0.8 + 1e-6  # the deadline from that pose: the timeout
+    mixer.estimate_timed_out()
+    assert mixer.step(twist_planar(0.0, 0.0)) == (twist_planar(0.0, 0.0), "lost")
+    assert (mixer.estimate_timeouts, mixer.stops) == (1, 1)
+    mixer.set_estimate(0.9, (x, y, theta))
+    assert mixer.step(twist_planar(0.0, 0.0))[1] == "path"
+
+
+def test_by_a_scan_deadline_s_timeout_the_safety_layer_is_blind_and_the_timeout_is_counted() -> None:
+    """``Gazebo -> Move : LaserScan within 250ms else timeout`` is the safety layer's ``STALE_SCAN``:
+    at the timeout a forward command is held (the robot may turn), until the next scan."""
+    clock = Clock()
+    mixer = Mixer(DEFAULT_WORLD, PERIOD, clock=clock, scanned=True)
+    mixer.set_scan(open_scan())
+    assert mixer.step(twist_planar(0.2, 0.0))[0] == twist_planar(0.2, 0.0)
+    clock.now = STALE_SCAN + 1e-6
+    mixer.scan_timed_out()
+    assert mixer.step(twist_planar(0.2, 0.3))[0] == twist_planar(0.0, 0.3)
+    assert (mixer.scan_timeouts, mixer.safety.blind) == (1, 1)
+    mixer.set_scan(open_scan())
+    assert mixer.step(twist_planar(0.2, 0.0))[0] == twist_planar(0.2, 0.0)

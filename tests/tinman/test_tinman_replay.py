@@ -56,7 +56,20 @@ ROLES = {"Joy": "control:joy", "Control": "control:control", "Move": "control:mo
          "Camera": "perception:camera", "VisOdom": "perception:visodom", "Planner": "planner:planner"}
 
 
-@pytest.mark.parametrize("role", sorted(ROLES))
+# Two gaps of anodize's replay that TinMan's contract (tinman.proto) runs into, reported to anodize:
+# beyond the run's last clock reading a replayed role reads message time (since the epoch) where its
+# monotonic readings were, so Joy's next send, which the run never made, breaks its period before
+# the replay can say the recording ends; and a receive that took its `else timeout` in the run is
+# given the next recorded message instead (the recording keeps no timeouts), so Move's estimates
+# thread, which takes one at its start (no pose within 500 ms of the fork), goes out of step.
+REPLAY_GAPS = {
+    "Joy": "anodize replay: a clock read past the recorded ones is message time, which breaks Joy's period",
+    "Move": "anodize replay: a receive's `else timeout` in the run is not replayed (the recording keeps none)",
+}
+
+
+@pytest.mark.parametrize("role", [pytest.param(role, marks=pytest.mark.xfail(reason=REPLAY_GAPS[role], strict=True))
+                                  if role in REPLAY_GAPS else role for role in sorted(ROLES)])
 def test_each_role_but_the_simulator_s_replays_equal_and_writes_nothing_into_the_run(recorded: Path,
                                                                                      role: str) -> None:
     before = _folder(recorded)
@@ -88,3 +101,22 @@ def test_the_report_gives_the_world_s_real_time_factor(recorded: Path) -> None:
     assert world["simulated_s"] > 0 and world["wall_s"] > 0
     assert abs(world["real_time_factor"] - world["simulated_s"] / world["wall_s"]) < 0.01
     assert 0 < world["camera_frames_rendered"] <= world["camera_frames_due"]
+
+
+def test_the_recorded_run_s_contract_held_and_verify_lists_its_constraints(
+        recorded: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The report's contract section and ``anodize verify`` of the recording agree: every constraint
+    held; verify judges the period, the deadlines and the velocity limits on the recorded times and
+    payloads, and says why it leaves the deadlines with ``else timeout`` unjudged."""
+    report = json.loads((recorded / "report.json").read_text())
+    assert report["contract"] and all(entry["held"] and entry["checked"] > 0 for entry in report["contract"])
+    capsys.readouterr()
+    assert cli.main(["verify", str(recorded / "run.mcap")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith(f"{recorded / 'run.mcap'} conforms to TinManParallel"), lines
+    held = [line for line in lines if line.startswith("constraint: ") and ": held on " in line]
+    for start in ("Joy->Control Joy every 20ms +- 10ms", "Control->Move Twist within 100ms",
+                  "Move->Gazebo Twist within 500ms", "Move->Gazebo Twist {abs(linear.x) <= 0.5",
+                  "Control->Move Twist {abs(linear.x) <= 0.5"):
+        assert any(line.startswith(f"constraint: {start}") for line in held), (start, lines)
+    assert "constraint: VisOdom->Move Pose within 500ms else timeout: not judged" in "\n".join(lines)

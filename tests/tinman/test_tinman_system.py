@@ -53,6 +53,19 @@ def test_tinman_runs_with_every_group_and_no_violation(
     assert report["messages"]["Move->Gazebo"] > frames > report["messages"]["Planner->Move"]
     assert report["control"]["sources"]["path"] > 0  # the robot followed plans
     assert report["robot"]["distance_m"] > 0.3 and report["robot"]["bumps"] == 0
+    assert_the_contract_held(report)
+
+
+def assert_the_contract_held(report: dict) -> None:
+    """Every constraint of the protocol was checked, on both sides where both check, and held."""
+    contract = {(entry["interaction"].split(":")[0], entry["side"]): entry for entry in report["contract"]}
+    assert {"Joy -> Control", "Control -> Move", "Move -> Gazebo", "VisOdom -> Move", "Gazebo -> Move",
+            "Gazebo -> Camera"} == {pair for pair, _ in contract}
+    for (pair, side), entry in contract.items():
+        assert entry["checked"] > 0 and entry["held"] and entry["violations"] == [], (pair, side, entry)
+    joy = contract["Joy -> Control", "sends"]
+    assert joy["constraints"] == "every 20ms +- 10ms" and 0 < joy["closest_ms"] <= 10
+    assert "abs(linear.x) <= 0.5" in contract["Move -> Gazebo", "sends"]["constraints"]
 
 
 def test_a_leaking_planner_is_stopped_while_control_keeps_driving(
@@ -129,3 +142,38 @@ def test_a_lying_pose_estimate_does_not_drive_the_robot_into_a_wall(
     nearest = min(row[2] for row in trajectory)  # y: the south wall is y = 0
     assert nearest < 0.6
     assert nearest > 0.18  # the robot's radius: never touched
+
+
+def test_an_overspeeding_control_is_refused_and_blamed_on_control(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, sequence: Path) -> None:
+    """Control commands 2 m/s after 2 s ("overspeed"): the refinement on Control -> Move refuses
+    the send (nothing leaves: the robot never drove faster than 0.5 m/s), blames Control, and the
+    report's contract and outcome say so."""
+    report = run_tinman(monkeypatch, tmp_path, sequence, "--duration", "5", "--inject", "overspeed=control")
+    assert not report["ok"] and report["violations"] >= 1
+    assert report["roles"]["Control"]["error"]["type"] == "ProtocolViolationError"
+    [entry] = [e for e in report["contract"] if e["interaction"].startswith("Control -> Move") and e["side"] == "sends"]
+    [violation] = entry["violations"]
+    assert not entry["held"] and violation["blame"] == "Control" and violation["raised_at"] == "Control"
+    assert "refinement {abs(linear.x) <= 0.5" in violation["message"] and "is false" in violation["message"]
+    [received] = [e for e in report["contract"] if e["interaction"].startswith("Control -> Move")
+                  and e["side"] == "receives"]
+    assert received["held"]  # Move never saw it: nothing left Control
+    trajectory = json.loads((tmp_path / "records" / "Gazebo.json").read_text())["trajectory"]
+    assert max(abs(row[4]) for row in trajectory) <= 0.5  # no 2 m/s command reached the robot
+
+
+def test_a_perception_stall_times_move_out_and_path_following_stops(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, sequence: Path) -> None:
+    """VisOdom holds its pose to Move back for 2 s ("stalled-pose"): Move's estimates thread takes the
+    protocol's timeout (500 ms), counts it, and path following stops until the next pose; no bump,
+    nobody blamed."""
+    report = run_tinman(monkeypatch, tmp_path, sequence, "--duration", "7", "--inject", "stalled-pose=perception")
+    assert report["ok"], report["problems"]
+    control = report["control"]
+    assert control["estimate_timeouts"] >= 3  # 2 s of stall is four deadlines of 500 ms
+    assert control["stops_for_lost_tracking"] >= 1 and control["sources"]["lost"] > 0
+    assert report["robot"]["bumps"] == 0 and report["violations"] == 0
+    [entry] = [e for e in report["contract"]
+               if e["interaction"].startswith("VisOdom -> Move") and e["side"] == "receives"]
+    assert entry["held"] and entry["timeouts"] == control["estimate_timeouts"]

@@ -161,10 +161,16 @@ S = ?B1(title(str)).!B1(quote(int)).!B2(quote(int)).&B2{ok(str).!B2(date(str)), 
 """, "")
 
 
+# TinMan's velocity limits, on every Twist of TinManParallel
+LIMITS = ("{abs(linear.x) <= 0.5 and abs(angular.z) <= 1.5 and linear.y == 0 and linear.z == 0 and angular.x == 0 and "
+          "angular.y == 0}")
+
+
 def test_project_role_filter(capsys: pytest.CaptureFixture[str]) -> None:
     assert run(capsys, "project", "protocols/tinman.proto", "--global", "TinManParallel", "--role", "Move") == (
-        0, ("Move = (mu c.?Control(Twist).!Gazebo(Twist).c || mu s.?Gazebo(LaserScan).s"
-            " || mu v.?VisOdom(Pose).v || mu p.?Planner(Path).p)\n"), "")
+        0, (f"Move = (mu c.?Control(Twist{LIMITS}) within 100ms.!Gazebo(Twist{LIMITS}) within 500ms.c"
+            " || mu s.?Gazebo(LaserScan) within 250ms else timeout.s"
+            " || mu v.?VisOdom(Pose) within 500ms else timeout.v || mu p.?Planner(Path).p)\n"), "")
     assert run(capsys, "project", "protocols/ring.proto", "--role", "B") == (0, """\
 # Ring
 B = mu t.?A(token(int)).!C(token(int)).t

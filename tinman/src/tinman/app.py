@@ -28,6 +28,7 @@ from anodize import (
     load_config,
 )
 
+from .contract import contract_lines
 from .mission_outcome import counted, mission_line
 from .outcome import build_report, world_clock_line
 from .settings import FAULTS, Settings, export
@@ -335,6 +336,7 @@ def _lines(data: dict[str, Any], problems: list[str]) -> list[str]:
     world = world_clock_line(data.get("world_clock") or {})
     if world is not None:
         lines.append(world)
+    lines.extend(contract_lines(data.get("contract") or []))  # absent from a report written before the contract
     lines.append(f"protocol violations: {data['violations']}")
     lines.extend(f"problem: {problem}" for problem in problems)
     return lines

@@ -11,12 +11,19 @@ import numpy as np
 from .settings import current
 from .world import DEFAULT_WORLD
 
-__all__ = ["start_faults", "memory_hog", "blinded", "BLIND_FROM", "BLIND_UNTIL", "lied", "LIE_TURN"]
+__all__ = ["start_faults", "memory_hog", "blinded", "BLIND_FROM", "BLIND_UNTIL", "lied", "LIE_TURN", "overspeed",
+           "OVERSPEED", "OVERSPEED_AFTER", "STALL_FROM", "STALL_FOR"]
 
 HOG_STEP = 16 * 2**20  # bytes kept per step
 HOG_PERIOD = 0.1       # seconds between steps: 160 MiB/s
 HOG_DELAY = 3.0        # seconds of normal running first, so the report shows the group before and after
 BLIND_FROM, BLIND_UNTIL = 3.0, 5.0  # seconds into the run: "blind-camera" covers the lens then
+OVERSPEED = 2.0  # m/s: "overspeed" commands this, four times the protocol's limit of 0.5 m/s
+OVERSPEED_AFTER = 2.0  # seconds of normal commands first
+# "stalled-pose" (perception): VisOdom holds its next pose to Move back, once, STALL_FROM seconds into its
+# run, for STALL_FOR seconds, as a tracker stuck in a long optimisation would
+STALL_FROM = 3.0  # seconds into VisOdom's run
+STALL_FOR = 2.0  # seconds the pose is held back (four times Move's patience of 500 ms)
 LIE_TURN = math.pi / 2  # "lying-pose": the estimate's whole map is turned this far about the dock
 
 
@@ -49,6 +56,20 @@ def lied(role: str, t_wc: np.ndarray) -> np.ndarray:
                      [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
     turned: np.ndarray = turn @ t_wc
     return turned
+
+
+_started: dict[str, float] = {}  # per role, when overspeed first saw a command
+
+
+def overspeed(role: str, v: float, w: float) -> tuple[float, float]:
+    """The command ``(v, w)`` as ``role`` sends it: unchanged, or with "overspeed" injected into its
+    group, ``OVERSPEED`` forward from ``OVERSPEED_AFTER`` seconds after the first command on, as a
+    controller with a wrong gain would (the protocol's refinement refuses it: nothing leaves)."""
+    if current().fault_for(role) != "overspeed":
+        return v, w
+    now = time.monotonic()
+    start = _started.setdefault(role, now)
+    return (OVERSPEED, w) if now - start >= OVERSPEED_AFTER else (v, w)
 
 
 def memory_hog() -> None:

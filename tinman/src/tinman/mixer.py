@@ -8,6 +8,10 @@ the estimate is the wheels' alone (the camera's odometry lost track and relocali
 pose comes in the ``odom`` frame), path following drives at ``RECOVERING_SPEED`` of its
 speed. When no fresh estimate has come for ``LOST_AFTER`` seconds (perception is gone),
 path following stops the robot and counts the stop; it resumes with the next fresh estimate.
+The protocol states the same bound as Move's patience (``VisOdom -> Move : Pose within 500ms else
+timeout``): when Move's estimates thread takes that timeout (:meth:`Mixer.estimate_timed_out`),
+path following has stopped by this rule already; likewise a scan's timeout (250 ms) finds the
+safety layer's blind rule in force.
 
 Path following looks ahead before it drives: if the arc commanded would, in
 ``CLEAR_AHEAD`` seconds, bring the robot (by Move's pose, in the room's known map)
@@ -90,6 +94,8 @@ class Mixer:
         self._fresh_at = clock()  # the robot starts knowing its pose: its dock
         self.path_at: float | None = None  # when the latest path came (clock)
         self._lost = False
+        self.estimate_timeouts = 0  # the protocol's deadline for a pose passed with none (Move's patience)
+        self.scan_timeouts = 0  # the protocol's deadline for a scan passed with none
         self._scan: tuple[LaserScan, float] | None = None  # the latest scan, and when it came (clock)
         self._lock = threading.Lock()  # the planning and perception branches' threads hand over
 
@@ -119,6 +125,22 @@ class Mixer:
             self.model.pose = pose
             self._wheels_only = wheels_only
             self.estimates += 1
+
+    def estimate_timed_out(self) -> None:
+        """No pose came within the protocol's deadline (Move's estimates thread took the timeout).
+
+        Counted only: the deadline, 500 ms from the branch's previous pose, is ``LOST_AFTER`` from
+        the last *fresh* one at the latest, so path following has already stopped by the mixer's
+        own rule, judged on the clock (which a replay gives back; a timeout it cannot)."""
+        with self._lock:
+            self.estimate_timeouts += 1
+
+    def scan_timed_out(self) -> None:
+        """No scan came within the protocol's deadline: counted only, as for a pose. The deadline
+        (250 ms) is the safety layer's ``STALE_SCAN``: from then on it lets the robot turn, not
+        drive (its blind rule), until the next scan."""
+        with self._lock:
+            self.scan_timeouts += 1
 
     def tracking(self) -> bool:
         """Whether a fresh estimate came within ``LOST_AFTER`` seconds."""

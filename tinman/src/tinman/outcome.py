@@ -10,6 +10,7 @@ import numpy as np
 from anodize import ProtocolViolationError, RunReport
 
 from .ate import evaluate_ate
+from .contract import contract_report
 from .mission import DOCK
 from .mission_outcome import mission_outcome
 from .records import load_records
@@ -71,6 +72,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "vo_track_ms": {key: vo.get("track_ms", {}).get(key) for key in ("p50", "p99")},
         "violations": len(violations),
         "violation_messages": violations,
+        "contract": contract_report(records, report),  # each time and value constraint, as the monitors saw it
         "messages": dict(report.messages),
         "high_water": dict(report.high_water),  # per channel, the most messages that waited at once
         "boosts": run["boosts"],  # priority inheritance: per waiter->target pair, episodes and seconds
@@ -91,7 +93,8 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
                     "path_commands_after_recovering": move.get("path_commands_after_recovering"),
                     "held_back_near_obstacles": move.get("held_back"),
                     "safety_stops": move.get("safety_stops"), "safety_slowed": move.get("safety_slowed"),
-                    "safety_blind": move.get("safety_blind"), "scanner_lost": move.get("scanner_lost")},
+                    "safety_blind": move.get("safety_blind"), "scanner_lost": move.get("scanner_lost"),
+                    "estimate_timeouts": move.get("estimate_timeouts"), "scan_timeouts": move.get("scan_timeouts")},
         "vo_lost_frames": vo.get("lost_frames"),
         "recovery": {"recoveries": vo.get("recoveries"), "time_to_recover_s": vo.get("recovery_s"),
                      "lost_at_the_end": vo.get("lost_at_the_end")},

@@ -16,7 +16,7 @@ from pathlib import Path
 __all__ = ["Settings", "ENVIRONMENT_VARIABLE", "current", "export", "launched", "FAULTS"]
 
 ENVIRONMENT_VARIABLE = "TINMAN_SETTINGS"
-FAULTS = ("memory-hog", "blind-camera", "lying-pose")  # what --inject can put into a group
+FAULTS = ("memory-hog", "blind-camera", "lying-pose", "overspeed", "stalled-pose")  # what --inject can put into a group
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,10 @@ import threading
 
 import numpy as np
 
-from anodize import Endpoint, PeerFailedError, RoleStopped, client_input
+from anodize import TIMEOUT, Endpoint, PeerFailedError, RoleStopped, client_input
 
-from ..faults import start_faults
+from ..contract import contract_of
+from ..faults import overspeed, start_faults
 from ..geometry import robot_pose
 from ..joystick import AXES, BUTTONS, scripted_joy, twist_from_joy
 from ..keyboard import Keyboard
@@ -73,6 +74,7 @@ def joy(ep: Endpoint) -> None:
     finally:
         if keyboard is not None:
             keyboard.close()
+        save_record("Joy", {"contract": contract_of(ep)})
 
 
 def _fitted(state: Joy) -> tuple[tuple[float, ...], tuple[int, ...]]:
@@ -87,10 +89,13 @@ def _fitted(state: Joy) -> tuple[tuple[float, ...], tuple[int, ...]]:
 def control(ep: Endpoint) -> None:
     """Joystick to velocity command."""
     start_faults("Control")
-    while True:
-        state: Joy = ep.recv("Joy").payload
-        v, w, _ = twist_from_joy(state.axes, state.buttons)
-        ep.send("Move", "Twist", twist_planar(v, w))
+    try:
+        while True:
+            state: Joy = ep.recv("Joy").payload
+            v, w, _ = twist_from_joy(state.axes, state.buttons)
+            ep.send("Move", "Twist", twist_planar(*overspeed("Control", v, w)))
+    finally:
+        save_record("Control", {"contract": contract_of(ep)})
 
 
 def move(ep: Endpoint) -> None:
@@ -146,7 +151,9 @@ def move(ep: Endpoint) -> None:
             "perception_lost": perception_lost[0] if perception_lost else None,
             "estimated_pose": list(mixer.model.pose),
             "safety_stops": mixer.safety.stops, "safety_slowed": mixer.safety.slowed,
-            "safety_blind": mixer.safety.blind, "scanner_lost": scanner_lost[0] if scanner_lost else None})
+            "safety_blind": mixer.safety.blind, "scanner_lost": scanner_lost[0] if scanner_lost else None,
+            "estimate_timeouts": mixer.estimate_timeouts, "scan_timeouts": mixer.scan_timeouts,
+            "contract": contract_of(ep)})
 
 
 def _estimate(mixer: Mixer, pose: PoseStamped) -> None:
@@ -180,7 +187,11 @@ def _take_estimates(ep: Endpoint, mixer: Mixer, perception_lost: list[str], cloc
     clock.use(ep)
     try:
         while True:
-            _estimate(mixer, ep.recv("VisOdom").payload)
+            message = ep.recv("VisOdom")
+            if message.label == TIMEOUT:  # the protocol's deadline passed with no pose: stop following the path
+                mixer.estimate_timed_out()
+            else:
+                _estimate(mixer, message.payload)
     except PeerFailedError as error:  # no more estimates: path following stops, teleop goes on
         perception_lost.append(str(error))
     except RoleStopped:
@@ -191,7 +202,11 @@ def _take_scans(ep: Endpoint, mixer: Mixer, scanner_lost: list[str], clock: _Thr
     clock.use(ep)
     try:
         while True:
-            mixer.set_scan(ep.recv("Gazebo").payload)
+            message = ep.recv("Gazebo")
+            if message.label == TIMEOUT:  # the protocol's deadline passed with no scan: the robot is blind
+                mixer.scan_timed_out()
+            else:
+                mixer.set_scan(message.payload)
     except PeerFailedError as error:  # no more scans: the safety layer lets the robot turn, not drive
         scanner_lost.append(str(error))
     except RoleStopped:

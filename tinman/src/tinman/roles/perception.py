@@ -9,11 +9,12 @@ import time
 import cv2
 import numpy as np
 
-from anodize import Endpoint, PeerFailedError, RoleStopped
+from anodize import TIMEOUT, Endpoint, PeerFailedError, RoleStopped
 
+from ..contract import contract_of
 from ..dataset import TumSequence
 from ..estimator import MAX_REFUSED, PoseFilter
-from ..faults import lied, start_faults
+from ..faults import STALL_FOR, STALL_FROM, lied, start_faults
 from ..geometry import FR1, camera_pose, depth_metres, robot_pose
 from ..messages import (
     Header,
@@ -52,16 +53,20 @@ def camera(ep: Endpoint) -> None:
     capture time, passed on as a camera driver publishes them.
     """
     start_faults("Camera")
-    published = 0
+    published = waited = 0
     try:
         while True:
-            color: Image = ep.recv("Gazebo").payload
+            message = ep.recv("Gazebo")
+            if message.label == TIMEOUT:  # no frame for the protocol's second: the camera is stalled; wait on
+                waited += 1
+                continue
+            color: Image = message.payload
             depth: Image = ep.recv("Gazebo").payload
             ep.send("VisOdom", "color", color)
             ep.send("VisOdom", "depth", depth)
             published += 1
     finally:
-        save_record("Camera", {"frames_published": published})
+        save_record("Camera", {"frames_published": published, "frame_timeouts": waited, "contract": contract_of(ep)})
 
 
 def visodom(ep: Endpoint) -> None:
@@ -104,6 +109,9 @@ def visodom(ep: Endpoint) -> None:
     recoveries = Recoveries()
     lateness = Lateness()
     last: PoseStamped | None = None
+    stall = settings.fault_for("VisOdom") == "stalled-pose"  # read the clock for it only when injected
+    began_at = ep.now() if stall else 0.0
+    stalls = 0
     try:
         while True:
             if fusion.broken is not None:  # the wheels' thread failed: say so as this role's failure
@@ -153,6 +161,9 @@ def visodom(ep: Endpoint) -> None:
             ep.send("Visualizer", "Pose", last)
             if settings.paper:
                 ep.send("Planner", "Pose", last)
+            if stall and not stalls and ep.now() - began_at >= STALL_FROM:  # "stalled-pose": Move waits in vain
+                stalls += 1
+                ep.sleep(STALL_FOR)
             ep.send("Move", "Pose", last)
     finally:
         out = records_folder()
@@ -165,7 +176,7 @@ def visodom(ep: Endpoint) -> None:
         save_record("VisOdom", {
             "frames_processed": len(stamps), "frames_dropped": dropped, "track_ms": percentiles(track_ms),
             "lost_frames": odometry.failures, "lost_stamps": lost[-200:], "vo_reanchored": odometry.reanchored,
-            **recoveries.record(), **fusion.record()})
+            **recoveries.record(), **fusion.record(), "stalls": stalls, "contract": contract_of(ep)})
 
 
 def _published(stamp: float, t_wc: np.ndarray, wheels_only: bool) -> PoseStamped:

@@ -13,6 +13,7 @@ import numpy as np
 from anodize import Endpoint, PeerFailedError, RoleStopped, lower_thread_priority
 
 from ..cameras import LiveCamera, RecordedCamera
+from ..contract import contract_of
 from ..faults import blinded, start_faults
 from ..messages import Header, PoseStamped, Twist, odometry_message, seconds, stamp_now
 from ..outcome import CAMERA_TRUTH
@@ -107,7 +108,7 @@ def gazebo(ep: Endpoint) -> None:
                                "columns": ["t", "x", "y", "theta", "v", "w"],
                                # The physics' seconds against the wall's, from the first step to the last
                                # (the robot's start and the run's stop are not the world's to keep up with).
-                               "simulated_s": round(len(trace) * period, 6),
+                               "simulated_s": round(len(trace) * period, 6), "contract": contract_of(ep),
                                "wall_s": round(trace[-1][0] - trace[0][0] + period, 6) if trace else 0.0,
                                **(film.record(ended) if film is not None else {})})
 
@@ -251,16 +252,19 @@ def _run_wheels(ep: Endpoint, robot: _Robot, period: float, seed: int) -> None:
 
 def _at_a_fixed_rate(ep: Endpoint, period: float, step: Callable[[], None]) -> None:
     """``step`` every ``period`` seconds until the run stops or the peer it sends to is gone: due times
-    on a fixed grid, and a step that fell behind by more than a period is skipped, not made late."""
+    on a fixed grid, and a step that fell behind by more than a period is skipped, not made late.
+    After a late step the next waits at least half a period (as Joy does): a sensor that fell
+    behind does not burst to catch up, so a period with a jitter of half the period holds on
+    the early side."""
     due = time.monotonic()
     try:
         while True:
             step()
+            done = time.monotonic()
             due += period
-            now = time.monotonic()
-            if now - due > period:  # behind by more than a step: start again from now
-                due = now
-            ep.sleep(due - now)
+            if done - due > period:  # behind by more than a step: start again from now
+                due = done
+            ep.sleep(max(due, done + period / 2) - time.monotonic())
     except (RoleStopped, PeerFailedError):
         pass
 
