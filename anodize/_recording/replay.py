@@ -13,8 +13,9 @@ recorded run, in order, each endpoint (the role's, each parallel branch's) its o
 recording records every reading. Where the recording has none for it (a recording made
 before clocks were recorded, or a role that reads its clock more often than it did in
 the run), it reads message time: the recorded time of the message its thread received
-last, advanced by that thread's ``Endpoint.sleep`` arguments. ``Endpoint.sleep`` returns
-at once.
+last, advanced by that thread's ``Endpoint.sleep`` arguments (``now()`` past an endpoint's
+readings goes on from its last one, advanced as message time advances). ``Endpoint.sleep``
+returns at once.
 
 What a replay cannot reproduce: time read past the endpoint (``time.monotonic()``,
 ``time.sleep`` in the role's code: it still sleeps); a ``recv(..., timeout=...)`` that

@@ -23,7 +23,10 @@ The role's clock (``Endpoint.now()``, ``Endpoint.wall()``) is the replay's
 the readings the recording holds for it, in order; where the recording holds none (a
 recording made before clocks were recorded, or the role reads more often than it did in
 the run), it reads message time: the recorded time of the last message its thread
-received, advanced by that thread's ``Endpoint.sleep`` calls.
+received, advanced by that thread's ``Endpoint.sleep`` calls. ``now()`` past an endpoint's
+recorded readings goes on from its last one, advanced as message time has advanced since
+(the role's monotonic clock and message time count from different origins: a role that
+compares a reading with an earlier one, as a period's monitor does, sees the time that passed).
 
 A role that forks into threads is taken through the recorded order of its sends and
 clock readings (:mod:`.turnstile`).
@@ -150,6 +153,8 @@ class ReplayClock(threading.Event):
         self.from_messages = 0  # readings made of message time
         self.differs = ""     # the first reading the role took otherwise than in the run
         self._start = start
+        # Per endpoint, its last replayed now() reading and the message time when it was read.
+        self._anchors: dict[str, tuple[float, float]] = {}
         self._thread = threading.local()
         self._lock = threading.Lock()
 
@@ -183,6 +188,8 @@ class ReplayClock(threading.Event):
                 recorded, value = readings.popleft()
                 if recorded == kind:
                     self.replayed += 1
+                    if kind == "now":
+                        self._anchors[branch] = (value, self._message_time())
                     return value
                 self.differs = self.differs or (
                     f"endpoint {branch or '(the role)'} read {kind}() where the run read {recorded}() "
@@ -191,6 +198,10 @@ class ReplayClock(threading.Event):
                     self._network.turnstile.drop(("clock", other))
                 self._readings.clear()  # out of step: the rest would be given to other reads
             self.from_messages += 1
+            anchor = self._anchors.get(branch) if kind == "now" else None
+        if anchor is not None:
+            value, then = anchor
+            return value + (self._message_time() - then)
         return self._message_time()
 
     def _message_time(self) -> float:
