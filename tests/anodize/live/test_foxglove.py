@@ -99,8 +99,9 @@ class Client:
             joy = b"\x01" + struct.pack("<I", 7) + _client_joy()
             with contextlib.suppress(websockets.ConnectionClosed):  # the run ended: the server closes
                 while not self.done.is_set():
-                    await ws.send(joy)
-                    self.published += 1
+                    if self.statuses:  # the run's first status came: then the Joys that end it
+                        await ws.send(joy)
+                        self.published += 1
                     with contextlib.suppress(TimeoutError):
                         async with asyncio.timeout(0.05):  # take what comes for a while, then publish again
                             while True:
@@ -123,7 +124,8 @@ class Client:
 
 
 def test_a_foxglove_client_sees_every_channel_and_drives_the_joy_role(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        run_waits_for_client: Any) -> None:  # a HeldRun (conftest.py): the groups start once it subscribed
     (tmp_path / "pad.proto").write_text(live_roles.PROTOCOL, encoding="utf-8")
     system = tmp_path / "pad.toml"
     system.write_text(live_roles.SYSTEM, encoding="utf-8")
@@ -137,6 +139,8 @@ def test_a_foxglove_client_sees_every_channel_and_drives_the_joy_role(
         client.done.set()
         client.thread.join(timeout=10.0)
     out = capsys.readouterr().out
+    assert run_waits_for_client.subscribed == [True], "the client never subscribed to the status topic"
+    assert not client.thread.is_alive(), "the client did not close"
     assert client.error is None, repr(client.error)
     assert code == 0, out
     assert f"foxglove: serving the run live at ws://127.0.0.1:{port}" in out

@@ -26,6 +26,7 @@ import sessiontypes
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import live_roles
+import test_foxglove
 
 from anodize import _live as live
 from anodize._live import STATUS_TOPIC
@@ -34,6 +35,11 @@ from anodize._tools.cli import main
 
 pytest.importorskip("foxglove")
 websockets = pytest.importorskip("websockets")
+
+
+READ_EVERY = 0.2    # seconds between two messages the slow client reads
+JOY_EVERY = 0.3     # seconds between its Joys, at most: the pad takes Joys younger than 0.5 s
+CLOSE_WITHIN = 1.0  # seconds the client waits for the server's closing frame
 
 
 def _free_port() -> int:
@@ -61,12 +67,21 @@ def test_the_outbox_is_bounded_drops_the_oldest_and_counts_per_label() -> None:
 
 
 class SlowClient:
-    """Subscribes to every channel, publishes Joys for the pad, and reads one message in a while."""
+    """A Foxglove client that reads one message in a while, its own Joys still published on time.
+
+    It subscribes to the status topic first and waits for a status (the run's groups start only
+    once it has subscribed: ``run_waits_for_client``), then to every channel, and from then on
+    publishes a Joy at least every :data:`JOY_EVERY` seconds (younger than the pad's
+    ``max_age``) while it reads one message each :data:`READ_EVERY` seconds: a slow reader,
+    not a slow writer. Everything else waits in the server's queues. When done it closes
+    within :data:`CLOSE_WITHIN` seconds, whatever it left unread.
+    """
 
     def __init__(self, port: int) -> None:
         self.port = port
         self.statuses: list[dict[str, Any]] = []
         self.received = 0
+        self.published = 0
         self.done = threading.Event()
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._run, daemon=True)
@@ -82,8 +97,11 @@ class SlowClient:
         ws = None
         for _ in range(200):
             with contextlib.suppress(OSError):
+                # close_timeout: unread messages fill its queue, so it would not see the server's
+                # closing frame and would wait websockets' default 10 s for it.
                 ws = await asyncio.wait_for(websockets.connect(
-                    f"ws://127.0.0.1:{self.port}", subprotocols=["foxglove.sdk.v1"], max_size=None), timeout=2.0)
+                    f"ws://127.0.0.1:{self.port}", subprotocols=["foxglove.sdk.v1"], max_size=None,
+                    close_timeout=CLOSE_WITHIN), timeout=2.0)
                 break
             await asyncio.sleep(0.05)
         assert ws is not None, "the live view never listened"
@@ -94,18 +112,24 @@ class SlowClient:
                 if op.get("op") == "advertise":
                     advertised.update({c["topic"]: c["id"] for c in op["channels"]})
             topics = dict(enumerate(sorted(advertised), start=1))
+            first = {n: topic for n, topic in topics.items() if topic == STATUS_TOPIC}
             await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                {"id": n, "channelId": advertised[topic]} for n, topic in topics.items()]}))
+                {"id": n, "channelId": advertised[topic]} for n, topic in first.items()]}))
+            while not self.statuses:  # the groups are starting; the supervisor says so twice a second
+                self._take(await asyncio.wait_for(ws.recv(), timeout=15.0), topics)
+            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                {"id": n, "channelId": advertised[topic]} for n, topic in topics.items() if n not in first]}))
             await ws.send(json.dumps({"op": "advertise", "channels": [
                 {"id": 7, "topic": "/joy", "encoding": "cdr", "schemaName": "sensor_msgs/msg/Joy"}]}))
             joy = b"\x01" + struct.pack("<I", 7) + _joy()
             with contextlib.suppress(websockets.ConnectionClosed):
                 while not self.done.is_set():
                     await ws.send(joy)
+                    self.published += 1
                     with contextlib.suppress(TimeoutError):
-                        message = await asyncio.wait_for(ws.recv(), timeout=0.5)
+                        message = await asyncio.wait_for(ws.recv(), timeout=JOY_EVERY - READ_EVERY)
                         self._take(message, topics)
-                    await asyncio.sleep(0.2)  # a slow client: everything else waits in the server's queues
+                    await asyncio.sleep(READ_EVERY)  # a slow reader: everything else waits in the server's queues
 
     def _take(self, message: Any, topics: dict[int, str]) -> None:
         if isinstance(message, str):
@@ -117,26 +141,17 @@ class SlowClient:
 
 
 def _joy() -> bytes:
-    import test_foxglove
-
     return test_foxglove._client_joy()
 
 
 def test_a_slow_client_subscribed_to_everything_is_bounded_counted_and_below_every_group(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        run_waits_for_client: Any) -> None:  # a HeldRun (conftest.py)
     (tmp_path / "pad.proto").write_text(live_roles.PROTOCOL, encoding="utf-8")
     system = tmp_path / "pad.toml"
     system.write_text(live_roles.SYSTEM, encoding="utf-8")
     monkeypatch.setenv("LIVE_TEST_OUT", str(tmp_path))
     monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1]))
-    views: list[Any] = []
-    opened = live.open_live_view
-
-    def keep(port: int = live.DEFAULT_PORT, host: str = "127.0.0.1") -> Any:
-        views.append(opened(port, host))
-        return views[-1]
-
-    monkeypatch.setattr(live, "open_live_view", keep)
     port = _free_port()
     client = SlowClient(port)
     try:
@@ -145,9 +160,15 @@ def test_a_slow_client_subscribed_to_everything_is_bounded_counted_and_below_eve
         client.done.set()
         client.thread.join(timeout=10.0)
     out = capsys.readouterr().out
+    assert run_waits_for_client.subscribed == [True], "the client never subscribed to the status topic"
+    assert not client.thread.is_alive(), "the slow client did not close"
     assert client.error is None, repr(client.error)
-    assert code == 0, out  # the roles finished: the pad took the client's Joys and stopped the run
-    view = views[0]
+    assert code == 0, out
+    # A slow reader's own Joys still reach the pad: it took them (not its 15 s giving up) and stopped the run.
+    seen = json.loads((tmp_path / "robot.json").read_text(encoding="utf-8"))
+    assert seen.count(test_foxglove.CLIENT_AXES) == live_roles.CLIENT_TAKES, (client.published, out)
+    assert "client messages on /joy handed to their role" in out
+    view = run_waits_for_client.views[0]
     assert view.outbox.peak <= OUTBOX_BYTES  # bounded, whatever the client did
 
     # Not shown is counted, per topic: the pad sends images at 50 Hz, the view shows 10 a second.
