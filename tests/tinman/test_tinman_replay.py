@@ -63,7 +63,6 @@ ROLES = {"Joy": "control:joy", "Control": "control:control", "Move": "control:mo
 # given the next recorded message instead (the recording keeps no timeouts), so Move's estimates
 # thread, which takes one at its start (no pose within 500 ms of the fork), goes out of step.
 REPLAY_GAPS = {
-    "Joy": "anodize replay: a clock read past the recorded ones is message time, which breaks Joy's period",
     "Move": "anodize replay: a receive's `else timeout` in the run is not replayed (the recording keeps none)",
 }
 
