@@ -19,7 +19,9 @@ returns at once.
 
 What a replay cannot reproduce: time read past the endpoint (``time.monotonic()``,
 ``time.sleep`` in the role's code: it still sleeps); a ``recv(..., timeout=...)`` that
-timed out in the run (it gets the next recorded message instead); the interleaving of a
+timed out in the run (it gets the next recorded message instead; a wait under the
+protocol's ``within`` that expired in the run does expire again: the recording says where);
+the interleaving of a
 role's own threads (each thread gets its channels' messages in the recorded order, and
 its own clock readings, but two threads that share state run as the replay's scheduler
 runs them); and the channels a recording leaves out (both ends in one group, unless the
@@ -354,7 +356,7 @@ def _reading(message: RecordedMessage, done: int, readings: dict[str, list[tuple
         found = json.loads(codec_for_sort(None).ros.deserialize(bytes(message.data)).data)  # type: ignore[attr-defined]
         branch = found.pop("branch")
         (kind, value), = found.items()
-        if (not isinstance(branch, str) or kind not in ("now", "wall") or not isinstance(value, float)
+        if (not isinstance(branch, str) or kind not in ("now", "wall", "expiry") or not isinstance(value, float)
                 or not math.isfinite(value)):  # JSON may say NaN or Infinity: no clock reads that
             raise ValueError(f"not a reading: {found!r}")
     except (AnodizeError, ValueError, TypeError, KeyError, AttributeError, RecursionError) as error:

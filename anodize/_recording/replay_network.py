@@ -137,7 +137,8 @@ class ReplayClock(threading.Event):
     Args:
         network: the replay's network.
         readings: per endpoint (``""``, ``"1"``, ...), the recorded readings: ``(kind, value,
-            time read)`` with kind ``"now"`` or ``"wall"``, the time in ns since the epoch.
+            time read)`` with kind ``"now"`` or ``"wall"`` (or ``"expiry"``: a deadline passed as the
+            endpoint waited), the time in ns since the epoch.
         start: the time (seconds since the epoch) a thread that has received nothing reads.
     """
 
@@ -175,6 +176,22 @@ class ReplayClock(threading.Event):
 
     def now(self, branch: str) -> float:
         return self._read(branch, "now")
+
+    def expired(self, branch: str) -> bool:
+        """Whether endpoint ``branch``'s wait expired here in the run (its next recorded reading
+        is an expiry, which is then taken): the replay expires it too, though the message the
+        run had not received in time is there."""
+        with self._lock:  # a look at the branch's own next reading: only its thread takes them
+            readings = self._readings.get(branch)
+            if not readings or readings[0][0] != "expiry":
+                return False
+        self._network.turnstile.take(("clock", branch), self._network.role)  # the expiry's turn
+        with self._lock:
+            readings = self._readings.get(branch)
+            if readings and readings[0][0] == "expiry":
+                readings.popleft()
+                self.replayed += 1
+        return True
 
     def wall(self, branch: str) -> float:
         return self._read(branch, "wall")

@@ -174,8 +174,8 @@ class Recorder:
 
     def reading(self, role: str, branch: str, kind: str, value: float) -> None:
         """Record that ``role``'s endpoint ``branch`` read ``value`` from its clock (``kind``: "now"
-        or "wall"), on the role's clock channel; never waits (beyond the backlog it is lost, and the
-        channel's numbering shows the gap to a replay)."""
+        or "wall"; "expiry": a deadline passed as it waited), on the role's clock channel; never
+        waits (beyond the backlog it is lost, and the channel's numbering shows the gap to a replay)."""
         codec = codec_for_sort(None)  # a JSON String
         data = codec.ros.serialize(codec.ros.cls(data=json.dumps({"branch": branch, kind: value})))
         with self._lock:
@@ -449,6 +449,11 @@ class RecordingClock:
         value = time.time()
         self._recorder.reading(self._role, branch, "wall", value)
         return value
+
+    def expiry(self, branch: str) -> None:
+        """A deadline passed while the endpoint waited with nothing there (``else timeout`` or a
+        miss): recorded among the readings, so that a replay expires at the same point."""
+        self._recorder.reading(self._role, branch, "expiry", time.monotonic())
 
 
 class TappedChannel:

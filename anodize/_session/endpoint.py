@@ -358,6 +358,9 @@ class Endpoint(_Core):
         the readings in the order they were taken, the clock is read here once whether or not
         the message is there (and once more by the monitor, for the time of the receive)."""
         left = (due - monitor.clock()) / 1e9
+        if self._expired_in_the_run():  # a replay: the recorded run's wait expired here
+            monitor.expire(frm)
+            return Message(TIMEOUT, None)
         try:
             item = channel.get_nowait()
         except queue.Empty:
@@ -372,6 +375,7 @@ class Endpoint(_Core):
                 try:  # a message that is there is always taken before the deadline is judged
                     item = channel.get_nowait()
                 except queue.Empty:
+                    self._note_expiry()
                     monitor.expire(frm)  # raises DeadlineMissedError, unless `else timeout` was written
                     return Message(TIMEOUT, None)
         if type(item) is tuple:  # a message (a signal goes the common way)
@@ -379,6 +383,17 @@ class Endpoint(_Core):
             self.received[frm] += 1
             return _new_tuple(Message, item)
         return self._accept(frm, item, channel)
+
+    def _note_expiry(self) -> None:
+        """Tell the clock a deadline passed as this endpoint waited (a recording records it)."""
+        note = getattr(self._clock, "expiry", None)
+        if note is not None:
+            note(self._branch)
+
+    def _expired_in_the_run(self) -> bool:
+        """Whether the clock is a replay's whose recorded run expired this wait (see ReplayClock)."""
+        expired = getattr(self._clock, "expired", None)
+        return expired is not None and bool(expired(self._branch))
 
     def recv_many(self, frm: str, limit: int = 1024, timeout: float | None = None) -> list[Message]:
         """Receive the next message from ``frm`` as :meth:`recv` does, then up to ``limit - 1``
@@ -482,12 +497,17 @@ class Endpoint(_Core):
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
             due = self._earliest_due(wanted)
             if due is not None:  # the protocol's deadline may end the wait first
-                left = max(0.0, (due[0] - due[1].clock()) / 1e9)
+                owner, monitor = due[1], due[1]._monitor
+                assert monitor is not None  # only monitored endpoints have deadlines
+                left = max(0.0, (due[0] - monitor.clock()) / 1e9)
+                if owner._expired_in_the_run():  # a replay: the recorded run's wait expired here
+                    monitor.expire(due[2])
+                    return due[2], Message(TIMEOUT, None)
                 if remaining is None or left < remaining:
                     try:
                         peer = self._wait_any(left, wanted)
                     except TimeoutError:
-                        return self._expire_any(due[1], due[2], wanted)
+                        return self._expire_any(owner, due[2], wanted)
                     if not wanted(peer):
                         self._skipped.add(peer)
                         continue
@@ -504,29 +524,35 @@ class Endpoint(_Core):
                 continue
             return peer, self._take(peer, channel)
 
-    def _earliest_due(self, wanted: Callable[[str], bool]) -> tuple[int, Monitor, str] | None:
+    def _earliest_due(self, wanted: Callable[[str], bool]) -> tuple[int, Endpoint, str] | None:
         """The earliest deadline among the messages ``recv_any`` waits for: when (ns), whose
-        monitor (this endpoint's or a branch's), from which peer; None if none has one."""
-        found: tuple[int, Monitor, str] | None = None
-        for monitor in self._leaf_monitors():
-            if not monitor.deadlines[monitor.state] or monitor.previous is None:
+        endpoint (this one or a branch's: its monitor holds the deadline), from which peer; None
+        if none has one."""
+        found: tuple[int, Endpoint, str] | None = None
+        for owner in self._leaf_endpoints():
+            monitor = owner._monitor
+            if monitor is None or not monitor.deadlines[monitor.state] or monitor.previous is None:
                 continue
             for peer, (within, _, _) in monitor.deadlines[monitor.state].items():
                 if peer is not None and wanted(peer) and (found is None or monitor.previous + within < found[0]):
-                    found = (monitor.previous + within, monitor, peer)
+                    found = (monitor.previous + within, owner, peer)
         return found
 
-    def _leaf_monitors(self) -> list[Monitor]:
+    def _leaf_endpoints(self) -> list[Endpoint]:
         if self._branches is not None:
-            return [m for branch in self._branches for m in branch._leaf_monitors()]
-        return [] if self._monitor is None else [self._monitor]
+            return [e for branch in self._branches for e in branch._leaf_endpoints()]
+        return [self]
 
-    def _expire_any(self, monitor: Monitor, peer: str, wanted: Callable[[str], bool]) -> tuple[str, Message]:
+    def _expire_any(self, owner: Endpoint, peer: str, wanted: Callable[[str], bool]) -> tuple[str, Message]:
         """``recv_any``'s deadline passed: a wanted message that is there is taken first; else the
-        monitor blames ``peer`` or takes the timeout (``else timeout``)."""
+        monitor of ``owner`` (this endpoint or a branch's) blames ``peer`` or takes the timeout
+        (``else timeout``)."""
         for other, channel in self._all_in().items():
             if wanted(other) and not channel.empty():
                 return other, self._take(other, channel)
+        monitor = owner._monitor
+        assert monitor is not None
+        owner._note_expiry()
         monitor.expire(peer)
         return peer, Message(TIMEOUT, None)
 

@@ -31,3 +31,25 @@ def out_of_range(ep: anodize.Endpoint) -> None:
 def motor(ep: anodize.Endpoint) -> None:
     while ep.recv("C").label == "cmd":
         pass
+
+
+# S sends r, waits for M's count, stalls past M's deadline, and goes on; M counts the timeouts it
+# takes and sends each count back: what M sends depends on where its waits expired.
+WATCH = "global W(S, M) = mu t. S -> M : { r(c: int). M -> S : seen(n: int). t, stop } within 50ms else timeout"
+
+
+def stalling_sensor(ep: anodize.Endpoint) -> None:
+    for c in range(3):
+        ep.send("M", "r", {"c": c})
+        ep.recv("M")
+        ep.sleep(0.12 * c)  # 0, then at least two of M's 50 ms, then at least four
+    ep.send("M", "stop")
+
+
+def counting_monitor(ep: anodize.Endpoint) -> None:
+    timeouts = 0
+    while (message := ep.recv("S")).label != "stop":
+        if message.label == anodize.TIMEOUT:
+            timeouts += 1
+        else:
+            ep.send("S", "seen", {"n": timeouts})

@@ -56,19 +56,9 @@ ROLES = {"Joy": "control:joy", "Control": "control:control", "Move": "control:mo
          "Camera": "perception:camera", "VisOdom": "perception:visodom", "Planner": "planner:planner"}
 
 
-# Two gaps of anodize's replay that TinMan's contract (tinman.proto) runs into, reported to anodize:
-# beyond the run's last clock reading a replayed role reads message time (since the epoch) where its
-# monotonic readings were, so Joy's next send, which the run never made, breaks its period before
-# the replay can say the recording ends; and a receive that took its `else timeout` in the run is
-# given the next recorded message instead (the recording keeps no timeouts), so Move's estimates
-# thread, which takes one at its start (no pose within 500 ms of the fork), goes out of step.
-REPLAY_GAPS = {
-    "Move": "anodize replay: a receive's `else timeout` in the run is not replayed (the recording keeps none)",
-}
-
-
-@pytest.mark.parametrize("role", [pytest.param(role, marks=pytest.mark.xfail(reason=REPLAY_GAPS[role], strict=True))
-                                  if role in REPLAY_GAPS else role for role in sorted(ROLES)])
+# Joy's period and Move's timeouts (tinman.proto's contract) replay too: the replay's clock keeps
+# its origin past the recorded readings, and a wait that expired in the run expires in the replay.
+@pytest.mark.parametrize("role", sorted(ROLES))
 def test_each_role_but_the_simulator_s_replays_equal_and_writes_nothing_into_the_run(recorded: Path,
                                                                                      role: str) -> None:
     before = _folder(recorded)

@@ -28,6 +28,7 @@ from hypothesis import strategies as st
 from timed_machines import timed_global
 
 import anodize
+import sessiontypes
 from anodize import TIMEOUT, DeadlineMissedError, ProtocolViolationError
 from anodize._session.endpoint import Endpoint
 from anodize._session.monitor import Monitor
@@ -625,3 +626,25 @@ def test_a_recorded_constrained_run_replays_equal_with_the_monitors_readings(tmp
     assert replayed.ok or role == "M", replayed.text()  # M sends nothing: a replay of it compares nothing
     assert "ended: M returned at the end of its local type" in replayed.text() or role == "C"
     assert replayed.clock == {"C": (4, 4, 0), "M": (8, 8, 0)}[role]
+
+
+def test_a_recorded_run_whose_waits_expired_replays_them_where_they_expired(tmp_path: FilePath) -> None:
+    """The recording keeps where a wait expired (``else timeout``): the replay expires the same
+    waits, though the messages the run had not received in time are there at once, so a role whose
+    output depends on its timeouts replays equal."""
+    from anodize._recording.reader import open_recording
+    from anodize._recording.replay import replay
+
+    gt = sessiontypes.loads(timed_roles.WATCH, "watch.proto").globals["W"]
+    system = anodize.System(gt)
+    system.group("sensing").role("S", timed_roles.stalling_sensor)
+    system.group("watching").role("M", timed_roles.counting_monitor)
+    path = tmp_path / "run.mcap"
+    report = system.run(timeout=30, taps=[anodize.Recording(path)])
+    assert report.ok, report.summary()
+    taken = sum(int(c["timeouts"] or 0) for key, c in report.constraints.items() if key.startswith("M "))
+    assert taken >= 6, report.constraints  # two, then four, at least
+    with open_recording(path) as recording:
+        replayed = replay(recording, gt, "M", timed_roles.counting_monitor, timeout=20.0)
+    assert replayed.divergence is None and replayed.ok, replayed.text()
+    assert "sent on M->S: 3 compared of 3 recorded" in replayed.text(), replayed.text()
