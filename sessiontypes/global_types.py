@@ -18,7 +18,7 @@ from .location import NOWHERE, Location
 from .sorts import Interaction
 
 __all__ = [
-    "Branch", "Choice", "RoutedBranch", "Routed", "Rec", "Var", "End", "Parallel", "GlobalTerm",
+    "Branch", "Choice", "RoutedBranch", "Routed", "Rec", "Var", "End", "Parallel", "GlobalTerm", "children",
 ]
 
 
@@ -100,3 +100,17 @@ class Parallel:
 
 
 GlobalTerm = Choice | Routed | Rec | Var | End | Parallel
+
+
+def children(term: GlobalTerm) -> list[GlobalTerm]:
+    """The terms right below ``term``: each branch's continuation, a loop's body, each parallel part."""
+    match term:
+        case Choice(branches=branches):
+            return [b.continuation for b in branches]
+        case Routed(branches=routes):
+            return [r.continuation for r in routes]
+        case Rec(body=body):
+            return [body]
+        case Parallel(branches=parts):
+            return list(parts)
+    return []

@@ -56,22 +56,9 @@ def project_declared(protocol: str, roles: tuple[str, ...], body: g.GlobalTerm, 
 
 def project(term: g.GlobalTerm, role: str, protocol: str = "<global>") -> lt.LocalTerm:
     """Project a global type term onto ``role`` (see :func:`project_declared`)."""
-    nodes = find_shared(term, _children)
+    nodes = find_shared(term, g.children)
     shared = Sharing(nodes)
     return run_deep(_Projector(protocol, role, (), shared).project, term)
-
-
-def _children(term: g.GlobalTerm) -> list[g.GlobalTerm]:
-    match term:
-        case g.Choice(branches=branches):
-            return [b.continuation for b in branches]
-        case g.Routed(branches=routes):
-            return [r.continuation for r in routes]
-        case g.Rec(body=body):
-            return [body]
-        case g.Parallel(branches=parts):
-            return list(parts)
-    return []
 
 
 @dataclass

@@ -45,19 +45,6 @@ def _describe(choice: g.Choice) -> str:
     return f"{choice.sender} -> {choice.receiver} : {labels}"
 
 
-def _children(term: g.GlobalTerm) -> list[g.GlobalTerm]:
-    match term:
-        case g.Choice(branches=branches):
-            return [b.continuation for b in branches]
-        case g.Routed(branches=routes):
-            return [r.continuation for r in routes]
-        case g.Rec(body=body):
-            return [body]
-        case g.Parallel(branches=parts):
-            return list(parts)
-    return []
-
-
 def _periodic_choices(body: g.GlobalTerm) -> list[g.Choice]:
     """Every interaction with ``every``, each shared node visited once."""
     found: list[g.Choice] = []
@@ -70,7 +57,7 @@ def _periodic_choices(body: g.GlobalTerm) -> list[g.Choice]:
         seen.add(id(term))
         if isinstance(term, g.Choice) and term.timing is not None and term.timing.every is not None:
             found.append(term)
-        stack.extend(_children(term))
+        stack.extend(g.children(term))
     return found
 
 
@@ -88,12 +75,12 @@ def _repeated(body: g.GlobalTerm) -> set[int]:
                 continue
             if not ready:
                 pending.append((node, True))
-                pending.extend((child, False) for child in _children(node) if id(child) not in free)
+                pending.extend((child, False) for child in g.children(node) if id(child) not in free)
                 continue
             if isinstance(node, g.Var):
                 free[id(node)] = frozenset((node.name,))
             else:
-                names = frozenset().union(*[free[id(c)] for c in _children(node)])
+                names = frozenset().union(*[free[id(c)] for c in g.children(node)])
                 free[id(node)] = names - {node.var} if isinstance(node, g.Rec) else names
         return free[id(term)]
 
@@ -108,7 +95,7 @@ def _repeated(body: g.GlobalTerm) -> set[int]:
         if isinstance(term, g.Choice) and loops & free_in(term):
             repeated.add(id(term))
         inner = loops | {term.var} if isinstance(term, g.Rec) else loops
-        stack.extend((child, inner) for child in _children(term))
+        stack.extend((child, inner) for child in g.children(term))
     return repeated
 
 
