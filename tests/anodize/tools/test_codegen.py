@@ -280,7 +280,12 @@ def test_fork_wraps_each_branch_endpoint(tmp_path: Path) -> None:
     assert (type(control), type(scans), type(estimates), type(planning)) == (
         move.Branch1State0, move.Branch2State0, move.Branch3State0, move.Branch4State0)
     control_endpoint, scans_endpoint, estimates_endpoint, planning_endpoint = endpoint.branches
-    control_endpoint.incoming.append(Message("Twist", "forward"))
+    # A Twist within TinMan's contract (the generated send checks its refinement before it goes).
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Twist as Twist
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Vector3 as Vector3
+
+    forward = Twist(linear=Vector3(x=0.3, y=0.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=0.5))
+    control_endpoint.incoming.append(Message("Twist", forward))
     scans_endpoint.incoming.append(Message("LaserScan", "clear ahead"))
     estimates_endpoint.incoming.append(Message("Pose", "here"))
     planning_endpoint.incoming.append(Message("Path", ["a", "b"]))
@@ -292,7 +297,7 @@ def test_fork_wraps_each_branch_endpoint(tmp_path: Path) -> None:
     assert (type(estimating), pose) == (move.Branch3State0, "here")
     path, planning_again = planning.recv_path()
     assert (type(planning_again), path) == (move.Branch4State0, ["a", "b"])
-    assert control_endpoint.sent == [("Gazebo", "Twist", "forward")]
+    assert control_endpoint.sent == [("Gazebo", "Twist", forward)]
     assert "parallel branch 4" in move.Branch4State0.__doc__
     with pytest.raises(LinearityError, match=r"^state State0 was already used"):
         start.fork()
