@@ -47,7 +47,7 @@ from anodize._recording.reader import open_recording  # noqa: E402
 from anodize._recording.verify import VerifyReport, verify  # noqa: E402
 from sessiontypes import GlobalType  # noqa: E402
 
-SETTINGS = settings(deadline=None, max_examples=examples(50),
+SETTINGS = settings(deadline=None, max_examples=examples(25),
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
                                            HealthCheck.filter_too_much, HealthCheck.function_scoped_fixture])
 RUN_TIMEOUT = 20.0

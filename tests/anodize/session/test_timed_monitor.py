@@ -511,18 +511,22 @@ def _run(kind: str, controller: Callable[[anodize.Endpoint], None],
     return system.run(timeout=60)
 
 
+# tests/anodize/test_timed_end_to_end.py runs a conforming run, a late role and an out-of-range
+# payload on each transport from real .proto text; here, on threads, the same from hand-built
+# machines, and on each transport only what it does not: a payload refused on arrival alone.
+INPROC = TRANSPORTS[:1]
 DEADLINE = {("C", "cmd"): (Timing(within=200 * MS), None)}
 LIMIT = {("C", "cmd"): (None, cmp("<=", at("v"), Number(10)))}
 
 
-@pytest.mark.parametrize("kind", TRANSPORTS)
+@pytest.mark.parametrize("kind", INPROC)
 def test_a_run_within_its_constraints_is_ok(kind: str) -> None:
     report = _run(kind, timed_roles.punctual, {("C", "cmd"): (Timing(within=30_000 * MS),
                                                               cmp("<=", at("v"), Number(10)))}, ["C", "M"])
     assert report.ok, report.summary()
 
 
-@pytest.mark.parametrize("kind", TRANSPORTS)
+@pytest.mark.parametrize("kind", INPROC)
 def test_a_late_sender_is_blamed_by_its_own_monitor(kind: str) -> None:
     report = _run(kind, timed_roles.late, DEADLINE, ["C"])
     error = report.roles["C"].error
@@ -530,7 +534,7 @@ def test_a_late_sender_is_blamed_by_its_own_monitor(kind: str) -> None:
     assert (error.role, error.blame, error.kind) == ("C", "C", "deadline")
 
 
-@pytest.mark.parametrize("kind", TRANSPORTS)
+@pytest.mark.parametrize("kind", INPROC)
 def test_a_late_sender_is_blamed_by_the_waiting_receiver_at_the_deadline(kind: str) -> None:
     report = _run(kind, timed_roles.late, DEADLINE, ["M"])
     error = report.roles["M"].error
@@ -538,7 +542,7 @@ def test_a_late_sender_is_blamed_by_the_waiting_receiver_at_the_deadline(kind: s
     assert (error.role, error.blame, error.kind) == ("M", "C", "deadline")
 
 
-@pytest.mark.parametrize("kind", TRANSPORTS)
+@pytest.mark.parametrize("kind", INPROC)
 def test_an_out_of_range_payload_is_refused_by_the_sender(kind: str) -> None:
     report = _run(kind, timed_roles.out_of_range, LIMIT, ["C", "M"])
     error = report.roles["C"].error
@@ -581,7 +585,7 @@ _VALUES = st.one_of(st.none(), st.booleans(), st.integers(-3, 3), st.sampled_fro
                     st.text(max_size=2))
 
 
-@settings(max_examples=examples(1500), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(400), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(_expressions(), st.dictionaries(st.sampled_from(["x", "y", "s", "b", "r"]), _VALUES | st.fixed_dictionaries(
     {"z": _VALUES})), st.dictionaries(st.sampled_from(["y", "gone"]), _VALUES), st.sets(st.sampled_from(["x", "y"])))
 def test_the_fast_check_holds_only_where_the_reference_holds(expr: Expr, payload: dict[str, object],
