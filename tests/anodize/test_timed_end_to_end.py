@@ -20,6 +20,7 @@ from typing import Any
 import drive_roles
 import pytest
 from dds_hosts import domain
+from mcap_rewrite import rewrite
 
 import anodize
 import sessiontypes
@@ -227,37 +228,8 @@ def test_else_timeout_gives_the_waiting_role_a_timeout_and_the_run_goes_on(kind:
 
 # ---- tampered recordings: verify blames with index, time and location --------------------------
 
-def _rewrite(source: Path, target: Path, change: Any) -> None:
-    """Copy a recording; ``change(messages)`` edits the list of ``[channel key, log time, sequence,
-    data, metadata]`` in place (as tests/anodize/recording/test_recording.py's ``_rewrite``)."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
-
-    with source.open("rb") as stream:
-        reader = make_reader(stream)
-        summary = reader.get_summary()
-        assert summary is not None
-        schemas = summary.schemas
-        messages = [[(c.topic, c.schema_id, tuple(sorted(c.metadata.items()))), m.log_time, m.sequence, m.data,
-                     c.metadata] for _, c, m in reader.iter_messages(log_time_order=True)]
-        metadata = list(reader.iter_metadata())
-    change(messages)
-    with target.open("wb") as stream:
-        writer = Writer(stream)
-        writer.start(profile="ros2", library="test")
-        ids = {sid: writer.register_schema(s.name, s.encoding, s.data) for sid, s in schemas.items()}
-        channels: dict[Any, int] = {}
-        for key, log_time, sequence, data, _ in messages:
-            if key not in channels:
-                channels[key] = writer.register_channel(key[0], "cdr", ids[key[1]], dict(key[2]))
-            writer.add_message(channels[key], log_time, data, log_time, sequence)
-        for record in metadata:
-            writer.add_metadata(record.name, dict(record.metadata))
-        writer.finish()
-
-
 def _label(message: list[Any]) -> str:
-    label: str = message[4].get("anodize.label", "")  # "": a clock channel's reading
+    label: str = dict(message[0][2]).get("anodize.label", "")  # the channel's metadata; "": a clock channel
     return label
 
 
@@ -288,7 +260,7 @@ def test_a_recording_with_a_payload_out_of_range_is_blamed_on_its_sender(
         second[3] = codec.encode({"v": -1.75})
         times.append(second[1])
 
-    _rewrite(recorded, tmp_path / "fast.mcap", speed_up)
+    rewrite(recorded, tmp_path / "fast.mcap", speed_up)
     code, out, broken = _violations(tmp_path / "fast.mcap", capsys)
     assert code == 1, out
     assert list(broken) == ["C->M"], out
@@ -312,7 +284,7 @@ def test_a_recording_with_its_times_stretched_is_blamed_on_the_late_sender(
                 m[1] += 3 * S // 2
         moved.append(start + 3 * S // 2)
 
-    _rewrite(recorded, tmp_path / "slow.mcap", stretch)
+    rewrite(recorded, tmp_path / "slow.mcap", stretch)
     code, out, broken = _violations(tmp_path / "slow.mcap", capsys)
     assert code == 1, out
     pose = broken["O->M"]

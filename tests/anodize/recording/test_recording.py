@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 sys.path.insert(0, str(Path(__file__).parents[1]))
 sys.path.insert(0, str(Path(__file__).parents[2] / "sessiontypes"))
 
+from mcap_rewrite import rewrite
 from role_drivers import BOGUS_LABEL, build_system, can_always_end, load_global, machines_of
 from strategies import GeneratedGlobal, global_protocols
 
@@ -133,35 +134,6 @@ def test_the_json_of_other_sorts_reads_back_what_was_written() -> None:
 
 # ---- mutated recordings ----------------------------------------------------------------------
 
-def _rewrite(source: Path, target: Path, change: Any) -> None:
-    """Copy a recording message by message; ``change(messages)`` edits the list of
-    ``[channel_key, log_time, sequence, data]`` in place, where ``channel_key`` is
-    ``(topic, schema id, metadata items)`` (a new key makes a new channel)."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
-
-    with source.open("rb") as stream:
-        reader = make_reader(stream)
-        summary = reader.get_summary()
-        assert summary is not None
-        schemas = summary.schemas
-        messages = [[(c.topic, c.schema_id, tuple(sorted(c.metadata.items()))), m.log_time, m.sequence, m.data]
-                    for _, c, m in reader.iter_messages(log_time_order=True)]
-        metadata = list(reader.iter_metadata())
-    change(messages)
-    with target.open("wb") as stream:
-        writer = Writer(stream)
-        writer.start(profile="ros2", library="test")
-        ids = {sid: writer.register_schema(s.name, s.encoding, s.data) for sid, s in schemas.items()}
-        channels: dict[Any, int] = {}
-        for key, log_time, sequence, data in messages:
-            if key not in channels:
-                channels[key] = writer.register_channel(key[0], "cdr", ids[key[1]], dict(key[2]))
-            writer.add_message(channels[key], log_time, data, log_time, sequence)
-        for record in metadata:
-            writer.add_metadata(record.name, dict(record.metadata))
-        writer.finish()
-
 
 def _positions(messages: list[Any], channel: tuple[str, str]) -> list[int]:
     return [i for i, m in enumerate(messages)
@@ -208,7 +180,7 @@ def test_verify_names_the_channel_index_and_blame_of_a_mutation(
             string = codec_for_sort(None).ros
             spot[3] = string.serialize(string.cls(data='{"$object": "nowhere:Nothing", "repr": "?"}'))
 
-    _rewrite(folder / "run.mcap", folder / "mutated.mcap", change)
+    rewrite(folder / "run.mcap", folder / "mutated.mcap", change)
     with open_recording(folder / "mutated.mcap") as recording:
         report = verify(recording, global_type)
     note(report.text())
@@ -232,7 +204,7 @@ def test_the_cli_reports_a_violation_with_state_expectation_and_location(
 
     def b_sends_a_quote(messages: list[Any]) -> None:
         messages[0][0] = _with(messages[0][0], label="quote")  # only S sends quotes
-    _rewrite(tmp_path / "run.mcap", tmp_path / "bad.mcap", b_sends_a_quote)
+    rewrite(tmp_path / "run.mcap", tmp_path / "bad.mcap", b_sends_a_quote)
     capsys.readouterr()
     assert main(["verify", str(tmp_path / "bad.mcap"), "--json", str(tmp_path / "v.json")]) == 1
     out = capsys.readouterr().out
@@ -333,7 +305,7 @@ def test_tinman_records_and_its_recording_verifies(tmp_path: Path) -> None:
     def cut_the_tenth_twist(messages: list[Any]) -> None:
         twists = [m for m in messages if m[0][0] == "/cmd_vel"]
         twists[10][3] = twists[10][3][:20]  # a Twist is 52 bytes of CDR
-    _rewrite(out / "run.mcap", tmp_path / "cut.mcap", cut_the_tenth_twist)
+    rewrite(out / "run.mcap", tmp_path / "cut.mcap", cut_the_tenth_twist)
     with open_recording(tmp_path / "cut.mcap") as recording:
         report = verify(recording, sessiontypes.load(TINMAN / "tinman.proto").globals["TinManParallel"])
     violation = report.channels["Move->Gazebo"].violation
@@ -367,7 +339,7 @@ def test_a_recorded_channel_the_protocol_does_not_have_fails_verify(tmp_path: Pa
 
     def to_a_stranger(messages: list[Any]) -> None:
         messages[0][0] = _with(messages[0][0], receiver="Eve")
-    _rewrite(tmp_path / "run.mcap", tmp_path / "odd.mcap", to_a_stranger)
+    rewrite(tmp_path / "run.mcap", tmp_path / "odd.mcap", to_a_stranger)
     with open_recording(tmp_path / "odd.mcap") as recording:
         report = verify(recording, global_type)
     assert not report.conforms
@@ -443,7 +415,7 @@ def test_verify_of_a_recording_with_hostile_json_reports_it_without_a_traceback(
 
     def poison(messages: list[Any]) -> None:
         messages[0][3] = codec_for_sort(None).ros.serialize(codec_for_sort(None).ros.cls(data="[" * 100_000))
-    _rewrite(tmp_path / "run.mcap", tmp_path / "deep.mcap", poison)
+    rewrite(tmp_path / "run.mcap", tmp_path / "deep.mcap", poison)
     capsys.readouterr()
     assert main(["verify", str(tmp_path / "deep.mcap")]) == 1
     captured = capsys.readouterr()
