@@ -34,7 +34,7 @@ from sessiontypes import StateMachine, Transition
 from sessiontypes.constraints import Expr, format_duration
 from sessiontypes.refine import Predicate, compile_predicate, print_expr
 
-from .._session.timed import format_nanos
+from .._session.timed import constraint_location, format_nanos
 
 __all__ = ["Breach", "RoleTimes", "Earlier", "judge_refinement", "judge_deadline", "judge_period",
            "constrained", "machines_of", "Held", "constraints_of"]
@@ -199,7 +199,7 @@ def judge_refinement(t: Transition, label: str, payload: object, earlier: Mappin
         return None
     shown = repr(payload)
     shown = shown if len(shown) <= _SHOWN else shown[:_SHOWN - 3] + "..."
-    return Breach("refinement", f"{reason} for {label} {shown}", _where(t.refinement.location, t))
+    return Breach("refinement", f"{reason} for {label} {shown}", constraint_location(t.refinement, t))
 
 
 def judge_deadline(t: Transition, role: str, sender: bool, previous: int | None, log_time: int) -> Breach | None:
@@ -213,7 +213,7 @@ def judge_deadline(t: Transition, role: str, sender: bool, previous: int | None,
     late = gap - timing.within
     what = "sent" if sender else f"it reached {role}"
     return Breach("deadline", f"deadline missed: {what} {format_nanos(gap)} after {role}'s previous action, later than "
-                  f"within {format_nanos(timing.within)}", _where(timing.location, t), late)
+                  f"within {format_nanos(timing.within)}", constraint_location(timing, t), late)
 
 
 def judge_period(t: Transition, previous: int | None, log_time: int) -> Breach | None:
@@ -227,10 +227,5 @@ def judge_period(t: Transition, previous: int | None, log_time: int) -> Breach |
         return None
     off, side = (low - gap, "early") if gap < low else (gap - high, "late")
     return Breach("period", f"period missed: sent {format_nanos(gap)} after the interaction's previous send, "
-                  f"{format_nanos(off)} too {side} for {timing}", _where(timing.location, t), off)
-
-
-def _where(location: object, t: Transition) -> str:
-    line = getattr(location, "line", 0)
-    return str(location) if line > 0 else str(t.location)
+                  f"{format_nanos(off)} too {side} for {timing}", constraint_location(timing, t), off)
 

@@ -20,7 +20,7 @@ from sessiontypes import StateMachine, Transition
 from ..errors import Action, DeadlineMissedError, ProtocolViolationError
 from .payloads import Validator, exact_types_for, identities, real_name, validator_for
 from .statistics import ConstraintCheck
-from .timed import Rule, format_nanos, plan_for
+from .timed import Rule, constraint_location, format_nanos, plan_for
 
 __all__ = ["Monitor", "TIMEOUT"]
 
@@ -152,7 +152,7 @@ class Monitor:
             if not held and rule.check is not None and (reason := rule.check(payload, self.earlier)) is not None:
                 raise self.violation(Action(kind, peer, label, _type_name(payload)), blame,
                                      f"{reason} for {label} {_short(payload)}", rule.transition,
-                                     _where(rule.transition.refinement, rule.transition))
+                                     constraint_location(rule.transition.refinement, rule.transition))
         if rule.remembers and type(payload) is dict:
             for name in rule.remembers:
                 self.earlier[name] = payload[name]
@@ -241,7 +241,7 @@ class Monitor:
 
     def _missed(self, actual: Action, transition: Transition, blame: str, reason: str, deadline: int, late: int,
                 kind: str) -> DeadlineMissedError:
-        plain = self.violation(actual, blame, reason, transition, _where(transition.timing, transition))
+        plain = self.violation(actual, blame, reason, transition, constraint_location(transition.timing, transition))
         return DeadlineMissedError(plain.protocol, plain.role, plain.peer, plain.state, plain.expected, actual,
                                    blame, plain.location, reason, deadline, late, kind)
 
@@ -269,12 +269,6 @@ class Monitor:
         state = f"{self.state} ({self.machine.describe(self.state)})"
         return ProtocolViolationError(self.protocol, self.role, actual.peer, state, expected, actual,
                                       blame, location, reason)
-
-
-def _where(constraint: object, transition: Transition) -> str:
-    """Where a broken constraint is written (as verify reports it), else its interaction."""
-    location = getattr(constraint, "location", None)
-    return str(location) if getattr(location, "line", 0) > 0 else str(transition.location)
 
 
 def _short(payload: object) -> str:

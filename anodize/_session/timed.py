@@ -19,7 +19,7 @@ from sessiontypes.refine import Predicate, compile_predicate, print_expr
 from .predicates import FastCheck, fast_predicate
 from .statistics import ConstraintCheck
 
-__all__ = ["Rule", "Plan", "to_nanos", "format_nanos", "plan_for"]
+__all__ = ["Rule", "Plan", "to_nanos", "format_nanos", "plan_for", "constraint_location"]
 
 _NANOS_PER_SECOND = 1_000_000_000
 
@@ -40,6 +40,13 @@ def format_nanos(nanos: int) -> str:
         return f"{nanos / 1_000:.1f} us"
     return f"{nanos} ns"
 
+
+
+def constraint_location(constraint: Expr | Timing | None, transition: Transition) -> str:
+    """Where a broken constraint is written (its time clause, its refinement), else where its
+    interaction is: the live monitor, verify and generated code all locate a violation so."""
+    location = getattr(constraint, "location", None)
+    return str(location) if location is not None and location.line > 0 else str(transition.location)
 
 class Rule:
     """What the monitor does on one transition beyond the plain step.

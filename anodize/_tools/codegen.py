@@ -54,6 +54,7 @@ from sessiontypes.refine import print_expr
 
 from .._ros import DEFAULT_DISTRO, rosbags_class
 from .._session import State
+from .._session.timed import constraint_location
 
 __all__ = [
     "GENERATOR_VERSION", "GeneratedModule", "CodegenError", "generate_modules",
@@ -644,7 +645,7 @@ class _Writer:
                 f"        _reason = {check}(_payload, {{}})",
                 "        if _reason is not None:",
                 (f"            raise _refused({where}, ({expected},), {_quote(t.peer)}, {_quote(t.label)}, "
-                 f"_payload, _reason, {_quote(_where(refinement, t))})")]
+                 f"_payload, _reason, {_quote(constraint_location(refinement, t))})")]
 
     def predicate(self, expr: Expr) -> str:
         """The module's compiled predicate of ``expr`` (written once, with ``_refused``)."""
@@ -712,10 +713,3 @@ class _Writer:
                 "        endpoint = self._use()",
                 f"        {', '.join(variables)} = endpoint.fork()",
                 f"        return {', '.join(f'{c}({v})' for c, v in zip(initials, variables, strict=True))}"]
-
-
-def _where(refinement: Expr, t: Transition) -> str:
-    """Where a refinement is written (as the monitor and verify locate its violation), else its
-    interaction."""
-    location = refinement.location
-    return str(location) if location.line > 0 else str(t.location)
