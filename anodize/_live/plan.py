@@ -40,11 +40,14 @@ class LivePlan:
         socket: the UNIX socket where the supervisor takes what the groups tap.
         labels: every label of every channel; a label's index names it on the socket.
         group_of: role -> group, for every role anodize runs (the others are external).
+        on_demand: a label is forwarded only while the supervisor wants it (:data:`~.wire.WANT`),
+            and every label's messages are counted (introspection); else every one is (Foxglove).
     """
 
     socket: str
     labels: tuple[LiveLabel, ...]
     group_of: Mapping[str, str]
+    on_demand: bool = False
     index: Mapping[tuple[str, str, str], int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -63,7 +66,7 @@ class LivePlan:
 
 
 def live_plan(socket: str, machines: Mapping[str, StateMachine], group_of: Mapping[str, str],
-              ros_topics: Mapping[tuple[str, str, str], str]) -> LivePlan:
+              ros_topics: Mapping[tuple[str, str, str], str], on_demand: bool = False) -> LivePlan:
     """The plan of a run whose roles run in ``group_of``'s groups (a role in none is external).
 
     Args:
@@ -71,7 +74,8 @@ def live_plan(socket: str, machines: Mapping[str, StateMachine], group_of: Mappi
         machines: every role's state machine.
         group_of: role -> group name, for every role anodize runs.
         ros_topics: ``(sender, receiver, label) -> ROS topic`` of the labels the system maps.
+        on_demand: forward a label only while it is wanted (introspection).
     """
     labels = tuple(LiveLabel(*key, item.sort, ros_topics.get(key) or default_topic(*key))
                    for key, item in sorted(channel_labels(machines).items()))
-    return LivePlan(socket, labels, dict(group_of))
+    return LivePlan(socket, labels, dict(group_of), on_demand)

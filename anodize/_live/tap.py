@@ -12,6 +12,12 @@ view may thus skip messages, counted per label and sent to the supervisor every
 :data:`STATS_EVERY` seconds; the protocol and a recording (``--record``) never do. The
 tap's threads run at the side-work priority (SCHED_FIFO 1 in a real-time group, else
 nice 19: :func:`~anodize._isolation.sched.side_work_priority`).
+
+Introspection (``anodize echo|hz``) taps every channel the same way, on demand
+(:attr:`~.plan.LivePlan.on_demand`): a label is forwarded only while the supervisor wants
+it (a :data:`~.wire.WANT` frame sets one byte the sending thread reads), as a message
+(echo) or as its time alone (hz, and for echo the messages thinned); otherwise the
+sending thread only counts it, and the counts go with the stats.
 """
 
 from __future__ import annotations
@@ -32,9 +38,10 @@ from .._session.channel import Channel
 from ..taps import TapGroup
 from .inputs import ClientInput, register_input, unregister_input
 from .plan import LivePlan
-from .wire import HELLO, INPUT, MESSAGE, STATS, read_frame, send_frame
+from .wire import HELLO, INPUT, MESSAGE, STATS, WANT, read_frame, send_frame
 
-__all__ = ["GroupLiveView", "LiveTap", "LiveChannel", "LARGE", "LARGE_RATE", "QUEUE"]
+__all__ = ["GroupLiveView", "LiveTap", "LiveChannel", "LARGE", "LARGE_RATE", "QUEUE", "WANT_TIMES",
+           "WANT_MESSAGES"]
 
 LARGE = 4096       # bytes: a message above this is thinned, and waits in its label's one slot
 LARGE_RATE = 10.0  # messages per second a large label is shown at, at most
@@ -42,6 +49,8 @@ QUEUE = 4096       # small messages waiting to be forwarded, at most (<= 16 MiB)
 _SEND_EVERY = 0.02  # seconds: how often the forwarding thread looks when nothing woke it
 STATS_EVERY = 1.0  # seconds between the counts a tap sends the supervisor
 CLOSE_WITHIN = 0.5  # seconds a closing tap waits for its thread (its group keeps beating meanwhile)
+WANT_TIMES = 1     # on demand: a label's times are wanted (hz); forwarded with no data
+WANT_MESSAGES = 2  # on demand: its messages are wanted (echo); a thinned one goes as its time alone
 
 
 @dataclass(frozen=True)
@@ -75,7 +84,10 @@ class LiveTap:
         self.shown = self.thinned = self.dropped = self.unencodable = 0
         self._by_label: dict[int, list[int]] = {}  # label -> [thinned, dropped]
         self.priority = ""  # what side_work_priority applied to the forwarding thread
-        self.inputs = [ClientInput(x, codec_for_sort(x.sort)) for x in plan.labels if x.sender in roles]
+        self.wanted = bytearray(len(plan.labels))  # on demand: per label, WANT_TIMES, WANT_MESSAGES or 0
+        self.seen = [0] * len(plan.labels) if plan.on_demand else []  # on demand: per label, messages so far
+        self.inputs = [] if plan.on_demand else [
+            ClientInput(x, codec_for_sort(x.sort)) for x in plan.labels if x.sender in roles]
         self._sock: socket.socket | None = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             self._sock.connect(plan.socket)
@@ -105,10 +117,20 @@ class LiveTap:
         index = self.plan.index.get((*pair, label))
         if index is None or self._closing:
             return
+        if self.plan.on_demand:
+            self.seen[index] += 1
+            wanted = self.wanted[index]
+            if not wanted:  # nobody looks: a count, nothing more
+                return
+            if wanted == WANT_TIMES:
+                self._put_small(index, time.time_ns(), b"")
+                return
         now = time.monotonic()
         if now < self._next_at.get(index, 0.0):
             self.thinned += 1
             self._counts(index)[0] += 1
+            if self.plan.on_demand:  # its time still counts for a rate
+                self._put_small(index, time.time_ns(), b"")
             return
         try:
             data = self._codec(index).encode(payload)
@@ -124,10 +146,16 @@ class LiveTap:
             self._large[index] = (stamp, data)
         else:
             self._next_at.pop(index, None)
-            if len(self._small) == QUEUE:
-                self.dropped += 1
-                self._counts(self._small[0][0])[1] += 1  # the oldest goes
-            self._small.append((index, stamp, data))  # deque.append: atomic, no lock to wait for
+            self._put_small(index, stamp, data)
+            return
+        if not self._wake.is_set():
+            self._wake.set()
+
+    def _put_small(self, index: int, stamp: int, data: bytes) -> None:
+        if len(self._small) == QUEUE:
+            self.dropped += 1
+            self._counts(self._small[0][0])[1] += 1  # the oldest goes
+        self._small.append((index, stamp, data))  # deque.append: atomic, no lock to wait for
         if not self._wake.is_set():
             self._wake.set()
 
@@ -141,7 +169,8 @@ class LiveTap:
         return json.dumps({"shown": self.shown, "thinned": self.thinned, "dropped": self.dropped,
                            "unencodable": self.unencodable, "priority": self.priority,
                            "labels": {str(i): list(c) for i, c in list(self._by_label.items())},
-                           "inputs": {x.label.topic: [x.received, x.rejected] for x in self.inputs}}).encode()
+                           "inputs": {x.label.topic: [x.received, x.rejected] for x in self.inputs},
+                           "seen": list(self.seen)}).encode()
 
     def _codec(self, index: int) -> SortCodec:
         codec = self._codecs.get(index)
@@ -182,10 +211,12 @@ class LiveTap:
         by_index = {self.plan.index[(x.label.sender, x.label.receiver, x.label.label)]: x for x in self.inputs}
         with contextlib.suppress(OSError):
             while (frame := read_frame(sock)) is not None:
-                kind, index, _, data = frame
+                kind, index, stamp, data = frame
                 found = by_index.get(index)
                 if kind == INPUT and found is not None:
                     found.deliver(data)  # checked by the supervisor already; a failure is only counted
+                elif kind == WANT and 0 <= index < len(self.wanted):
+                    self.wanted[index] = min(max(stamp, 0), WANT_MESSAGES)
 
     def close(self) -> None:
         """Forward what is waiting and what was thinned, and disconnect."""

@@ -9,12 +9,14 @@ from __future__ import annotations
 import socket
 import struct
 
-__all__ = ["HELLO", "MESSAGE", "INPUT", "STATS", "send_frame", "read_frame"]
+__all__ = ["HELLO", "MESSAGE", "INPUT", "STATS", "WANT", "send_frame", "read_frame"]
 
 HELLO = b"H"    # group -> supervisor: data is the group's name
 MESSAGE = b"M"  # group -> supervisor: a tapped message (CDR)
 STATS = b"S"    # group -> supervisor, last: what the group's tap thinned or dropped (JSON)
 INPUT = b"I"    # supervisor -> group: a client's message for the label's sender (CDR)
+WANT = b"W"     # supervisor -> group, on demand (introspection): what the label's messages are wanted
+                # for now, in the time field: 0 nothing, 1 their times only (hz), 2 the messages (echo)
 
 _HEADER = struct.Struct("<IcHq")
 _MAX_FRAME = 1 << 30

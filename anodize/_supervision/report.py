@@ -112,6 +112,9 @@ class GroupStatus:
     ``memory`` is bytes allocated above the baseline (None where not measured);
     ``messages`` and ``received`` count messages sent and received so far;
     ``rate_hz`` is messages sent per second over the last second.
+    ``roles`` is each of the group's roles and where it is (the group's state until the
+    role ends, then how it ended); ``sent`` and ``high_water`` are per channel ``"A->B"`` (messages
+    sent so far, and the most that waited at once); ``scheduling`` is what was applied.
     """
 
     name: str
@@ -123,6 +126,10 @@ class GroupStatus:
     rate_hz: float | None = None
     restarts: int = 0
     note: str = ""
+    roles: Mapping[str, str] = field(default_factory=dict)
+    sent: Mapping[str, int] = field(default_factory=dict)
+    high_water: Mapping[str, int] = field(default_factory=dict)
+    scheduling: str = ""
 
     def line(self) -> str:
         """One line for a terminal, e.g. ``control  running  pid 4242  12.0 MiB  100 msgs  100 msg/s``."""

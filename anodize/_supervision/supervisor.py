@@ -640,7 +640,9 @@ class Supervisor:
         return {name: GroupStatus(
             name=name, state=r.state, pid=r.pid if not r.ended else None, memory=r.memory,
             messages=sum(r.sent.values()), received=sum(r.received.values()),
-            rate_hz=_last_rate(r.stretches[-1] if r.steady else []), restarts=r.restarts, note="; ".join(r.notes))
+            rate_hz=_last_rate(r.stretches[-1] if r.steady else []), restarts=r.restarts, note="; ".join(r.notes),
+            roles={role: str(r.reports[role].status) if role in r.reports else str(r.state) for role in r.group.roles},
+            sent=dict(r.sent), high_water=dict(r.high_water), scheduling=r.scheduling)
             for name, r in self.records.items()}
 
     def report(self) -> RunReport:

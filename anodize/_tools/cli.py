@@ -1,4 +1,4 @@
-"""The ``anodize`` command: check, project, fsm, graph, lint, run, verify, replay.
+"""The ``anodize`` command: check, project, fsm, graph, lint, run, verify, replay, ps, status, channels, echo, hz.
 
 The only module that prints or exits. Exit status: 0 success, 1 the input
 has errors (printed as ``path:line:col: error: ...``), 2 usage errors.
@@ -27,6 +27,8 @@ from sessiontypes.printer import PrintTooLongError, print_local
 
 from ..errors import AnodizeError
 from .codegen import GeneratedModule, generate_modules
+from .introspect import add_commands as add_introspection_commands
+from .introspect import open_introspection, system_name
 
 if TYPE_CHECKING:
     from .._live.server import LiveView
@@ -197,6 +199,7 @@ def _parser() -> argparse.ArgumentParser:
     replay.add_argument("--timeout", type=float, default=60.0, metavar="S",
                         help="stop the role if it has not ended after S seconds (default 60)")
     replay.set_defaults(run=_replay)
+    add_introspection_commands(commands, run=_introspect)
     return parser
 
 
@@ -442,8 +445,10 @@ def _run(args: argparse.Namespace) -> int:
     timeout = args.timeout if args.timeout is not None else config.timeout
     if args.record_inside and args.record is None:
         raise UsageError("--record-inside needs --record PATH")
-    with _taps(args.record, args.foxglove, args.record_inside) as taps:
-        report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout), taps=taps)
+    with _taps(args.record, args.foxglove, args.record_inside) as taps, \
+            _introspection(system_name(args.file), str(config.path)) as served:
+        report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout),
+                            taps=[*taps, *served])
     print(report.summary())
     if args.json:
         out = Path(args.json)
@@ -525,6 +530,26 @@ def _live_view(port: int | None) -> Iterator[LiveView | None]:
         live.close()
 
 
+@contextlib.contextmanager
+def _introspection(name: str, source: str) -> Iterator[list[ChannelTap]]:
+    """The run's introspection server ('anodize ps|status|channels|echo|hz'), if it can be opened."""
+    served, why = open_introspection(name, source)
+    if served is None:
+        print(f"introspection: off ({why}); the run goes on", file=sys.stderr)
+    try:
+        yield [served] if served is not None else []
+    finally:
+        if served is not None:
+            served.close()
+
+
+def _introspect(args: argparse.Namespace) -> int:
+    """ps, status, channels, echo, hz: print what the run answers."""
+    for line in args.lines(args):
+        print(line, flush=True)
+    return EXIT_OK
+
+
 def _replay(args: argparse.Namespace) -> int:
     from .._recording.reader import open_recording
     from .._recording.replay import replay
@@ -587,9 +612,10 @@ def _run_named(name: str, rest: list[str]) -> int:
     prepared = named.prepare(args, lambda line: print(line, flush=True))
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
     try:
-        with _taps(prepared.record, args.foxglove, prepared.record_inside) as taps:
+        with _taps(prepared.record, args.foxglove, prepared.record_inside) as taps, \
+                _introspection(name, name) as served:
             report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
-                                         taps=taps, stop_when=prepared.stop_when)
+                                         taps=[*taps, *served], stop_when=prepared.stop_when)
     finally:
         if progress is not None:
             progress.close()
