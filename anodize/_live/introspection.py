@@ -26,7 +26,6 @@ import json
 import os
 import socket
 import threading
-import time
 from collections import deque
 from collections.abc import Mapping
 from typing import Any
@@ -44,7 +43,7 @@ __all__ = ["Introspection", "REQUEST_BYTES", "RATE_WINDOW"]
 
 REQUEST_BYTES = 4096  # a request line's length at most
 REQUEST_WITHIN = 5.0  # seconds a client has to send its request
-RATE_WINDOW = 2.0     # seconds a channel's rate is measured over
+RATE_WINDOW = 3.0     # seconds a channel's rate is measured over (its group's tap counts every second)
 
 
 class Introspection:
@@ -79,7 +78,7 @@ class Introspection:
         self._groups: dict[int, tuple[socket.socket, threading.Lock]] = {}  # connection -> its socket
         self._stats: dict[int, dict[str, Any]] = {}  # connection -> its tap's latest stats
         self._connections = 0
-        self._samples: deque[tuple[float, list[int]]] = deque()  # (time, messages per label)
+        self._samples: dict[int, deque[tuple[int, list[int]]]] = {}  # connection -> (time, its counts per label)
         self._watchers: dict[int, list[Watcher]] = {}  # label -> who watches it
         self._wanted: dict[int, int] = {}  # label -> what the groups forward of it now
         self.clients = 0
@@ -104,17 +103,13 @@ class Introspection:
         return GroupLiveView(plan)
 
     def status(self, statuses: Mapping[str, Any]) -> None:
-        """Keep the groups' latest status, and a sample of each label's count for its rate."""
+        """Keep the groups' latest status."""
         groups = {name: {"state": str(s.state), "pid": s.pid, "memory": s.memory, "messages": s.messages,
                          "received": s.received, "rate_hz": s.rate_hz, "restarts": s.restarts, "note": s.note,
                          "roles": dict(s.roles), "sent": dict(s.sent), "high_water": dict(s.high_water),
                          "scheduling": s.scheduling} for name, s in statuses.items()}
-        now = time.monotonic()
         with self._lock:
             self._statuses = groups
-            self._samples.append((now, self._seen()))
-            while len(self._samples) > 2 and now - self._samples[1][0] >= RATE_WINDOW:
-                self._samples.popleft()
 
     def end(self) -> list[str]:
         """The run is over: the watchers stop; a note if anyone looked."""
@@ -188,6 +183,10 @@ class Introspection:
                     stats = json.loads(data)
                     with self._lock:
                         self._stats[connection] = stats
+                        samples = self._samples.setdefault(connection, deque())
+                        samples.append((stamp, [int(n) for n in stats.get("seen", ())]))
+                        while len(samples) > 2 and stamp - samples[1][0] >= RATE_WINDOW * 1e9:
+                            samples.popleft()
         with self._lock:
             self._groups.pop(connection, None)
 
@@ -198,6 +197,19 @@ class Introspection:
             for index, count in enumerate(stats.get("seen", ())[:len(total)]):
                 total[index] += int(count)
         return total
+
+    def _rates(self) -> dict[int, float]:
+        """Messages per second per label over the last :data:`RATE_WINDOW` seconds of the taps'
+        counts (each group's tap counts the labels it taps); under the lock."""
+        rates: dict[int, float] = {}
+        for samples in self._samples.values():
+            if len(samples) < 2 or samples[-1][0] <= samples[0][0]:
+                continue
+            (then, before), (now, after) = samples[0], samples[-1]
+            for index, (a, b) in enumerate(zip(before, after, strict=False)):
+                if b > a or index not in rates:
+                    rates[index] = rates.get(index, 0.0) + (b - a) / ((now - then) / 1e9)
+        return rates
 
     def _tap_losses(self, labels: list[int]) -> int:
         """What the groups' taps did not forward of ``labels`` so far (their queues were full)."""
@@ -266,11 +278,10 @@ class Introspection:
         if plan is None:
             return []
         seen = self._seen()
-        first = self._samples[0] if self._samples else None
-        elapsed = time.monotonic() - first[0] if first is not None else 0.0
+        rates = self._rates()
         found = []
         for index, x in enumerate(plan.labels):
-            rate = (seen[index] - first[1][index]) / elapsed if first is not None and elapsed > 0.2 else None
+            rate = rates.get(index)
             found.append({"channel": self._names[index],
                           "topic": x.topic if (x.sender, x.receiver, x.label) in self._ros_topics else "",
                           "type": x.sort.spelling if x.sort is not None else "",

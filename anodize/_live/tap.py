@@ -197,7 +197,7 @@ class LiveTap:
                     send_frame(sock, MESSAGE, index, stamp, data)
                     self.shown += 1
                 if closing or time.monotonic() >= stats_at:
-                    send_frame(sock, STATS, 0, 0, self._stats())
+                    send_frame(sock, STATS, 0, time.time_ns(), self._stats())  # its time: for rates
                     stats_at = time.monotonic() + STATS_EVERY
                 if closing:
                     return
