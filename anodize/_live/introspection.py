@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import itertools
 import json
 import os
 import socket
@@ -34,7 +35,7 @@ from .._isolation.sched import side_work_priority
 from .._recording.encoding import SortCodec, codec_for_sort
 from ..taps import TapRun
 from .plan import LivePlan, live_plan
-from .runs import listen, run_dir, run_id, same_user, socket_path, taps_path
+from .runs import in_use, listen, run_dir, run_id, same_user, socket_path, taps_path
 from .tap import WANT_MESSAGES, WANT_TIMES, GroupLiveView
 from .watchers import Watcher
 from .wire import HELLO, MESSAGE, STATS, WANT, read_frame, send_frame
@@ -62,6 +63,11 @@ class Introspection:
         folder = run_dir(create=True)
         self.run = run_id(name, os.getpid())
         self.path = socket_path(self.run, folder)
+        for again in itertools.count(2):  # a second run of this process at once: <name>.2-<pid>
+            if not in_use(self.path):
+                break
+            self.run = run_id(f"{name}.{again}", os.getpid())
+            self.path = socket_path(self.run, folder)
         self._taps_path = taps_path(self.run, folder)
         self._listener = listen(self.path)
         self._taps: socket.socket | None = None

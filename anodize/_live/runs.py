@@ -23,7 +23,7 @@ from pathlib import Path
 from ..errors import AnodizeError
 
 __all__ = ["RUN_DIR_ENV", "run_dir", "run_id", "pid_of", "socket_path", "taps_path", "listen", "same_user",
-           "peer_uid", "running"]
+           "peer_uid", "running", "in_use"]
 
 RUN_DIR_ENV = "ANODIZE_RUN_DIR"
 _SUFFIX = ".sock"
@@ -88,6 +88,16 @@ def listen(path: Path) -> socket.socket:
         listener.close()
         raise
     return listener
+
+
+def in_use(path: Path) -> bool:
+    """Whether a server answers at ``path`` (a run of this process started before, still running)."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe:
+        try:
+            probe.connect(str(path))
+        except OSError:
+            return False
+    return True
 
 
 def peer_uid(sock: socket.socket) -> int:

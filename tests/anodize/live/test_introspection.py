@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -22,13 +23,15 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import introspect_roles
 import pytest
 
-import introspect_roles
 import sessiontypes
 from anodize import Inproc, System
 from anodize._live.introspection import Introspection
-from anodize._live.runs import RUN_DIR_ENV
+from anodize._live.plan import live_plan
+from anodize._live.runs import RUN_DIR_ENV, running
+from anodize._live.tap import WANT_MESSAGES, WANT_TIMES, GroupLiveView, LiveTap
 from anodize._tools.cli import main
 from anodize.errors import AnodizeError
 
@@ -156,8 +159,8 @@ def test_with_no_run_ps_prints_nothing_and_status_names_the_directory(
     assert main(["status"]) == 1
     assert capsys.readouterr().err == f"error: no system is running on this host (none has a socket in {runs})\n"
     assert main(["echo", "nope-1", "A->B:x"]) == 1
-    assert capsys.readouterr().err == "error: no running system 'nope-1'; expected a run id or pid of 'anodize ps' " \
-                                      "(none is running)\n"
+    assert capsys.readouterr().err == ("error: no running system 'nope-1'; expected a run id or pid of "
+                                       "'anodize ps' (none is running)\n")
 
 
 def test_the_socket_is_the_users_alone(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -222,11 +225,53 @@ def _as_nobody(path: str) -> str:
     return text
 
 
+def test_two_runs_of_one_process_get_two_sockets(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(RUN_DIR_ENV, str(tmp_path / "runs"))
+    first, second = Introspection("twice"), Introspection("twice")
+    try:
+        assert (first.run, second.run) == (f"twice-{os.getpid()}", f"twice.2-{os.getpid()}")
+        assert running() == sorted([first.run, second.run])
+    finally:
+        first.close()
+        second.close()
+    assert running() == []
+
+
+def test_an_unwatched_label_is_counted_not_forwarded(tmp_path: Path) -> None:
+    machines = {role: global_type().project(role).fsm() for role in ("T", "L", "M")}
+    path = tmp_path / "taps"
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    listener.bind(str(path))
+    listener.listen()
+    plan = live_plan(str(path), machines, {"T": "talker", "L": "listener", "M": "listener"}, {}, on_demand=True)
+    tap = LiveTap(plan, "talker", ["T"])
+    try:
+        scan, tick = plan.index[("T", "L", "scan")], plan.index[("T", "L", "tick")]
+        for n in range(100):
+            tap.offer(("T", "L"), "scan", introspect_roles._scan(n))
+            tap.offer(("T", "L"), "tick", n)
+        assert (tap.seen[scan], tap.seen[tick], tap.dropped, tap.thinned) == (100, 100, 0, 0)
+        assert (len(tap._small), len(tap._large)) == (0, 0)  # nothing encoded, nothing queued
+        tap.wanted[tick] = WANT_TIMES
+        tap.offer(("T", "L"), "tick", 100)
+        tap.offer(("T", "L"), "scan", introspect_roles._scan(100))
+        assert [(index, data) for index, _, data in tap._small] == [(tick, b"")]  # its time alone
+    finally:
+        tap.close()
+        listener.close()
+
+
+def global_type() -> sessiontypes.GlobalType:
+    return sessiontypes.loads(introspect_roles.PROTOCOL).globals["Watched"]
+
+
 def test_a_client_that_never_reads_neither_blocks_nor_slows_the_roles(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(RUN_DIR_ENV, str(tmp_path / "runs"))
-    global_type = sessiontypes.loads(introspect_roles.PROTOCOL).globals["Watched"]
-    system = System(global_type, transport=Inproc())
+    taps: list[LiveTap] = []
+    opened = GroupLiveView.open
+    monkeypatch.setattr(GroupLiveView, "open", lambda self, group: taps.append(opened(self, group)) or taps[-1])
+    system = System(global_type(), transport=Inproc())
     system.group("talker").role("T", introspect_roles.burst)
     system.group("listener").role("L", introspect_roles.listener).role("M", introspect_roles.mirror)
     served = Introspection("burst")
@@ -242,6 +287,8 @@ def test_a_client_that_never_reads_neither_blocks_nor_slows_the_roles(
         client.connect(str(served.path))
         client.sendall(b'{"op": "echo", "channel": "T->L:scan"}\n')
         assert client.recv(len(b'{"watching": ["T->L:scan"]}\n')) == b'{"watching": ["T->L:scan"]}\n'
+        scan = served.plan.index[("T", "L", "scan")] if served.plan is not None else -1
+        assert _until(60, lambda: any(tap.wanted[scan] == WANT_MESSAGES for tap in taps))  # the talker's tap heard
         introspect_roles.GO.set()  # and never read again
         running.join(timeout=180)
         assert not running.is_alive()
@@ -256,8 +303,10 @@ def test_a_client_that_never_reads_neither_blocks_nor_slows_the_roles(
     [watcher] = served.watchers
     assert watcher.dropped > 0 and watcher.sent + watcher.dropped <= burst + 1
     [note] = [n for n in report.notes if n.startswith("introspection: ")]
-    assert note == (f"introspection: answered 1 client(s) at {served.path}; {watcher.dropped} messages dropped for "
-                    "clients that read slower than the run sent")
+    said = re.fullmatch(rf"introspection: answered 1 client\(s\) at {re.escape(str(served.path))}; (\d+) messages "
+                        "dropped for clients that read slower than the run sent", note)
+    assert said is not None, note
+    assert 0 < int(said[1]) <= watcher.dropped  # the note counts those dropped by the run's end
 
 
 @pytest.mark.slow
