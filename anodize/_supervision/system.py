@@ -26,7 +26,7 @@ from ..taps import ChannelTap, TapRun
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
 from .legacy import legacy_run, legacy_system, legacy_taps
 from .plan import RunPlan
-from .report import GroupStatus, RunReport
+from .report import GroupStatus, RunReport, lossy_channels
 from .rosbridge import RosBridge
 from .supervisor import Supervisor
 from .transports import Dds, Inproc, Processes, Transport
@@ -232,8 +232,11 @@ class System:
         report = Supervisor(gt.name, scope.roles, scope.groups, scope.channels, runner, timeout, grace, on_status,
                             scope.elsewhere, stop_when).run()
         notes = [note for tap in taps for note in tap.end()]
+        lossy = lossy_channels(self.ros_settings(machines, channels), scope.roles)
+        notes.extend(f"{channel} may lose messages: {what}" for channel, what in lossy.items())
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()},
-                                   notes=(*report.notes, *notes))
+                                   notes=(*report.notes, *notes), lost={
+                                       c: max(0, report.messages.get(c, 0) - report.received.get(c, 0)) for c in lossy})
 
     def _functions(self) -> dict[str, str]:
         """role -> ``module:function`` of the roles that can be named so (a recording keeps them for replay)."""
