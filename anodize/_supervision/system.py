@@ -221,7 +221,9 @@ class System:
         machines = {role: gt.project(role).fsm() for role in gt.roles}
         channels = tuple(communication_graph(gt).edges)
         topics = self.ros.topic_names(machines, channels) if self.ros is not None else {}
-        shape = TapRun(gt, machines, dict(self._placed), topics, transport.kind, self._functions())
+        ros = self.ros_settings(machines, channels)  # the QoS of its topics: on the wire, recorded, lost counted
+        shape = TapRun(gt, machines, dict(self._placed), topics, transport.kind, self._functions(),
+                       {name: profile.yaml() for name, profile in ros.qos.items()} if ros is not None else {})
         opened = tuple(tap.begin(shape) for tap in taps)
         if taps:
             on_status = _with_tap_status(on_status, taps)
@@ -232,7 +234,7 @@ class System:
         report = Supervisor(gt.name, scope.roles, scope.groups, scope.channels, runner, timeout, grace, on_status,
                             scope.elsewhere, stop_when).run()
         notes = [note for tap in taps for note in tap.end()]
-        lossy = lossy_channels(self.ros_settings(machines, channels), scope.roles)
+        lossy = lossy_channels(ros, scope.roles)
         notes.extend(f"{channel} may lose messages: {what}" for channel, what in lossy.items())
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()},
                                    notes=(*report.notes, *notes), lost={
