@@ -91,7 +91,9 @@ def test_a_ros_node_sees_the_qos_offered_and_the_recording_keeps_it(tmp_path: Pa
     from mcap.reader import make_reader
 
     with (tmp_path / "run.mcap").open("rb") as stream:
-        channels = {c.topic: c.metadata for c in make_reader(stream).get_summary().channels.values()}
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    channels = {c.topic: c.metadata for c in summary.channels.values()}
     profile = channels["/scan"]["offered_qos_profiles"]
     expected = f"history: {offered[1]}\n  depth: {offered[2]}\n  reliability: {offered[0]}\n  durability: {offered[3]}"
     assert expected in profile, profile

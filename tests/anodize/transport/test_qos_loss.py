@@ -18,7 +18,6 @@ import pytest
 import qos_roles
 from dds_hosts import domain
 
-pytestmark = pytest.mark.slow
 HERE = Path(qos_roles.__file__).resolve().parent
 
 
