@@ -55,6 +55,7 @@ from pathlib import Path
 from typing import Any
 
 import sessiontypes
+from sessiontypes.graph import communication_graph
 from sessiontypes.limits import SYSTEM_FILE, read_limited
 
 from .._supervision.group import FailurePolicy, parse_memory
@@ -542,6 +543,9 @@ def build_system(config: SystemConfig) -> System:
         system = System(global_type, transport=config.transport, monitors=config.monitors, ros=config.ros,
                         capacities=config.capacities)
         system.ros_settings()  # the topics against the protocol, now rather than when the run starts
+        if config.ros is not None and config.ros.qos:  # and the QoS on any transport (`run --transport dds`)
+            config.ros.settings({role: global_type.project(role).fsm() for role in global_type.roles},
+                                tuple(communication_graph(global_type).edges))
     except QosError as error:
         raise ConfigError(shown, error.key, error.problem) from None
     except ConfigurationError as error:

@@ -151,9 +151,11 @@ def test_the_system_file_gives_qos_per_topic_and_per_channel(tmp_path: Path) -> 
     assert settings is not None and settings.qos_of("/scan") == PROFILES["sensor_data"]
 
 
+@pytest.mark.parametrize("kind", ["dds", "process"])  # the file is the same with --transport dds
 def test_a_lossy_channel_the_protocol_cannot_lose_is_refused_by_run_with_its_key_and_interaction(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str) -> None:
     path = write_system(tmp_path, '[channels."S->C"]\nqos = "sensor_data"\n')
+    path.write_text(path.read_text().replace('kind = "dds"', f'kind = "{kind}"'))
     # Make the count a request the sensor waits on: a lost count would leave C waiting forever.
     (tmp_path / "sense.proto").write_text(SENSE.replace("mu c. S -> C : count(Count). c",
                                                         "mu c. S -> C : count(Count). C -> S : ack. c"))
