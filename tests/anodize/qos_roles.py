@@ -2,7 +2,8 @@
 
 ``SENSE``: S streams numbered scans to R on a lossy topic while it counts to C on a
 reliable one; both loops run until the run's timeout stops them. ``QOS_TEST_OUT`` (a
-folder): where R and C write what they saw, as JSON, for the test to read.
+folder): where R and C write what they saw, as JSON, for the test to read; ``QOS_TEST_SLOW``
+(seconds): how long R dwells on each scan (a reader that falls behind).
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ def sensor(ep: Endpoint) -> None:
 def scans(ep: Endpoint) -> None:
     """Take scans until stopped: each newer than the last (gaps allowed and counted); write the tally."""
     last, received, gaps = -1, 0, 0
+    dwell = float(os.environ.get("QOS_TEST_SLOW", "0"))
     try:
         while True:
             number = ep.recv("S").payload.header.stamp.sec
@@ -61,6 +63,8 @@ def scans(ep: Endpoint) -> None:
                 raise AssertionError(f"scan {number} after scan {last}: duplicated or reordered")
             gaps += number - last - 1
             last, received = number, received + 1
+            if dwell:
+                ep.sleep(dwell)
     except RoleStopped:
         _write("scans", {"received": received, "gaps": gaps, "last": last})
         raise

@@ -4,6 +4,7 @@ Cyclone) matched to anodize's writer reads the QoS it offers, and the recording'
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -99,3 +100,26 @@ def test_a_ros_node_sees_the_qos_offered_and_the_recording_keeps_it(tmp_path: Pa
     assert expected in profile, profile
     others = [meta["offered_qos_profiles"] for topic, meta in channels.items() if topic.startswith("/anodize/S/C")]
     assert others and all("history: keep_all" in p and "reliability: reliable" in p for p in others)
+
+
+def test_a_keep_last_reader_that_falls_behind_loses_the_oldest_and_holds_back_nobody(tmp_path: Path) -> None:
+    """R dwells 20 ms on each scan while S sends about 500 a second: its depth-1 history keeps
+    only the newest, the rest are counted lost, and S is never held back by R (a lossy topic is
+    outside the credits), so the reliable count to C goes on at S's pace."""
+    number = domain()
+    (tmp_path / "sense.proto").write_text(qos_roles.SENSE)
+    system = tmp_path / "sense.toml"
+    system.write_text(SYSTEM.format(here=HERE, domain=number, qos='{ history = "keep_last", depth = 1 }')
+                      .replace("timeout = 3", "timeout = 5"))
+    done = subprocess.run([sys.executable, "-m", "anodize._tools.cli", "run", "--quiet", str(system), "--json",
+                           str(tmp_path / "report.json")], capture_output=True, text=True, timeout=180,
+                          env={**os.environ, "QOS_TEST_OUT": str(tmp_path), "QOS_TEST_SLOW": "0.02"})
+    out = done.stdout + done.stderr
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["outcome"] == "stopped, no failures", out
+    scans = json.loads((tmp_path / "scans.json").read_text())
+    assert scans["received"] <= 5 / 0.02 + 1, (scans, out)  # R took at most one scan per dwell
+    # More were lost than the sender's whole credit window (224): counted, S never waited for them.
+    assert report["lost"]["S->R"] > 500, out
+    assert report["lost"]["S->R"] == report["messages"]["S->R"] - report["received"]["S->R"] >= scans["gaps"]
+    assert report["received"]["S->C"] > 1000, out
