@@ -16,7 +16,7 @@ so it imports neither :mod:`anodize._recording` nor :mod:`anodize._live`.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from sessiontypes import GlobalType, StateMachine
@@ -38,6 +38,8 @@ class TapRun:
             as ROS 2 topics (the others are the tap's to name).
         transport: the transport's kind (``"inproc"``, ``"process"`` or ``"dds"``).
         functions: role -> ``"module:function"`` of the roles that can be named so.
+        qos: ROS topic -> the QoS it is offered with, as rosbag2's ``offered_qos_profiles``
+            YAML, for the topics given one on DDS (the others: reliable, keep-all, volatile).
     """
 
     global_type: GlobalType
@@ -46,6 +48,7 @@ class TapRun:
     topics: Mapping[tuple[str, str, str], str]
     transport: str
     functions: Mapping[str, str]
+    qos: Mapping[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from sessiontypes import Sort, StateMachine
 
@@ -48,6 +48,7 @@ class RecordPlan:
         at_sender: channels recorded by the group that sends them.
         at_receiver: channels recorded by the group that receives them (external senders).
         group_of: role -> group, for the channel metadata.
+        qos: ROS topic -> its ``offered_qos_profiles`` (rosbag2's YAML), where the run gave it a QoS.
     """
 
     parts: str
@@ -55,6 +56,7 @@ class RecordPlan:
     at_sender: frozenset[tuple[str, str]]
     at_receiver: frozenset[tuple[str, str]]
     group_of: Mapping[str, str]
+    qos: Mapping[str, str] = field(default_factory=dict)
 
     def recorded_here(self, roles: Iterable[str]) -> dict[tuple[str, str], str]:
         """The channels a group running ``roles`` records: pair -> "send" or "recv"."""
@@ -84,7 +86,8 @@ def default_topic(sender: str, receiver: str, label: str) -> str:
 
 
 def record_plan(parts: str, machines: Mapping[str, StateMachine], group_of: Mapping[str, str],
-                ros_topics: Mapping[tuple[str, str, str], str], inside: bool = False) -> RecordPlan:
+                ros_topics: Mapping[tuple[str, str, str], str], inside: bool = False,
+                qos: Mapping[str, str] | None = None) -> RecordPlan:
     """The plan of a run whose roles run in ``group_of``'s groups (a role in none is external).
 
     Args:
@@ -93,10 +96,11 @@ def record_plan(parts: str, machines: Mapping[str, StateMachine], group_of: Mapp
         group_of: role -> group name, for every role anodize runs.
         ros_topics: ``(sender, receiver, label) -> ROS topic`` of the labels the system maps.
         inside: record the channels inside each group too (each role can then be replayed alone).
+        qos: ROS topic -> its ``offered_qos_profiles``, for the topics given a QoS.
     """
     labels = channel_labels(machines)
     between = {(s, r) for s, r, _ in labels if inside or group_of.get(s) != group_of.get(r)}
     topics = {key: ros_topics.get(key) or default_topic(*key) for key in labels if key[:2] in between}
     at_sender = frozenset(pair for pair in between if pair[0] in group_of)
     at_receiver = frozenset(pair for pair in between if pair[0] not in group_of and pair[1] in group_of)
-    return RecordPlan(parts, topics, at_sender, at_receiver, dict(group_of))
+    return RecordPlan(parts, topics, at_sender, at_receiver, dict(group_of), dict(qos or {}))

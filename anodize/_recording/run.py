@@ -40,7 +40,7 @@ class Recording:
             raise AnodizeError(f"recording {self.target} records one run: make another for the next")
         # The parts are written beside the target, so the merge is a rename away on the same file system.
         parts = self.target.with_name(f".{self.target.name}.parts-{os.getpid()}")
-        self.plan = record_plan(str(parts), run.machines, run.group_of, run.topics, self.inside)
+        self.plan = record_plan(str(parts), run.machines, run.group_of, run.topics, self.inside, run.qos)
         self._run = run
         return GroupRecording(self.plan)
 

@@ -274,6 +274,7 @@ class Recorder:
             key = (item.sender, item.receiver, item.label)
             topic = self.plan.topics.get(key) or f"/anodize/{key[0]}/{key[1]}/{key[2]}"
             metadata = channel_metadata(item, codec, self.protocol, self.plan.group_of)
+            metadata["offered_qos_profiles"] = self.plan.qos.get(topic, QOS_PROFILES)  # per topic, as rosbag2
             found = self._mcap[number] = self._writer.register_channel(topic, "cdr", schema, metadata)
         return found
 

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .._session.statistics import EndpointStatistics
 from ..errors import AnodizeError
+
+if TYPE_CHECKING:
+    from .._transport.ros_lanes import RosSettings
 
 __all__ = ["RoleStatus", "GroupState", "RoleReport", "GroupReport", "RunReport", "GroupStatus", "constraint_counts"]
 
@@ -174,6 +177,10 @@ class RunReport:
             constraints were checked, and the closest it came to a time bound in seconds
             (negative: missed; None without a time bound), and ``"timeouts"``, how often its
             deadline passed and the receiver took ``else timeout``. A violation is the role's failure.
+        lost: per channel with a ROS topic whose QoS may lose messages (best effort, keep last),
+            where both ends ran here: the messages sent and not received (lost on the wire,
+            overwritten in a keep-last history, or in flight at the end). The protocol allows
+            it (:mod:`anodize._transport.lossy_lanes`): no violation, nobody blamed.
     """
 
     protocol: str
@@ -190,6 +197,7 @@ class RunReport:
     boosts: dict[str, dict[str, float]] = field(default_factory=dict)
     inheritance_inactive: tuple[str, ...] = ()
     constraints: dict[str, dict[str, float | None]] = field(default_factory=dict)
+    lost: dict[str, int] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -234,6 +242,8 @@ class RunReport:
         lines.extend(f"  constraint {key}: {int(c['checked'] or 0)} checked" + _closest(c["closest_s"])
                      + (f", {int(c['timeouts'] or 0)} timeouts taken" if c.get("timeouts") else "")
                      for key, c in self.constraints.items())
+        lines.extend(f"  lost {n} of {self.messages.get(channel, 0)} on {channel} (a lossy QoS; the protocol "
+                     "allows it: no violation)" for channel, n in self.lost.items())
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)
 
@@ -244,7 +254,7 @@ class RunReport:
             "interrupted": self.interrupted, "duration_s": round(self.duration, 4),
             "transport": self.transport, "notes": list(self.notes), "messages": dict(self.messages),
             "received": dict(self.received), "high_water": dict(self.high_water),
-            "capacities": dict(self.capacities),
+            "capacities": dict(self.capacities), "lost": dict(self.lost),
             "boosts": {pair: dict(b) for pair, b in self.boosts.items()},
             "inheritance_inactive": list(self.inheritance_inactive),
             "constraints": {key: dict(c) for key, c in self.constraints.items()},
@@ -321,3 +331,18 @@ def constraint_counts(statistics: Mapping[str, EndpointStatistics],
             if check.timeouts:
                 timeouts[f"{role} {key}"] = check.timeouts
     return checked, closest, timeouts
+
+
+def lossy_channels(ros: RosSettings | None, here: Collection[str]) -> dict[str, str]:
+    """Per channel ``"A->B"`` with a ROS topic whose QoS may lose messages, both of whose roles
+    run here (so the report has both counts): its lossy topics and their QoS, for the notes."""
+    found: dict[str, list[str]] = {}
+    if ros is None:
+        return {}
+    for (sender, receiver, _), topic in sorted(ros.topics.items()):
+        profile = ros.qos_of(topic.name)
+        if profile.lossy and sender in here and receiver in here:
+            found.setdefault(f"{sender}->{receiver}", []).append(f"{topic.name} is {profile.describe()}")
+    return {channel: "; ".join(topics) + " (the protocol allows a loss there: counted as lost, not a violation)"
+            for channel, topics in found.items()}
+

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 from sessiontypes import StateMachine
 
+from .._transport.qos_profiles import QosProfile, qos_profile
 from .._transport.ros_lanes import RosSettings, ros_settings
 from ..errors import ConfigurationError
 
@@ -28,6 +29,11 @@ class RosBridge:
             runs no code for them, and every message to or from them must be on a topic.
         distro: the ROS 2 distribution whose message definitions are used ("" for Jazzy).
         domain: the ROS domain when ``ROS_DOMAIN_ID`` is not set (None: 0, as for every node).
+        qos: per ROS topic (``"/scan"``) or channel (``"Gazebo->Move"``), its QoS on DDS: a ROS 2
+            profile's name (``"sensor_data"``), a table ``{"reliability": "best_effort", "history":
+            "keep_last", "depth": 5, "durability": "volatile"}`` or a :class:`QosProfile`; the
+            others stay reliable, keep-all, volatile. A QoS that may lose messages is refused
+            where the protocol cannot lose one (docs/guide/ros2.md, "QoS per topic").
 
     Raises:
         ConfigurationError: a field of the wrong type or range, naming what was expected.
@@ -37,6 +43,7 @@ class RosBridge:
     external: frozenset[str] = frozenset()
     distro: str = ""
     domain: int | None = None
+    qos: Mapping[str, QosProfile | str | Mapping[str, object]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         topics = self.topics
@@ -55,12 +62,19 @@ class RosBridge:
         if domain is not None and (isinstance(domain, bool) or not isinstance(domain, int)
                                    or not 0 <= domain <= 232):
             raise ConfigurationError(f"RosBridge domain: expected a DDS domain id 0..232 or None, got {domain!r}")
+        if not isinstance(self.qos, Mapping) or not all(isinstance(k, str) for k in self.qos):
+            raise ConfigurationError(f'RosBridge qos: expected a mapping such as {{"/scan": "sensor_data"}}, '
+                                     f"got {self.qos!r}")
+        profiles = {key: value if isinstance(value, QosProfile) else qos_profile(value, f"RosBridge qos {key!r}")
+                    for key, value in self.qos.items()}
+        object.__setattr__(self, "qos", profiles)
         # A copy: the caller's dict changing later must not change the value.
         object.__setattr__(self, "topics", dict(topics))
         object.__setattr__(self, "external", frozenset(external))
 
     def __hash__(self) -> int:
-        return hash((tuple(sorted(self.topics.items())), self.external, self.distro, self.domain))
+        return hash((tuple(sorted(self.topics.items())), self.external, self.distro, self.domain,
+                     tuple(sorted(self.qos.items(), key=lambda item: item[0]))))
 
     def settings(self, machines: Mapping[str, StateMachine], channels: Iterable[tuple[str, str]]) -> RosSettings:
         """The bridge checked against a protocol, with its lanes worked out.
@@ -68,7 +82,13 @@ class RosBridge:
         Raises:
             ConfigurationError: a topic entry that cannot be, naming it.
         """
-        return ros_settings(machines, channels, self.topics, self.external, self.distro, self.domain)
+        return ros_settings(machines, channels, self.topics, self.external, self.distro, self.domain,
+                            self.profiles)
+
+    @property
+    def profiles(self) -> Mapping[str, QosProfile]:
+        """``qos``, each entry as a :class:`QosProfile` (they are converted when the bridge is made)."""
+        return {key: value for key, value in self.qos.items() if isinstance(value, QosProfile)}
 
     def topic_names(self, machines: Mapping[str, StateMachine],
                     channels: Iterable[tuple[str, str]]) -> dict[tuple[str, str, str], str]:

@@ -26,7 +26,7 @@ from ..taps import ChannelTap, TapRun
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
 from .legacy import legacy_run, legacy_system, legacy_taps
 from .plan import RunPlan
-from .report import GroupStatus, RunReport
+from .report import GroupStatus, RunReport, lossy_channels
 from .rosbridge import RosBridge
 from .supervisor import Supervisor
 from .transports import Dds, Inproc, Processes, Transport
@@ -221,7 +221,9 @@ class System:
         machines = {role: gt.project(role).fsm() for role in gt.roles}
         channels = tuple(communication_graph(gt).edges)
         topics = self.ros.topic_names(machines, channels) if self.ros is not None else {}
-        shape = TapRun(gt, machines, dict(self._placed), topics, transport.kind, self._functions())
+        ros = self.ros_settings(machines, channels)  # the QoS of its topics: on the wire, recorded, lost counted
+        shape = TapRun(gt, machines, dict(self._placed), topics, transport.kind, self._functions(),
+                       {name: profile.yaml() for name, profile in ros.qos.items()} if ros is not None else {})
         opened = tuple(tap.begin(shape) for tap in taps)
         if taps:
             on_status = _with_tap_status(on_status, taps)
@@ -232,8 +234,11 @@ class System:
         report = Supervisor(gt.name, scope.roles, scope.groups, scope.channels, runner, timeout, grace, on_status,
                             scope.elsewhere, stop_when).run()
         notes = [note for tap in taps for note in tap.end()]
+        lossy = lossy_channels(ros, scope.roles)
+        notes.extend(f"{channel} may lose messages: {what}" for channel, what in lossy.items())
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()},
-                                   notes=(*report.notes, *notes))
+                                   notes=(*report.notes, *notes), lost={
+                                       c: max(0, report.messages.get(c, 0) - report.received.get(c, 0)) for c in lossy})
 
     def _functions(self) -> dict[str, str]:
         """role -> ``module:function`` of the roles that can be named so (a recording keeps them for replay)."""

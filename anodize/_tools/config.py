@@ -18,7 +18,10 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     [ros]                                    # RosBridge: topics, external, distro, domain
     topics = { "Move->Gazebo" = "/cmd_vel" }
 
-    [channels."A->B"]                        # capacities
+    [ros.qos]                                # QoS per ROS topic (default: reliable, keep all)
+    "/scan" = "sensor_data"                  # a ROS 2 profile, or { reliability = ..., depth = ... }
+
+    [channels."A->B"]                        # capacities; qos: of the channel's ROS topics
     capacity = 8
 
     [groups.control]                         # one table per group (at least one)
@@ -52,12 +55,14 @@ from pathlib import Path
 from typing import Any
 
 import sessiontypes
+from sessiontypes.graph import communication_graph
 from sessiontypes.limits import SYSTEM_FILE, read_limited
 
 from .._supervision.group import FailurePolicy, parse_memory
 from .._supervision.rosbridge import RosBridge
 from .._supervision.system import System
 from .._supervision.transports import KINDS, Dds, Transport
+from .._transport.qos_profiles import QosError, QosProfile, qos_profile
 from ..errors import AnodizeError, ConfigurationError
 
 __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
@@ -65,8 +70,8 @@ __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_s
 
 _TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id",
              "ros", "channels")
-_CHANNEL_KEYS = ("capacity",)
-_ROS_KEYS = ("topics", "external", "distro", "domain")
+_CHANNEL_KEYS = ("capacity", "qos")
+_ROS_KEYS = ("topics", "external", "distro", "domain", "qos")
 _OLD_DDS_KEYS = ("domain", "run_id")  # top-level keys of the earlier form, now fields of [transport]
 _RUN_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 _GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host",
@@ -256,7 +261,7 @@ class _Reader:
             global_name=global_name, transport=self.transport(data),
             timeout=None if timeout is None else float(timeout), monitors=monitors,
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
-            groups=self.groups(data.get("groups")), ros=self.ros(data.get("ros")),
+            groups=self.groups(data.get("groups")), ros=self.ros(data.get("ros"), data.get("channels")),
             capacities=self.capacities(data.get("channels", {})))
 
     def transport(self, data: dict[str, Any]) -> Transport:
@@ -317,16 +322,22 @@ class _Reader:
             if not isinstance(settings, dict):
                 raise self.error(key, f"expected a table such as {{ capacity = 8 }}, got {_show(settings)}")
             self.known_keys(settings, _CHANNEL_KEYS, key)
+            if "qos" in settings and "capacity" not in settings:
+                continue  # a QoS alone: read with [ros] (self.ros)
             capacity: Any = settings.get("capacity")
             if not _is_int(capacity) or capacity < 1:
                 raise self.error(f"{key}.capacity", f"expected a whole number of messages >= 1, got {_show(capacity)}")
             found[channel] = capacity
         return found
 
-    def ros(self, table: Any) -> RosBridge | None:
-        """The ``[ros]`` table: what is checked here is its shape; the topics against the protocol
-        are checked when the system is built."""
+    def ros(self, table: Any, channels: Any = None) -> RosBridge | None:
+        """The ``[ros]`` table (with the ``qos`` of ``[channels."A->B"]``): what is checked here is its
+        shape; the topics against the protocol are checked when the system is built."""
+        channel_qos = self.channel_qos(channels)
         if table is None:
+            if channel_qos:
+                raise self.error(f'channels."{next(iter(channel_qos))}".qos', "a QoS is a ROS topic's, and this "
+                                 "system has no [ros.topics]; anodize's own topics stay reliable and keep-all")
             return None
         if not isinstance(table, dict):
             raise self.error("ros", f"expected a table [ros], got {_show(table)}")
@@ -344,7 +355,25 @@ class _Reader:
         domain = table.get("domain")
         if domain is not None and (not _is_int(domain) or not 0 <= domain <= 232):
             raise self.error("ros.domain", f"expected a DDS domain id 0..232, got {_show(domain)}")
-        return RosBridge(topics=dict(topics), external=frozenset(external), distro=distro, domain=domain)
+        qos = table.get("qos", {})
+        if not isinstance(qos, dict):
+            raise self.error("ros.qos", f'expected a table such as {{ "/scan" = "sensor_data" }}, got {_show(qos)}')
+        profiles = {**channel_qos, **{topic: self.qos(value, f'ros.qos."{topic}"') for topic, value in qos.items()}}
+        return RosBridge(topics=dict(topics), external=frozenset(external), distro=distro, domain=domain,
+                         qos=profiles)
+
+    def channel_qos(self, channels: Any) -> dict[str, QosProfile]:
+        """``[channels."A->B"] qos``, per channel (the shape of ``[channels]`` is checked by capacities)."""
+        if not isinstance(channels, dict):
+            return {}
+        return {channel: self.qos(settings["qos"], f'channels."{channel}".qos') for channel, settings
+                in channels.items() if isinstance(settings, dict) and "qos" in settings}
+
+    def qos(self, value: Any, key: str) -> QosProfile:
+        try:
+            return qos_profile(value, key)
+        except QosError as error:
+            raise self.error(error.key, error.problem) from None
 
     def known_keys(self, table: dict[str, Any], allowed: tuple[str, ...], prefix: str | None) -> None:
         for key in table:
@@ -514,6 +543,11 @@ def build_system(config: SystemConfig) -> System:
         system = System(global_type, transport=config.transport, monitors=config.monitors, ros=config.ros,
                         capacities=config.capacities)
         system.ros_settings()  # the topics against the protocol, now rather than when the run starts
+        if config.ros is not None and config.ros.qos:  # and the QoS on any transport (`run --transport dds`)
+            config.ros.settings({role: global_type.project(role).fsm() for role in global_type.roles},
+                                tuple(communication_graph(global_type).edges))
+    except QosError as error:
+        raise ConfigError(shown, error.key, error.problem) from None
     except ConfigurationError as error:
         key = "channels" if str(error).startswith("capacity of") else "ros"
         raise ConfigError(shown, key, str(error)) from None

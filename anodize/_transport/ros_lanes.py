@@ -25,9 +25,11 @@ from dataclasses import dataclass, field
 from sessiontypes import StateMachine
 
 from ..errors import ConfigurationError
+from .lossy_lanes import check_lossy
+from .qos_profiles import RELIABLE_KEEP_ALL, QosError, QosProfile
 
 __all__ = ["RosTopic", "RosSettings", "LanePlan", "lane_plan", "ros_settings", "dds_topic_of", "check_topic_name",
-           "DEFAULT_ROS_DOMAIN", "ROS_DOMAIN_ENV"]
+           "DEFAULT_ROS_DOMAIN", "ROS_DOMAIN_ENV", "qos_key"]
 
 ROS_DOMAIN_ENV = "ROS_DOMAIN_ID"  # as every ROS 2 node reads it
 DEFAULT_ROS_DOMAIN = 0
@@ -94,6 +96,8 @@ class RosSettings:
         external: roles that ROS 2 nodes play (anodize runs no code for them).
         plans: for each channel with a mapped label, its :class:`LanePlan` (channels
             into an external role have none: nobody reads them here).
+        qos: ROS topic name -> its QoS, for the topics given one (the others are reliable,
+            keep-all, volatile: :data:`~.qos_profiles.RELIABLE_KEEP_ALL`).
     """
 
     domain: int
@@ -101,6 +105,11 @@ class RosSettings:
     topics: Mapping[tuple[str, str, str], RosTopic]
     external: frozenset[str] = frozenset()
     plans: Mapping[tuple[str, str], LanePlan] = field(default_factory=dict)
+    qos: Mapping[str, QosProfile] = field(default_factory=dict)
+
+    def qos_of(self, topic: str) -> QosProfile:
+        """The QoS of a ROS topic (reliable, keep-all, volatile unless the system gives another)."""
+        return self.qos.get(topic, RELIABLE_KEEP_ALL)
 
     def topic_of(self, sender: str, receiver: str, label: str) -> RosTopic | None:
         return self.topics.get((sender, receiver, label))
@@ -193,7 +202,7 @@ def _determinise(machine: StateMachine, sender: str, topic_of: Mapping[str, str]
 
 def ros_settings(machines: Mapping[str, StateMachine], channels: Iterable[tuple[str, str]],
                  topics: Mapping[str, str], external: Iterable[str] = (), distro: str = "",
-                 domain: int | None = None) -> RosSettings:
+                 domain: int | None = None, qos: Mapping[str, QosProfile] | None = None) -> RosSettings:
     """Check a system's ROS topic map and work out its lanes.
 
     Args:
@@ -205,9 +214,13 @@ def ros_settings(machines: Mapping[str, StateMachine], channels: Iterable[tuple[
         distro: the ROS 2 distribution ("" for anodize's default).
         domain: the ROS domain the system file gives, if any; ``ROS_DOMAIN_ID`` overrides it,
             and without either it is 0, as for every ROS 2 node.
+        qos: ROS topic name (``"/scan"``) or channel (``"A->B"``, ``"A->B:label"``: each of its
+            labels on a ROS topic) -> QoS; a topic's own entry wins over its channel's.
 
     Raises:
-        ConfigurationError: naming the entry at fault and what was expected.
+        ConfigurationError: naming the entry at fault and what was expected; a
+            :class:`~.qos_profiles.QosError` for a QoS entry (a lossy QoS on a topic whose
+            protocol cannot lose a message names the interaction that forbids it).
     """
     import os
 
@@ -265,6 +278,13 @@ def ros_settings(machines: Mapping[str, StateMachine], channels: Iterable[tuple[
                 machines[receiver], sender,
                 {label: t.name for (s, r, label), t in mapped.items() if (s, r) == (sender, receiver)},
                 f"{sender}->{receiver}")
+    given = _topic_qos(qos or {}, mapped)  # topic -> (QoS, the entry that gives it)
+    for (sender, receiver, label), topic in mapped.items():
+        if topic.name in given:
+            plan = plans.get((sender, receiver))
+            profile, key = given[topic.name]
+            check_lossy(machines[receiver], sender, receiver, label, topic.name, profile, qos_key(key),
+                        plan.steps if plan is not None else None)
     text = os.environ.get(ROS_DOMAIN_ENV, "").strip()
     if text:
         try:
@@ -275,7 +295,41 @@ def ros_settings(machines: Mapping[str, StateMachine], channels: Iterable[tuple[
         domain = DEFAULT_ROS_DOMAIN
     if not 0 <= domain <= 232:
         raise ConfigurationError(f"ROS domain {domain}: expected a DDS domain id 0..232")
-    return RosSettings(domain, distro, mapped, frozenset(outside), plans)
+    return RosSettings(domain, distro, mapped, frozenset(outside), plans,
+                       {name: profile for name, (profile, _) in given.items()})
+
+
+def qos_key(entry: str) -> str:
+    """Where the system file gives a QoS entry: ``ros.qos."/scan"`` or ``channels."A->B".qos``."""
+    return f'ros.qos."{entry}"' if entry.startswith("/") else f'channels."{entry}".qos'
+
+
+def _topic_qos(qos: Mapping[str, QosProfile],
+               mapped: Mapping[tuple[str, str, str], RosTopic]) -> dict[str, tuple[QosProfile, str]]:
+    """Each ROS topic given a QoS, with it and the entry that gives it (a topic's own entry wins
+    over its channel's)."""
+    found: dict[str, tuple[QosProfile, str]] = {}
+    for entry, profile in sorted(qos.items(), key=lambda item: item[0].startswith("/")):  # channels first
+        if entry.startswith("/"):
+            if not any(topic.name == entry for topic in mapped.values()):
+                named = ", ".join(sorted(topic.name for topic in mapped.values())) or "none"
+                raise QosError(qos_key(entry), f"no label of the protocol is on ROS topic {entry} "
+                                               f"([ros.topics]); the topics are: {named}")
+            found[entry] = (profile, entry)
+            continue
+        if "->" not in entry:
+            raise QosError(qos_key(entry), "expected a ROS topic name such as \"/scan\" or a channel such as "
+                                           "\"Gazebo->Move\"")
+        sender, receiver, label = _parse_key(entry)
+        topics = [topic for (s, r, carried), topic in mapped.items()
+                  if (s, r) == (sender, receiver) and label in (None, carried)]
+        if not topics:
+            raise QosError(qos_key(entry), f"channel {sender}->{receiver}" + (f" label {label}" if label else "")
+                           + " is on no ROS topic ([ros.topics]); a QoS is a ROS topic's, and anodize's own "
+                             "topics stay reliable and keep-all")
+        for topic in topics:
+            found[topic.name] = (profile, entry)
+    return found
 
 
 def _parse_key(key: str) -> tuple[str, str, str | None]:

@@ -6,8 +6,9 @@ or reordered); writers assert liveliness automatically with a lease of the setti
 process dies, freezes or is cut off loses its endpoints within about one lease. Every
 endpoint carries its identity (:mod:`.identity`) in its USER_DATA, and every endpoint
 on anodize's own topics is in the run's partition (:attr:`.settings.DdsSettings.partition`),
-so it never meets another run's. Endpoints on ROS topics use QoS that ROS 2's default and
-sensor-data profiles match, in the default partition, where ROS 2 tools look.
+so it never meets another run's. Endpoints on ROS topics are in the default partition,
+where ROS 2 tools look, with the topic's QoS (:mod:`anodize._transport.qos_profiles`):
+reliable, keep-all and volatile unless the system file gives another.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import os
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from ..qos_profiles import RELIABLE_KEEP_ALL, QosProfile
 from ..ros_lanes import RosTopic, dds_topic_of
 from .binding import XCDR1, DomainParticipant, Policy, Qos, Topic, duration
 from .flow import READER_SAMPLES
@@ -74,13 +76,21 @@ class Endpoints:
             self.topics[name] = Topic(self.participant, name, kind.idl_class())
         return self.topics[name], kind
 
-    def ros_qos(self, kind: RosType, writer: bool) -> Qos:
-        """QoS that ROS 2's default and sensor-data profiles match: reliable, volatile. Writers
-        assert liveliness as on anodize's own topics; readers ask for none, since a ROS 2
-        writer offers an infinite lease and a reader asking for less would not match it."""
+    def ros_qos(self, kind: RosType, writer: bool, profile: QosProfile = RELIABLE_KEEP_ALL) -> Qos:
+        """The topic's QoS (by default reliable, keep-all, volatile, which ROS 2's default and
+        sensor-data profiles both match). Writers assert liveliness as on anodize's own topics;
+        readers ask for none, since a ROS 2 writer offers an infinite lease and a reader asking
+        for less would not match it. A transient-local writer keeps its last samples for ROS 2
+        tools that join late; anodize's own readers ask for volatile (they match before the first
+        write, and a restarted receiver must not take again what its predecessor took)."""
         userdata = Policy.Userdata(ros_userdata(kind.type_hash, self.identity))
+        reliability = (Policy.Reliability.Reliable(WRITE_BLOCK) if profile.reliability == "reliable"
+                       else Policy.Reliability.BestEffort)
+        history = Policy.History.KeepLast(profile.depth) if profile.history == "keep_last" else Policy.History.KeepAll
         if writer:
-            return Qos(Policy.Reliability.Reliable(WRITE_BLOCK), Policy.History.KeepAll, Policy.Durability.Volatile,
+            durability = (Policy.Durability.TransientLocal if profile.durability == "transient_local"
+                          else Policy.Durability.Volatile)
+            return Qos(reliability, history, durability,
                        Policy.Liveliness.Automatic(duration(seconds=self.settings.lease)), userdata, *XCDR1)
-        return Qos(Policy.Reliability.Reliable(WRITE_BLOCK), Policy.History.KeepAll, Policy.Durability.Volatile,
-                   Policy.ResourceLimits(max_samples=READER_SAMPLES), userdata, *XCDR1)
+        bound = () if profile.history == "keep_last" else (Policy.ResourceLimits(max_samples=READER_SAMPLES),)
+        return Qos(reliability, history, Policy.Durability.Volatile, *bound, userdata, *XCDR1)

@@ -48,8 +48,10 @@ __all__ = ["DdsReceiver", "InLane"]
 class InLane:
     """One topic a receiver reads: the channel's own (codec frames) or a ROS topic (one label)."""
 
-    def __init__(self, reader: DataReader[Any], label: str | None, kind: RosType | None, topic: str) -> None:
+    def __init__(self, reader: DataReader[Any], label: str | None, kind: RosType | None, topic: str,
+                 lossy: bool = False) -> None:
         self.reader = reader
+        self.lossy = lossy  # its QoS may lose messages: outside the credits (the sender does not count it)
         self.ref = ref_of(reader)
         self.label = label  # the one label a ROS topic carries (None: the channel's own topic)
         self.kind = kind
@@ -83,9 +85,10 @@ class DdsReceiver:
         if settings.ros is not None:
             for label, topic in settings.ros.channel_topics(sender, receiver).items():
                 dds_topic, kind = endpoints.ros_topic(topic)
+                profile = settings.ros.qos_of(topic.name)
                 self.ros[topic.name] = InLane(DataReader(endpoints.participant, dds_topic,
-                                                         qos=endpoints.ros_qos(kind, writer=False)),
-                                              label, kind, topic.name)
+                                                         qos=endpoints.ros_qos(kind, False, profile)),
+                                              label, kind, topic.name, profile.lossy)
             self.plan = settings.ros.plans.get((sender, receiver))
         self.lanes = [lane for lane in (self.frames, *self.ros.values()) if lane is not None]
         for lane in self.lanes:
@@ -246,6 +249,8 @@ class DdsReceiver:
         data = lane.samples.popleft()
         if isinstance(data, Corrupt):
             return data
+        if lane.lossy:
+            return self._decode_ros(lane, data)  # a self-loop of the plan, outside the credits
         self.taken += 1
         self._uncredited_bytes += len(data)
         if self.credit_writer is not None and (self.taken - self.credited >= self.credit_every

@@ -53,8 +53,9 @@ __all__ = ["DdsSender", "OutLane"]
 class OutLane:
     """One topic a sender writes: the channel's own (codec frames) or a ROS topic (one label's CDR)."""
 
-    def __init__(self, writer: DataWriter[Any], kind: RosType | None, topic: str) -> None:
+    def __init__(self, writer: DataWriter[Any], kind: RosType | None, topic: str, lossy: bool = False) -> None:
         self.writer = writer
+        self.lossy = lossy  # its QoS may lose messages: outside the credits (nothing would credit a lost one)
         self.ref = ref_of(writer)
         self.kind = kind  # None: the channel's own topic
         self.topic = topic
@@ -85,8 +86,10 @@ class DdsSender:
         if settings.ros is not None:
             for label, topic in settings.ros.channel_topics(sender, receiver).items():
                 dds_topic, kind = endpoints.ros_topic(topic)
+                profile = settings.ros.qos_of(topic.name)
                 self.ros[label] = OutLane(DataWriter(endpoints.participant, dds_topic,
-                                                     qos=endpoints.ros_qos(kind, writer=True)), kind, topic.name)
+                                                     qos=endpoints.ros_qos(kind, True, profile)), kind, topic.name,
+                                          profile.lossy)
         self.lanes = [lane for lane in (self.frames, *self.ros.values()) if lane is not None]
         self.credits: DataReader[Frame] | None = None
         self.credit_writer: int | None = None  # the publication handle of the receiver's credit writer
@@ -128,17 +131,17 @@ class DdsSender:
             except (EncodeError, AnodizeError) as error:
                 raise PayloadError(f"role {self.sender}: cannot send {item[0]} to {self.receiver}: "
                                    f"{error}") from None
+            counted = self.credits is not None and not (lane is not None and lane.lossy)
             with self._lock:
-                if self.credits is not None and self.written >= self._credit_look:
+                if counted and self.written >= self._credit_look:
                     # Read what credits came once every so many writes (a take costs microseconds),
                     # so qsize(), the report's backlog, stays true to within a credit or two.
                     self._credit_look = self.written + CREDIT_EVERY
                     self._take_credits()
-                if self.credits is not None and (self.written - self.taken >= self.window
-                                                 or self._in_flight_bytes >= WINDOW_BYTES):
+                if counted and (self.written - self.taken >= self.window or self._in_flight_bytes >= WINDOW_BYTES):
                     self._await_credit()
                 self._write(lane or self.frames, sample)  # type: ignore[arg-type]
-                if self.credits is not None:
+                if counted:
                     self.written += 1
                     self._in_flight.append(len(sample))
                     self._in_flight_bytes += len(sample)

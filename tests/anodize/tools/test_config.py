@@ -114,10 +114,10 @@ BAD = {
         "channels.A->B.capacity: expected a whole number of messages >= 1, got 0"),
     "channel_unknown_key": (
         MINIMAL + '[channels."A->B"]\nsize = 3\n' + GROUP,
-        "channels.A->B.size: unknown key; expected one of capacity"),
+        "channels.A->B.size: unknown key; expected one of capacity, qos"),
     "unknown_ros_key": (
         MINIMAL + "[ros]\ntopic = {}\n" + GROUP,
-        "ros.topic: unknown key; expected one of distro, domain, external, topics"),
+        "ros.topic: unknown key; expected one of distro, domain, external, qos, topics"),
     "ros_topics_not_a_table": (
         MINIMAL + "[ros]\ntopics = [\"/cmd_vel\"]\n" + GROUP,
         'ros.topics: expected a table such as { "Move->Gazebo" = "/cmd_vel" }, got ["/cmd_vel"]'),
