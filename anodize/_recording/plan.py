@@ -48,6 +48,7 @@ class RecordPlan:
         at_sender: channels recorded by the group that sends them.
         at_receiver: channels recorded by the group that receives them (external senders).
         group_of: role -> group, for the channel metadata.
+        run_id: the run's random id, which each chain of the recording starts from (:mod:`.chain`).
     """
 
     parts: str
@@ -55,6 +56,7 @@ class RecordPlan:
     at_sender: frozenset[tuple[str, str]]
     at_receiver: frozenset[tuple[str, str]]
     group_of: Mapping[str, str]
+    run_id: str = ""
 
     def recorded_here(self, roles: Iterable[str]) -> dict[tuple[str, str], str]:
         """The channels a group running ``roles`` records: pair -> "send" or "recv"."""
