@@ -39,8 +39,8 @@ from .encoding import codec_for_sort
 from .plan import META
 
 __all__ = ["CHAIN_TOPIC", "CHAIN_KEY", "HEADS_RECORD", "ChainedWriter", "HeadCollector", "Links", "chain_of",
-           "genesis", "entry_digest", "step", "decode_links", "heads_document", "heads_record", "sign",
-           "ENTRY", "SIGNATURE_KIND", "ChainFormatError"]
+           "genesis", "entry_digest", "step", "encode_links", "decode_links", "identity", "heads_document",
+           "heads_record", "sign", "ENTRY", "SIGNATURE_KIND", "ChainFormatError"]
 
 CHAIN_TOPIC = "/anodize/recording/chain"  # where the link records are
 CHAIN_KEY = f"{META}.chain_links"  # the link channel's metadata key (its value: "1")
@@ -147,11 +147,8 @@ class ChainedWriter:
         for name, chain in sorted(self._chains.items()):
             if not chain.pending:
                 continue
-            text = json.dumps({"part": self._part, "chain": name, "first": chain.first_pending,
-                               "hash": chain.head.hex(), "entries": base64.b64encode(b"".join(chain.pending)).decode()})
-            codec = codec_for_sort(None)  # a JSON String, as the gap records
-            self._writer.add_message(self._links(), chain.last_time, codec.ros.serialize(codec.ros.cls(data=text)),
-                                     chain.last_time, 0)
+            data = encode_links(Links(self._part, name, chain.first_pending, chain.head, chain.pending))
+            self._writer.add_message(self._links(), chain.last_time, data, chain.last_time, 0)
             chain.pending = []
 
     def _links(self) -> int:
@@ -183,6 +180,14 @@ class Links:
     first: int
     hash: bytes
     entries: list[bytes]
+
+
+def encode_links(links: Links) -> bytes:
+    """A link record's bytes: a JSON String, as the gap records."""
+    text = json.dumps({"part": links.part, "chain": links.chain, "first": links.first, "hash": links.hash.hex(),
+                       "entries": base64.b64encode(b"".join(links.entries)).decode()})
+    codec = codec_for_sort(None)
+    return codec.ros.serialize(codec.ros.cls(data=text))
 
 
 def decode_links(data: bytes | memoryview) -> Links:
@@ -243,6 +248,31 @@ class HeadCollector:
         count += len(links.entries)
         self._state[key] = (count, head)
         self.heads.setdefault(links.part, {})[links.chain] = [count, head.hex()]
+
+    def link_tail(self, part: str, messages: Iterable[tuple[str, bytes, int, int, int, bytes | memoryview]]
+                  ) -> list[tuple[int, bytes]]:
+        """The link records a part that was not closed (its group was killed) lacks: of its
+        messages after each chain's last link record. ``messages``: the part's, in its order,
+        as ``(chain, identity, sequence, log time, publish time, data)``; returns
+        ``(log time, link record)`` for each chain that had such messages."""
+        seen: dict[str, int] = {}
+        tails: dict[str, list[bytes]] = {}
+        last: dict[str, int] = {}
+        for chain, who, sequence, log_time, publish_time, data in messages:
+            number = seen[chain] = seen.get(chain, -1) + 1
+            if number >= self._state.get((part, chain), (0, b""))[0]:
+                tails.setdefault(chain, []).append(ENTRY.pack(sequence, log_time, publish_time,
+                                                              entry_digest(who, data)))
+                last[chain] = max(last.get(chain, 0), log_time)
+        records = []
+        for chain, entries in sorted(tails.items()):
+            count, head = self._state.get((part, chain)) or (0, genesis(self.run_id, part, chain))
+            for entry in entries:
+                head = step(head, entry)
+            records.append((last[chain], encode_links(Links(part, chain, count, head, entries))))
+            self._state[(part, chain)] = (count + len(entries), head)
+            self.heads.setdefault(part, {})[chain] = [count + len(entries), head.hex()]
+        return records
 
     def check_part(self, part: str, written: Mapping[str, str]) -> None:
         """Compare the heads a part wrote when it closed with its folded links."""

@@ -30,6 +30,7 @@ from .chain import (
     entry_digest,
     genesis,
     heads_document,
+    identity,
     sign,
     step,
 )
@@ -229,8 +230,6 @@ class EvidenceCheck:
 
 
 def _identity(topic: RecordedTopic) -> bytes:
-    from .chain import identity
-
     return identity(topic.topic, topic.metadata)
 
 

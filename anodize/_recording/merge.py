@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from .._extras import import_extra
-from .chain import CHAIN_KEY, HEADS_RECORD, HeadCollector, heads_record
+from .chain import CHAIN_KEY, CHAIN_TOPIC, HEADS_RECORD, HeadCollector, chain_of, heads_record, identity
+from .encoding import codec_for_sort
 from .plan import CLOCK_KEY, META, PROFILE
 
 __all__ = ["MergeResult", "merge_parts", "recording_file"]
@@ -102,6 +103,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
             return new
 
         start, end = 2**63 - 1, 0
+        linked = 0  # link records of the hash chain (not counted in messages)
         for number, channel_id, log_time, publish_time, sequence, data in heapq.merge(
                 *(source.messages(n) for n, source in enumerate(sources)), key=lambda m: m[2]):
             new = ids.get((number, channel_id)) or channel_of(number, channel_id)
@@ -110,19 +112,27 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
             start, end = min(start, log_time), max(end, log_time)
             if new in links:
                 collector.see(data)
+                linked += 1
             elif new in clocks:
                 result.readings += 1
             else:
                 result.messages += 1
             result.bytes += len(data)
+        for source in sources:
+            if source.heads is not None:
+                collector.check_part(source.path.stem, source.heads)
+                continue
+            # Not closed (its group was killed): the merge links what its writer had not linked yet.
+            for log_time, data in collector.link_tail(source.path.stem, _Part(source.path).chained()):
+                if not links:
+                    links.add(_link_channel(writer, topics))
+                writer.add_message(min(links), log_time, data, log_time, 0)
+                topics[min(links)]["count"] += 1
+                result.bytes += len(data)
+                linked += 1
         result.channels = len(topics) - len(clocks) - len(links)
         for source in sources:
             result.notes.extend(source.notes)
-            if source.heads is not None:
-                collector.check_part(source.path.stem, source.heads)
-            elif collector.heads.get(source.path.stem):
-                result.notes.append(f"part {source.path.name} was not closed: its hash chains end at their last "
-                                    "link record")
         result.notes.extend(collector.notes)
         ran_at: dict[str, list[str]] = {}
         for source in sources:
@@ -133,7 +143,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
                 f"{priority} ({', '.join(parts)})" for priority, parts in sorted(ran_at.items())))
         if result.messages + result.readings == 0:  # nothing was written: no time span
             start = end = 0
-        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings)
+        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings + linked)
         writer.add_metadata("rosbag2", {"serialized_metadata": _yaml(bag)})
         writer.add_metadata(META, run_info)
         chain = heads_record(collector.run_id, collector.heads, sign_key)
@@ -145,6 +155,16 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
         (folder / "metadata.yaml").write_text(_yaml({"rosbag2_bagfile_information": bag}), encoding="utf-8")
     shutil.rmtree(parts, ignore_errors=True)
     return result
+
+
+def _link_channel(writer: Any, topics: dict[int, dict[str, Any]]) -> int:
+    """The recording's link channel, for a merge whose parts wrote no link record."""
+    codec = codec_for_sort(None)
+    schema = writer.register_schema(codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+    new = int(writer.register_channel(CHAIN_TOPIC, "cdr", schema, {"topic_type_hash": codec.ros.type_hash,
+                                                                  CHAIN_KEY: "1"}))
+    topics[new] = {"name": CHAIN_TOPIC, "type": codec.type_name, "hash": codec.ros.type_hash, "qos": "", "count": 0}
+    return new
 
 
 class _Part:
@@ -193,6 +213,13 @@ class _Part:
             self.priority = record.metadata.get("writer_priority", "")
         elif isinstance(record, Metadata) and record.name == HEADS_RECORD:
             self.heads = dict(record.metadata)
+
+    def chained(self) -> Iterator[tuple[str, bytes, int, int, int, bytes]]:
+        """The part's messages as the chain sees them (:meth:`.chain.HeadCollector.link_tail`)."""
+        for _, channel_id, log_time, publish_time, sequence, data in self.messages(0):
+            topic, _, _, metadata = self.channels[channel_id]
+            if CHAIN_KEY not in metadata:
+                yield chain_of(topic, metadata), identity(topic, metadata), sequence, log_time, publish_time, data
 
     def messages(self, number: int) -> Iterator[tuple[int, int, int, int, int, bytes]]:
         from mcap.records import Message
