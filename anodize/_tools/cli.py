@@ -438,6 +438,8 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
     if args.wait is not None and not args.wait > 0:
         raise UsageError(f"--wait {args.wait}: expected a number of seconds > 0")
+    if args.sign_key is not None and args.record is None:
+        raise UsageError("--sign-key needs --record PATH")
     config = load_config(_system_file(args.file, named=True))
     if args.transport is not None:
         config = config.on_transport(args.transport)
@@ -451,8 +453,6 @@ def _run(args: argparse.Namespace) -> int:
     timeout = args.timeout if args.timeout is not None else config.timeout
     if args.record_inside and args.record is None:
         raise UsageError("--record-inside needs --record PATH")
-    if args.sign_key is not None and args.record is None:
-        raise UsageError("--sign-key needs --record PATH")
     sign_key = read_signing_key(args.sign_key, "--sign-key") if args.sign_key is not None else None
     with _taps(args.record, args.foxglove, args.record_inside, sign_key) as taps:
         report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout), taps=taps)
