@@ -22,6 +22,7 @@ from typing import Any
 
 from .chain import (
     CHAIN_KEY,
+    CHAIN_TOPIC,
     ENTRY,
     ChainFormatError,
     Links,
@@ -163,7 +164,7 @@ class EvidenceCheck:
                                                                           f"{NO_CHAIN}"))
             return evidence
         evidence.chained = True
-        evidence.faults.extend(ChainFault("", None, "altered", f"a link record cannot be read: {reason}")
+        evidence.faults.extend(ChainFault(CHAIN_TOPIC, None, "altered", f"a link record cannot be read: {reason}")
                                for reason in self._bad_links[:3])
         run_id, heads = self._read_heads(evidence)
         expected, complete, declared = self._fold(run_id, heads, evidence)

@@ -67,7 +67,8 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, str]
     folder = tmp_path_factory.mktemp("evidence")
     (folder / "buy.proto").write_text(BUY, encoding="utf-8")
     system = folder / "system.toml"
-    system.write_text(f'protocol = "{folder / "buy.proto"}"\nglobal = "Buy"\ntransport = "inproc"\npythonpath = ["{HERE}"]\n'
+    system.write_text(f'protocol = "{folder / "buy.proto"}"\nglobal = "Buy"\ntransport = "inproc"\n'
+                      f'pythonpath = ["{HERE}"]\n'
                       '[groups.b]\nroles = { B = "evidence_roles:buyer" }\n'
                       '[groups.s]\nroles = { S = "evidence_roles:seller" }\n', encoding="utf-8")
     key = _key(folder)
@@ -345,3 +346,22 @@ def test_a_gap_record_is_chained_and_removing_it_is_caught(with_a_gap: Path, tmp
         assert evidence is not None
         assert [(f.channel, f.index, f.kind) for f in evidence.faults] == [
             (GAP_TOPIC, 0, "removed" if mutation == "drop" else "altered")], evidence.lines()
+
+
+def test_malformed_link_records_and_heads_are_findings_not_tracebacks(
+        recorded: tuple[Path, Path, str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    def garble(messages: list[Any]) -> None:
+        links = [m for m in messages if m[0][0] == CHAIN_TOPIC]
+        links[0][3] = b"\x00\x01\x00\x00garbage"
+        links[1][3] = _string("not a link record")
+
+    rewrite(recorded[0], tmp_path / "m.mcap", garble)
+    status, out = _cli(capsys, "verify", str(tmp_path / "m.mcap"))
+    assert status == EXIT_NOT_EVIDENCE, out
+    assert "chain: channel /anodize/recording/chain altered: a link record cannot be read" in out, out
+    for heads in ("[1", '{"b-0": {"B->S": [-1, "00"]}}', '{"b-0": 7}', "null"):
+        copy = tmp_path / "h.mcap"
+        copy.write_bytes(recorded[0].read_bytes())
+        _strip_heads(copy, {"heads": heads})
+        status, out = _cli(capsys, "verify", str(copy))
+        assert status == EXIT_NOT_EVIDENCE and "the heads record is malformed" in out, out
