@@ -206,7 +206,7 @@ def test_the_tail_of_the_file_cut_is_caught_against_the_heads(recorded: tuple[Pa
 def test_moving_a_message_to_another_label_is_an_alteration(recorded: tuple[Path, Path, str], tmp_path: Path) -> None:
     def relabel(messages: list[Any]) -> None:
         title = messages[_on(messages, ("B", "S"))[0]]
-        topic, schema, items = title[0]
+        _, schema, items = title[0]
         title[0] = ("/anodize/B/S/done", schema, tuple((k, "done" if k == "anodize.label" else v) for k, v in items))
 
     rewrite(recorded[0], tmp_path / "m.mcap", relabel)
