@@ -62,7 +62,9 @@ class ChainFault:
     detail: str
 
     def __str__(self) -> str:
-        where = f"channel {self.channel}" if self.channel else "the chain heads"
+        if not self.channel:
+            return f"the chain heads: {self.detail}"
+        where = f"channel {self.channel}"
         if self.index is not None:
             where += f", message {self.index}"
         return f"{where} {self.kind}: {self.detail}"
@@ -104,7 +106,7 @@ class Evidence:
             held = f"evidence: the hash chain holds on {self.channels} channels ({self.messages} messages)"
             return [f"{held}; chain heads sha256 {self.digest}{signature}"]
         digest = self.digest or "unknown"
-        lines = [f"NOT evidence: the recording was changed after it was written (chain heads sha256 {digest})"]
+        lines = [f"NOT evidence (chain heads sha256 {digest}): the hash chain does not vouch for this recording"]
         lines.extend(f"chain: {fault}" for fault in self.faults)
         return lines
 
