@@ -365,3 +365,33 @@ def test_malformed_link_records_and_heads_are_findings_not_tracebacks(
         _strip_heads(copy, {"heads": heads})
         status, out = _cli(capsys, "verify", str(copy))
         assert status == EXIT_NOT_EVIDENCE and "the heads record is malformed" in out, out
+
+
+def test_a_part_cut_short_before_its_links_were_written_is_linked_by_the_merge(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A group killed after its writer wrote messages but before their link records: the merge
+    links them (from the part), and the recording is evidence of what the part holds."""
+    import time
+
+    from anodize._recording.chain import ChainedWriter
+
+    global_type = load_global(TEXTS, "Texts")
+    machines = machines_of(global_type)
+    plan = record_plan(str(tmp_path / "parts"), machines, {"Talker": "t", "Listener": "l"}, {})
+    monkeypatch.setattr(ChainedWriter, "seal", lambda self: None)  # no link record is ever written
+    recorder = recording_tap.Recorder(plan, "t", 0, "Texts", {"Talker": machines["Talker"]})
+    for number in range(5):
+        encoded = recorder.encode(PAIR, "text", f"text {number}")
+        assert encoded is not None
+        recorder.queue(PAIR, encoded)
+    deadline = time.monotonic() + 10
+    while recorder.written < 5 and time.monotonic() < deadline:  # bounded: the writer takes them
+        time.sleep(0.01)
+    with recorder._io:  # written: on disk now (the writer flushes every 0.1 s); never closed, as if killed
+        recorder._file.flush()
+    result = merge_parts(tmp_path / "parts", tmp_path / "r.mcap", {"global": "Texts"})
+    assert result.chains == 1
+    with open_recording(tmp_path / "r.mcap") as recording:
+        report = verify(recording, global_type)
+    assert report.evidence is not None and report.evidence.ok, report.text()
+    assert report.evidence.messages == 5
