@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from ..taps import ChannelTap
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
-EXIT_NOT_EVIDENCE = 3  # verify: the recording's hash chain shows it was changed after it was written
+EXIT_NOT_EVIDENCE = 3  # verify: the hash chain does not vouch for the recording (changed, or unsigned with --key)
 
 
 class Terminated(KeyboardInterrupt):
