@@ -7,6 +7,10 @@ an ``anodize`` metadata record: the protocol's source and the global type's name
 ``anodize verify`` needs nothing else to check it.
 
 A part cut short (its group was killed) is read up to its last whole message.
+
+Each part's hash chains (:mod:`.chain`) pass through as they are: a chain is one group's,
+so it is in one part. The merge folds their link records again and writes the heads
+document (with a key, signed), so a part cut short has heads too.
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from .._extras import import_extra
+from .chain import CHAIN_KEY, CHAIN_TOPIC, HEADS_RECORD, HeadCollector, chain_of, heads_record, identity
+from .encoding import codec_for_sort
 from .plan import CLOCK_KEY, META, PROFILE
 
 __all__ = ["MergeResult", "merge_parts", "recording_file"]
@@ -36,6 +42,9 @@ class MergeResult:
     channels: int = 0
     bytes: int = 0
     readings: int = 0  # of the roles' clocks, on their clock channels (not counted in messages, channels)
+    chains: int = 0  # hash chains (one per recorded channel or other topic)
+    heads_digest: str = ""  # SHA-256 of the heads document (:func:`.chain.heads_document`)
+    signed: bool = False
     notes: list[str] = field(default_factory=list)
 
 
@@ -47,13 +56,14 @@ def recording_file(target: Path) -> tuple[Path, Path | None]:
     return target / f"{target.name}_0.mcap", target
 
 
-def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeResult:
+def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: bytes | None = None) -> MergeResult:
     """Merge the part files in ``parts`` into the recording ``target``, then remove ``parts``.
 
     Args:
         parts: the folder the groups wrote into.
         target: the recording asked for (see :func:`recording_file`).
-        run_info: the ``anodize`` metadata record: protocol source, global, transport, ...
+        run_info: the ``anodize`` metadata record: protocol source, global, transport, run id, ...
+        sign_key: the key that signs the chain heads (HMAC-SHA256), if any.
     """
     import_extra("mcap.writer", "record", FEATURE)
     from mcap.writer import CompressionType, Writer
@@ -70,6 +80,8 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
         known: dict[tuple[str, int, tuple[tuple[str, str], ...]], int] = {}  # a restarted group's channels again
         topics: dict[int, dict[str, Any]] = {}
         clocks: set[int] = set()  # the recording's clock channels
+        links: set[int] = set()  # the recording's link channel (:mod:`.chain`)
+        collector = HeadCollector(run_info.get("run_id", ""))
 
         def channel_of(number: int, channel_id: int) -> int:
             """The recording's channel of a part's, registered at its first message (one pass)."""
@@ -83,26 +95,45 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
                 new = known[key] = writer.register_channel(topic, "cdr", schema, metadata)
                 if CLOCK_KEY in metadata:
                     clocks.add(new)
+                if CHAIN_KEY in metadata:
+                    links.add(new)
                 topics[new] = {"name": topic, "type": type_name, "hash": metadata.get("topic_type_hash", ""),
                                "qos": metadata.get("offered_qos_profiles", ""), "count": 0}
             ids[(number, channel_id)] = new
             return new
 
         start, end = 2**63 - 1, 0
+        linked = 0  # link records of the hash chain (not counted in messages)
         for number, channel_id, log_time, publish_time, sequence, data in heapq.merge(
                 *(source.messages(n) for n, source in enumerate(sources)), key=lambda m: m[2]):
             new = ids.get((number, channel_id)) or channel_of(number, channel_id)
             writer.add_message(new, log_time, data, publish_time, sequence)
             topics[new]["count"] += 1
             start, end = min(start, log_time), max(end, log_time)
-            if new in clocks:
+            if new in links:
+                collector.see(data)
+                linked += 1
+            elif new in clocks:
                 result.readings += 1
             else:
                 result.messages += 1
             result.bytes += len(data)
-        result.channels = len(topics) - len(clocks)
+        for source in sources:
+            if source.heads is not None:
+                collector.check_part(source.path.stem, source.heads)
+                continue
+            # Not closed (its group was killed): the merge links what its writer had not linked yet.
+            for log_time, data in collector.link_tail(source.path.stem, _Part(source.path).chained()):
+                if not links:
+                    links.add(_link_channel(writer, topics))
+                writer.add_message(min(links), log_time, data, log_time, 0)
+                topics[min(links)]["count"] += 1
+                result.bytes += len(data)
+                linked += 1
+        result.channels = len(topics) - len(clocks) - len(links)
         for source in sources:
             result.notes.extend(source.notes)
+        result.notes.extend(collector.notes)
         ran_at: dict[str, list[str]] = {}
         for source in sources:
             if source.priority:
@@ -112,14 +143,28 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
                 f"{priority} ({', '.join(parts)})" for priority, parts in sorted(ran_at.items())))
         if result.messages + result.readings == 0:  # nothing was written: no time span
             start = end = 0
-        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings)
+        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings + linked)
         writer.add_metadata("rosbag2", {"serialized_metadata": _yaml(bag)})
         writer.add_metadata(META, run_info)
+        chain = heads_record(collector.run_id, collector.heads, sign_key)
+        writer.add_metadata(HEADS_RECORD, chain)
+        result.chains = len({name for chains in collector.heads.values() for name in chains})
+        result.heads_digest, result.signed = chain["digest"], sign_key is not None
         writer.finish()  # type: ignore[no-untyped-call]
     if folder is not None:
         (folder / "metadata.yaml").write_text(_yaml({"rosbag2_bagfile_information": bag}), encoding="utf-8")
     shutil.rmtree(parts, ignore_errors=True)
     return result
+
+
+def _link_channel(writer: Any, topics: dict[int, dict[str, Any]]) -> int:
+    """The recording's link channel, for a merge whose parts wrote no link record."""
+    codec = codec_for_sort(None)
+    schema = writer.register_schema(codec.type_name, "ros2msg", codec.ros.message_definition().encode())
+    new = int(writer.register_channel(CHAIN_TOPIC, "cdr", schema, {"topic_type_hash": codec.ros.type_hash,
+                                                                  CHAIN_KEY: "1"}))
+    topics[new] = {"name": CHAIN_TOPIC, "type": codec.type_name, "hash": codec.ros.type_hash, "qos": "", "count": 0}
+    return new
 
 
 class _Part:
@@ -131,6 +176,7 @@ class _Part:
         self.channels: dict[int, tuple[str, str, bytes, dict[str, str]]] = {}
         self._schemas: dict[int, tuple[str, bytes]] = {}
         self.priority = ""  # what the part's writer ran at (its group's side-work priority)
+        self.heads: dict[str, str] | None = None  # the chain heads it wrote when it closed
 
     def _records(self) -> Iterator[Any]:
         from mcap.records import Chunk
@@ -165,6 +211,15 @@ class _Part:
             self.notes.extend(f"{key}: {text}" for key, text in record.metadata.items())
         elif isinstance(record, Metadata) and record.name == f"{META}.side_work":
             self.priority = record.metadata.get("writer_priority", "")
+        elif isinstance(record, Metadata) and record.name == HEADS_RECORD:
+            self.heads = dict(record.metadata)
+
+    def chained(self) -> Iterator[tuple[str, bytes, int, int, int, bytes]]:
+        """The part's messages as the chain sees them (:meth:`.chain.HeadCollector.link_tail`)."""
+        for _, channel_id, log_time, publish_time, sequence, data in self.messages(0):
+            topic, _, _, metadata = self.channels[channel_id]
+            if CHAIN_KEY not in metadata:
+                yield chain_of(topic, metadata), identity(topic, metadata), sequence, log_time, publish_time, data
 
     def messages(self, number: int) -> Iterator[tuple[int, int, int, int, int, bytes]]:
         from mcap.records import Message

@@ -49,6 +49,7 @@ class RecordPlan:
         at_receiver: channels recorded by the group that receives them (external senders).
         group_of: role -> group, for the channel metadata.
         qos: ROS topic -> its ``offered_qos_profiles`` (rosbag2's YAML), where the run gave it a QoS.
+        run_id: the run's random id, which each chain of the recording starts from (:mod:`.chain`).
     """
 
     parts: str
@@ -57,6 +58,7 @@ class RecordPlan:
     at_receiver: frozenset[tuple[str, str]]
     group_of: Mapping[str, str]
     qos: Mapping[str, str] = field(default_factory=dict)
+    run_id: str = ""
 
     def recorded_here(self, roles: Iterable[str]) -> dict[tuple[str, str], str]:
         """The channels a group running ``roles`` records: pair -> "send" or "recv"."""

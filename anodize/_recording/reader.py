@@ -16,6 +16,7 @@ from sessiontypes.limits import RECORDING, RECORDING_METADATA, InputLimit, check
 
 from .._extras import import_extra
 from ..errors import AnodizeError
+from .chain import HEADS_RECORD
 from .mcap_chunks import ChunkTooLargeError, iter_messages
 from .plan import META
 
@@ -42,6 +43,7 @@ class RecordedMessage:
     log_time: int
     sequence: int
     data: bytes | memoryview
+    publish_time: int = -1  # -1: the storage keeps none (the log time stands for it)
 
 
 class Recording:
@@ -51,6 +53,7 @@ class Recording:
         self.path = path
         self.topics: list[RecordedTopic] = []
         self.info: dict[str, str] = {}
+        self.chain: dict[str, str] | None = None  # the hash chain's heads record (:mod:`.chain`), if any
         self._files: list[Path] = []
         self._bag: Any = None
         if path.is_dir():
@@ -100,6 +103,8 @@ class Recording:
                     for record in reader.iter_metadata():
                         if record.name == META:
                             self.info = dict(record.metadata)
+                        elif record.name == HEADS_RECORD:
+                            self.chain = dict(record.metadata)
             except RecordingError:
                 raise
             except Exception as error:  # mcap raises several kinds for a damaged file
@@ -124,7 +129,7 @@ class Recording:
                 try:
                     for channel, message in iter_messages(stream, str(file)):
                         yield RecordedMessage(by_id[number * 2**16 + channel.id], message.log_time,
-                                              message.sequence, message.data)
+                                              message.sequence, message.data, message.publish_time)
                 except ChunkTooLargeError as error:
                     raise RecordingError(str(error)) from None
                 except Exception as error:  # a damaged chunk

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
+import secrets
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -26,11 +28,16 @@ class Recording:
     ``.mcap``, else a rosbag2 folder (docs/recording.md). Each group writes its part
     beside the target; when the run ends the parts are merged and the report's notes
     say what was recorded. A recording records one run.
+
+    Each channel's messages are chained by SHA-256 (docs/recording.md, "Recordings as
+    evidence"); the report gives the digest of the chain heads, and with ``sign_key`` (the
+    bytes of a secret key) the heads are signed (HMAC-SHA256) for ``anodize verify --key``.
     """
 
-    def __init__(self, target: str | os.PathLike[str], inside: bool = False) -> None:
+    def __init__(self, target: str | os.PathLike[str], inside: bool = False, sign_key: bytes | None = None) -> None:
         self.target = Path(target)
         self.inside = inside
+        self.sign_key = sign_key
         self.plan: RecordPlan | None = None
         self._run: TapRun | None = None
 
@@ -40,7 +47,9 @@ class Recording:
             raise AnodizeError(f"recording {self.target} records one run: make another for the next")
         # The parts are written beside the target, so the merge is a rename away on the same file system.
         parts = self.target.with_name(f".{self.target.name}.parts-{os.getpid()}")
-        self.plan = record_plan(str(parts), run.machines, run.group_of, run.topics, self.inside, run.qos)
+        self.plan = dataclasses.replace(record_plan(str(parts), run.machines, run.group_of, run.topics, self.inside,
+                                                    run.qos),
+                                        run_id=secrets.token_hex(16))  # each chain starts from it
         self._run = run
         return GroupRecording(self.plan)
 
@@ -56,13 +65,16 @@ class Recording:
         info = {"protocol_file": location.path, "protocol_source": "\n".join(run.global_type.source_lines),
                 "global": run.global_type.name, "transport": run.transport, "anodize_version": _version(),
                 "recorded_channels": " ".join(sorted(f"{s}->{r}" for s, r in plan.at_sender | plan.at_receiver)),
-                "role_functions": json.dumps(dict(run.functions)), "group_of": json.dumps(dict(plan.group_of))}
-        result = merge_parts(Path(plan.parts), self.target, info)
+                "role_functions": json.dumps(dict(run.functions)), "group_of": json.dumps(dict(plan.group_of)),
+                "run_id": plan.run_id}
+        result = merge_parts(Path(plan.parts), self.target, info, self.sign_key)
         size = f"{result.bytes / 2**20:.1f} MiB"
         where = "between and inside groups" if self.inside else "between groups"
         readings = f", and {result.readings} readings of the roles' clocks," if result.readings else ""
         notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels {where}{readings} to "
                  + str(self.target)]
+        signed = ", signed (HMAC-SHA256)" if result.signed else ""
+        notes.append(f"recording: {result.chains} channels, chain heads sha256 {result.heads_digest}{signed}")
         notes.extend(f"recording: {note}" for note in result.notes)
         return notes
 

@@ -44,6 +44,7 @@ from .._isolation.sched import restore_thread_scheduling, side_work_priority, th
 from .._session.channel import Channel
 from .._session.endpoint import put_each
 from ..taps import TapGroup
+from .chain import ChainedWriter
 from .encoding import SortCodec, codec_for_sort
 from .plan import CLOCK_KEY, CLOCK_TOPIC, META, PROFILE, ChannelLabel, RecordPlan
 
@@ -126,8 +127,10 @@ class Recorder:
         Path(plan.parts).mkdir(parents=True, exist_ok=True)
         self.path = Path(plan.parts) / f"{group}-{incarnation}.mcap"
         self._file = (opener or open_part)(self.path)
-        self._writer = Writer(self._file, use_chunking=False, compression=CompressionType.NONE,
-                              enable_crcs=False)
+        # Every message written is chained (:mod:`.chain`), in this writer's thread, not a sender's.
+        self._writer = ChainedWriter(Writer(self._file, use_chunking=False, compression=CompressionType.NONE,
+                                            enable_crcs=False), plan.run_id, self.path.stem,
+                                     {"offered_qos_profiles": QOS_PROFILES, f"{META}.protocol": protocol})
         self._writer.start(profile=PROFILE, library="anodize")
         self._channels: dict[tuple[str, str, str], tuple[int, SortCodec]] = {}
         self._schemas: dict[str, int] = {}
@@ -353,6 +356,8 @@ class Recorder:
                 self._pending_bytes -= sum(len(item[3]) for item in batch if item[0] != _GAP)
                 self._lock.notify_all()
             if time.monotonic() - last_flush >= _FLUSH_EVERY or closing:
+                with self._io:
+                    self._writer.seal()  # the link records of what was written since the last flush
                 self._file.flush()
                 last_flush = time.monotonic()
             if closing and not batch:
@@ -405,7 +410,7 @@ class Recorder:
                          for role, count in sorted(self.clock_lost.items())})
             if said:
                 self._writer.add_metadata(f"{META}.unrecorded", said)
-            self._writer.finish()  # type: ignore[no-untyped-call]
+            self._writer.finish()
             self._file.close()
 
     def _close_gaps(self) -> None:

@@ -19,6 +19,10 @@ The protocol's time and value constraints (``within``, ``every``, refinements) a
 too, across channels in log-time order (:mod:`.held` says how a recording stands for the
 roles' clocks): a message that breaks one is its channel's violation, blaming the sender, and
 the report says how each constraint held. A protocol without constraints pays nothing for it.
+
+In the same pass the recording's hash chain is checked (:mod:`.evidence`): whether the file
+is what the recorder wrote, which is a separate verdict (``VerifyReport.evidence``) from
+whether the run followed the protocol.
 """
 
 from __future__ import annotations
@@ -35,8 +39,10 @@ from .._ros import ros_type
 from .._session.payloads import Validator, validator_for
 from ..errors import AnodizeError
 from .by_name import sort_text, validator_by_name
+from .chain import CHAIN_KEY
 from .channel_view import ChannelView, Node, sort_key
 from .encoding import JSON_TYPE, SortCodec, UnknownObject, class_sorts, codec_for_sort
+from .evidence import Evidence, EvidenceCheck
 from .held import (
     Breach,
     Earlier,
@@ -148,6 +154,7 @@ class VerifyReport:
         gaps: messages the recorder marked as not recorded (the recording's, not a violation).
         notes: what else the reader should know (payload classes checked by name only, ...).
         constraints: each time or value constraint of the protocol, and how it held.
+        evidence: what the recording's hash chain says of it (None: not checked).
     """
 
     recording: str
@@ -160,6 +167,7 @@ class VerifyReport:
     gaps: list[Gap] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     constraints: list[Held] = field(default_factory=list)
+    evidence: Evidence | None = None
     messages: int = 0
     bytes: int = 0
     seconds: float = 0.0
@@ -184,6 +192,8 @@ class VerifyReport:
             lines.append(f"not recorded (both ends in one group): {', '.join(self.inside)}")
         lines.extend(f"constraint: {held}" for held in self.constraints)
         lines.extend(f"note: {note}" for note in self.notes)
+        if self.evidence is not None:
+            lines.extend(self.evidence.lines())
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -194,6 +204,7 @@ class VerifyReport:
                 "unknown": self.unknown, "unmapped": self.unmapped, "missing": self.missing, "inside": self.inside,
                 "gaps": [gap.__dict__ for gap in self.gaps], "notes": self.notes,
                 "constraints": [held.__dict__ for held in self.constraints],
+                "evidence": None if self.evidence is None else self.evidence.to_dict(),
                 "messages": self.messages, "bytes": self.bytes, "seconds": self.seconds}
 
 
@@ -500,7 +511,8 @@ def _payload_problem(payload: object, sort: Sort | None, check: Validator | str)
 
 
 def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, tuple[str, str, str]] | None = None,
-           import_classes: bool = True, machines: Mapping[str, StateMachine] | None = None) -> VerifyReport:
+           import_classes: bool = True, machines: Mapping[str, StateMachine] | None = None,
+           signing_key: bytes | None = None) -> VerifyReport:
     """Check ``recording`` against ``global_type``.
 
     Args:
@@ -511,6 +523,7 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
             (untrusted data; the payloads are then checked by their recorded class names, and
             the report says so).
         machines: the roles' state machines, if not ``global_type``'s projections.
+        signing_key: the key the recording's chain heads must be signed with (``--key``), if any.
 
     Raises:
         RecordingError: the recording cannot be read, or its metadata is not anodize's.
@@ -530,7 +543,7 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
         key = _key_of(topic, topics or {})
         if topic.metadata.get(GAP_KEY) == "1":
             gap_topics.add(topic.id)
-        elif CLOCK_KEY in topic.metadata:
+        elif CLOCK_KEY in topic.metadata or CHAIN_KEY in topic.metadata:
             continue  # a role's clock readings: no channel of the protocol (a replay gives them back)
         elif key is None:
             report.unmapped.append(f"{topic.topic} ({topic.type_name})")
@@ -542,7 +555,9 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
     checks = {pair: _ChannelCheck(*pair, machines) for pair in sorted({k[:2] for k in keys.values()})}
     codecs = _Codecs(import_classes)
     held = _constraints(report, machines, pairs, recorded if recorded is not None else {k[:2] for k in keys.values()})
+    evidence = EvidenceCheck(recording.chain, recording.topics, signing_key)
     for message in recording.messages():
+        evidence.see(message)
         report.messages += 1
         report.bytes += len(message.data)
         key = keys.get(message.topic.id)
@@ -551,6 +566,7 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
         elif message.topic.id in gap_topics:
             _note_gap(report, checks, message)
     report.channels = {check.name: check.result for check in checks.values()}
+    report.evidence = evidence.result()
     if held is not None:
         report.constraints = list(held.held.values())
     # An anodize recording says which channels it records: those inside one group it does not.

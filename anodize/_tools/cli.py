@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from ..taps import ChannelTap
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
+EXIT_NOT_EVIDENCE = 3  # verify: the hash chain does not vouch for the recording (changed, or unsigned with --key)
 
 
 class Terminated(KeyboardInterrupt):
@@ -170,14 +171,21 @@ def _parser() -> argparse.ArgumentParser:
     run_system.add_argument("--record-inside", action="store_true",
                             help="with --record: record the channels inside each group too, so that every role "
                                  "can be replayed alone ('anodize replay')")
+    run_system.add_argument("--sign-key", metavar="KEYFILE",
+                            help="with --record: sign the recording's hash chain heads with the secret key in "
+                                 "KEYFILE (HMAC-SHA256; 'anodize verify --key KEYFILE' checks it)")
     _add_foxglove_argument(run_system)
     run_system.set_defaults(run=_run)
 
     verify = commands.add_parser(
         "verify", help="check a recording (MCAP file or rosbag2 folder) against a protocol",
         description="Replay each channel of a recording through the monitors of both its ends and report the "
-                    "first violation on each, with the role to blame. Exit 0 when it conforms, 1 otherwise.")
+                    "first violation on each, with the role to blame; check the recording's hash chain. Exit 0 "
+                    "when it conforms and the chain holds (or it has none), 1 when it does not conform, 3 when "
+                    "the chain shows it was changed after it was written (not evidence).")
     _add_recording_arguments(verify)
+    verify.add_argument("--key", metavar="KEYFILE",
+                        help="the secret key the chain heads were signed with (run --sign-key): check the signature")
     verify.set_defaults(run=_verify)
 
     replay = commands.add_parser(
@@ -427,11 +435,14 @@ def _lint_target(given: str) -> Path:
 def _run(args: argparse.Namespace) -> int:
     from .._supervision.transports import Dds
     from .config import build_system, load_config
+    from .keys import read_signing_key
 
     if args.timeout is not None and not args.timeout > 0:
         raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
     if args.wait is not None and not args.wait > 0:
         raise UsageError(f"--wait {args.wait}: expected a number of seconds > 0")
+    if args.sign_key is not None and args.record is None:
+        raise UsageError("--sign-key needs --record PATH")
     config = load_config(_system_file(args.file, named=True))
     if args.transport is not None:
         config = config.on_transport(args.transport)
@@ -445,7 +456,8 @@ def _run(args: argparse.Namespace) -> int:
     timeout = args.timeout if args.timeout is not None else config.timeout
     if args.record_inside and args.record is None:
         raise UsageError("--record-inside needs --record PATH")
-    with _taps(args.record, args.foxglove, args.record_inside) as taps, \
+    sign_key = read_signing_key(args.sign_key, "--sign-key") if args.sign_key is not None else None
+    with _taps(args.record, args.foxglove, args.record_inside, sign_key) as taps, \
             _introspection(system_name(args.file), str(config.path)) as served:
         report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout),
                             taps=[*taps, *served])
@@ -461,17 +473,21 @@ def _run(args: argparse.Namespace) -> int:
 def _verify(args: argparse.Namespace) -> int:
     from .._recording.reader import open_recording
     from .._recording.verify import verify
+    from .keys import read_signing_key
     from .recordings import protocol_of, topic_map
 
+    key = read_signing_key(args.key, "--key") if args.key is not None else None
     with open_recording(args.recording) as recording:
         global_type = protocol_of(recording, args.protocol, args.global_name)
         topics = topic_map(args.topics, global_type) if args.topics else None
         # The recording's own protocol is untrusted: its payload classes are not imported.
-        report = verify(recording, global_type, topics, import_classes=args.protocol is not None)
+        report = verify(recording, global_type, topics, import_classes=args.protocol is not None, signing_key=key)
     print(report.text())
     if args.json:
         _write_json(Path(args.json), report.to_dict())
-    return EXIT_OK if report.conforms else EXIT_ERRORS
+    if not report.conforms:
+        return EXIT_ERRORS
+    return EXIT_NOT_EVIDENCE if report.evidence is not None and report.evidence.faults else EXIT_OK
 
 
 def _add_recording_arguments(parser: argparse.ArgumentParser) -> None:
@@ -497,14 +513,14 @@ def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
 
 @contextlib.contextmanager
 def _taps(record: str | os.PathLike[str] | None, foxglove: int | None,
-          inside: bool = False) -> Iterator[list[ChannelTap]]:
+          inside: bool = False, sign_key: bytes | None = None) -> Iterator[list[ChannelTap]]:
     """The run's channel taps: ``--record`` (first: it wraps the channels first, as it always has;
     ``inside``: the channels inside groups too), then ``--foxglove``."""
     taps: list[ChannelTap] = []
     if record is not None:
         from .._recording import Recording
 
-        taps.append(Recording(record, inside=inside))
+        taps.append(Recording(record, inside=inside, sign_key=sign_key))
     with _live_view(foxglove) as live:
         if live is not None:
             taps.append(live)
