@@ -30,6 +30,7 @@ from .codegen import GeneratedModule, generate_modules
 
 if TYPE_CHECKING:
     from .._live.server import LiveView
+    from .._recording.selection import RecordSelection
     from .._supervision.report import GroupStatus
     from ..taps import ChannelTap
 
@@ -163,11 +164,16 @@ def _parser() -> argparse.ArgumentParser:
                             help='transport kind "dds": how long the groups wait for their peers to appear '
                                  "(default: the file's transport.wait, else 30)")
     run_system.add_argument("--record", metavar="PATH",
-                            help="record every message between groups: PATH.mcap is an MCAP file, any other PATH "
-                                 "a rosbag2 folder (see 'anodize verify' and 'anodize replay')")
+                            help="record every message, inside groups too (the file's [record] may choose "
+                                 "channels): PATH.mcap is an MCAP file, any other PATH a rosbag2 folder (see "
+                                 "'anodize verify' and 'anodize replay')")
+    run_system.add_argument("--record-exclude", action="append", default=[], metavar="A->B",
+                            help="with --record: leave channel A->B out of the recording (repeatable)")
+    run_system.add_argument("--record-between", action="store_true",
+                            help="with --record: record only the channels between groups (cheaper; a role that "
+                                 "talks inside its group then cannot be replayed alone)")
     run_system.add_argument("--record-inside", action="store_true",
-                            help="with --record: record the channels inside each group too, so that every role "
-                                 "can be replayed alone ('anodize replay')")
+                            help="the default now (every channel is recorded): accepted, and does nothing more")
     _add_foxglove_argument(run_system)
     run_system.set_defaults(run=_run)
 
@@ -440,9 +446,12 @@ def _run(args: argparse.Namespace) -> int:
             wait=args.wait if args.wait is not None else config.transport.wait))
     system = build_system(config)
     timeout = args.timeout if args.timeout is not None else config.timeout
-    if args.record_inside and args.record is None:
-        raise UsageError("--record-inside needs --record PATH")
-    with _taps(args.record, args.foxglove, args.record_inside) as taps:
+    given = [flag for flag, on in (("--record-inside", args.record_inside), ("--record-between", args.record_between),
+                                   ("--record-exclude", args.record_exclude)) if on]
+    if given and args.record is None:
+        raise UsageError(f"{given[0]} needs --record PATH")
+    selection = config.record.for_run(args.record_between, args.record_exclude)
+    with _taps(args.record, args.foxglove, selection) as taps:
         report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout), taps=taps)
     print(report.summary())
     if args.json:
@@ -492,14 +501,14 @@ def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
 
 @contextlib.contextmanager
 def _taps(record: str | os.PathLike[str] | None, foxglove: int | None,
-          inside: bool = False) -> Iterator[list[ChannelTap]]:
+          selection: RecordSelection | None = None) -> Iterator[list[ChannelTap]]:
     """The run's channel taps: ``--record`` (first: it wraps the channels first, as it always has;
-    ``inside``: the channels inside groups too), then ``--foxglove``."""
+    ``selection``: which channels, default every one), then ``--foxglove``."""
     taps: list[ChannelTap] = []
     if record is not None:
         from .._recording import Recording
 
-        taps.append(Recording(record, inside=inside))
+        taps.append(Recording(record, selection=selection))
     with _live_view(foxglove) as live:
         if live is not None:
             taps.append(live)
@@ -587,7 +596,7 @@ def _run_named(name: str, rest: list[str]) -> int:
     prepared = named.prepare(args, lambda line: print(line, flush=True))
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
     try:
-        with _taps(prepared.record, args.foxglove, prepared.record_inside) as taps:
+        with _taps(prepared.record, args.foxglove, prepared.selection()) as taps:
             report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
                                          taps=taps, stop_when=prepared.stop_when)
     finally:

@@ -129,7 +129,8 @@ class TinMan:
         export(self.settings)
         record = None if args.record is None else Path(args.record or out / "run.mcap")
         return Prepared(build_system(config), timeout=float(args.duration), grace=3.0, record=record,
-                        record_inside=True, stop_when=patrol_done(self.settings.records) if patrol else None)
+                        record_selection=config.record,  # tinman.toml's [record]: every channel by default
+                        stop_when=patrol_done(self.settings.records) if patrol else None)
 
     def progress(self, statuses: dict[str, GroupStatus], elapsed: float) -> str:
         """The live line, as much of it as the terminal has room for (80 columns when unknown).
