@@ -24,8 +24,8 @@ protocol's ``within`` that expired in the run does expire again: the recording s
 the interleaving of a
 role's own threads (each thread gets its channels' messages in the recorded order, and
 its own clock readings, but two threads that share state run as the replay's scheduler
-runs them); and the channels a recording leaves out (both ends in one group, unless the
-run recorded inside its groups): messages the role sends there are counted, not
+runs them); and the channels a recording leaves out (those it was told to leave out, or
+both ends in one group in a recording of the channels between groups only): messages the role sends there are counted, not
 compared, and a receive there ends the replay, saying that the role cannot be replayed
 alone from there.
 """
@@ -48,7 +48,7 @@ from .._session.typed import argument_for
 from ..errors import AnodizeError, ConfigurationError, ProtocolViolationError, RoleStopped
 from .compare import TopicCodecs, payload_difference
 from .encoding import class_sorts, codec_for_sort, imported_class
-from .metadata import group_of, recorded_channels
+from .metadata import group_of, left_out_by, recorded_channels
 from .plan import CLOCK_KEY, META
 from .reader import RecordedMessage, Recording
 from .replay_network import (
@@ -201,7 +201,7 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
     readings: dict[str, list[tuple[str, float, int]]] = {}
     streams = _streams(recording, role, topics or {}, report.notes, readings)
     recorded = set(streams) if listed is None else listed
-    why = _why_unrecorded(groups)
+    why = _why_unrecorded(groups, left_out_by(recording))
     codecs = TopicCodecs()
 
     def decode(item: RecordedItem) -> object:
@@ -367,9 +367,15 @@ def _reading(message: RecordedMessage, done: int, readings: dict[str, list[tuple
     return done + 1
 
 
-def _why_unrecorded(groups: Mapping[str, str]) -> Callable[[str, str], str]:
+def _why_unrecorded(groups: Mapping[str, str], left_out: str) -> Callable[[str, str], str]:
+    """Why a channel is not in the recording; ``left_out``: the recording's own account
+    (:func:`~.metadata.left_out_by`; empty: a recording of the channels between groups only)."""
     def why(sender: str, receiver: str) -> str:
         group = groups.get(sender)
+        if f"{sender}->{receiver}" in left_out.rpartition("left out: ")[2].split(", "):
+            return "the run's recording left it out (--record-exclude, or [record] in the system file)"
+        if left_out.startswith("only the channels chosen"):
+            return "the run recorded only the channels chosen in [record], and not this one"
         if group is not None and group == groups.get(receiver):
             return f"{sender} and {receiver} are both in group {group}, and only channels between groups are recorded"
         return "no message of it was recorded"

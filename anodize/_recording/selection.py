@@ -19,6 +19,9 @@ import json
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+from sessiontypes import GlobalType
+from sessiontypes.graph import communication_graph
+
 from ..errors import ConfigurationError
 
 __all__ = ["RecordSelection", "SelectionError", "parse_channel", "selection_from_table", "SELECTION_KEYS"]
@@ -60,23 +63,20 @@ class RecordSelection:
             return pair in self.channels
         return self.inside or group_of.get(pair[0]) != group_of.get(pair[1])
 
-    def for_run(self, between: bool, exclude: Iterable[str]) -> RecordSelection:
+    def for_run(self, between: bool, exclude: Iterable[str], global_type: GlobalType) -> RecordSelection:
         """The selection with the command line's ``--record-between`` and ``--record-exclude`` applied.
 
         Raises:
-            SelectionError: an excluded name is not of the form ``"Sender->Receiver"``.
+            SelectionError: an excluded name is not of the form ``"Sender->Receiver"``, or not a
+                channel of ``global_type``.
         """
         chosen = RecordSelection(False, self.channels, self.exclude) if between else self
-        return chosen.excluding(exclude)
-
-    def excluding(self, names: Iterable[str]) -> RecordSelection:
-        """The same selection with the channels ``names`` (``"A->B"``) left out too.
-
-        Raises:
-            SelectionError: a name is not of the form ``"Sender->Receiver"``.
-        """
-        found = {parse_channel(name, f"--record-exclude {name}") for name in names}
-        return RecordSelection(self.inside, self.channels, self.exclude | found)
+        excluded = RecordSelection(exclude=frozenset(parse_channel(name, f"--record-exclude {name}") for name in exclude))
+        try:
+            excluded.check(communication_graph(global_type).edges, f"global {global_type.name}")
+        except SelectionError as error:
+            raise SelectionError("--record-exclude", error.problem) from None
+        return RecordSelection(chosen.inside, chosen.channels, chosen.exclude | excluded.exclude)
 
     def check(self, pairs: Iterable[tuple[str, str]], what: str) -> None:
         """Every channel the selection names is one of ``pairs`` (the protocol's, ``what``).

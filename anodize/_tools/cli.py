@@ -450,7 +450,7 @@ def _run(args: argparse.Namespace) -> int:
                                    ("--record-exclude", args.record_exclude)) if on]
     if given and args.record is None:
         raise UsageError(f"{given[0]} needs --record PATH")
-    selection = config.record.for_run(args.record_between, args.record_exclude)
+    selection = config.record.for_run(args.record_between, args.record_exclude, system.global_type)
     with _taps(args.record, args.foxglove, selection) as taps:
         report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout), taps=taps)
     print(report.summary())
