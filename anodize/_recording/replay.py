@@ -24,9 +24,9 @@ protocol's ``within`` that expired in the run does expire again: the recording s
 the interleaving of a
 role's own threads (each thread gets its channels' messages in the recorded order, and
 its own clock readings, but two threads that share state run as the replay's scheduler
-runs them); and the channels a recording leaves out (those it was told to leave out, or
-both ends in one group in a recording of the channels between groups only): messages the role sends there are counted, not
-compared, and a receive there ends the replay, saying that the role cannot be replayed
+runs them); and the channels a recording leaves out (those it was told to leave out,
+or both ends in one group in a recording of the channels between groups only): messages
+the role sends there are counted, not compared, and a receive there ends the replay, saying that the role cannot be replayed
 alone from there.
 """
 

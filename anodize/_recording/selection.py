@@ -71,7 +71,8 @@ class RecordSelection:
                 channel of ``global_type``.
         """
         chosen = RecordSelection(False, self.channels, self.exclude) if between else self
-        excluded = RecordSelection(exclude=frozenset(parse_channel(name, f"--record-exclude {name}") for name in exclude))
+        names = frozenset(parse_channel(name, f"--record-exclude {name}") for name in exclude)
+        excluded = RecordSelection(exclude=names)
         try:
             excluded.check(communication_graph(global_type).edges, f"global {global_type.name}")
         except SelectionError as error:

@@ -117,8 +117,8 @@ def test_record_exclude_in_the_file_and_on_the_command_line(capsys: pytest.Captu
     # B2 receives on S->B2 first: the replay says the recording left it out, not that it failed.
     status, out, _ = _cli(capsys, "replay", str(bag), "--role", "B2", "--function", "replay_roles:buyer2",
                           "--pythonpath", str(HERE))
-    assert "which the recording does not have (the run's recording left it out (--record-exclude, or [record] " \
-           "in the system file))" in out, out
+    assert ("which the recording does not have (the run's recording left it out (--record-exclude, or [record] "
+            "in the system file))") in out, out
 
 
 def test_record_channels_records_only_those(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
@@ -128,8 +128,8 @@ def test_record_channels_records_only_those(capsys: pytest.CaptureFixture[str], 
     assert (status, err) == (0, "")
     assert sorted(_info(bag)[0]) == ["B1->S", "S->B1"]
     status, out, _ = _cli(capsys, "verify", str(bag))
-    assert status == 0 and "not recorded (only the channels chosen were recorded; not checked, not a violation): " \
-                           "B1->B2, B2->S, S->B2" in out, out
+    assert status == 0 and ("not recorded (only the channels chosen were recorded; not checked, not a violation): "
+                            "B1->B2, B2->S, S->B2") in out, out
 
 
 def test_record_between_records_the_channels_between_groups_only(capsys: pytest.CaptureFixture[str],
@@ -140,24 +140,24 @@ def test_record_between_records_the_channels_between_groups_only(capsys: pytest.
     assert (status, err) == (0, "") and "channels between groups" in out
     assert sorted(_info(bag)[0]) == ["B1->B2", "B2->S", "S->B2"]
     status, out, _ = _cli(capsys, "verify", str(bag))
-    assert status == 0 and "not recorded (recorded between groups only: both ends in one group; not checked, " \
-                           "not a violation): B1->S, S->B1" in out, out
+    assert status == 0 and ("not recorded (recorded between groups only: both ends in one group; not checked, "
+                            "not a violation): B1->S, S->B1") in out, out
 
 
 @pytest.mark.parametrize(("table", "message"), [
     ('[record]\nexclud = ["S->B2"]\n', "record.exclud: unknown key; expected one of channels, exclude, inside"),
-    ('[record]\nexclude = "S->B2"\n', 'record.exclude: expected an array of channels such as ["A->B"], '
-                                      "got 'S->B2'"),
+    ('[record]\nexclude = "S->B2"\n', ('record.exclude: expected an array of channels such as ["A->B"], '
+                                       "got 'S->B2'")),
     ('[record]\nexclude = ["S->B2:quote"]\n',
-     "record.exclude[0]: expected a channel \"Sender->Receiver\", got 'S->B2:quote': a recording selects whole "
-     "channels (verify checks a channel's labels in order, and replay feeds them in order); write S->B2"),
+     ("record.exclude[0]: expected a channel \"Sender->Receiver\", got 'S->B2:quote': a recording selects whole "
+      "channels (verify checks a channel's labels in order, and replay feeds them in order); write S->B2")),
     ('[record]\nchannels = ["S-B2"]\n', "record.channels[0]: expected a channel \"Sender->Receiver\", got 'S-B2'"),
-    ('[record]\nchannels = []\n', 'record.channels: expected at least one channel such as "A->B" (to record '
-                                  "nothing, run without --record)"),
+    ('[record]\nchannels = []\n', ('record.channels: expected at least one channel such as "A->B" (to record '
+                                   "nothing, run without --record)")),
     ('[record]\ninside = "yes"\n', "record.inside: expected true or false, got 'yes'"),
     ("record = 3\n", 'record: expected a table such as [record] exclude = ["A->B"], got 3'),
-    ('[record]\nexclude = ["S->Nobody"]\n', "record.exclude: global TwoBuyer has no channel S->Nobody; expected one "
-                                            "of B1->B2, B1->S, B2->S, S->B1, S->B2"),
+    ('[record]\nexclude = ["S->Nobody"]\n', ("record.exclude: global TwoBuyer has no channel S->Nobody; expected "
+                                             "one of B1->B2, B1->S, B2->S, S->B1, S->B2")),
 ])
 def test_a_mistake_in_record_is_a_located_error(capsys: pytest.CaptureFixture[str], tmp_path: Path,
                                                 table: str, message: str) -> None:
@@ -182,5 +182,5 @@ def test_record_exclude_mistakes(capsys: pytest.CaptureFixture[str], tmp_path: P
                    "B1->S, B2->S, S->B1, S->B2\n")
     status, out, err = _cli(capsys, "run", str(system), "--record", str(tmp_path / "r.mcap"),
                             "--record-exclude", "S", "--quiet")
-    assert (status, out, err) == (1, "", "error: --record-exclude S: expected a channel \"Sender->Receiver\", "
-                                         "got 'S'\n")
+    assert (status, out, err) == (1, "", ("error: --record-exclude S: expected a channel \"Sender->Receiver\", "
+                                          "got 'S'\n"))
