@@ -26,8 +26,8 @@ role's own threads (each thread gets its channels' messages in the recorded orde
 its own clock readings, but two threads that share state run as the replay's scheduler
 runs them); and the channels a recording leaves out (those it was told to leave out,
 or both ends in one group in a recording of the channels between groups only): messages
-the role sends there are counted, not compared, and a receive there ends the replay, saying that the role cannot be replayed
-alone from there.
+the role sends there are counted, not compared, and a receive there ends the replay,
+saying that the role cannot be replayed alone from there.
 """
 
 from __future__ import annotations
