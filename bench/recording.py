@@ -111,9 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     for key, name in (("p50_ms", "control period p50 (ms)"), ("p99_ms", "control period p99 (ms)"),
                       ("frames_tracked", "frames tracked by VO")):
         base = statistics.median(values("none", key))
-        rows.append([name, cell("none", key), cell("everything", key), cell("between", key),
-                     f"{statistics.median(values('everything', key)) / base:.3f}x",
-                     f"{statistics.median(values('between', key)) / base:.3f}x"])
+        ratios = [f"{statistics.median(values(mode, key)) / base:.3f}x" if base else "-"
+                  for mode in ("everything", "between")]  # no frames tracked: a run too short for VO
+        rows.append([name, cell("none", key), cell("everything", key), cell("between", key), *ratios])
     rows.append(["recording size (MiB)", "", cell("everything", "recording_mib"), cell("between", "recording_mib"),
                  "", ""])
     rows.append(["runs whose recording lost messages", "", str(sum(r["lost"] > 0 for r in runs["everything"])),

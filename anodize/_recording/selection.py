@@ -1,7 +1,7 @@
 """Which channels a recording records: every one by default, or the system file's choice.
 
 A recording records every channel of the protocol, those inside a group too (as
-``ros2 bag record -a`` records every topic: docs/decisions record-everything), unless it
+``ros2 bag record -a`` records every topic; docs/recording.md says why), unless it
 is told otherwise: a system file's ``[record]`` table names the channels to record
 (``channels = ["Joy->Control"]``: only these) or to leave out (``exclude = [...]``:
 everything but these), and ``anodize run --record-exclude A->B`` leaves one out;
