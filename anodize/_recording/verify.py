@@ -197,6 +197,7 @@ class VerifyReport:
                                     "violation": None if r.violation is None else r.violation.__dict__}
                              for name, r in self.channels.items()},
                 "unknown": self.unknown, "unmapped": self.unmapped, "missing": self.missing, "inside": self.inside,
+                "left_out_by": self.left_out_by,
                 "gaps": [gap.__dict__ for gap in self.gaps], "notes": self.notes,
                 "constraints": [held.__dict__ for held in self.constraints],
                 "messages": self.messages, "bytes": self.bytes, "seconds": self.seconds}
