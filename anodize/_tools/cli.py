@@ -168,7 +168,8 @@ def _parser() -> argparse.ArgumentParser:
                                  "channels): PATH.mcap is an MCAP file, any other PATH a rosbag2 folder (see "
                                  "'anodize verify' and 'anodize replay')")
     run_system.add_argument("--record-exclude", action="append", default=[], metavar="A->B",
-                            help="with --record: leave channel A->B out of the recording (repeatable)")
+                            help="with --record: leave channel A->B out of the recording (repeatable; quote "
+                                 "it, 'A->B': > is the shell's)")
     run_system.add_argument("--record-between", action="store_true",
                             help="with --record: record only the channels between groups (cheaper; a role that "
                                  "talks inside its group then cannot be replayed alone)")

@@ -97,8 +97,8 @@ class TinMan:
                                  "clock readings to PATH: an MCAP file if it ends in .mcap, else a rosbag2 folder "
                                  "(default: OUT/run.mcap); check it with 'anodize verify PATH'")
         parser.add_argument("--record-exclude", action="append", default=[], metavar="A->B",
-                            help="with --record: leave channel A->B out of the recording (repeatable), e.g. "
-                                 "Gazebo->Camera, the camera's images as rendered")
+                            help="with --record: leave channel A->B out of the recording (repeatable; quote "
+                                 "it: > is the shell's), e.g. 'Gazebo->Camera', the camera's images as rendered")
         parser.add_argument("--record-between", action="store_true",
                             help="with --record: record only the channels between groups (cheaper; the roles "
                                  "that talk inside their group then cannot be replayed alone)")
