@@ -1,10 +1,13 @@
 """What recording costs TinMan, and how fast ``anodize verify`` reads a recording.
 
-Runs ``anodize run tinman`` alternately without and with ``--record`` (so both see the
-same machine load), ``--runs`` times each, and compares the medians of the control
-loop's period (p50, p99) and of the frames visual odometry tracked. Each recording is
-then verified with ``anodize verify``'s code; its speed is compared with the rate the
-run wrote the recording at (the issue's target: verified faster than it was recorded).
+Runs ``anodize run tinman`` in turn not recording, recording every channel (``--record``,
+the default: inside groups too) and recording the channels between groups only
+(``--record --record-between``), so that all three see the same machine load,
+``--runs`` times each, and compares the control loop's period (p50, p99) and the frames
+visual odometry tracked: medians, and the spread (lowest..highest) over the runs. Each
+recording of every channel is then verified with ``anodize verify``'s code; its speed is
+compared with the rate the run wrote the recording at (the target: verified faster than
+it was recorded).
 
     .venv/bin/python bench/recording.py [--runs 3] [--duration 10]
 
@@ -32,12 +35,17 @@ from runs import LoadWatch, print_table, write_results  # noqa: E402
 ROOT = HERE.parent
 
 
-def run_tinman(out: Path, duration: float, record: bool) -> dict[str, Any]:
-    """One TinMan run: its report, and with ``record`` the recording's size and verify's speed."""
+MODES = {"none": [], "everything": ["--record"], "between": ["--record", "--record-between"]}
+SHOWN = {"none": "not recording", "everything": "--record (every channel)",
+         "between": "--record --record-between"}
+
+
+def run_tinman(out: Path, duration: float, mode: str) -> dict[str, Any]:
+    """One TinMan run: its report, and when it records, the recording's size (and, recording every
+    channel, verify's speed)."""
     command = [sys.executable, "-m", "anodize._tools.cli", "run", "tinman", "--quiet", "--world", "easy",
-               "--duration", str(duration), "--out", str(out)]
-    if record:
-        command.append("--record")
+               "--duration", str(duration), "--out", str(out), *MODES[mode]]
+    record = mode != "none"
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=duration * 10 + 120)
     report_file = out / "report.json"
     if not report_file.exists():
@@ -46,8 +54,12 @@ def run_tinman(out: Path, duration: float, record: bool) -> dict[str, Any]:
     result = {"p50_ms": report["control_period_ms"]["p50"], "p99_ms": report["control_period_ms"]["p99"],
               "frames_tracked": report["frames_processed"], "duration_s": report["duration_s"]}
     if record:
-        result.update(verify_speed(out / "run.mcap", report["duration_s"]))
-        (out / "run.mcap").unlink()
+        path = out / "run.mcap"
+        result["recording_mib"] = path.stat().st_size / 2**20
+        result["lost"] = sum(1 for note in report.get("notes", []) if "not recorded" in note)
+        if mode == "everything":
+            result.update(verify_speed(path, report["duration_s"]))
+        path.unlink()
     return result
 
 
@@ -77,35 +89,49 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     started = time.monotonic()
     watch = LoadWatch()
-    plain: list[dict[str, Any]] = []
-    recorded: list[dict[str, Any]] = []
+    runs: dict[str, list[dict[str, Any]]] = {mode: [] for mode in MODES}
     with tempfile.TemporaryDirectory(prefix="anodize-bench-rec-") as folder:
         for number in range(args.runs):
-            for record, into in ((False, plain), (True, recorded)):
-                out = Path(folder) / f"{'rec' if record else 'plain'}{number}"
-                into.append(run_tinman(out, args.duration, record))
-                print(f"run {number + 1}/{args.runs} {'with' if record else 'without'} --record: "
-                      f"p99 {into[-1]['p99_ms']:.2f} ms, {into[-1]['frames_tracked']} frames", flush=True)
+            for mode, into in runs.items():
+                out = Path(folder) / f"{mode}{number}"
+                into.append(run_tinman(out, args.duration, mode))
+                watch.sample()
+                print(f"run {number + 1}/{args.runs} {SHOWN[mode]}: p99 {into[-1]['p99_ms']:.2f} ms, "
+                      f"{into[-1]['frames_tracked']} frames", flush=True)
 
-    def median(runs: list[dict[str, Any]], key: str) -> float:
-        return float(statistics.median(r[key] for r in runs))
+    def values(mode: str, key: str) -> list[float]:
+        return [float(r[key]) for r in runs[mode]]
 
-    rows = [["measure (median of runs)", "without --record", "with --record", "ratio"]]
+    def cell(mode: str, key: str) -> str:
+        found = values(mode, key)
+        return f"{statistics.median(found):.2f} ({min(found):.2f}..{max(found):.2f})"
+
+    rows = [["measure: median (lowest..highest)", SHOWN["none"], SHOWN["everything"], SHOWN["between"],
+             "ratio every channel / none", "ratio between / none"]]
     for key, name in (("p50_ms", "control period p50 (ms)"), ("p99_ms", "control period p99 (ms)"),
                       ("frames_tracked", "frames tracked by VO")):
-        a, b = median(plain, key), median(recorded, key)
-        rows.append([name, f"{a:.2f}", f"{b:.2f}", f"{b / a:.3f}x"])
-    verify_rate, record_rate = median(recorded, "verify_mib_per_s"), median(recorded, "recorded_mib_per_s")
-    rows.append(["recording written (MiB/s)", "", f"{record_rate:.1f}", ""])
-    rows.append(["verify read and checked (MiB/s)", "", f"{verify_rate:.1f}",
-                 f"{verify_rate / record_rate:.0f}x the recording rate"])
-    rows.append(["verify (messages/s)", "", f"{median(recorded, 'verify_messages_per_s'):.0f}", ""])
+        base = statistics.median(values("none", key))
+        ratios = [f"{statistics.median(values(mode, key)) / base:.3f}x" if base else "-"
+                  for mode in ("everything", "between")]  # no frames tracked: a run too short for VO
+        rows.append([name, cell("none", key), cell("everything", key), cell("between", key), *ratios])
+    rows.append(["recording size (MiB)", "", cell("everything", "recording_mib"), cell("between", "recording_mib"),
+                 "", ""])
+    rows.append(["runs whose recording lost messages", "", str(sum(r["lost"] > 0 for r in runs["everything"])),
+                 str(sum(r["lost"] > 0 for r in runs["between"])), "", ""])
+    verify_rate = statistics.median(values("everything", "verify_mib_per_s"))
+    record_rate = statistics.median(values("everything", "recorded_mib_per_s"))
+    rows.append(["recording written (MiB/s)", "", f"{record_rate:.1f}", "", "", ""])
+    rows.append(["verify read and checked (MiB/s)", "", f"{verify_rate:.1f}", "",
+                 f"{verify_rate / record_rate:.0f}x the recording rate", ""])
+    rows.append(["verify (messages/s)", "", f"{statistics.median(values('everything', 'verify_messages_per_s')):.0f}",
+                 "", "", ""])
     print()
     print_table(rows, text_columns=(0,))
-    how = (f"anodize run tinman for {args.duration:g} s, {args.runs} runs each without and with --record, "
-           f"alternating; medians; {os.cpu_count()} CPUs")
+    how = (f"anodize run tinman --world easy for {args.duration:g} s, {args.runs} runs each not recording, recording "
+           f"every channel and recording between groups only, in turn; medians (lowest..highest); "
+           f"{os.cpu_count()} CPUs")
     write_results(Path(args.json), {"runs": args.runs, "duration_s": args.duration, "table": rows,
-                                    "without_record": plain, "with_record": recorded}, started,
+                                    **{f"runs_{mode}": found for mode, found in runs.items()}}, started,
                   title="What recording costs TinMan", how=how, watch=watch)
     return 0
 

@@ -13,7 +13,7 @@ import re
 
 from .reader import Recording, RecordingError
 
-__all__ = ["role_functions", "group_of", "recorded_channels", "recorded_protocol"]
+__all__ = ["role_functions", "group_of", "recorded_channels", "recorded_protocol", "left_out_by"]
 
 _REFERENCE = re.compile(r"[A-Za-z_][\w.]*:[A-Za-z_][\w.]*")  # module:function, as anodize writes it
 _SHOWN = 60  # characters of a malformed value shown in an error
@@ -54,6 +54,40 @@ def recorded_channels(recording: Recording) -> set[tuple[str, str]] | None:
                          _short(item))
         found.add((sender, receiver))
     return found
+
+
+def left_out_by(recording: Recording) -> str:
+    """Why an anodize recording leaves channels out, in words, from its ``record_selection``
+    (:meth:`~.selection.RecordSelection.to_json`): ``"recorded between groups only"``,
+    ``"left out: A->B"``, ... Empty for a recording that does not say (one made before
+    recordings said so, which recorded between groups only).
+
+    Raises:
+        RecordingError: the key is not a JSON object as anodize writes it.
+    """
+    text = recording.info.get("record_selection")
+    if text is None:
+        return ""
+    expected = 'a JSON object {"inside": true|false, "channels": [...]|null, "exclude": [...]}'
+    try:
+        value = json.loads(text)
+    except (ValueError, RecursionError):
+        raise _error(recording, "record_selection", expected, "text that is not JSON") from None
+    if not isinstance(value, dict):
+        raise _error(recording, "record_selection", expected, f"a JSON {_json_kind(value)}")
+    inside, channels, exclude = value.get("inside"), value.get("channels"), value.get("exclude")
+    if (not isinstance(inside, bool) or not _names(exclude)
+            or not (channels is None or _names(channels))):
+        raise _error(recording, "record_selection", expected, _short(text))
+    why = ["only the channels chosen were recorded" if channels is not None else
+           "recorded between groups only: both ends in one group" if not inside else ""]
+    if exclude:
+        why.append("left out: " + ", ".join(str(name) for name in exclude))
+    return "; ".join(part for part in why if part)
+
+
+def _names(value: object) -> bool:
+    return isinstance(value, list) and all(isinstance(item, str) and len(item) <= 200 for item in value)
 
 
 def recorded_protocol(recording: Recording) -> tuple[str, str] | None:

@@ -1,7 +1,7 @@
 """What a recorded run records: which channels, under which topics, at which end.
 
-Every channel between two groups is recorded (with ``inside``, every channel inside a
-group too), every label of it on its own MCAP
+Every channel is recorded, those inside a group too, unless the run's
+:class:`~.selection.RecordSelection` leaves some out; every label of it on its own MCAP
 channel (a ROS topic carries one message type): under the ROS topic the system maps
 it to, else ``/anodize/<Sender>/<Receiver>/<label>``. A channel is recorded where it
 is sent, so what is recorded is what left the sender, numbered in the order it was
@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from sessiontypes import Sort, StateMachine
 
 from .._transport.ros_lanes import check_topic_name
+from .selection import RecordSelection
 
 __all__ = ["RecordPlan", "ChannelLabel", "record_plan", "default_topic", "channel_labels", "PROFILE", "META",
            "CLOCK_KEY", "CLOCK_TOPIC"]
@@ -88,8 +89,8 @@ def default_topic(sender: str, receiver: str, label: str) -> str:
 
 
 def record_plan(parts: str, machines: Mapping[str, StateMachine], group_of: Mapping[str, str],
-                ros_topics: Mapping[tuple[str, str, str], str], inside: bool = False,
-                qos: Mapping[str, str] | None = None) -> RecordPlan:
+                ros_topics: Mapping[tuple[str, str, str], str], inside: bool = True,
+                selection: RecordSelection | None = None, qos: Mapping[str, str] | None = None) -> RecordPlan:
     """The plan of a run whose roles run in ``group_of``'s groups (a role in none is external).
 
     Args:
@@ -97,12 +98,15 @@ def record_plan(parts: str, machines: Mapping[str, StateMachine], group_of: Mapp
         machines: every role's state machine.
         group_of: role -> group name, for every role anodize runs.
         ros_topics: ``(sender, receiver, label) -> ROS topic`` of the labels the system maps.
-        inside: record the channels inside each group too (each role can then be replayed alone).
+        inside: record the channels inside each group too (each role can then be replayed alone);
+            False: only those between groups. Ignored when ``selection`` is given.
+        selection: which channels to record (default: every one ``inside`` allows).
         qos: ROS topic -> its ``offered_qos_profiles``, for the topics given a QoS.
     """
+    chosen = selection if selection is not None else RecordSelection(inside=inside)
     labels = channel_labels(machines)
-    between = {(s, r) for s, r, _ in labels if inside or group_of.get(s) != group_of.get(r)}
-    topics = {key: ros_topics.get(key) or default_topic(*key) for key in labels if key[:2] in between}
-    at_sender = frozenset(pair for pair in between if pair[0] in group_of)
-    at_receiver = frozenset(pair for pair in between if pair[0] not in group_of and pair[1] in group_of)
+    recorded = {(s, r) for s, r, _ in labels if chosen.chooses((s, r), group_of)}
+    topics = {key: ros_topics.get(key) or default_topic(*key) for key in labels if key[:2] in recorded}
+    at_sender = frozenset(pair for pair in recorded if pair[0] in group_of)
+    at_receiver = frozenset(pair for pair in recorded if pair[0] not in group_of and pair[1] in group_of)
     return RecordPlan(parts, topics, at_sender, at_receiver, dict(group_of), dict(qos or {}))

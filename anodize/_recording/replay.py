@@ -24,10 +24,10 @@ protocol's ``within`` that expired in the run does expire again: the recording s
 the interleaving of a
 role's own threads (each thread gets its channels' messages in the recorded order, and
 its own clock readings, but two threads that share state run as the replay's scheduler
-runs them); and the channels a recording leaves out (both ends in one group, unless the
-run recorded inside its groups): messages the role sends there are counted, not
-compared, and a receive there ends the replay, saying that the role cannot be replayed
-alone from there.
+runs them); and the channels a recording leaves out (those it was told to leave out,
+or both ends in one group in a recording of the channels between groups only): messages
+the role sends there are counted, not compared, and a receive there ends the replay,
+saying that the role cannot be replayed alone from there.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from .._session.typed import argument_for
 from ..errors import AnodizeError, ConfigurationError, ProtocolViolationError, RoleStopped
 from .compare import TopicCodecs, payload_difference
 from .encoding import class_sorts, codec_for_sort, imported_class
-from .metadata import group_of, recorded_channels
+from .metadata import group_of, left_out_by, recorded_channels
 from .plan import CLOCK_KEY, META
 from .reader import RecordedMessage, Recording
 from .replay_network import (
@@ -199,9 +199,10 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
     sends_to, receives_from = peers_of(machine)
     listed, groups = recorded_channels(recording), group_of(recording)  # checked before anything runs
     readings: dict[str, list[tuple[str, float, int]]] = {}
-    streams = _streams(recording, role, topics or {}, report.notes, readings)
+    cut: set[tuple[str, str]] = set()  # channels whose numbering breaks: taken up to the break
+    streams = _streams(recording, role, topics or {}, report.notes, readings, cut)
     recorded = set(streams) if listed is None else listed
-    why = _why_unrecorded(groups)
+    why = _why_unrecorded(groups, left_out_by(recording))
     codecs = TopicCodecs()
 
     def decode(item: RecordedItem) -> object:
@@ -219,7 +220,7 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
         decode=decode, difference=difference, readings=readings, threads=bool(machine.forks))
     endpoint = network.endpoint = Endpoint(role, global_type.name, machine, network)
     _run(function, endpoint, network, timeout, report)
-    _account(network, report)
+    _account(network, report, sorted(f"{p}->{role}" for p, r in cut if r == role))
     return report
 
 
@@ -274,8 +275,10 @@ def _run(function: Callable[..., Any], endpoint: Endpoint, network: ReplayNetwor
             report.traceback = "".join(traceback.format_exception(error))
 
 
-def _account(network: ReplayNetwork, report: ReplayReport) -> None:
-    """Fill in the counts, and the divergence of a role that stopped sending before the recording did."""
+def _account(network: ReplayNetwork, report: ReplayReport, cut_in: list[str]) -> None:
+    """Fill in the counts, and the divergence of a role that stopped sending before the recording did
+    (not judged when a channel into the role is cut short, ``cut_in``: a gap of the recording's
+    left the role without the input that made it send the rest)."""
     role = network.role
     report.received = {f"{peer}->{role}": (feed.delivered, feed.recorded)
                        for peer, feed in network.feeds.items() if feed.unrecorded is None}
@@ -294,6 +297,11 @@ def _account(network: ReplayNetwork, report: ReplayReport) -> None:
     # Ended where the recorded role could not have sent more? Then what it did not send, it should have.
     if report.divergence is not None or report.error is not None or report.outcome in (NOT_RECORDED, TIMED_OUT):
         return
+    if cut_in:
+        if any(network.unsent(peer) for peer in network.checks if network.checks[peer].recorded):
+            report.notes.append(f"the recorded messages {report.role} sent after the break on {', '.join(cut_in)} "
+                                "are not compared: it did not get the input that made it send them")
+        return
     for peer in network.checks:
         unsent = network.unsent(peer) if network.checks[peer].recorded else []
         if unsent:
@@ -305,14 +313,14 @@ def _account(network: ReplayNetwork, report: ReplayReport) -> None:
 
 
 def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, str, str]],
-             notes: list[str], readings: dict[str, list[tuple[str, float, int]]],
+             notes: list[str], readings: dict[str, list[tuple[str, float, int]]], broken: set[tuple[str, str]],
              ) -> dict[tuple[str, str], list[RecordedItem]]:
     """The recorded messages of the channels into and out of ``role``, per channel, in order;
     the role's clock readings go into ``readings``, per endpoint, in order.
 
     A channel's messages are taken up to the first break in their numbering (a message lost,
     or the sender's group started again): what follows is not the same run of the role. So
-    are the clock's readings.
+    are the clock's readings. The channels cut so go into ``broken``.
     """
     keys: dict[int, tuple[str, str, str]] = {}
     clock_topics = {topic.id for topic in recording.topics if topic.metadata.get(CLOCK_KEY) == role}
@@ -324,7 +332,6 @@ def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, st
         if key is not None and role in key[:2]:
             keys[topic.id] = key
     streams: dict[tuple[str, str], list[RecordedItem]] = {}
-    broken: set[tuple[str, str]] = set()
     for message in recording.messages():
         if message.topic.id in clock_topics:
             if clock_read >= 0:
@@ -367,9 +374,15 @@ def _reading(message: RecordedMessage, done: int, readings: dict[str, list[tuple
     return done + 1
 
 
-def _why_unrecorded(groups: Mapping[str, str]) -> Callable[[str, str], str]:
+def _why_unrecorded(groups: Mapping[str, str], left_out: str) -> Callable[[str, str], str]:
+    """Why a channel is not in the recording; ``left_out``: the recording's own account
+    (:func:`~.metadata.left_out_by`; empty: a recording of the channels between groups only)."""
     def why(sender: str, receiver: str) -> str:
         group = groups.get(sender)
+        if f"{sender}->{receiver}" in left_out.rpartition("left out: ")[2].split(", "):
+            return "the run's recording left it out (--record-exclude, or [record] in the system file)"
+        if left_out.startswith("only the channels chosen"):
+            return "the run recorded only the channels chosen in [record], and not this one"
         if group is not None and group == groups.get(receiver):
             return f"{sender} and {receiver} are both in group {group}, and only channels between groups are recorded"
         return "no message of it was recorded"

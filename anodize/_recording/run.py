@@ -13,15 +13,17 @@ from typing import Any
 from ..errors import AnodizeError
 from ..taps import TapRun
 from .merge import merge_parts
-from .plan import RecordPlan, record_plan
+from .plan import RecordPlan, channel_labels, record_plan
+from .selection import RecordSelection
 from .tap import GroupRecording
 
 __all__ = ["Recording"]
 
 
 class Recording:
-    """A channel tap (:mod:`anodize.taps`) that records every message between groups to ``target``
-    (``inside=True``: inside groups too, so that every role can be replayed alone), and every
+    """A channel tap (:mod:`anodize.taps`) that records every message to ``target``, those inside
+    a group too (so that every role can be replayed alone; ``inside=False``: only those between
+    groups; ``selection``: the channels chosen, :class:`~.selection.RecordSelection`), and every
     reading of each role's clock (``Endpoint.now()``, ``Endpoint.wall()``).
 
     ``System.run(taps=[Recording("run.mcap")])``: an MCAP file if ``target`` ends in
@@ -34,9 +36,11 @@ class Recording:
     bytes of a secret key) the heads are signed (HMAC-SHA256) for ``anodize verify --key``.
     """
 
-    def __init__(self, target: str | os.PathLike[str], inside: bool = False, sign_key: bytes | None = None) -> None:
+    def __init__(self, target: str | os.PathLike[str], inside: bool = True,
+                 selection: RecordSelection | None = None, sign_key: bytes | None = None) -> None:
         self.target = Path(target)
-        self.inside = inside
+        self.selection = selection if selection is not None else RecordSelection(inside=inside)
+        self.inside = self.selection.inside
         self.sign_key = sign_key
         self.plan: RecordPlan | None = None
         self._run: TapRun | None = None
@@ -47,8 +51,11 @@ class Recording:
             raise AnodizeError(f"recording {self.target} records one run: make another for the next")
         # The parts are written beside the target, so the merge is a rename away on the same file system.
         parts = self.target.with_name(f".{self.target.name}.parts-{os.getpid()}")
-        self.plan = dataclasses.replace(record_plan(str(parts), run.machines, run.group_of, run.topics, self.inside,
-                                                    run.qos),
+        # A channel the selection names must be one of the protocol's (checked here for the Python API;
+        # a system file's [record] is checked, located, when the system is built).
+        self.selection.check({(s, r) for s, r, _ in channel_labels(run.machines)}, f"global {run.global_type.name}")
+        self.plan = dataclasses.replace(record_plan(str(parts), run.machines, run.group_of, run.topics,
+                                                    selection=self.selection, qos=run.qos),
                                         run_id=secrets.token_hex(16))  # each chain starts from it
         self._run = run
         return GroupRecording(self.plan)
@@ -66,10 +73,12 @@ class Recording:
                 "global": run.global_type.name, "transport": run.transport, "anodize_version": _version(),
                 "recorded_channels": " ".join(sorted(f"{s}->{r}" for s, r in plan.at_sender | plan.at_receiver)),
                 "role_functions": json.dumps(dict(run.functions)), "group_of": json.dumps(dict(plan.group_of)),
-                "run_id": plan.run_id}
+                "run_id": plan.run_id, "record_selection": self.selection.to_json()}
         result = merge_parts(Path(plan.parts), self.target, info, self.sign_key)
         size = f"{result.bytes / 2**20:.1f} MiB"
-        where = "between and inside groups" if self.inside else "between groups"
+        where = {"every channel": "between and inside groups",
+                 "the channels between groups": "between groups"}.get(self.selection.describe(),
+                                                                       f"({self.selection.describe()})")
         readings = f", and {result.readings} readings of the roles' clocks," if result.readings else ""
         notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels {where}{readings} to "
                  + str(self.target)]

@@ -55,7 +55,7 @@ from .held import (
     judge_period,
     judge_refinement,
 )
-from .metadata import recorded_channels
+from .metadata import left_out_by, recorded_channels
 from .plan import CLOCK_KEY, META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
 from .tap import GAP_KEY, SEQUENCE_WRAP
@@ -150,7 +150,10 @@ class VerifyReport:
         unknown: recorded channels the protocol does not have (a violation).
         unmapped: recorded topics that are no channel's (not checked).
         missing: channels of the protocol with no message in the recording.
-        inside: channels an anodize recording leaves out by design (both ends in one group).
+        inside: channels an anodize recording leaves out by design: both ends in one group, in a
+            recording of the channels between groups only, or not chosen (``[record]``,
+            ``--record-exclude``); not a violation.
+        left_out_by: why they are left out, in words (empty for a recording that does not say).
         gaps: messages the recorder marked as not recorded (the recording's, not a violation).
         notes: what else the reader should know (payload classes checked by name only, ...).
         constraints: each time or value constraint of the protocol, and how it held.
@@ -164,6 +167,7 @@ class VerifyReport:
     unmapped: list[str] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)
     inside: list[str] = field(default_factory=list)
+    left_out_by: str = ""
     gaps: list[Gap] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     constraints: list[Held] = field(default_factory=list)
@@ -189,7 +193,8 @@ class VerifyReport:
         lines.extend(f"missing: no message on channel {channel}" for channel in self.missing)
         lines.extend(f"gap: {gap}" for gap in self.gaps)
         if self.inside:
-            lines.append(f"not recorded (both ends in one group): {', '.join(self.inside)}")
+            why = self.left_out_by or "both ends in one group"
+            lines.append(f"not recorded ({why}; not checked, not a violation): {', '.join(self.inside)}")
         lines.extend(f"constraint: {held}" for held in self.constraints)
         lines.extend(f"note: {note}" for note in self.notes)
         if self.evidence is not None:
@@ -202,6 +207,7 @@ class VerifyReport:
                                     "violation": None if r.violation is None else r.violation.__dict__}
                              for name, r in self.channels.items()},
                 "unknown": self.unknown, "unmapped": self.unmapped, "missing": self.missing, "inside": self.inside,
+                "left_out_by": self.left_out_by,
                 "gaps": [gap.__dict__ for gap in self.gaps], "notes": self.notes,
                 "constraints": [held.__dict__ for held in self.constraints],
                 "evidence": None if self.evidence is None else self.evidence.to_dict(),
@@ -574,6 +580,8 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
     report.missing = [f"{s}->{r}" for s, r in expected
                       if f"{s}->{r}" not in report.channels or not report.channels[f"{s}->{r}"].messages]
     report.inside = [f"{s}->{r}" for s, r in sorted(pairs) if (s, r) not in expected]
+    if report.inside:
+        report.left_out_by = left_out_by(recording)
     report.seconds = time.perf_counter() - began
     return report
 
@@ -596,7 +604,8 @@ def _constraints(report: VerifyReport, machines: Mapping[str, StateMachine], pai
         elif any(t.timing is not None and t.timing.within is not None for t in machine.all_transitions()):
             channels = ", ".join(f"{s}->{r}" for s, r in absent)
             report.notes.append(f"deadlines of {role} not judged: its channel(s) {channels} are not in the recording "
-                                "(its previous action may be one of theirs; record with --record-inside)")
+                                "(its previous action may be one of theirs; a recording records every channel "
+                                "unless [record] or --record-exclude leaves some out)")
     return _Held(machines, frozenset(complete), refined)
 
 

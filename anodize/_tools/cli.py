@@ -32,6 +32,7 @@ from .introspect import open_introspection, system_name
 
 if TYPE_CHECKING:
     from .._live.server import LiveView
+    from .._recording.selection import RecordSelection
     from .._supervision.report import GroupStatus
     from ..taps import ChannelTap
 
@@ -166,11 +167,17 @@ def _parser() -> argparse.ArgumentParser:
                             help='transport kind "dds": how long the groups wait for their peers to appear '
                                  "(default: the file's transport.wait, else 30)")
     run_system.add_argument("--record", metavar="PATH",
-                            help="record every message between groups: PATH.mcap is an MCAP file, any other PATH "
-                                 "a rosbag2 folder (see 'anodize verify' and 'anodize replay')")
+                            help="record every message, inside groups too (the file's [record] may choose "
+                                 "channels): PATH.mcap is an MCAP file, any other PATH a rosbag2 folder (see "
+                                 "'anodize verify' and 'anodize replay')")
+    run_system.add_argument("--record-exclude", action="append", default=[], metavar="A->B",
+                            help="with --record: leave channel A->B out of the recording (repeatable; quote "
+                                 "it, 'A->B': > is the shell's)")
+    run_system.add_argument("--record-between", action="store_true",
+                            help="with --record: record only the channels between groups (cheaper; a role that "
+                                 "talks inside its group then cannot be replayed alone)")
     run_system.add_argument("--record-inside", action="store_true",
-                            help="with --record: record the channels inside each group too, so that every role "
-                                 "can be replayed alone ('anodize replay')")
+                            help="the default now (every channel is recorded): accepted, and does nothing more")
     run_system.add_argument("--sign-key", metavar="KEYFILE",
                             help="with --record: sign the recording's hash chain heads with the secret key in "
                                  "KEYFILE (HMAC-SHA256; 'anodize verify --key KEYFILE' checks it)")
@@ -454,10 +461,13 @@ def _run(args: argparse.Namespace) -> int:
             wait=args.wait if args.wait is not None else config.transport.wait))
     system = build_system(config)
     timeout = args.timeout if args.timeout is not None else config.timeout
-    if args.record_inside and args.record is None:
-        raise UsageError("--record-inside needs --record PATH")
+    given = [flag for flag, on in (("--record-inside", args.record_inside), ("--record-between", args.record_between),
+                                   ("--record-exclude", args.record_exclude)) if on]
+    if given and args.record is None:
+        raise UsageError(f"{given[0]} needs --record PATH")
+    selection = config.record.for_run(args.record_between, args.record_exclude, system.global_type)
     sign_key = read_signing_key(args.sign_key, "--sign-key") if args.sign_key is not None else None
-    with _taps(args.record, args.foxglove, args.record_inside, sign_key) as taps, \
+    with _taps(args.record, args.foxglove, selection, sign_key) as taps, \
             _introspection(system_name(args.file), str(config.path)) as served:
         report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout),
                             taps=[*taps, *served])
@@ -513,14 +523,14 @@ def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
 
 @contextlib.contextmanager
 def _taps(record: str | os.PathLike[str] | None, foxglove: int | None,
-          inside: bool = False, sign_key: bytes | None = None) -> Iterator[list[ChannelTap]]:
+          selection: RecordSelection | None = None, sign_key: bytes | None = None) -> Iterator[list[ChannelTap]]:
     """The run's channel taps: ``--record`` (first: it wraps the channels first, as it always has;
-    ``inside``: the channels inside groups too), then ``--foxglove``."""
+    ``selection``: which channels, default every one), then ``--foxglove``."""
     taps: list[ChannelTap] = []
     if record is not None:
         from .._recording import Recording
 
-        taps.append(Recording(record, inside=inside, sign_key=sign_key))
+        taps.append(Recording(record, selection=selection, sign_key=sign_key))
     with _live_view(foxglove) as live:
         if live is not None:
             taps.append(live)
@@ -628,7 +638,7 @@ def _run_named(name: str, rest: list[str]) -> int:
     prepared = named.prepare(args, lambda line: print(line, flush=True))
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
     try:
-        with _taps(prepared.record, args.foxglove, prepared.record_inside) as taps, \
+        with _taps(prepared.record, args.foxglove, prepared.selection()) as taps, \
                 _introspection(name, name) as served:
             report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
                                          taps=[*taps, *served], stop_when=prepared.stop_when)

@@ -24,6 +24,9 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     [channels."A->B"]                        # capacities; qos: of the channel's ROS topics
     capacity = 8
 
+    [record]                                 # what --record records (default: every channel)
+    exclude = ["Gazebo->Camera"]             # all but these; or channels = [...]: only these
+
     [groups.control]                         # one table per group (at least one)
     priority = 90                            # 1..99: SCHED_FIFO
     # nice = -10                             # instead of a priority: ordinary scheduling at this nice
@@ -58,6 +61,7 @@ import sessiontypes
 from sessiontypes.graph import communication_graph
 from sessiontypes.limits import SYSTEM_FILE, read_limited
 
+from .._recording.selection import RecordSelection, SelectionError, selection_from_table
 from .._supervision.group import FailurePolicy, parse_memory
 from .._supervision.rosbridge import RosBridge
 from .._supervision.system import System
@@ -69,7 +73,7 @@ __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_s
            "add_pythonpath"]
 
 _TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id",
-             "ros", "channels")
+             "ros", "channels", "record")
 _CHANNEL_KEYS = ("capacity", "qos")
 _ROS_KEYS = ("topics", "external", "distro", "domain", "qos")
 _OLD_DDS_KEYS = ("domain", "run_id")  # top-level keys of the earlier form, now fields of [transport]
@@ -159,6 +163,7 @@ class SystemConfig:
         groups: group name -> its configuration, in file order.
         ros: ``[ros]``: the ROS 2 bridge (topics, external roles, distro, domain), or None.
         capacities: ``[channels."A->B"] capacity``: channels that hold at most so many messages.
+        record: ``[record]``: the channels ``--record`` records (default: every one).
     """
 
     path: Path
@@ -171,6 +176,7 @@ class SystemConfig:
     groups: dict[str, GroupConfig]
     ros: RosBridge | None = None
     capacities: dict[str, int] = field(default_factory=dict)
+    record: RecordSelection = field(default_factory=RecordSelection)
 
     @property
     def external(self) -> frozenset[str]:
@@ -262,7 +268,14 @@ class _Reader:
             timeout=None if timeout is None else float(timeout), monitors=monitors,
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
             groups=self.groups(data.get("groups")), ros=self.ros(data.get("ros"), data.get("channels")),
-            capacities=self.capacities(data.get("channels", {})))
+            capacities=self.capacities(data.get("channels", {})), record=self.record(data.get("record")))
+
+    def record(self, table: Any) -> RecordSelection:
+        """``[record]``: its shape here; its channels against the protocol when the system is built."""
+        try:
+            return selection_from_table(table)
+        except SelectionError as error:
+            raise self.error(f"record.{error.key}".rstrip("."), error.problem) from None
 
     def transport(self, data: dict[str, Any]) -> Transport:
         """``[transport]`` (kind and fields), or the earlier form: ``transport = "kind"`` with
@@ -551,6 +564,10 @@ def build_system(config: SystemConfig) -> System:
     except ConfigurationError as error:
         key = "channels" if str(error).startswith("capacity of") else "ros"
         raise ConfigError(shown, key, str(error)) from None
+    try:
+        config.record.check(communication_graph(global_type).edges, f"global {global_type.name}")
+    except SelectionError as error:
+        raise ConfigError(shown, f"record.{error.key}", error.problem) from None
     for group in config.groups.values():
         try:
             declared = system.group(group.name, priority=group.priority, memory=group.memory,

@@ -20,6 +20,7 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Protocol
 
+from .._recording.selection import RecordSelection
 from .._supervision.report import GroupStatus, RunReport
 from .._supervision.system import System
 from ..errors import AnodizeError
@@ -32,8 +33,9 @@ ENTRY_POINT_GROUP = "anodize.systems"
 @dataclass
 class Prepared:
     """What a named system hands back to be run: the system, its timeout (seconds), where
-    to record it (None: not recorded; ``record_inside``: the channels inside groups too, so
-    that each role can be replayed alone), and ``stop_when``: asked about twice a second
+    to record it (None: not recorded; every channel is recorded, inside groups too, unless
+    ``record_selection`` chooses, e.g. the system file's ``[record]``; ``record_inside=False``:
+    only the channels between groups), and ``stop_when``: asked about twice a second
     while the run goes, it ends the run early by returning a reason (None: go on; see
     ``System.run``)."""
 
@@ -42,7 +44,14 @@ class Prepared:
     grace: float = 3.0
     record: Path | None = None
     stop_when: Callable[[], str | None] | None = None
-    record_inside: bool = False
+    record_inside: bool = True
+    record_selection: RecordSelection | None = None
+
+    def selection(self) -> RecordSelection:
+        """The channels to record: ``record_selection``, else every one ``record_inside`` allows."""
+        if self.record_selection is not None:
+            return self.record_selection
+        return RecordSelection(inside=self.record_inside)
 
 
 @dataclass

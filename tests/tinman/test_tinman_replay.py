@@ -1,4 +1,5 @@
-"""``anodize replay`` of a recorded TinMan run: every role's replay but the simulator's matches its
+"""``anodize replay`` of a recorded TinMan run (plain ``--record DIR``: a rosbag2 folder that holds
+every channel, those inside a group too): every role's replay but the simulator's matches its
 recording message for message (the roles read time through their endpoints, which a recording
 records and a replay gives back; Move's and VisOdom's threads go through their recorded order);
 the Visualizer, which only receives, compares nothing and says so (exit 1); no replay writes
@@ -14,7 +15,12 @@ from pathlib import Path
 
 import pytest
 
+import sessiontypes
+from anodize._recording.reader import open_recording
 from anodize._tools import cli
+from anodize._tools.config import load_config
+from sessiontypes.graph import communication_graph
+from tinman.app import SYSTEM_FILE
 from tinman.settings import ENVIRONMENT_VARIABLE
 
 pytestmark = pytest.mark.slow  # runs the whole system in processes for seconds, then replays in a fresh process
@@ -22,14 +28,19 @@ pytestmark = pytest.mark.slow  # runs the whole system in processes for seconds,
 ROOT = Path(__file__).resolve().parents[2]
 
 
+BAG = "bag"  # the recording: a rosbag2 folder in the run's folder
+
+
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A recorded 6 s run in ``<tmp>/out/tinman``: the folder the default settings name, seen from ``<tmp>``."""
+    """A recorded 6 s run in ``<tmp>/out/tinman``: the folder the default settings name, seen from
+    ``<tmp>``; the recording, plain ``--record DIR``, in its folder ``bag``."""
     root = tmp_path_factory.mktemp("replayed")
     out = root / "out" / "tinman"
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the run: the run exports its own
-        status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", "--out", str(out)])
+        status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", str(out / BAG),
+                           "--out", str(out)])
     report = json.loads((out / "report.json").read_text())
     assert status == (0 if report["ok"] else 1)
     assert report["messages"].get("VisOdom->Planner", 0) >= 2, report["messages"]
@@ -45,7 +56,7 @@ def _replay(recorded: Path, role: str, function: str) -> tuple[int, str]:
     """``anodize replay`` as a user runs it: a fresh process, in the folder above ``out/tinman``."""
     environment = {key: value for key, value in os.environ.items() if key != ENVIRONMENT_VARIABLE}
     environment["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(ROOT / "tinman" / "src")])
-    done = subprocess.run([sys.executable, "-m", "anodize._tools.cli", "replay", str(recorded / "run.mcap"),
+    done = subprocess.run([sys.executable, "-m", "anodize._tools.cli", "replay", str(recorded / BAG),
                            "--role", role, "--function", function, "--timeout", "60"],
                           cwd=recorded.parent.parent, env=environment, capture_output=True, text=True, timeout=180)
     assert done.stderr == "", done.stderr
@@ -76,6 +87,17 @@ def test_each_role_but_the_simulator_s_replays_equal_and_writes_nothing_into_the
     assert _folder(recorded) == before  # not a file of the recorded run written again
 
 
+def test_plain_record_holds_every_channel_of_tinman(recorded: Path) -> None:
+    """Every channel of TinManParallel, those inside a group (Joy->Control, Camera->VisOdom, ...) too."""
+    config = load_config(SYSTEM_FILE)
+    channels = communication_graph(sessiontypes.load(str(config.protocol)).globals["TinManParallel"]).edges
+    with open_recording(recorded / BAG) as recording:
+        listed = set(recording.info["recorded_channels"].split())
+        topics = {(t.metadata.get("anodize.sender"), t.metadata.get("anodize.receiver")) for t in recording.topics}
+    assert listed == {f"{s}->{r}" for s, r in channels}
+    assert {("Joy", "Control"), ("Control", "Move"), ("Camera", "VisOdom"), ("Gazebo", "Camera")} <= topics
+
+
 def test_the_visualizer_only_receives_so_its_replay_compares_nothing_and_fails(recorded: Path) -> None:
     before = _folder(recorded)
     status, out = _replay(recorded, "Visualizer", "tinman.roles.simulation:visualizer")
@@ -100,9 +122,10 @@ def test_the_recorded_run_s_contract_held_and_verify_lists_its_constraints(
     report = json.loads((recorded / "report.json").read_text())
     assert report["contract"] and all(entry["held"] and entry["checked"] > 0 for entry in report["contract"])
     capsys.readouterr()
-    assert cli.main(["verify", str(recorded / "run.mcap")]) == 0
+    assert cli.main(["verify", str(recorded / BAG)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0].startswith(f"{recorded / 'run.mcap'} conforms to TinManParallel"), lines
+    assert lines[0].startswith(f"{recorded / BAG} conforms to TinManParallel"), lines
+    assert not any(line.startswith(("not recorded", "missing", "gap")) for line in lines), lines
     held = [line for line in lines if line.startswith("constraint: ") and ": held on " in line]
     for start in ("Joy->Control Joy every 20ms +- 10ms", "Control->Move Twist within 100ms",
                   "Move->Gazebo Twist within 500ms", "Move->Gazebo Twist {abs(linear.x) <= 0.5",

@@ -317,7 +317,7 @@ def test_tinman_records_and_its_recording_verifies(tmp_path: Path) -> None:
     assert [n for n, r in report.channels.items() if r.violation] == ["Move->Gazebo"]
 
 
-def test_a_system_run_records_only_channels_between_groups(tmp_path: Path) -> None:
+def test_a_run_recorded_between_groups_only_leaves_the_channels_inside_a_group_out(tmp_path: Path) -> None:
     global_type = load_global(BUYERS, "Buy")
 
     def buyer(ep: Any) -> None:
@@ -328,7 +328,7 @@ def test_a_system_run_records_only_channels_between_groups(tmp_path: Path) -> No
 
     system = System(global_type)
     system.group("all").role("B", buyer).role("S", seller)
-    report = system.run(timeout=10, taps=[Recording(tmp_path / "r.mcap")])
+    report = system.run(timeout=10, taps=[Recording(tmp_path / "r.mcap", inside=False)])
     assert report.ok
     assert any("recorded 0 messages" in n for n in report.notes), report.notes
     with open_recording(tmp_path / "r.mcap") as recording:

@@ -240,13 +240,49 @@ def test_sending_beyond_the_recording_ends_the_replay_cleanly(cut_short: Path) -
                              "only the 1 message(s) before it there")
 
 
-def test_a_channel_inside_a_group_is_counted_not_compared_and_cannot_be_fed(
+def _three_titles_seller(ep: Endpoint) -> None:
+    while ep.recv("B").label == "title":
+        ep.send("B", "quote", 140)
+
+
+def test_a_gap_in_the_role_s_input_ends_the_replay_there_without_calling_it_a_divergence(tmp_path: Path) -> None:
+    """The recorder lost a message into the role (its writer fell behind: a gap): the role is fed up
+    to the gap, and what it sent in the run after it is not what the replay can ask of it."""
+    from mcap_rewrite import rewrite
+
+    def buyer(ep: Endpoint) -> None:
+        for title in ("Ulysses", "Dubliners", "Emma"):
+            ep.send("S", "title", title)
+            ep.recv("S")
+        ep.send("S", "done")
+
+    system = System(LOOP)
+    system.group("b").role("B", buyer)
+    system.group("s").role("S", _three_titles_seller)
+    path = tmp_path / "run.mcap"
+    assert system.run(timeout=20.0, taps=[Recording(path)]).ok
+
+    def lose_the_second_title(messages: list[list[Any]]) -> None:
+        titles = [m for m in messages if m[0][0].endswith("/B/S/title")]
+        messages.remove(titles[1])
+
+    gapped = tmp_path / "gapped.mcap"
+    rewrite(path, gapped, lose_the_second_title)
+    report = _replay(gapped, "S", _three_titles_seller, LOOP)
+    assert (report.ok, report.outcome, report.divergence) == (True, "recording ends", None), report.text()
+    assert report.compared == {"S->B": (1, 3)}
+    assert "B->S: replayed up to message 0; the next one is numbered 3 (messages are missing)" in report.notes
+    assert ("the recorded messages S sent after the break on B->S are not compared: it did not get the input "
+            "that made it send them") in report.notes
+
+
+def test_a_channel_inside_a_group_recorded_between_groups_only_is_counted_not_compared_and_cannot_be_fed(
         capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     system = System(TWO_BUYER)
     system.group("shop").role("B1", replay_roles.buyer1).role("S", replay_roles.seller)
     system.group("b2").role("B2", replay_roles.buyer2)
     path = tmp_path / "run.mcap"
-    assert system.run(timeout=20.0, taps=[Recording(path)]).ok
+    assert system.run(timeout=20.0, taps=[Recording(path, inside=False)]).ok
     report = _replay(path, "B1", replay_roles.buyer1)
     # B1 stopped before its first send on a recorded channel: nothing was compared, which is no pass.
     assert (report.ok, report.outcome, report.messages_compared) == (False, "not recorded", 0)

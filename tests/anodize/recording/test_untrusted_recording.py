@@ -224,6 +224,11 @@ def test_replay_takes_a_class_the_recording_names_only_from_the_user_s_imports(
     ("group_of", "[]", "a JSON object of role -> group name; found a JSON array"),
     ("group_of", '{"A": null}', "a JSON object of role -> group name; found null for role A"),
     ("recorded_channels", "A-B", "channels \"Sender->Receiver\" separated by spaces; found 'A-B'"),
+    ("record_selection", "[1]", ('a JSON object {"inside": true|false, "channels": [...]|null, "exclude": [...]}; '
+                                 "found a JSON array")),
+    ("record_selection", '{"inside": 1, "exclude": []}', (
+        'a JSON object {"inside": true|false, "channels": [...]|null, "exclude": [...]}; '
+        "found '{\"inside\": 1, \"exclude\": []}'")),
 ])
 def test_malformed_metadata_is_a_clean_error_naming_the_key(
         capsys: pytest.CaptureFixture[str], folder: Path, key: str, value: str, expected: str) -> None:

@@ -108,7 +108,7 @@ BAD = {
     "unknown_top_key": (
         MINIMAL + "protocl = 1\n" + GROUP,
         ("protocl: unknown key; expected one of channels, domain, global, groups, monitors, protocol, pythonpath, "
-         "ros, run_id, timeout, transport")),
+         "record, ros, run_id, timeout, transport")),
     "channel_capacity_zero": (
         MINIMAL + '[channels."A->B"]\ncapacity = 0\n' + GROUP,
         "channels.A->B.capacity: expected a whole number of messages >= 1, got 0"),

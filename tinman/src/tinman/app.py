@@ -96,6 +96,12 @@ class TinMan:
                                  "so that each role can be replayed alone with 'anodize replay') and every role's "
                                  "clock readings to PATH: an MCAP file if it ends in .mcap, else a rosbag2 folder "
                                  "(default: OUT/run.mcap); check it with 'anodize verify PATH'")
+        parser.add_argument("--record-exclude", action="append", default=[], metavar="A->B",
+                            help="with --record: leave channel A->B out of the recording (repeatable; quote "
+                                 "it: > is the shell's), e.g. 'Gazebo->Camera', the camera's images as rendered")
+        parser.add_argument("--record-between", action="store_true",
+                            help="with --record: record only the channels between groups (cheaper; the roles "
+                                 "that talk inside their group then cannot be replayed alone)")
 
     def prepare(self, args: argparse.Namespace, log: Callable[[str], None]) -> Prepared:
         patrol = bool(getattr(args, "patrol", False))
@@ -128,8 +134,14 @@ class TinMan:
         self.settings.records.mkdir(parents=True, exist_ok=True)
         export(self.settings)
         record = None if args.record is None else Path(args.record or out / "run.mcap")
-        return Prepared(build_system(config), timeout=float(args.duration), grace=3.0, record=record,
-                        record_inside=True, stop_when=patrol_done(self.settings.records) if patrol else None)
+        exclude, between = getattr(args, "record_exclude", []), bool(getattr(args, "record_between", False))
+        if record is None and (exclude or between):
+            raise TinManError(f"{'--record-exclude' if exclude else '--record-between'} needs --record")
+        system = build_system(config)
+        # tinman.toml's [record] (every channel by default), with the command line's choices.
+        selection = config.record.for_run(between, exclude, system.global_type)
+        return Prepared(system, timeout=float(args.duration), grace=3.0, record=record, record_selection=selection,
+                        stop_when=patrol_done(self.settings.records) if patrol else None)
 
     def progress(self, statuses: dict[str, GroupStatus], elapsed: float) -> str:
         """The live line, as much of it as the terminal has room for (80 columns when unknown).
