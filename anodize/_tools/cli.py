@@ -27,6 +27,7 @@ from sessiontypes.printer import PrintTooLongError, print_local
 
 from ..errors import AnodizeError
 from .codegen import GeneratedModule, generate_modules
+from .version import version_line
 
 if TYPE_CHECKING:
     from .._live.server import LiveView
@@ -95,6 +96,7 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="anodize", description=(
         "Multiparty session types for mixed-criticality systems: check protocols, "
         "project them onto roles, and run them."))
+    parser.add_argument("--version", action="version", version=version_line())
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     check = commands.add_parser("check", help="check .proto files for well-formedness")
