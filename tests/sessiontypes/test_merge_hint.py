@@ -35,7 +35,8 @@ def test_the_error_suggests_that_the_chooser_tells_the_role() -> None:
 def test_following_the_hint_makes_the_protocol_projectable() -> None:
     hint = str(_error(UNINFORMED, "deal.proto")).splitlines()[3]
     buy, cancel = re.findall(r"`A -> C : (\w+\(\))`", hint)
-    fixed = UNINFORMED.replace("buy(). ", f"buy(). A -> C : {buy}. ").replace("cancel()\n", f"cancel(). A -> C : {cancel}\n")
+    fixed = UNINFORMED.replace("buy(). ", f"buy(). A -> C : {buy}. ")
+    fixed = fixed.replace("cancel()\n", f"cancel(). A -> C : {cancel}\n")
     module = sessiontypes.loads(fixed, "deal.proto")
     assert str(module.globals["Deal"].project("C")) == "&A{buy.?B(ship(str)), cancel}"
 
