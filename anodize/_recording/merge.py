@@ -33,7 +33,8 @@ class MergeResult:
 
     path: Path
     messages: int = 0
-    channels: int = 0
+    channels: int = 0  # the protocol's channels (sender->receiver) with a message recorded
+    topics: int = 0  # the recording's topics of messages: one per label of a channel (each an MCAP channel)
     bytes: int = 0
     readings: int = 0  # of the roles' clocks, on their clock channels (not counted in messages, channels)
     notes: list[str] = field(default_factory=list)
@@ -70,6 +71,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
         known: dict[tuple[str, int, tuple[tuple[str, str], ...]], int] = {}  # a restarted group's channels again
         topics: dict[int, dict[str, Any]] = {}
         clocks: set[int] = set()  # the recording's clock channels
+        pairs: set[tuple[str, str]] = set()  # the protocol's channels (sender, receiver) recorded
 
         def channel_of(number: int, channel_id: int) -> int:
             """The recording's channel of a part's, registered at its first message (one pass)."""
@@ -83,6 +85,8 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
                 new = known[key] = writer.register_channel(topic, "cdr", schema, metadata)
                 if CLOCK_KEY in metadata:
                     clocks.add(new)
+                elif f"{META}.sender" in metadata:
+                    pairs.add((metadata[f"{META}.sender"], metadata.get(f"{META}.receiver", "")))
                 topics[new] = {"name": topic, "type": type_name, "hash": metadata.get("topic_type_hash", ""),
                                "qos": metadata.get("offered_qos_profiles", ""), "count": 0}
             ids[(number, channel_id)] = new
@@ -100,7 +104,8 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
             else:
                 result.messages += 1
             result.bytes += len(data)
-        result.channels = len(topics) - len(clocks)
+        result.channels = len(pairs)
+        result.topics = len(topics) - len(clocks)
         for source in sources:
             result.notes.extend(source.notes)
         ran_at: dict[str, list[str]] = {}

@@ -61,10 +61,15 @@ class Recording:
         size = f"{result.bytes / 2**20:.1f} MiB"
         where = "between and inside groups" if self.inside else "between groups"
         readings = f", and {result.readings} readings of the roles' clocks," if result.readings else ""
-        notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels {where}{readings} to "
-                 + str(self.target)]
+        on = f"{_count(result.channels, 'channel')} ({_count(result.topics, 'topic')})"
+        notes = [f"recorded {result.messages} messages ({size}) on {on} {where}{readings} to {self.target}"]
         notes.extend(f"recording: {note}" for note in result.notes)
         return notes
+
+
+def _count(n: int, word: str) -> str:
+    """``1 channel``, ``2 channels``."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
 
 
 def _version() -> str:
