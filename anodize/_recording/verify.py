@@ -177,7 +177,7 @@ class VerifyReport:
         lines = [f"{head}: {checked} messages on {on} checked ({read})"]
         lines.extend(f"violation: {r.violation}" for r in self.channels.values() if r.violation is not None)
         lines.extend(f"unknown channel: {text}" for text in self.unknown)
-        lines.extend(f"not checked: topic {text} is no channel of the protocol (give it in --topics)"
+        lines.extend(f"not checked: topic {text} is on no channel of the protocol (map it with --topics)"
                      for text in self.unmapped)
         lines.extend(f"missing: no message on channel {channel}" for channel in self.missing)
         lines.extend(f"gap: {gap}" for gap in self.gaps)
