@@ -72,7 +72,7 @@ def _tools(folder: Path) -> dict[str, str]:
         tool.chmod(0o755)
     pythonpath = os.pathsep.join([str(REPO), str(REPO / "tinman" / "src")])
     return {**os.environ, "PATH": f"{tools}{os.pathsep}{os.environ.get('PATH', '')}", "PYTHONPATH": pythonpath,
-            "MYPY_CACHE_DIR": str(folder / "mypy-cache"), "ANODIZE_NO_RT": os.environ.get("ANODIZE_NO_RT", "")}
+            "MYPY_CACHE_DIR": str(folder / "mypy-cache")}
 
 
 def test_the_page_has_files_and_sessions() -> None:
