@@ -12,12 +12,22 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-SCRIPT = REPO / "scripts" / "bootstrap"
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "bootstrap"
 PACKAGES = ["gcc", "python3-dev", "g++", "libfastrtps-dev", "libfastcdr-dev", "nftables"]
 
 
+def _copy(tmp_path: Path) -> Path:
+    """The script in an empty checkout: should an option ever be ignored and the script install,
+    nothing of the repository is touched (the script works in the folder above its own)."""
+    script = tmp_path / "checkout" / "scripts" / "bootstrap"
+    script.parent.mkdir(parents=True)
+    script.write_bytes(SCRIPT.read_bytes())
+    script.chmod(0o755)
+    return script
+
+
 def _dry_run(tmp_path: Path, uid: int) -> subprocess.CompletedProcess[str]:
+    script = _copy(tmp_path)
     tools = tmp_path / "bin"
     tools.mkdir()
     for name, body in {"dpkg-query": "exit 1", "id": f"echo {uid}", "apt-get": "exit 0", "nft": "exit 127"}.items():
@@ -26,7 +36,7 @@ def _dry_run(tmp_path: Path, uid: int) -> subprocess.CompletedProcess[str]:
         tool.chmod(0o755)
     (tools / "nft").unlink()  # nftables absent: no nft on PATH
     path = f"{tools}:/usr/bin:/bin"
-    return subprocess.run([str(SCRIPT), "--dry-run"], capture_output=True, text=True, timeout=60, check=False,
+    return subprocess.run([str(script), "--dry-run"], capture_output=True, text=True, timeout=60, check=False,
                           env={**os.environ, "PATH": path, "PYTHON": os.environ.get("PYTHON", "python3")})
 
 
@@ -50,10 +60,10 @@ def test_the_plan_names_each_package_and_why_before_anything(tmp_path: Path, uid
                for line in lines)
     assert told == (uid != 0), done.stdout  # as another user it says what to install as root, instead of doing it
     assert lines[-1] == "bootstrap: --dry-run: nothing installed"
-    assert not (REPO / ".venv").exists() or (REPO / ".venv" / "bin" / "python").exists()
+    assert not (tmp_path / "checkout" / ".venv").exists()
 
 
-def test_an_unknown_option_is_a_usage_error() -> None:
-    done = subprocess.run([str(SCRIPT), "--frobnicate"], capture_output=True, text=True, timeout=30, check=False)
+def test_an_unknown_option_is_a_usage_error(tmp_path: Path) -> None:
+    done = subprocess.run([str(_copy(tmp_path)), "--frobnicate"], capture_output=True, text=True, timeout=30, check=False)
     assert done.returncode == 2
     assert "expected --dry-run or --help" in done.stderr
