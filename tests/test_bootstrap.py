@@ -64,6 +64,7 @@ def test_the_plan_names_each_package_and_why_before_anything(tmp_path: Path, uid
 
 
 def test_an_unknown_option_is_a_usage_error(tmp_path: Path) -> None:
-    done = subprocess.run([str(_copy(tmp_path)), "--frobnicate"], capture_output=True, text=True, timeout=30, check=False)
+    done = subprocess.run([str(_copy(tmp_path)), "--frobnicate"], capture_output=True, text=True, timeout=30,
+                          check=False)
     assert done.returncode == 2
     assert "expected --dry-run or --help" in done.stderr
