@@ -343,7 +343,7 @@ def _check_projectable(global_type: GlobalType, reporter: Reporter,
                      error.reason)
             if cause not in reported:
                 reported.add(cause)
-                reporter.error(error.location, error.message)
+                reporter.error(error.location, error.message, error.diagnostics[0].hint)
 
 
 def _has_error(diagnostics: Iterable[Diagnostic]) -> bool:

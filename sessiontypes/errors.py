@@ -36,18 +36,21 @@ class Diagnostic:
         location: where the problem is.
         message: what is wrong, in words (no location, no trailing period).
         source_line: the text of the offending line ("" when unknown).
+        hint: how such a problem is usually fixed ("" when there is no general advice),
+            shown on its own line after the caret.
     """
 
     severity: Severity
     location: Location
     message: str
     source_line: str = ""
+    hint: str = ""
 
     def __str__(self) -> str:
-        head = f"{self.location}: {self.severity}: {self.message}"
-        if not self.source_line or self.location.line <= 0:
-            return head
-        return f"{head}\n{caret_block(self.source_line, self.location.column)}"
+        text = f"{self.location}: {self.severity}: {self.message}"
+        if self.source_line and self.location.line > 0:
+            text += f"\n{caret_block(self.source_line, self.location.column)}"
+        return f"{text}\n    hint: {self.hint}" if self.hint else text
 
 
 # Characters a terminal may break a line at or move the cursor for; shown as a space
@@ -190,6 +193,8 @@ class ProjectionError(ProtocolError):
         labels: the labels of the two branches that disagree.
         reason: why they do not merge.
         source_line: the text of the choice's line.
+        chooser: the role that makes the choice ("" when unknown); with it the message
+            ends with the usual fix, a message from the chooser to ``role`` in each branch.
     """
 
     def __init__(
@@ -202,6 +207,7 @@ class ProjectionError(ProtocolError):
         right: str,
         reason: str,
         source_line: str = "",
+        chooser: str = "",
     ) -> None:
         self.protocol = protocol
         self.role = role
@@ -211,6 +217,7 @@ class ProjectionError(ProtocolError):
         self.right = right
         self.reason = reason
         self.source_line = source_line
+        self.chooser = chooser
         super().__init__(str(self))
 
     @property
@@ -223,8 +230,23 @@ class ProjectionError(ProtocolError):
         )
 
     @property
+    def hint(self) -> str:
+        """The usual fix, in the syntax of the file: the chooser tells the role which branch it took."""
+        if not self.chooser:
+            return ""
+        # 'B:x' names a routed branch by its receiver; the example message is named after its label.
+        labels = list(dict.fromkeys(label.rpartition(":")[2] for label in self.labels if label != "?")) or ["done"]
+        if len(labels) < len([label for label in self.labels if label != "?"]):  # 'B:x' and 'C:x': distinct names
+            labels = [label.replace(":", "_") for label in self.labels]
+        examples = " and ".join(f"`{_message_text(self.chooser, self.role, label, self.location.path)}`"
+                                f"{f' in branch {label!r}' if len(labels) > 1 else ' in each branch'}"
+                                for label in labels)
+        return (f"{self.role} must learn which branch {self.chooser} chose before it acts differently: "
+                f"in each branch, have {self.chooser} send {self.role} a message first, e.g. {examples}")
+
+    @property
     def diagnostics(self) -> tuple[Diagnostic, ...]:
-        return (Diagnostic("error", self.location, self.message, self.source_line),)
+        return (Diagnostic("error", self.location, self.message, self.source_line, self.hint),)
 
     def __str__(self) -> str:
         return str(self.diagnostics[0])
@@ -261,6 +283,13 @@ class ChoiceRaceError(ProjectionError):
             f"{self.left} (at {where.line}:{where.column}) decides, {sender} may send {sent} here "
             f"before {deciding} has reached {self.role}, so {self.role} could take {sent} first"
         )
+
+
+def _message_text(sender: str, receiver: str, label: str, path: str) -> str:
+    """One interaction ``sender -> receiver : label()`` as a file of ``path``'s language writes it."""
+    if path.endswith((".scr", ".nuscr")):  # Scribble and nuScr: 'label() from A to B;'
+        return f"{label}() from {sender} to {receiver};"
+    return f"{sender} -> {receiver} : {label}()"
 
 
 def _action_parts(action: str) -> tuple[str, str]:

@@ -30,9 +30,9 @@ class Reporter:
     source: s.SourceFile
     diagnostics: list[Diagnostic] = field(default_factory=list)
 
-    def error(self, location: Location, message: str) -> None:
+    def error(self, location: Location, message: str, hint: str = "") -> None:
         self.diagnostics.append(
-            Diagnostic("error", location, message, self.source.line(location.line)))
+            Diagnostic("error", location, message, self.source.line(location.line), hint))
 
     def warning(self, location: Location, message: str) -> None:
         self.diagnostics.append(

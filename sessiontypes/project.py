@@ -112,7 +112,7 @@ class _Projector:
         if type(error) is not ProjectionError or error.protocol == self.protocol:
             return error.with_traceback(None)
         return ProjectionError(self.protocol, error.role, error.location, error.labels, error.left,
-                               error.right, error.reason, error.source_line)
+                               error.right, error.reason, error.source_line, error.chooser)
 
     def _project_node(self, term: g.GlobalTerm) -> lt.LocalTerm:
         role = self.role
@@ -147,7 +147,7 @@ class _Projector:
                     return lt.offer(sender, self._branches(branches, location), location, term.timing)
                 if len(branches) == 1:
                     return self.project(branches[0].continuation)
-                return self._merge_branches(branches, location)
+                return self._merge_branches(branches, location, sender)
             case g.Routed(sender=sender, branches=routes, location=location):
                 if self.role == sender:
                     return lt.select_among(tuple([lt.Send(r.receiver, r.message, self.project(r.continuation),
@@ -158,12 +158,12 @@ class _Projector:
     def _branches(self, branches: tuple[g.Branch, ...], location: Location) -> tuple[lt.Branch, ...]:
         return tuple([lt.Branch(b.message, self.project(b.continuation), location) for b in branches])
 
-    def _merge_branches(self, branches: tuple[g.Branch, ...], location: Location) -> lt.LocalTerm:
+    def _merge_branches(self, branches: tuple[g.Branch, ...], location: Location, chooser: str) -> lt.LocalTerm:
         projections = [self.project(b.continuation) for b in branches]
         try:
             return merge_all(projections)
         except MergeError as error:
-            raise self._blame(branches, projections, error.index, location) from None
+            raise self._blame(branches, projections, error.index, location, chooser) from None
 
     def _merge_routes(self, term: g.Routed) -> lt.LocalTerm:
         """Onto a role other than the sender: its view of each branch, merged."""
@@ -179,10 +179,10 @@ class _Projector:
             # the branches as the error names them: 'B:m1' and 'C:m2'
             branches = tuple([g.Branch(replace(r.message, label=f"{r.receiver}:{r.message.label}"),
                                        r.continuation) for r in term.branches])
-            raise self._blame(branches, projections, error.index, term.location) from None
+            raise self._blame(branches, projections, error.index, term.location, term.sender) from None
 
     def _blame(self, branches: tuple[g.Branch, ...], projections: list[lt.LocalTerm],
-               index: int, location: Location) -> ProjectionError:
+               index: int, location: Location, chooser: str) -> ProjectionError:
         """Name the first earlier branch that does not merge with branch ``index``."""
         other, reason = 0, "they differ"
         for earlier in range(index):
@@ -199,7 +199,7 @@ class _Projector:
             self.protocol, self.role, location,
             (branches[other].message.label, branches[index].message.label),
             # Bounded: the behaviours can be long, or exponential written out.
-            lt.describe_local(projections[other]), lt.describe_local(projections[index]), reason, line)
+            lt.describe_local(projections[other]), lt.describe_local(projections[index]), reason, line, chooser)
 
     def _absent_loop(self, loop: g.Rec) -> lt.LocalTerm:
         """Project a loop the role takes no part in.
@@ -279,7 +279,8 @@ class _Projector:
                            for name in (first, second)])  # type: ignore[assignment]
         line = self.source_lines[location.line - 1] if 0 < location.line <= len(self.source_lines) else ""
         return ProjectionError(self.protocol, self.role, location, labels, first, second,
-                               f"{self.role} takes no part in the loop and cannot tell how it ends", line)
+                               f"{self.role} takes no part in the loop and cannot tell how it ends", line,
+                               choice.sender if choice is not None else "")
 
     def _leads_to(self, term: g.GlobalTerm, exit_name: str) -> bool:
         found: dict[str, g.Choice | g.Routed | None] = {}

@@ -23,7 +23,13 @@ docs/language.md has its own, stricter test (tests/test_language_doc.py). Every 
   files they name need not exist; the rest is output), ``usage`` (each
   ``--option`` in it exists in the command-line front ends) or ``diagram`` (a picture drawn
   in text: it shows no ``$ `` command, and each NAME in capitals it shows is a constant that
-  anodize's sources define).
+  anodize's sources define);
+- a tutorial's blocks (docs/guide/first-system.md, run by tests/test_first_system.py):
+  ``file NAME`` above a ```proto, ```python or ```toml block (a file the reader writes: checked
+  here as ``ok``, ``compile`` and ``toml`` are) and ``session`` above a ```text block, optionally
+  ``session (external: mypy)`` (``$ `` commands checked here as a transcript's are, and run by
+  the tutorial's test, in order, in an empty folder with the page's files, each exiting 0 and
+  printing what follows it; a line ``...`` stands for any lines, ``...`` in a line for any text).
 
 A block of any other kind, or without an expectation, fails this test.
 """
@@ -55,9 +61,9 @@ PAGES = [REPO / "README.md", *sorted(p for p in (REPO / "docs").rglob("*.md") if
 
 SOURCE_KINDS = {"proto": "example.proto", "scribble": "example.scr", "nuscr": "example.nuscr"}
 VERBS = {
-    "proto": {"ok", "projections", "error"}, "scribble": {"ok", "projections", "error"},
-    "nuscr": {"ok", "projections", "error"}, "python": {"run", "compile", "doctest"}, "toml": {"toml"},
-    "sh": {"commands"}, "text": {"report", "transcript", "usage", "diagram"},
+    "proto": {"ok", "projections", "error", "file"}, "scribble": {"ok", "projections", "error"},
+    "nuscr": {"ok", "projections", "error"}, "python": {"run", "compile", "doctest", "file"},
+    "toml": {"toml", "file"}, "sh": {"commands"}, "text": {"report", "transcript", "usage", "diagram", "session"},
 }
 NEEDS_OUTPUT = {"projections", "error"}
 # The tools `.venv/bin` holds after scripts/bootstrap: the project's scripts and its extras' tools.
@@ -167,7 +173,7 @@ def test_source_block(checked: Checked) -> None:
 
 @pytest.mark.parametrize("checked", [c for c in ALL if c.kind == "python"], ids=_id)
 def test_python_block(checked: Checked, tmp_path: Path) -> None:
-    if checked.verb == "compile":
+    if checked.verb in {"compile", "file"}:  # a tutorial's file runs in its test (tests/test_first_system.py)
         compile(checked.code, f"{checked.page}:{checked.line}", "exec")
     elif checked.verb == "doctest":
         test = doctest.DocTestParser().get_doctest(checked.code, {}, _id(checked), checked.page, checked.line)
@@ -257,10 +263,10 @@ def _external(argument: str) -> set[str]:
     return set(found.group(1).split()) if found else set()
 
 
-@pytest.mark.parametrize("checked", [c for c in ALL if c.verb in {"commands", "transcript"}], ids=_id)
+@pytest.mark.parametrize("checked", [c for c in ALL if c.verb in {"commands", "transcript", "session"}], ids=_id)
 def test_command_block(checked: Checked) -> None:
     lines = checked.code.replace("\\\n", " ").splitlines()  # a line continued with a backslash is one
-    if checked.verb == "transcript":
+    if checked.verb in {"transcript", "session"}:
         lines = [line[2:] for line in lines if line.startswith("$ ")]
         assert lines, "a transcript shows at least one '$ ' command"
     for line in lines:

@@ -41,6 +41,7 @@ from .._recording.encoding import SortCodec, codec_for_sort
 from .._session.payloads import validator_for
 from ..errors import AnodizeError
 from ..taps import TapRun
+from .gate import SUBPROTOCOL, Handshake, SubprotocolGate, describe_offer
 from .outbox import Outbox
 from .plan import STATUS_TOPIC, LiveLabel, LivePlan, live_plan
 from .tap import LARGE, LARGE_RATE, GroupLiveView
@@ -104,11 +105,13 @@ def open_live_view(port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> LiveVie
             view.client_message(client.id, client_channel_id, data)
 
     try:
+        # The SDK's server on the loopback, behind the gate on host:port (its module says why).
         view.server = foxglove.start_server(
-            name="anodize", host=host, port=port, context=view.context, server_listener=Listener(),
+            name="anodize", host="127.0.0.1", port=0, context=view.context, server_listener=Listener(),
             capabilities=[Capability.ClientPublish], supported_encodings=["cdr"],
             message_backlog_size=CLIENT_BACKLOG)
-    except Exception as error:  # the SDK's own error type: e.g. the port is taken
+        view.gate = SubprotocolGate(host, port, ("127.0.0.1", int(view.server.port)), view.refused, view.lower)
+    except Exception as error:  # the SDK's own error type, or OSError: e.g. the port is taken
         view.close()
         raise AnodizeError(f"the live view cannot serve on {host}:{port}: {error}") from None
     view.host = host
@@ -149,6 +152,8 @@ class LiveView:
 
         self.context = foxglove.Context()
         self.server: Any = None
+        self.gate: SubprotocolGate | None = None
+        self.refusals: dict[tuple[str, tuple[str, ...]], int] = {}  # (client host, offered) -> connections refused
         self.host = "127.0.0.1"
         self._folder = tempfile.mkdtemp(prefix="anodize-live-")
         self.socket_path = str(Path(self._folder) / "taps")
@@ -179,7 +184,18 @@ class LiveView:
 
     @property
     def port(self) -> int:
-        return int(self.server.port) if self.server is not None else 0
+        return self.gate.port if self.gate is not None else 0
+
+    def refused(self, address: str, handshake: Handshake) -> None:
+        """A client refused at the gate: one line the first time, then counted for the report."""
+        key = (address, handshake.offered if handshake.websocket else ("(plain HTTP)",))
+        with self._lock:
+            first = all(known != address for known, _ in self.refusals)  # once per client, whatever it offers
+            self.refusals[key] = self.refusals.get(key, 0) + 1
+        if first:
+            _log.warning("foxglove: refused a client at %s: it offered %s, and this live view speaks %s only "
+                         "(answered HTTP 400; its further attempts are counted in the report)",
+                         address, describe_offer(handshake), SUBPROTOCOL)
 
     @property
     def url(self) -> str:
@@ -317,6 +333,10 @@ class LiveView:
             notes.append(f"foxglove: {count} client messages on {topic} handed to their role")
         for topic, (rejected, reason) in sorted(self.rejected.items()):
             notes.append(f"foxglove: {rejected} client messages on {topic} rejected; the first: {reason}")
+        for (address, offered), count in sorted(self.refusals.items()):
+            what = ", ".join(offered) or "no subprotocol"
+            notes.append(f"foxglove: refused {count} connection(s) from {address}, which offered {what} "
+                         f"(the live view speaks {SUBPROTOCOL})")
         return notes
 
     def close(self) -> None:
@@ -332,6 +352,8 @@ class LiveView:
             for sock, _ in self._groups.values():
                 with contextlib.suppress(OSError):
                     sock.shutdown(socket.SHUT_RDWR)
+        if self.gate is not None:
+            self.gate.close()
         if self.server is not None:
             self.server.stop()
         shutil.rmtree(self._folder, ignore_errors=True)

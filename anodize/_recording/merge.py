@@ -39,7 +39,8 @@ class MergeResult:
 
     path: Path
     messages: int = 0
-    channels: int = 0
+    channels: int = 0  # the protocol's channels (sender->receiver) with a message recorded
+    topics: int = 0  # the recording's topics of messages: one per label of a channel (each an MCAP channel)
     bytes: int = 0
     readings: int = 0  # of the roles' clocks, on their clock channels (not counted in messages, channels)
     chains: int = 0  # hash chains (one per recorded channel or other topic)
@@ -82,6 +83,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
         clocks: set[int] = set()  # the recording's clock channels
         links: set[int] = set()  # the recording's link channel (:mod:`.chain`)
         collector = HeadCollector(run_info.get("run_id", ""))
+        pairs: set[tuple[str, str]] = set()  # the protocol's channels (sender, receiver) recorded
 
         def channel_of(number: int, channel_id: int) -> int:
             """The recording's channel of a part's, registered at its first message (one pass)."""
@@ -95,8 +97,10 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
                 new = known[key] = writer.register_channel(topic, "cdr", schema, metadata)
                 if CLOCK_KEY in metadata:
                     clocks.add(new)
-                if CHAIN_KEY in metadata:
+                elif CHAIN_KEY in metadata:
                     links.add(new)
+                elif f"{META}.sender" in metadata:
+                    pairs.add((metadata[f"{META}.sender"], metadata.get(f"{META}.receiver", "")))
                 topics[new] = {"name": topic, "type": type_name, "hash": metadata.get("topic_type_hash", ""),
                                "qos": metadata.get("offered_qos_profiles", ""), "count": 0}
             ids[(number, channel_id)] = new
@@ -130,7 +134,8 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
                 topics[min(links)]["count"] += 1
                 result.bytes += len(data)
                 linked += 1
-        result.channels = len(topics) - len(clocks) - len(links)
+        result.channels = len(pairs)
+        result.topics = len(topics) - len(clocks) - len(links)
         for source in sources:
             result.notes.extend(source.notes)
         result.notes.extend(collector.notes)

@@ -80,12 +80,17 @@ class Recording:
                  "the channels between groups": "between groups"}.get(self.selection.describe(),
                                                                        f"({self.selection.describe()})")
         readings = f", and {result.readings} readings of the roles' clocks," if result.readings else ""
-        notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels {where}{readings} to "
-                 + str(self.target)]
+        on = f"{_count(result.channels, 'channel')} ({_count(result.topics, 'topic')})"
+        notes = [f"recorded {result.messages} messages ({size}) on {on} {where}{readings} to {self.target}"]
         signed = ", signed (HMAC-SHA256)" if result.signed else ""
-        notes.append(f"recording: {result.chains} channels, chain heads sha256 {result.heads_digest}{signed}")
+        notes.append(f"recording: {_count(result.chains, 'hash chain')}, heads sha256 {result.heads_digest}{signed}")
         notes.extend(f"recording: {note}" for note in result.notes)
         return notes
+
+
+def _count(n: int, word: str) -> str:
+    """``1 channel``, ``2 channels``."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
 
 
 def _version() -> str:

@@ -185,10 +185,11 @@ class VerifyReport:
         verdict = "conforms to" if self.conforms else "does NOT conform to"
         read = f"{self.messages} read, {self.bytes / 2**20:.1f} MiB in {self.seconds:.2f} s"
         head = f"{self.recording} {verdict} {self.protocol}"
-        lines = [f"{head}: {checked} messages on {len(self.channels)} channels checked ({read})"]
+        on = f"{len(self.channels)} channel{'' if len(self.channels) == 1 else 's'}"
+        lines = [f"{head}: {checked} messages on {on} checked ({read})"]
         lines.extend(f"violation: {r.violation}" for r in self.channels.values() if r.violation is not None)
         lines.extend(f"unknown channel: {text}" for text in self.unknown)
-        lines.extend(f"not checked: topic {text} is no channel of the protocol (give it in --topics)"
+        lines.extend(f"not checked: topic {text} is on no channel of the protocol (map it with --topics)"
                      for text in self.unmapped)
         lines.extend(f"missing: no message on channel {channel}" for channel in self.missing)
         lines.extend(f"gap: {gap}" for gap in self.gaps)

@@ -29,6 +29,7 @@ from ..errors import AnodizeError
 from .codegen import GeneratedModule, generate_modules
 from .introspect import add_commands as add_introspection_commands
 from .introspect import open_introspection, system_name
+from .version import version_line
 
 if TYPE_CHECKING:
     from .._live.server import LiveView
@@ -99,6 +100,7 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="anodize", description=(
         "Multiparty session types for mixed-criticality systems: check protocols, "
         "project them onto roles, and run them."))
+    parser.add_argument("--version", action="version", version=version_line())
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     check = commands.add_parser("check", help="check .proto files for well-formedness")

@@ -141,7 +141,7 @@ def test_a_recorded_run_is_evidence_and_its_report_gives_the_heads(recorded: tup
     path, key, output = recorded
     evidence = _evidence(path, key.read_bytes())
     assert evidence.ok and evidence.signature_checked, evidence.lines()
-    line = f"recording: 2 channels, chain heads sha256 {evidence.digest}, signed (HMAC-SHA256)"
+    line = f"recording: 2 hash chains, heads sha256 {evidence.digest}, signed (HMAC-SHA256)"
     assert f"note: {line}" in output  # the text report
     assert json.dumps(line) in output  # and the JSON one
     # B->S and S->B: each label of a channel is in its channel's chain

@@ -91,7 +91,8 @@ def talked(tmp_path_factory: pytest.TempPathFactory) -> Path:
     # B read now() and wall() and ended a sleep each round; S read now() once, then once a title.
     note = next(note for note in report.notes if note.startswith("recorded "))
     assert note.startswith("recorded 11 messages (") and note.endswith(
-        f" on 3 channels between and inside groups, and {3 * ROUNDS + ROUNDS + 1} readings of the roles' clocks, "
+        f" on 3 channels (3 topics) between and inside groups, and {3 * ROUNDS + ROUNDS + 1} readings of the roles' "
+        "clocks, "
         f"to {path}"), note
     return path
 
@@ -231,7 +232,7 @@ def test_a_run_recorded_inside_its_groups_replays_a_role_that_talks_inside_its_g
     path = tmp_path / "run.mcap"
     run = system.run(timeout=20.0, taps=[Recording(path, inside=True)])
     assert run.ok
-    assert any("channels between and inside groups" in note for note in run.notes), run.notes
+    assert any("between and inside groups" in note for note in run.notes), run.notes
     report = _replay(path, TWO_BUYER, "B1", replay_roles.buyer1)
     assert (report.ok, report.outcome) == (True, "finished")
     assert report.compared == {"B1->S": (1, 1), "B1->B2": (1, 1)}
@@ -261,7 +262,7 @@ def test_record_inside_needs_record(capsys: pytest.CaptureFixture[str], tmp_path
     assert capsys.readouterr().err.endswith("--record-inside needs --record PATH\n")
     path = tmp_path / "run.mcap"
     assert main(["run", str(system), "--record", str(path), "--record-inside", "--quiet"]) == 0
-    assert "on 6 channels between and inside groups" in capsys.readouterr().out
+    assert "on 5 channels (6 topics) between and inside groups" in capsys.readouterr().out
 
 
 def test_a_thread_s_patience_counts_from_when_it_starts_to_wait(monkeypatch: pytest.MonkeyPatch) -> None:

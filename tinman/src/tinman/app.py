@@ -87,7 +87,7 @@ class TinMan:
                             help="RRT-Connect with shortcut smoothing (default) or grid A*")
         parser.add_argument("--transport", choices=("process", "dds"), default=None,
                             help="process pipes and shared memory (tinman.toml's, the default) or DDS, "
-                                 "where the channels are ROS 2 topics ([ros.topics] in tinman.toml)")
+                                 "where the mapped labels travel on ROS 2 topics ([ros.topics] in tinman.toml)")
         parser.add_argument("--external", action="append", default=[], metavar="ROLE",
                             help="with --transport dds: a ROS 2 node on the network plays ROLE (e.g. Joy: a "
                                  "joy_node on /joy; Gazebo: a simulator on /cmd_vel); TinMan does not run it")

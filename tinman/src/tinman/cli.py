@@ -26,6 +26,7 @@ import numpy as np
 
 from . import tum
 from .ate import AteResult, evaluate_ate
+from .version import version_line
 
 __all__ = ["main", "run"]
 
@@ -79,6 +80,7 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tinman", description=(
         "TinMan's tools: run RGB-D visual odometry over a TUM sequence, evaluate "
         "trajectories as the TUM benchmark does, and write synthetic sequences."))
+    parser.add_argument("--version", action="version", version=version_line())
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     vo_eval = commands.add_parser(
