@@ -76,12 +76,14 @@ class Recording:
                 "run_id": plan.run_id, "record_selection": self.selection.to_json()}
         result = merge_parts(Path(plan.parts), self.target, info, self.sign_key)
         size = f"{result.bytes / 2**20:.1f} MiB"
-        where = {"every channel": "between and inside groups",
-                 "the channels between groups": "between groups"}.get(self.selection.describe(),
-                                                                       f"({self.selection.describe()})")
+        chosen = self.selection.describe()
+        where = {"every channel": " between and inside groups",
+                 "the channels between groups": " between groups"}.get(chosen)
+        topics = _count(result.topics, 'topic')
+        on = f"{_count(result.channels, 'channel')} ({topics})" if where else \
+            f"{_count(result.channels, 'channel')} ({topics}; {chosen})"
         readings = f", and {result.readings} readings of the roles' clocks," if result.readings else ""
-        on = f"{_count(result.channels, 'channel')} ({_count(result.topics, 'topic')})"
-        notes = [f"recorded {result.messages} messages ({size}) on {on} {where}{readings} to {self.target}"]
+        notes = [f"recorded {result.messages} messages ({size}) on {on}{where or ''}{readings} to {self.target}"]
         signed = ", signed (HMAC-SHA256)" if result.signed else ""
         notes.append(f"recording: {_count(result.chains, 'hash chain')}, heads sha256 {result.heads_digest}{signed}")
         notes.extend(f"recording: {note}" for note in result.notes)

@@ -106,7 +106,7 @@ def test_record_exclude_in_the_file_and_on_the_command_line(capsys: pytest.Captu
     bag = tmp_path / "run.mcap"
     status, out, err = _cli(capsys, "run", str(system), "--record", str(bag), "--record-exclude", "B1->B2", "--quiet")
     assert (status, err) == (0, ""), err
-    assert "on 3 channels (every channel but B1->B2, S->B2)" in out, out
+    assert "on 3 channels (3 topics; every channel but B1->B2, S->B2)" in out, out
     recorded, selection = _info(bag)
     assert sorted(recorded) == ["B1->S", "B2->S", "S->B1"]
     assert selection == {"inside": True, "channels": None, "exclude": ["B1->B2", "S->B2"]}
@@ -137,7 +137,7 @@ def test_record_between_records_the_channels_between_groups_only(capsys: pytest.
     bag = tmp_path / "run.mcap"
     status, out, err = _cli(capsys, "run", str(_system(tmp_path)), "--record", str(bag), "--record-between",
                             "--quiet")
-    assert (status, err) == (0, "") and "channels between groups" in out
+    assert (status, err) == (0, "") and "topics) between groups" in out
     assert sorted(_info(bag)[0]) == ["B1->B2", "B2->S", "S->B2"]
     status, out, _ = _cli(capsys, "verify", str(bag))
     assert status == 0 and ("not recorded (recorded between groups only: both ends in one group; not checked, "

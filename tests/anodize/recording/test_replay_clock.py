@@ -91,7 +91,7 @@ def talked(tmp_path_factory: pytest.TempPathFactory) -> Path:
     # B read now() and wall() and ended a sleep each round; S read now() once, then once a title.
     note = next(note for note in report.notes if note.startswith("recorded "))
     assert note.startswith("recorded 11 messages (") and note.endswith(
-        f" on 3 channels (3 topics) between and inside groups, and {3 * ROUNDS + ROUNDS + 1} readings of the roles' "
+        f" on 2 channels (3 topics) between and inside groups, and {3 * ROUNDS + ROUNDS + 1} readings of the roles' "
         "clocks, "
         f"to {path}"), note
     return path
