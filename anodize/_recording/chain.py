@@ -14,7 +14,7 @@ never a sender's) puts after each batch one *link record* per chain on :data:`CH
 the entries ``(sequence, log_time, publish_time, d_i)`` of the batch and the hash they lead
 to. From them alone ``verify`` recomputes the chain, checks it against its head, and then
 compares the messages actually in the file with the entries, which tells which message was
-removed, inserted, moved or altered (docs/decisions/XXXX-evidence.md says why links, not
+removed, inserted, moved or altered (docs/decisions/0050-evidence.md says why links, not
 only heads). When the part ends the writer adds the heads (:data:`HEADS_RECORD`).
 
 The merge (:class:`HeadCollector`) folds each part's link records again, so that a part cut
