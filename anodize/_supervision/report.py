@@ -10,6 +10,7 @@ from typing import Any
 
 from .._session.statistics import EndpointStatistics
 from ..errors import AnodizeError
+from .logsummary import LogSummary
 
 __all__ = ["RoleStatus", "GroupState", "RoleReport", "GroupReport", "RunReport", "GroupStatus", "constraint_counts"]
 
@@ -167,6 +168,7 @@ class RunReport:
             constraints were checked, and the closest it came to a time bound in seconds
             (negative: missed; None without a time bound), and ``"timeouts"``, how often its
             deadline passed and the receiver took ``else timeout``. A violation is the role's failure.
+        logs: the roles' log records: counts per severity, those dropped, the last warnings and errors.
     """
 
     protocol: str
@@ -183,6 +185,7 @@ class RunReport:
     boosts: dict[str, dict[str, float]] = field(default_factory=dict)
     inheritance_inactive: tuple[str, ...] = ()
     constraints: dict[str, dict[str, float | None]] = field(default_factory=dict)
+    logs: LogSummary = field(default_factory=LogSummary)
 
     @property
     def ok(self) -> bool:
@@ -227,6 +230,7 @@ class RunReport:
         lines.extend(f"  constraint {key}: {int(c['checked'] or 0)} checked" + _closest(c["closest_s"])
                      + (f", {int(c['timeouts'] or 0)} timeouts taken" if c.get("timeouts") else "")
                      for key, c in self.constraints.items())
+        lines.extend(f"  {line}" for line in self.logs.lines())
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)
 
@@ -241,6 +245,7 @@ class RunReport:
             "boosts": {pair: dict(b) for pair, b in self.boosts.items()},
             "inheritance_inactive": list(self.inheritance_inactive),
             "constraints": {key: dict(c) for key, c in self.constraints.items()},
+            "logs": self.logs.to_dict(),
             "groups": {name: {
                 "status": str(g.status), "scheduling": g.scheduling, "peak_memory": g.peak_memory,
                 "memory_bound": g.memory_bound, "memory_note": g.memory_note, "notes": list(g.notes),

@@ -10,6 +10,7 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import logging
 import os
 import shlex
 import shutil
@@ -27,6 +28,7 @@ from sessiontypes.printer import PrintTooLongError, print_local
 
 from ..errors import AnodizeError
 from .codegen import GeneratedModule, generate_modules
+from .loglines import LogLines
 
 if TYPE_CHECKING:
     from .._live.server import LiveView
@@ -152,7 +154,8 @@ def _parser() -> argparse.ArgumentParser:
     run_system.add_argument("--timeout", type=float, metavar="S",
                             help="stop roles still running after S seconds (default: the file's timeout)")
     run_system.add_argument("--json", metavar="FILE", help="also write the run report as JSON to FILE")
-    run_system.add_argument("--quiet", action="store_true", help="no live status lines")
+    run_system.add_argument("--quiet", action="store_true",
+                            help="no live status lines, and of the roles' logs only WARN and above")
     run_system.add_argument("--transport", choices=("inproc", "process", "dds"),
                             help="run on this transport instead of the file's (e.g. dds, to try a system across "
                                  "hosts on one)")
@@ -442,8 +445,11 @@ def _run(args: argparse.Namespace) -> int:
     timeout = args.timeout if args.timeout is not None else config.timeout
     if args.record_inside and args.record is None:
         raise UsageError("--record-inside needs --record PATH")
+    status = None if args.quiet else LiveStatus(sys.stdout)
+    logs = LogLines(sys.stdout, logging.WARNING if args.quiet else logging.DEBUG,
+                    status.clear if status is not None else None)
     with _taps(args.record, args.foxglove, args.record_inside) as taps:
-        report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout), taps=taps)
+        report = system.run(timeout=timeout, on_status=status, taps=taps, on_log=logs)
     print(report.summary())
     if args.json:
         out = Path(args.json)
@@ -586,10 +592,12 @@ def _run_named(name: str, rest: list[str]) -> int:
         return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
     prepared = named.prepare(args, lambda line: print(line, flush=True))
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
+    logs = LogLines(sys.stdout, logging.WARNING if args.quiet else logging.DEBUG,
+                    progress.clear if progress is not None else None)
     try:
         with _taps(prepared.record, args.foxglove, prepared.record_inside) as taps:
             report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
-                                         taps=taps, stop_when=prepared.stop_when)
+                                         taps=taps, stop_when=prepared.stop_when, on_log=logs)
     finally:
         if progress is not None:
             progress.close()
@@ -628,6 +636,11 @@ class ProgressLine:
             self.logged = elapsed
             self.stream.write(line + "\n")
         self.stream.flush()
+
+    def clear(self) -> None:
+        """Clear the line drawn in place (a log record is written there); the next call redraws it."""
+        if self.tty:
+            self.stream.write("\r\x1b[2K")
 
     def close(self) -> None:
         if self.tty:
@@ -668,6 +681,12 @@ class LiveStatus:
         self.tty = stream.isatty()
         self.drawn = 0                       # lines drawn last time (terminal)
         self.states: dict[str, str] = {}     # state last printed per group (log)
+
+    def clear(self) -> None:
+        """Clear the lines drawn in place (a log record is written there); the next call redraws them."""
+        if self.tty and self.drawn:
+            self.stream.write(f"\x1b[{self.drawn}F\x1b[J")
+            self.drawn = 0
 
     def __call__(self, statuses: dict[str, GroupStatus]) -> None:
         if self.tty:
