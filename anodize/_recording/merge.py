@@ -21,6 +21,7 @@ from typing import Any
 
 from .._extras import import_extra
 from .plan import CLOCK_KEY, META, PROFILE
+from .rosout import LOG_KEY
 
 __all__ = ["MergeResult", "merge_parts", "recording_file"]
 
@@ -36,6 +37,7 @@ class MergeResult:
     channels: int = 0
     bytes: int = 0
     readings: int = 0  # of the roles' clocks, on their clock channels (not counted in messages, channels)
+    logs: int = 0  # the roles' log records on /rosout (not counted in messages, channels either)
     notes: list[str] = field(default_factory=list)
 
 
@@ -70,6 +72,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
         known: dict[tuple[str, int, tuple[tuple[str, str], ...]], int] = {}  # a restarted group's channels again
         topics: dict[int, dict[str, Any]] = {}
         clocks: set[int] = set()  # the recording's clock channels
+        logs: set[int] = set()  # and its log channel
 
         def channel_of(number: int, channel_id: int) -> int:
             """The recording's channel of a part's, registered at its first message (one pass)."""
@@ -83,6 +86,8 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
                 new = known[key] = writer.register_channel(topic, "cdr", schema, metadata)
                 if CLOCK_KEY in metadata:
                     clocks.add(new)
+                elif LOG_KEY in metadata:  # the roles' log records (/rosout): no channel either
+                    logs.add(new)
                 topics[new] = {"name": topic, "type": type_name, "hash": metadata.get("topic_type_hash", ""),
                                "qos": metadata.get("offered_qos_profiles", ""), "count": 0}
             ids[(number, channel_id)] = new
@@ -97,10 +102,12 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
             start, end = min(start, log_time), max(end, log_time)
             if new in clocks:
                 result.readings += 1
+            elif new in logs:
+                result.logs += 1
             else:
                 result.messages += 1
             result.bytes += len(data)
-        result.channels = len(topics) - len(clocks)
+        result.channels = len(topics) - len(clocks) - len(logs)
         for source in sources:
             result.notes.extend(source.notes)
         ran_at: dict[str, list[str]] = {}
@@ -110,9 +117,9 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str]) -> MergeRes
         if ran_at:
             result.notes.append("the groups' writers ran at " + "; ".join(
                 f"{priority} ({', '.join(parts)})" for priority, parts in sorted(ran_at.items())))
-        if result.messages + result.readings == 0:  # nothing was written: no time span
+        if result.messages + result.readings + result.logs == 0:  # nothing was written: no time span
             start = end = 0
-        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings)
+        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings + result.logs)
         writer.add_metadata("rosbag2", {"serialized_metadata": _yaml(bag)})
         writer.add_metadata(META, run_info)
         writer.finish()  # type: ignore[no-untyped-call]

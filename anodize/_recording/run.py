@@ -4,17 +4,21 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from .._session.logs import LogEntry
 from ..errors import AnodizeError
 from ..taps import TapRun
 from .merge import merge_parts
 from .plan import RecordPlan, record_plan
+from .rosout import write_part
 from .tap import GroupRecording
 
-__all__ = ["Recording"]
+__all__ = ["Recording", "LOGS_KEPT"]
+
+LOGS_KEPT = 1_000_000  # log records a recording holds for /rosout; beyond them, records are counted, not kept
 
 
 class Recording:
@@ -33,6 +37,8 @@ class Recording:
         self.inside = inside
         self.plan: RecordPlan | None = None
         self._run: TapRun | None = None
+        self._logs: list[LogEntry] = []
+        self._logs_over = 0  # records past LOGS_KEPT
 
     def begin(self, run: TapRun) -> GroupRecording:
         """Plan which channels each group records, under which topics."""
@@ -47,6 +53,12 @@ class Recording:
     def status(self, statuses: Mapping[str, Any]) -> None:
         """Nothing: a recording is of messages, not of statuses."""
 
+    def log(self, entries: Sequence[LogEntry]) -> None:
+        """The roles' log records, as they reach the supervisor: recorded on ``/rosout`` at the end."""
+        room = LOGS_KEPT - len(self._logs)
+        self._logs.extend(entries[:max(0, room)])
+        self._logs_over += max(0, len(entries) - max(0, room))
+
     def end(self) -> list[str]:
         """Merge the groups' parts into the recording; returns notes for the run's report."""
         run, plan = self._run, self.plan
@@ -57,12 +69,17 @@ class Recording:
                 "global": run.global_type.name, "transport": run.transport, "anodize_version": _version(),
                 "recorded_channels": " ".join(sorted(f"{s}->{r}" for s, r in plan.at_sender | plan.at_receiver)),
                 "role_functions": json.dumps(dict(run.functions)), "group_of": json.dumps(dict(plan.group_of))}
+        if self._logs:
+            write_part(Path(plan.parts), self._logs, run.global_type.name)
         result = merge_parts(Path(plan.parts), self.target, info)
         size = f"{result.bytes / 2**20:.1f} MiB"
         where = "between and inside groups" if self.inside else "between groups"
         readings = f", and {result.readings} readings of the roles' clocks," if result.readings else ""
         notes = [f"recorded {result.messages} messages ({size}) on {result.channels} channels {where}{readings} to "
                  + str(self.target)]
+        if self._logs:
+            notes.append(f"recording: {result.logs} log records on /rosout" + (
+                f"; {self._logs_over} more were not recorded (over {LOGS_KEPT})" if self._logs_over else ""))
         notes.extend(f"recording: {note}" for note in result.notes)
         return notes
 

@@ -23,12 +23,15 @@ from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-__all__ = ["LogEntry", "LogCapture", "bind_role", "role_logger", "severity_name", "CAPACITY", "MAX_TEXT",
-           "SEVERITIES"]
+__all__ = ["LogEntry", "LogCapture", "bind_role", "role_logger", "severity_name", "ros_log", "CAPACITY", "MAX_TEXT",
+           "SEVERITIES", "ROSOUT", "LOG_TYPE", "ROS_LEVELS"]
 
 CAPACITY = 1000   # entries a capture holds until its runner drains them; beyond, records are dropped
 MAX_TEXT = 2000   # characters of a message kept (a control frame carries a batch of them)
 SEVERITIES = ("DEBUG", "INFO", "WARN", "ERROR", "FATAL")  # ROS's names, lowest first
+ROS_LEVELS = {"DEBUG": 10, "INFO": 20, "WARN": 30, "ERROR": 40, "FATAL": 50}  # rcl_interfaces/msg/Log's bytes
+ROSOUT = "/rosout"                  # where ROS 2 nodes publish their log records
+LOG_TYPE = "rcl_interfaces/msg/Log"  # what they publish there
 
 _bound = threading.local()
 
@@ -79,6 +82,19 @@ def severity_name(level: int) -> str:
     if level >= logging.INFO:
         return "INFO"
     return "DEBUG"
+
+
+def ros_log(entry: LogEntry) -> object:
+    """``entry`` as ROS 2's ``rcl_interfaces/msg/Log`` (rosbags' class): stamp, level, name (the
+    role), msg, file, function, line, as a node's record on ``/rosout``."""
+    from .._ros import ros_type
+
+    log_type = ros_type(LOG_TYPE)
+    stamp_type = ros_type("builtin_interfaces/msg/Time")
+    seconds = int(entry.wall // 1)
+    stamp = stamp_type.cls(sec=seconds, nanosec=min(999_999_999, int((entry.wall - seconds) * 1e9)))
+    return log_type.cls(stamp=stamp, level=ROS_LEVELS[entry.severity], name=entry.role, msg=entry.message,
+                        file=entry.file, function=entry.function, line=max(0, min(entry.line, 2**32 - 1)))
 
 
 def bind_role(role: str | None) -> None:

@@ -70,3 +70,27 @@ def test_a_flood_of_records_finishes_and_the_report_counts_the_dropped(
     consumer = transport == "process"  # its "consumer done" (see the first test)
     assert delivered + dropped == 100_000 + consumer and dropped > 0  # every record delivered or counted
     assert " dropped (" in out
+
+
+@pytest.mark.parametrize("transport", ["inproc", "process"])
+def test_a_recording_holds_the_records_on_rosout_and_verify_passes_over_them(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, transport: str) -> None:
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    status, out, _ = run(capsys, "run", str(system_file(tmp_path, transport)), "--quiet",
+                         "--record", str(tmp_path / "bag"))
+    consumer = transport == "process"  # its module logger's INFO (see the first test)
+    assert status == 0 and f"recording: {5 + consumer} log records on /rosout" in out
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(tmp_path / "bag") as bag:
+        rosout = [c for c in bag.connections if c.topic == "/rosout"]
+        assert [c.msgtype for c in rosout] == ["rcl_interfaces/msg/Log"]
+        logs = [store.deserialize_cdr(data, "rcl_interfaces/msg/Log") for _, _, data in bag.messages(rosout)]
+    own = [(log.level, log.name, log.msg) for log in logs if log.name == "P"]
+    assert own == [(10, "P", "debug from P"), (20, "P", "planning 2 items"), (30, "P", "battery low"),
+                   (40, "P", "lidar lost"), (50, "P", "safety stop")]
+    assert all(log.stamp.sec > 1_700_000_000 and log.file.endswith("logging_roles.py") and log.line > 0
+               for log in logs)
+    status, out, _ = run(capsys, "verify", str(tmp_path / "bag"))
+    assert status == 0 and "/rosout" not in out, out
