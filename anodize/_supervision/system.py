@@ -236,9 +236,10 @@ class System:
                        dict(self.capacities), self.ros, opened)
         runner = transport.runner(plan)
         scope = runner.scope
+        fanout = log_receivers(on_log, taps, runner)
         report = Supervisor(gt.name, scope.roles, scope.groups, scope.channels, runner, timeout, grace, on_status,
-                            scope.elsewhere, stop_when, on_log=log_receivers(on_log, taps, runner)).run()
-        notes = [note for tap in taps for note in tap.end()]
+                            scope.elsewhere, stop_when, on_log=fanout).run()
+        notes = [note for tap in taps for note in tap.end()] + (fanout.problems if fanout is not None else [])
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()},
                                    notes=(*report.notes, *notes))
 
