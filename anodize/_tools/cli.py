@@ -28,7 +28,7 @@ from sessiontypes.printer import PrintTooLongError, print_local
 
 from ..errors import AnodizeError
 from .codegen import GeneratedModule, generate_modules
-from .loglines import LogLines
+from .loglines import LogLines, replayed_lines
 
 if TYPE_CHECKING:
     from .._live.server import LiveView
@@ -534,6 +534,7 @@ def _live_view(port: int | None) -> Iterator[LiveView | None]:
 def _replay(args: argparse.Namespace) -> int:
     from .._recording.reader import open_recording
     from .._recording.replay import replay
+    from .._session.logs import LogCapture
     from .recordings import protocol_of, role_function, topic_map
 
     if not args.timeout > 0:
@@ -545,8 +546,15 @@ def _replay(args: argparse.Namespace) -> int:
                              f"{', '.join(global_type.roles)}")
         topics = topic_map(args.topics, global_type) if args.topics else None
         function = role_function(recording, args.role, args.function, [".", *args.pythonpath])
-        report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout,
-                        import_classes=args.protocol is not None)
+        logs = LogCapture({args.role: "replay"})  # the role's records (ep.logger), shown once it has ended
+        logs.install()
+        try:
+            report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout,
+                            import_classes=args.protocol is not None)
+        finally:
+            logs.uninstall()
+    for line in replayed_lines(*logs.drain()):
+        print(line)
     print(report.text())
     if args.json:
         _write_json(Path(args.json), report.to_dict())

@@ -10,12 +10,12 @@ terminal); a burst larger than that queue is dropped there and counted in the re
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TextIO
 
-from .._session.logs import LogEntry
+from .._session.logs import CAPACITY, LogEntry
 
-__all__ = ["LogLines", "format_entry"]
+__all__ = ["LogLines", "format_entry", "replayed_lines"]
 
 
 def format_entry(entry: LogEntry) -> str:
@@ -45,3 +45,11 @@ class LogLines:
             self.clear()
         self.stream.write("\n".join(lines) + "\n")
         self.stream.flush()
+
+
+def replayed_lines(entries: Sequence[LogEntry], dropped: Mapping[str, int]) -> list[str]:
+    """What ``anodize replay`` shows of the records the replayed role logged (held until it ended)."""
+    lines = [format_entry(e) for e in entries]
+    if dropped:
+        lines.append(f"({sum(dropped.values())} more log records were dropped: past {CAPACITY} a replay keeps none)")
+    return lines

@@ -94,3 +94,15 @@ def test_a_recording_holds_the_records_on_rosout_and_verify_passes_over_them(
                for log in logs)
     status, out, _ = run(capsys, "verify", str(tmp_path / "bag"))
     assert status == 0 and "/rosout" not in out, out
+
+
+def test_a_replayed_role_shows_what_it_logs_and_nothing_reaches_stderr(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    assert run(capsys, "run", str(system_file(tmp_path, "process")), "--quiet",
+               "--record", str(tmp_path / "run.mcap"))[0] == 0
+    status, out, err = run(capsys, "replay", str(tmp_path / "run.mcap"), "--role", "P",
+                           "--function", "logging_roles:producer", "--pythonpath", str(TESTS))
+    assert (status, err) == (0, "")
+    shown = [line.split("] [")[0] + " " + line.split("]: ")[1] for line in out.splitlines() if line.startswith("[")]
+    assert shown == ["[DEBUG debug from P", "[INFO planning 2 items", "[WARN battery low", "[ERROR lidar lost",
+                     "[FATAL safety stop"]
