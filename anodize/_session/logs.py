@@ -130,8 +130,11 @@ class LogCapture(logging.Handler):
         role = getattr(_bound, "role", None)
         if role is None or role not in self.groups:
             role = record.name if record.name in self.groups else None
-        if role is None:
-            return  # not a role's record: some other handler's business
+        if role is None:  # not a role's record: some other handler's business, else Python's last resort
+            last = logging.lastResort
+            if last is not None and record.levelno >= last.level and logging.getLogger().handlers == [self]:
+                last.handle(record)  # as if we were not here (stderr, WARNING and above)
+            return
         if len(self._entries) >= self.capacity:  # checked before formatting: a flood costs little
             name = severity_name(record.levelno)
             with self._lock:

@@ -129,3 +129,14 @@ def test_live_status_lines_are_cleared_for_a_record_and_drawn_again() -> None:
     assert stream.getvalue().endswith("\x1b[2F\x1b[J") and status.drawn == 0
     status(groups)  # drawn anew below the records, not over them
     assert not stream.getvalue().endswith("\x1b[2F\x1b[J") and status.drawn == 2
+
+
+def test_a_record_of_no_role_still_reaches_pythons_last_resort(capture: LogCapture,
+                                                                capsys: pytest.CaptureFixture[str],
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    root = logging.getLogger()
+    monkeypatch.setattr(root, "handlers", [capture])  # as in a group's process: ours is the only handler
+    logging.getLogger("some.library").warning("a library's warning")
+    logging.getLogger("some.library").info("a library's chatter")
+    assert capsys.readouterr().err == "a library's warning\n"
+    assert capture.drain() == ([], {})
