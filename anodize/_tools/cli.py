@@ -546,16 +546,16 @@ def _replay(args: argparse.Namespace) -> int:
                              f"{', '.join(global_type.roles)}")
         topics = topic_map(args.topics, global_type) if args.topics else None
         function = role_function(recording, args.role, args.function, [".", *args.pythonpath])
-        logs = LogCapture({args.role: "replay"})  # the role's records (ep.logger), shown once it has ended
+        logs = LogCapture({args.role: "replay"})  # the role's records (ep.logger), shown after the report
         logs.install()
         try:
             report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout,
                             import_classes=args.protocol is not None)
         finally:
             logs.uninstall()
-    for line in replayed_lines(*logs.drain()):
-        print(line)
     print(report.text())
+    for line in replayed_lines(*logs.drain()):  # after the verdict, which stays the first line
+        print(line)
     if args.json:
         _write_json(Path(args.json), report.to_dict())
     return EXIT_OK if report.ok else EXIT_ERRORS
