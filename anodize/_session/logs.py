@@ -9,7 +9,8 @@ severity, wall and monotonic time, logger, place) and keeps it in a bounded queu
 record is the role's when its thread runs the role (:func:`bind_role`, set by the runner)
 or when its logger is named after a role of the group (a thread the role started, using
 ``ep.logger``). Nothing in ``emit`` waits: when the queue is full the record is dropped and
-counted per severity, so a role logging in a tight loop runs on as fast as it can format.
+counted per severity (unformatted), so a role logging in a tight loop runs on as fast as
+:mod:`logging` makes its records.
 The runner drains the queue (:meth:`LogCapture.drain`) and carries the entries to the
 supervisor.
 """
