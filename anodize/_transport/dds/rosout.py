@@ -37,7 +37,7 @@ class RosoutWriter:
         self.writer: Any = DataWriter(self.participant, topic, qos=Qos(
             Policy.Reliability.Reliable(0), Policy.History.KeepLast(DEPTH), Policy.Durability.TransientLocal,
             userdata, *XCDR1))
-        self._ref = ref_of(self.writer)
+        self.ref = ref_of(self.writer)  # looked up once, as a lane does
         self.written = 0
         self.failed = 0
 
@@ -45,7 +45,7 @@ class RosoutWriter:
         """Publish ``entries`` (a write that fails is counted, never raised: logging is no reason to stop)."""
         for entry in entries:
             try:
-                ret = write(self._ref, ros_sample(self.kind.serialize(ros_log(entry))))
+                ret = write(self.ref, ros_sample(self.kind.serialize(ros_log(entry))))
             except Exception:  # a record that cannot go (DDSException, a bad value) is counted
                 ret = -1
             if ret == 0:
