@@ -23,6 +23,7 @@ from ._recording.replay_network import ReplayDivergenceError
 from ._recording.run import Recording
 from ._ros.messages import RosDecodeError, RosEncodeError
 from ._session import TIMEOUT, Endpoint, EndpointStatistics, Message, State
+from ._session.logs import LogEntry
 from ._supervision import (
     Dds,
     Group,
@@ -69,6 +70,8 @@ __all__ = [
     # The taps a program can hand to System.run itself: a recording, the live view in Foxglove.
     "Recording", "open_live_view", "LiveView",
     "EndpointStatistics",
+    # The roles' log records, as System.run(on_log=...) is handed them (docs/guide/logging.md).
+    "LogEntry",
     # System files and named systems (`anodize run FILE`, `anodize run NAME`), as TinMan uses them.
     "SystemConfig", "load_config", "build_system", "NamedSystem", "Prepared", "Finished",
     # Helpers for roles: messages from live-view clients, a thread below its role's priority.

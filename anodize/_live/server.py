@@ -31,17 +31,19 @@ import socket
 import tempfile
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from .._extras import import_extra
 from .._isolation.sched import side_work_priority
 from .._recording.encoding import SortCodec, codec_for_sort
+from .._session.logs import LogEntry
 from .._session.payloads import validator_for
 from ..errors import AnodizeError
 from ..taps import TapRun
 from .gate import SUBPROTOCOL, Handshake, SubprotocolGate, describe_offer
+from .logs import LOG_SCHEMA, LOG_SCHEMA_NAME, LOG_TOPIC, LogQueue, foxglove_log
 from .outbox import Outbox
 from .plan import STATUS_TOPIC, LiveLabel, LivePlan, live_plan
 from .tap import LARGE, LARGE_RATE, GroupLiveView
@@ -165,6 +167,9 @@ class LiveView:
         self._channels: list[Any] = []            # per label index: its Foxglove channel
         self._codecs: list[SortCodec] = []
         self._status: Any = None
+        self._log_channel: Any = None
+        self._logs = LogQueue()
+        self.logs_shown = 0
         self._groups: dict[str, tuple[socket.socket, threading.Lock]] = {}
         self._connected: set[str] = set()
         self._stats: dict[tuple[str, int], dict[str, Any]] = {}  # (group, connection) -> its tap's latest
@@ -228,6 +233,9 @@ class LiveView:
             STATUS_TOPIC, message_encoding="json", context=self.context,
             schema=foxglove.Schema(name="anodize.GroupStatuses", encoding="jsonschema",
                                    data=json.dumps(_STATUS_SCHEMA).encode()))
+        self._log_channel = foxglove.Channel(
+            LOG_TOPIC, message_encoding="json", context=self.context,
+            schema=foxglove.Schema(name=LOG_SCHEMA_NAME, encoding="jsonschema", data=json.dumps(LOG_SCHEMA).encode()))
         self.plan = plan
         threading.Thread(target=self._accept_loop, name="anodize-live-accept", daemon=True).start()
         self._publisher = threading.Thread(target=self._publish_loop, name="anodize-live-publish", daemon=True)
@@ -280,6 +288,10 @@ class LiveView:
                   for name, s in statuses.items()}
         self._latest_status = {"groups": groups}
 
+    def log(self, entries: Sequence[LogEntry]) -> None:
+        """The roles' log records: published on ``/rosout`` as ``foxglove.Log`` (by the publisher)."""
+        self._logs.put(entries)
+
     def _publish_loop(self) -> None:
         """Hand what the groups sent, and the latest status, to the SDK (and so to the clients)."""
         self.lower()
@@ -288,6 +300,10 @@ class LiveView:
                 with contextlib.suppress(ValueError, OverflowError, TypeError):  # a bad stamp: that one unshown
                     self._channels[index].log(data, log_time=stamp)
                     self.forwarded += 1
+            for entry in self._logs.take():
+                if self._log_channel is not None:
+                    self._log_channel.log(foxglove_log(entry), log_time=int(entry.wall * 1e9))
+                    self.logs_shown += 1
             status, self._latest_status = self._latest_status, None
             if status is not None and self._status is not None:
                 with self._lock:
@@ -315,6 +331,9 @@ class LiveView:
                  + (f"; {thinned} thinned (large messages at most {LARGE_RATE:g} times a second per topic) and "
                     f"{dropped} dropped (a queue of the live view was full: it shows the newest); the protocol "
                     "keeps every one" if thinned + dropped else "")]
+        if self.logs_shown or self._logs.dropped:
+            notes.append(f"foxglove: {self.logs_shown} log records on {LOG_TOPIC} ({LOG_SCHEMA_NAME})" + (
+                f"; {self._logs.dropped} dropped (the view's log queue was full)" if self._logs.dropped else ""))
         not_shown = self.not_shown()
         if not_shown:
             notes.append("foxglove: not shown, per topic: " + ", ".join(

@@ -27,6 +27,7 @@ from .._extras import import_extra
 from .chain import CHAIN_KEY, CHAIN_TOPIC, HEADS_RECORD, HeadCollector, chain_of, heads_record, identity
 from .encoding import codec_for_sort
 from .plan import CLOCK_KEY, META, PROFILE
+from .rosout import LOG_KEY
 
 __all__ = ["MergeResult", "merge_parts", "recording_file"]
 
@@ -46,6 +47,7 @@ class MergeResult:
     chains: int = 0  # hash chains (one per recorded channel or other topic)
     heads_digest: str = ""  # SHA-256 of the heads document (:func:`.chain.heads_document`)
     signed: bool = False
+    logs: int = 0  # the roles' log records on /rosout (not counted in messages, channels either)
     notes: list[str] = field(default_factory=list)
 
 
@@ -84,6 +86,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
         links: set[int] = set()  # the recording's link channel (:mod:`.chain`)
         collector = HeadCollector(run_info.get("run_id", ""))
         pairs: set[tuple[str, str]] = set()  # the protocol's channels (sender, receiver) recorded
+        logs: set[int] = set()  # and its log channel
 
         def channel_of(number: int, channel_id: int) -> int:
             """The recording's channel of a part's, registered at its first message (one pass)."""
@@ -101,6 +104,8 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
                     links.add(new)
                 elif f"{META}.sender" in metadata:
                     pairs.add((metadata[f"{META}.sender"], metadata.get(f"{META}.receiver", "")))
+                elif LOG_KEY in metadata:  # the roles' log records (/rosout): no channel either
+                    logs.add(new)
                 topics[new] = {"name": topic, "type": type_name, "hash": metadata.get("topic_type_hash", ""),
                                "qos": metadata.get("offered_qos_profiles", ""), "count": 0}
             ids[(number, channel_id)] = new
@@ -119,6 +124,8 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
                 linked += 1
             elif new in clocks:
                 result.readings += 1
+            elif new in logs:
+                result.logs += 1
             else:
                 result.messages += 1
             result.bytes += len(data)
@@ -135,7 +142,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
                 result.bytes += len(data)
                 linked += 1
         result.channels = len(pairs)
-        result.topics = len(topics) - len(clocks) - len(links)
+        result.topics = len(topics) - len(clocks) - len(links) - len(logs)
         for source in sources:
             result.notes.extend(source.notes)
         result.notes.extend(collector.notes)
@@ -146,9 +153,9 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
         if ran_at:
             result.notes.append("the groups' writers ran at " + "; ".join(
                 f"{priority} ({', '.join(parts)})" for priority, parts in sorted(ran_at.items())))
-        if result.messages + result.readings == 0:  # nothing was written: no time span
+        if result.messages + result.readings + result.logs == 0:  # nothing was written: no time span
             start = end = 0
-        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings + linked)
+        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings + linked + result.logs)
         writer.add_metadata("rosbag2", {"serialized_metadata": _yaml(bag)})
         writer.add_metadata(META, run_info)
         chain = heads_record(collector.run_id, collector.heads, sign_key)

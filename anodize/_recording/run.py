@@ -6,18 +6,22 @@ import dataclasses
 import json
 import os
 import secrets
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from .._session.logs import LogEntry
 from ..errors import AnodizeError
 from ..taps import TapRun
 from .merge import merge_parts
 from .plan import RecordPlan, channel_labels, record_plan
+from .rosout import write_part
 from .selection import RecordSelection
 from .tap import GroupRecording
 
-__all__ = ["Recording"]
+__all__ = ["Recording", "LOGS_KEPT"]
+
+LOGS_KEPT = 1_000_000  # log records a recording holds for /rosout; beyond them, records are counted, not kept
 
 
 class Recording:
@@ -44,6 +48,8 @@ class Recording:
         self.sign_key = sign_key
         self.plan: RecordPlan | None = None
         self._run: TapRun | None = None
+        self._logs: list[LogEntry] = []
+        self._logs_over = 0  # records past LOGS_KEPT
 
     def begin(self, run: TapRun) -> GroupRecording:
         """Plan which channels each group records, under which topics."""
@@ -63,6 +69,12 @@ class Recording:
     def status(self, statuses: Mapping[str, Any]) -> None:
         """Nothing: a recording is of messages, not of statuses."""
 
+    def log(self, entries: Sequence[LogEntry]) -> None:
+        """The roles' log records, as they reach the supervisor: recorded on ``/rosout`` at the end."""
+        room = LOGS_KEPT - len(self._logs)
+        self._logs.extend(entries[:max(0, room)])
+        self._logs_over += max(0, len(entries) - max(0, room))
+
     def end(self) -> list[str]:
         """Merge the groups' parts into the recording; returns notes for the run's report."""
         run, plan = self._run, self.plan
@@ -74,6 +86,8 @@ class Recording:
                 "recorded_channels": " ".join(sorted(f"{s}->{r}" for s, r in plan.at_sender | plan.at_receiver)),
                 "role_functions": json.dumps(dict(run.functions)), "group_of": json.dumps(dict(plan.group_of)),
                 "run_id": plan.run_id, "record_selection": self.selection.to_json()}
+        if self._logs:
+            write_part(Path(plan.parts), self._logs, run.global_type.name)
         result = merge_parts(Path(plan.parts), self.target, info, self.sign_key)
         size = f"{result.bytes / 2**20:.1f} MiB"
         chosen = self.selection.describe()
@@ -86,6 +100,9 @@ class Recording:
         notes = [f"recorded {result.messages} messages ({size}) on {on}{where or ''}{readings} to {self.target}"]
         signed = ", signed (HMAC-SHA256)" if result.signed else ""
         notes.append(f"recording: {_count(result.chains, 'hash chain')}, heads sha256 {result.heads_digest}{signed}")
+        if self._logs:
+            notes.append(f"recording: {result.logs} log records on /rosout" + (
+                f"; {self._logs_over} more were not recorded (over {LOGS_KEPT})" if self._logs_over else ""))
         notes.extend(f"recording: {note}" for note in result.notes)
         return notes
 

@@ -58,6 +58,7 @@ from .held import (
 from .metadata import left_out_by, recorded_channels
 from .plan import CLOCK_KEY, META, channel_labels
 from .reader import RecordedMessage, RecordedTopic, Recording
+from .rosout import LOG_KEY
 from .tap import GAP_KEY, SEQUENCE_WRAP
 
 __all__ = ["Violation", "ChannelResult", "VerifyReport", "verify", "RECORDING_FAULT", "Gap", "NOT_IMPORTED"]
@@ -552,6 +553,8 @@ def verify(recording: Recording, global_type: GlobalType, topics: Mapping[str, t
             gap_topics.add(topic.id)
         elif CLOCK_KEY in topic.metadata or CHAIN_KEY in topic.metadata:
             continue  # a role's clock readings: no channel of the protocol (a replay gives them back)
+        elif LOG_KEY in topic.metadata:
+            continue  # the roles' log records (/rosout): no channel of the protocol
         elif key is None:
             report.unmapped.append(f"{topic.topic} ({topic.type_name})")
         elif key[:2] not in pairs:

@@ -13,6 +13,7 @@ part in.
 from __future__ import annotations
 
 import contextlib
+import logging
 import queue
 import threading
 import time
@@ -27,6 +28,7 @@ from . import compiled
 from .channel import STOP, Channel, Corrupt, Network, PeerFailure
 from .clock import LIVE, clock_of
 from .inheriting import Lender, get_lending, inheriting, lend_to_any
+from .logs import role_logger
 from .monitor import TIMEOUT, Monitor
 from .statistics import EndpointStatistics
 from .timed import to_nanos
@@ -620,6 +622,17 @@ class Endpoint(_Core):
         Live, ``time.time()``; recorded and replayed as :meth:`now` is.
         """
         return self._clock.wall(self._branch)
+
+    @property
+    def logger(self) -> logging.Logger:
+        """The role's logger: a standard :class:`logging.Logger` named after the role, at INFO
+        unless its level was set (``ep.logger.info("new plan")``, as ROS's ``node.get_logger()``).
+
+        In a run its records reach the terminal, the run's report, a recording (``/rosout``),
+        the live view and, on DDS, ROS's ``/rosout`` (docs/guide/logging.md). Logging never
+        waits: past a bound, records are dropped and counted.
+        """
+        return role_logger(self.role)
 
     # ---- completion ------------------------------------------------------------------
     def unfinished(self) -> list[Endpoint]:

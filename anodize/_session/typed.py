@@ -9,6 +9,7 @@ generated module shares one copy.
 from __future__ import annotations
 
 import inspect
+import logging
 import typing
 from collections.abc import Callable
 from typing import Any
@@ -36,6 +37,11 @@ class State:
     def wall(self) -> float:
         """The wall clock (:meth:`Endpoint.wall`), for stamps; the state stays unused."""
         return self._endpoint.wall()
+
+    @property
+    def logger(self) -> logging.Logger:
+        """The role's logger (:attr:`Endpoint.logger`); logging is no action: the state stays unused."""
+        return self._endpoint.logger
 
     def _use(self) -> Endpoint:
         """Mark the state used and return the endpoint (``LinearityError`` the second time)."""

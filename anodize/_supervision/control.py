@@ -23,7 +23,7 @@ from typing import Any, ClassVar
 from .._transport.codec import Codec, DecodeError, FrameKind
 
 __all__ = [
-    "ControlTag", "Ready", "Beat", "RoleEnded", "MemoryExceeded", "Crash", "Notice", "Go", "PeerFailed", "Stop",
+    "ControlTag", "Ready", "Beat", "RoleEnded", "MemoryExceeded", "Crash", "Notice", "Logs", "Go", "PeerFailed", "Stop",
     "GroupMessage", "SupervisorMessage", "encode_control", "send_control", "decode_control", "FrameReader",
     "MAX_CONTROL_FRAME",
 ]
@@ -38,6 +38,7 @@ class ControlTag(IntEnum):
     MEMORY_EXCEEDED = 4
     CRASH = 5
     NOTICE = 6
+    LOGS = 7
     GO = 20
     PEER_FAILED = 21
     STOP = 22
@@ -112,6 +113,24 @@ class Notice:
     text: str
 
 
+@dataclass(frozen=True, kw_only=True)
+class Logs:
+    """A batch of the roles' log records (:class:`anodize._session.logs.LogEntry`), one column per
+    field (so each is type-checked at the door), and the records dropped since the last batch."""
+
+    TAG: ClassVar[ControlTag] = ControlTag.LOGS
+    roles: tuple[str, ...] = ()
+    levels: tuple[int, ...] = ()
+    loggers: tuple[str, ...] = ()
+    messages: tuple[str, ...] = ()
+    walls: tuple[float, ...] = ()
+    monotonics: tuple[float, ...] = ()
+    files: tuple[str, ...] = ()
+    functions: tuple[str, ...] = ()
+    lines: tuple[int, ...] = ()
+    dropped: dict[str, int] = field(default_factory=dict)  # per severity
+
+
 # ---- from the supervisor to a group ----------------------------------------------------------
 @dataclass(frozen=True, kw_only=True)
 class Go:
@@ -136,10 +155,10 @@ class Stop:
     TAG: ClassVar[ControlTag] = ControlTag.STOP
 
 
-GroupMessage = Ready | Beat | RoleEnded | MemoryExceeded | Crash | Notice
+GroupMessage = Ready | Beat | RoleEnded | MemoryExceeded | Crash | Notice | Logs
 SupervisorMessage = Go | PeerFailed | Stop
 _CLASSES: dict[int, type[Any]] = {cls.TAG: cls for cls in (Ready, Beat, RoleEnded, MemoryExceeded, Crash,
-                                                           Notice, Go, PeerFailed, Stop)}
+                                                           Notice, Logs, Go, PeerFailed, Stop)}
 _CODEC = Codec()  # no payload classes: control messages are plain data only
 
 

@@ -14,7 +14,9 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
+from .._session.logs import LogEntry
 from .._transport.dds import DdsSettings
+from .._transport.dds.rosout import RosoutWriter
 from .._transport.dds.settings import run_token
 from . import processes
 from .hostlink import HostLink
@@ -52,6 +54,7 @@ class DdsRunner(ProcessRunner):
         self.link = HostLink(settings, set(settings.host_of.values())) if elsewhere else None
         # The start barrier may wait for other hosts: the start-up deadline allows for it.
         self.start_timeout = processes._START_TIMEOUT + settings.wait
+        self.rosout: RosoutWriter | None = None  # the roles' log records on ROS 2's /rosout (see log)
         roles = self.scope.roles  # this host's (external roles are in no group)
         self.scope = Scope(local, roles, tuple((a, b) for a, b in self.channels if a in roles and b in roles),
                            Elsewhere(self.link, everyone, self.channels) if self.link is not None else None)
@@ -69,6 +72,14 @@ class DdsRunner(ProcessRunner):
                     for role in self.machines if role in group_of and group_of[role] not in batch}
             self._launch(name, incarnation, dead, {},
                          dds=replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)))
+
+    def log(self, entries: Sequence[LogEntry]) -> None:
+        """The roles' log records: published on ROS 2's ``/rosout`` (the writer made at the first)."""
+        if self.rosout is None:
+            ros = self.settings.ros
+            self.rosout = RosoutWriter(ros.domain if ros is not None else self.settings.domain,
+                                       (ros.distro or None) if ros is not None else None)
+        self.rosout.log(entries)
 
     def notes(self) -> list[str]:
         notes = super().notes()
@@ -90,6 +101,11 @@ class DdsRunner(ProcessRunner):
                 f"{name} on host {host}" for name, host in sorted(self.elsewhere.items())))
         if self.link is not None:
             notes.extend(self.link.notes)
+        if self.rosout is not None:
+            rosout = self.rosout
+            notes.append(f"{rosout.written} log records published on /rosout (DDS domain "
+                         f"{settings.ros.domain if settings.ros is not None else settings.domain})"
+                         + (f"; {rosout.failed} could not be written" if rosout.failed else ""))
         return notes
 
     def close(self) -> None:
@@ -98,3 +114,5 @@ class DdsRunner(ProcessRunner):
         finally:
             if self.link is not None:
                 self.link.close()
+            if self.rosout is not None:
+                self.rosout.close()

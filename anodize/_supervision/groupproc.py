@@ -24,6 +24,7 @@ import contextlib
 import ctypes
 import errno
 import functools
+import logging
 import os
 import signal
 import sys
@@ -44,6 +45,7 @@ from .._isolation.tree import become_subreaper, kill_tree
 from .._ros import RosType, ros_type
 from .._session.clock import adopt_clocks
 from .._session.endpoint import Endpoint
+from .._session.logs import LogCapture
 from .._session.payloads import resolve_class, with_field_classes
 from .._transport.codec import MAX_FRAME, Codec, DecodeError, make_codec
 from .._transport.network import GroupNetwork
@@ -68,6 +70,7 @@ from .control import (
     send_control,
 )
 from .group import resolve_function
+from .logcarry import to_messages
 from .report import RoleReport, RoleStatus, constraint_counts
 from .roles import describe_error, run_role
 
@@ -153,12 +156,14 @@ class _GroupProcess:
         self.peak = 0
         self.inheritance: BoostTable | None = None
         self.send_lock = threading.Lock()  # the control reader and the main thread both send
+        self.logs = LogCapture(dict.fromkeys(spec.roles, spec.name))
 
     def run(self) -> None:
         spec = self.spec
         scheduling = apply_thread_scheduling(spec.priority, spec.cpus, spec.nice)  # inherited by our threads
         functions = {role: resolve_function(ref) for role, ref in spec.roles.items()}
         threading.excepthook = self._thread_failed
+        self.logs.install(root_level=logging.INFO)  # our own process: a role's module logger logs INFO too
         network = self.network = self._network()
         self.inheritance = None if spec.inheritance is None or spec.inheritance[1] is None else (
             BoostTable.open(spec.inheritance[0], spec.inheritance[1]))
@@ -300,6 +305,8 @@ class _GroupProcess:
             self._heartbeat()
 
     def _heartbeat(self, final: bool = False) -> None:
+        for message in to_messages(*self.logs.drain()):  # before the beat: the final one comes last
+            self._send(message)
         used = max(0, (data_size() or self.baseline) - self.baseline)
         self.peak = max(self.peak, used)
         statistics = {role: ep.statistics() for role, ep in self.endpoints.items()}

@@ -41,9 +41,10 @@ from . import control
 from .group import Group, reference_of
 from .groupproc import EXIT_MEMORY, GroupSpec, group_main
 from .liveness import Frozen, HoldingGil
+from .logcarry import from_message
 from .plan import RunPlan
 from .report import RoleReport, RoleStatus
-from .supervisor import Counts, Event, GroupExited, GroupFailed, Note, Ready, RoleEnded, Scope
+from .supervisor import Counts, Event, GroupExited, GroupFailed, Logged, Note, Ready, RoleEnded, Scope
 from .watching import LivenessWatch
 
 if TYPE_CHECKING:
@@ -284,6 +285,14 @@ class ProcessRunner:
                 self._fail(inc, MemoryBoundError(name, inc.group.memory or 0, inc.peak))
             case control.Crash():
                 self._fail(inc, error_from_data(message.error))
+            case control.Logs():
+                try:
+                    entries = from_message(message, name, tuple(inc.group.roles))
+                except ValueError as error:  # as garbled as a bad frame
+                    self._fail(inc, RoleError("ControlError", f"garbled control message: {error}"))
+                    self.kill(inc.group.name)
+                    return
+                self.pending.append(Logged(entries=tuple(entries), dropped=dict(message.dropped)))
             case control.Notice():  # the group's own words: shown as what it says, not as a finding
                 self.pending.append(Note(group=name, text=f"group {name} reports: {message.text[:2000]}"))
             case _:

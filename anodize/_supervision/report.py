@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from .._session.statistics import EndpointStatistics
 from ..errors import AnodizeError
+from .logsummary import LogSummary
 
 if TYPE_CHECKING:
     from .._transport.ros_lanes import RosSettings
@@ -181,6 +182,7 @@ class RunReport:
             where both ends ran here: the messages sent and not received (lost on the wire,
             overwritten in a keep-last history, or in flight at the end). The protocol allows
             it (:mod:`anodize._transport.lossy_lanes`): no violation, nobody blamed.
+        logs: the roles' log records: counts per severity, those dropped, the last warnings and errors.
     """
 
     protocol: str
@@ -198,6 +200,7 @@ class RunReport:
     inheritance_inactive: tuple[str, ...] = ()
     constraints: dict[str, dict[str, float | None]] = field(default_factory=dict)
     lost: dict[str, int] = field(default_factory=dict)
+    logs: LogSummary = field(default_factory=LogSummary)
 
     @property
     def ok(self) -> bool:
@@ -244,6 +247,7 @@ class RunReport:
                      for key, c in self.constraints.items())
         lines.extend(f"  lost {n} of {self.messages.get(channel, 0)} on {channel} (a lossy QoS; the protocol "
                      "allows it: no violation)" for channel, n in self.lost.items())
+        lines.extend(f"  {line}" for line in self.logs.lines())
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)
 
@@ -258,6 +262,7 @@ class RunReport:
             "boosts": {pair: dict(b) for pair, b in self.boosts.items()},
             "inheritance_inactive": list(self.inheritance_inactive),
             "constraints": {key: dict(c) for key, c in self.constraints.items()},
+            "logs": self.logs.to_dict(),
             "groups": {name: {
                 "status": str(g.status), "scheduling": g.scheduling, "peak_memory": g.peak_memory,
                 "memory_bound": g.memory_bound, "memory_note": g.memory_note, "notes": list(g.notes),

@@ -13,6 +13,7 @@ from typing import Any
 from .._isolation.inherit import BoostTable
 from .._isolation.sched import apply_thread_scheduling
 from .._session.endpoint import Endpoint
+from .._session.logs import bind_role
 from .._session.typed import argument_for
 from ..errors import RoleStopped
 from .report import RoleReport, RoleStatus
@@ -55,6 +56,7 @@ def run_role(group: str, priority: int | None, cpus: frozenset[int] | None, role
     group's nice value, applied where it asked no priority.
     """
     scheduling = ""
+    bind_role(role)  # what this thread logs is the role's (anodize._session.logs)
     try:
         if schedule:
             scheduling = apply_thread_scheduling(priority, cpus, nice)

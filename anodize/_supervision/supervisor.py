@@ -28,13 +28,16 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Protocol
 
+from .._session.logs import LogEntry
 from ..errors import RoleError
 from .group import FailurePolicy, Group
+from .logsummary import LogSummary
 from .report import GroupReport, GroupState, GroupStatus, RoleReport, RoleStatus, RunReport
 from .roles import describe_error
 
 __all__ = ["Supervisor", "Runner", "RunState", "Event", "Ready", "Counts", "RoleEnded", "GroupFailed",
-           "GroupExited", "Note", "window_rates", "Link", "Elsewhere", "Scope", "StopWord", "RestartWord", "Word"]
+           "GroupExited", "Note", "Logged", "window_rates", "Link", "Elsewhere", "Scope", "StopWord", "RestartWord",
+           "Word"]
 
 TICK = 0.1           # seconds between two looks at the clock when nothing happens
 STATUS_EVERY = 0.5   # seconds between two on_status calls
@@ -120,7 +123,16 @@ class Note:
     text: str
 
 
-Event = Ready | Counts | RoleEnded | GroupFailed | GroupExited | Note
+@dataclass(frozen=True, kw_only=True)
+class Logged:
+    """Records the roles logged (every group's, in time order within a group), and those dropped
+    on the way, per severity (:mod:`anodize._session.logs`)."""
+
+    entries: tuple[LogEntry, ...]
+    dropped: dict[str, int] = field(default_factory=dict)
+
+
+Event = Ready | Counts | RoleEnded | GroupFailed | GroupExited | Note | Logged
 
 
 # ---- what supervisors on other hosts say (Dds, anodize run --host) ---------------------------
@@ -290,7 +302,8 @@ class Supervisor:
     def __init__(self, protocol: str, roles: Sequence[str], groups: dict[str, Group],
                  channels: Sequence[tuple[str, str]], runner: Runner, timeout: float | None,
                  grace: float, on_status: Callable[[dict[str, GroupStatus]], None] | None,
-                 elsewhere: Elsewhere | None = None, stop_when: Callable[[], str | None] | None = None) -> None:
+                 elsewhere: Elsewhere | None = None, stop_when: Callable[[], str | None] | None = None,
+                 on_log: Callable[[Sequence[LogEntry]], None] | None = None) -> None:
         self.protocol = protocol
         self.roles = tuple(roles)
         self.channels = tuple(channels)
@@ -300,6 +313,8 @@ class Supervisor:
         self.grace = grace
         self.on_status = on_status
         self.stop_when = stop_when
+        self.on_log = on_log  # handed the roles' log records as they come (the terminal, taps)
+        self.logs = LogSummary()
         self.records = {name: _GroupRecord(group) for name, group in groups.items()}
         everyone = groups if elsewhere is None else elsewhere.groups
         self.group_of = {role: g.name for g in everyone.values() for role in g.roles}
@@ -414,6 +429,9 @@ class Supervisor:
 
     # ---- events ----------------------------------------------------------------------------
     def _handle(self, event: Event) -> None:
+        if isinstance(event, Logged):
+            self._logged(event)
+            return
         record = self.records.get(event.group)
         if record is None:
             return
@@ -438,6 +456,17 @@ class Supervisor:
                     self._group_failed(record, event.error)
             case GroupExited():
                 self._exited(record, event.unreported, event.details)
+
+    def _logged(self, event: Logged) -> None:
+        """Count the roles' records for the report and hand them on (a failing receiver is told no more)."""
+        self.logs.add(event.entries, event.dropped)
+        if self.on_log is None or not event.entries:
+            return
+        try:
+            self.on_log(event.entries)
+        except Exception as error:  # the caller's code: its failure ends neither supervision nor the run
+            self.notes.append(f"on_log raised {type(error).__name__}: {error}; it is handed no more records")
+            self.on_log = None
 
     def _counts(self, record: _GroupRecord, counts: Counts) -> None:
         if counts.memory is not None:
@@ -681,7 +710,7 @@ class Supervisor:
                          interrupted=self.interrupted, notes=tuple(self.notes),
                          boosts={f"{waiter}->{target}": {"episodes": b.episodes, "seconds": round(b.seconds, 6)}
                                  for (waiter, target), b in boosts.items()},
-                         inheritance_inactive=tuple(inactive))
+                         inheritance_inactive=tuple(inactive), logs=self.logs)
 
 
 def window_rates(samples: list[tuple[float, int]], window: float = RATE_WINDOW) -> list[float]:

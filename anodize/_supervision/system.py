@@ -21,10 +21,12 @@ from typing import TYPE_CHECKING
 from sessiontypes import GlobalType, StateMachine
 from sessiontypes.graph import communication_graph
 
+from .._session.logs import LogEntry
 from ..errors import AnodizeError, ConfigurationError
 from ..taps import ChannelTap, TapRun
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
 from .legacy import legacy_run, legacy_system, legacy_taps
+from .logfanout import log_receivers
 from .plan import RunPlan
 from .report import GroupStatus, RunReport, lossy_channels
 from .rosbridge import RosBridge
@@ -181,7 +183,8 @@ class System:
             on_status: Callable[[dict[str, GroupStatus]], None] | None = None, *,
             taps: Sequence[ChannelTap] = (), liveness: float | None = None, host: str | None = None,
             wait: float | None = None, record: str | os.PathLike[str] | None = None,
-            live: ChannelTap | None = None, stop_when: Callable[[], str | None] | None = None) -> RunReport:
+            live: ChannelTap | None = None, stop_when: Callable[[], str | None] | None = None,
+            on_log: Callable[[Sequence[LogEntry]], None] | None = None) -> RunReport:
         """Run every role to the end of its local type (or until ``timeout`` seconds).
 
         Roles still running at the timeout are stopped (``RoleStopped`` is raised in
@@ -196,6 +199,10 @@ class System:
         stops the run as the timeout does when it returns a reason, which the report's notes
         give ("stopping every group: the patrol is done"): how a caller that knows its
         mission is done, e.g. from what the roles wrote, ends a run whose roles loop forever.
+        ``on_log``, if given, is handed the records the roles log (``ep.logger``, or any
+        ``logging`` logger on a role's thread) as they reach the supervisor, in batches, from
+        the same thread (keep it quick); every tap with a ``log`` method gets them too, and the
+        report counts them (docs/guide/logging.md).
         What only some transports have (liveness, hosts, the start barrier) are fields
         of the transport value.
 
@@ -231,9 +238,10 @@ class System:
                        dict(self.capacities), self.ros, opened)
         runner = transport.runner(plan)
         scope = runner.scope
+        fanout = log_receivers(on_log, taps, runner)
         report = Supervisor(gt.name, scope.roles, scope.groups, scope.channels, runner, timeout, grace, on_status,
-                            scope.elsewhere, stop_when).run()
-        notes = [note for tap in taps for note in tap.end()]
+                            scope.elsewhere, stop_when, on_log=fanout).run()
+        notes = [note for tap in taps for note in tap.end()] + (fanout.problems if fanout is not None else [])
         lossy = lossy_channels(ros, scope.roles)
         notes.extend(f"{channel} may lose messages: {what}" for channel, what in lossy.items())
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()},

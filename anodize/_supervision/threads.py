@@ -33,13 +33,14 @@ from .._isolation.inherit import Boosts, inheritance_table
 from .._isolation.procstat import own_run_delay
 from .._session.clock import adopt_clocks
 from .._session.endpoint import Endpoint
+from .._session.logs import LogCapture
 from .._transport.inproc import InprocNetwork
 from ..taps import GroupTap
 from .group import Group, resolve_function
 from .plan import RunPlan
 from .report import RoleReport, RoleStatus, constraint_counts
 from .roles import describe_error, run_role
-from .supervisor import Counts, Event, GroupExited, Ready, RoleEnded, Scope
+from .supervisor import Counts, Event, GroupExited, Logged, Ready, RoleEnded, Scope
 
 __all__ = ["ThreadRunner"]
 
@@ -90,6 +91,8 @@ class ThreadRunner:
         self.inactive: list[str] = []
         self.held_up: list[float] = []  # each time the loop woke HELD_UP late or more: by how much
         self.armed = False  # the last resort's timer (see bound)
+        self.logs = LogCapture(self.group_of)  # the roles' records (this process's root level stays the caller's)
+        self.logs.install()
 
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         batch = set(groups)
@@ -158,6 +161,9 @@ class ThreadRunner:
                 if inc.number == event.incarnation:
                     inc.reported.add(event.report.name)
         found.extend(self._counts())
+        entries, dropped = self.logs.drain()
+        if entries or dropped:
+            found.append(Logged(entries=tuple(entries), dropped=dropped))
         for name, inc in self.current.items():
             if not inc.over and len(inc.reported) == len(inc.group.roles):
                 inc.over = True
@@ -228,6 +234,7 @@ class ThreadRunner:
             self.kill(name)
         for tap in self.taps:
             tap.close()
+        self.logs.uninstall()  # an abandoned role's later records are nobody's
         if self.inheritance is not None:
             self.boosts, self.inactive = self.inheritance.boosts(), self.inheritance.inactive()
 

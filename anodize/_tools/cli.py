@@ -10,6 +10,7 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import logging
 import os
 import shlex
 import shutil
@@ -29,6 +30,7 @@ from ..errors import AnodizeError
 from .codegen import GeneratedModule, generate_modules
 from .introspect import add_commands as add_introspection_commands
 from .introspect import open_introspection, system_name
+from .loglines import LogLines, replayed_lines
 from .version import version_line
 
 if TYPE_CHECKING:
@@ -158,7 +160,8 @@ def _parser() -> argparse.ArgumentParser:
     run_system.add_argument("--timeout", type=float, metavar="S",
                             help="stop roles still running after S seconds (default: the file's timeout)")
     run_system.add_argument("--json", metavar="FILE", help="also write the run report as JSON to FILE")
-    run_system.add_argument("--quiet", action="store_true", help="no live status lines")
+    run_system.add_argument("--quiet", action="store_true",
+                            help="no live status lines, and of the roles' logs only WARN and above")
     run_system.add_argument("--transport", choices=("inproc", "process", "dds"),
                             help="run on this transport instead of the file's (e.g. dds, to try a system across "
                                  "hosts on one)")
@@ -469,10 +472,12 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f"{given[0]} needs --record PATH")
     selection = config.record.for_run(args.record_between, args.record_exclude, system.global_type)
     sign_key = read_signing_key(args.sign_key, "--sign-key") if args.sign_key is not None else None
+    status = None if args.quiet else LiveStatus(sys.stdout)
+    logs = LogLines(sys.stdout, logging.WARNING if args.quiet else logging.DEBUG,
+                    status.clear if status is not None else None)
     with _taps(args.record, args.foxglove, selection, sign_key) as taps, \
             _introspection(system_name(args.file), str(config.path)) as served:
-        report = system.run(timeout=timeout, on_status=None if args.quiet else LiveStatus(sys.stdout),
-                            taps=[*taps, *served])
+        report = system.run(timeout=timeout, on_status=status, taps=[*taps, *served], on_log=logs)
     print(report.summary())
     if args.json:
         out = Path(args.json)
@@ -581,6 +586,7 @@ def _introspect(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from .._recording.reader import open_recording
     from .._recording.replay import replay
+    from .._session.logs import LogCapture
     from .recordings import protocol_of, role_function, topic_map
 
     if not args.timeout > 0:
@@ -592,9 +598,16 @@ def _replay(args: argparse.Namespace) -> int:
                              f"{', '.join(global_type.roles)}")
         topics = topic_map(args.topics, global_type) if args.topics else None
         function = role_function(recording, args.role, args.function, [".", *args.pythonpath])
-        report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout,
-                        import_classes=args.protocol is not None)
+        logs = LogCapture({args.role: "replay"})  # the role's records (ep.logger), shown after the report
+        logs.install()
+        try:
+            report = replay(recording, global_type, args.role, function, topics, timeout=args.timeout,
+                            import_classes=args.protocol is not None)
+        finally:
+            logs.uninstall()
     print(report.text())
+    for line in replayed_lines(*logs.drain()):  # after the verdict, which stays the first line
+        print(line)
     if args.json:
         _write_json(Path(args.json), report.to_dict())
     return EXIT_OK if report.ok else EXIT_ERRORS
@@ -639,11 +652,13 @@ def _run_named(name: str, rest: list[str]) -> int:
         return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
     prepared = named.prepare(args, lambda line: print(line, flush=True))
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
+    logs = LogLines(sys.stdout, logging.WARNING if args.quiet else logging.DEBUG,
+                    progress.clear if progress is not None else None)
     try:
         with _taps(prepared.record, args.foxglove, prepared.selection()) as taps, \
                 _introspection(name, name) as served:
             report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
-                                         taps=[*taps, *served], stop_when=prepared.stop_when)
+                                         taps=[*taps, *served], stop_when=prepared.stop_when, on_log=logs)
     finally:
         if progress is not None:
             progress.close()
@@ -682,6 +697,11 @@ class ProgressLine:
             self.logged = elapsed
             self.stream.write(line + "\n")
         self.stream.flush()
+
+    def clear(self) -> None:
+        """Clear the line drawn in place (a log record is written there); the next call redraws it."""
+        if self.tty:
+            self.stream.write("\r\x1b[2K")
 
     def close(self) -> None:
         if self.tty:
@@ -722,6 +742,12 @@ class LiveStatus:
         self.tty = stream.isatty()
         self.drawn = 0                       # lines drawn last time (terminal)
         self.states: dict[str, str] = {}     # state last printed per group (log)
+
+    def clear(self) -> None:
+        """Clear the lines drawn in place (a log record is written there); the next call redraws them."""
+        if self.tty and self.drawn:
+            self.stream.write(f"\x1b[{self.drawn}F\x1b[J")
+            self.drawn = 0
 
     def __call__(self, statuses: dict[str, GroupStatus]) -> None:
         if self.tty:

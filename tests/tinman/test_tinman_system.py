@@ -52,6 +52,8 @@ def test_tinman_runs_with_every_group_and_no_violation(
     frames = report["messages"]["Camera->VisOdom"] / 2
     assert report["messages"]["Move->Gazebo"] > frames > report["messages"]["Planner->Move"]
     assert report["control"]["sources"]["path"] > 0  # the robot followed plans
+    assert report["logs"]["counts"]["INFO"] >= 1  # the Planner logged its goal (ep.logger)
+    assert report["logs"]["dropped"] == dict.fromkeys(report["logs"]["dropped"], 0)
     assert report["robot"]["distance_m"] > 0.3 and report["robot"]["bumps"] == 0
     assert_the_contract_held(report)
 

@@ -76,6 +76,7 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
         "messages": dict(report.messages),
         "high_water": dict(report.high_water),  # per channel, the most messages that waited at once
         "boosts": run["boosts"],  # priority inheritance: per waiter->target pair, episodes and seconds
+        "logs": run["logs"],  # the roles' log records: per severity, dropped, the last warnings and errors
         "groups": {name: {key: group[key] for key in (
             "status", "scheduling", "peak_memory", "memory_bound", "memory_note", "notes", "error", "restarts",
             "messages", "rate_hz", "rate_min_hz")} for name, group in run["groups"].items()},

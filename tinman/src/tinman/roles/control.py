@@ -125,6 +125,7 @@ def move(ep: Endpoint) -> None:
                                                        clock), name="Move-estimates", daemon=True).start()
     sent: list[float] = []
     teleop_after_loss = 0
+    stops = 0  # safety stops logged so far (the safety layer counts one per stop, not per command)
     try:
         while True:
             teleop: Twist = ep.recv("Control").payload
@@ -135,6 +136,10 @@ def move(ep: Endpoint) -> None:
             scan: LaserScan | None = ep.recv("Gazebo").payload if settings.paper else None  # else the latest
             command, source = mixer.step(teleop, scan)
             ep.send("Gazebo", "Twist", command)
+            if mixer.safety.stops > stops:  # after the send: the command goes first, the words after
+                stops = mixer.safety.stops
+                ep.logger.warning("safety stop: an obstacle within stopping distance; the robot stands (stop %d)",
+                                  stops)
             sent.append(ep.now())
             if planner_lost and source == "teleop":
                 teleop_after_loss += 1
@@ -194,6 +199,7 @@ def _take_estimates(ep: Endpoint, mixer: Mixer, perception_lost: list[str], cloc
                 _estimate(mixer, message.payload)
     except PeerFailedError as error:  # no more estimates: path following stops, teleop goes on
         perception_lost.append(str(error))
+        ep.logger.error("perception lost (%s): path following stops, teleop goes on", error)
     except RoleStopped:
         pass
 
@@ -209,6 +215,7 @@ def _take_scans(ep: Endpoint, mixer: Mixer, scanner_lost: list[str], clock: _Thr
                 mixer.set_scan(message.payload)
     except PeerFailedError as error:  # no more scans: the safety layer lets the robot turn, not drive
         scanner_lost.append(str(error))
+        ep.logger.error("range scanner lost (%s): the robot may turn, not drive", error)
     except RoleStopped:
         pass
 

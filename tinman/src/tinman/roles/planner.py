@@ -45,6 +45,7 @@ def planner(ep: Endpoint) -> None:
     plans: list[dict[str, object]] = []
     failures: list[str] = []
     plan_ms: list[float] = []
+    heading_to: tuple[float, float] | None = None  # the goal of the last plan logged at INFO
     while True:
         pose: PoseStamped = ep.recv("VisOdom").payload
         now = seconds(pose.header.stamp)
@@ -57,6 +58,7 @@ def planner(ep: Endpoint) -> None:
             if patrol.done:  # back at the dock: the robot stays, and the launcher ends the run
                 if not docked:
                     docked = True
+                    ep.logger.info("patrol done: docked at (%.2f, %.2f) after %d waypoints", x, y, patrol.reached)
                     path = Path(header=Header(stamp=pose.header.stamp, frame_id="map"), poses=[])
                     save_record("Patrol", {"completed_stamp": now, "x": round(x, 3), "y": round(y, 3),
                                            "waypoints": patrol.reached})
@@ -67,8 +69,13 @@ def planner(ep: Endpoint) -> None:
                 points = planning.plan((x, y), goal)
             except NoPathError as error:  # keep following the last plan; say why in the record
                 failures.append(str(error))
+                ep.logger.warning("no path to (%.2f, %.2f): %s; following the last plan", *goal, error)
             else:
                 plan_ms.append((time.perf_counter() - began) * 1000.0)
+                if goal != heading_to:
+                    heading_to = goal
+                    ep.logger.info("new goal (%.2f, %.2f): a plan of %d points", *goal, len(points))
+                ep.logger.debug("plan of %d points to (%.2f, %.2f) in %.1f ms", len(points), *goal, plan_ms[-1])
                 header = Header(stamp=pose.header.stamp, frame_id="map")
                 path = path_through(points, header)
                 plans.append({"stamp": seconds(pose.header.stamp), "goal": list(goal),
