@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import socket
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -25,6 +26,7 @@ SUBPROTOCOL = "foxglove.sdk.v1"  # what foxglove-sdk 0.30's server accepts, and 
 HEAD_LIMIT = 16 * 1024  # bytes of request head read before a connection is refused as no handshake
 HEAD_TIMEOUT = 5.0  # seconds a client may take to send its request head
 CHUNK = 256 * 1024  # bytes relayed per read
+DRAIN = 1.0  # seconds a closing gate lets its relays copy what the server sent last
 
 
 @dataclass(frozen=True)
@@ -97,18 +99,24 @@ class SubprotocolGate:
         self._on_refused = on_refused
         self._lower = lower
         self._lock = threading.Lock()
+        self._drained = threading.Condition(self._lock)
         self._open: set[socket.socket] = set()
         self._closed = False
         threading.Thread(target=self._accept_loop, name="anodize-live-gate", daemon=True).start()
 
-    def close(self) -> None:
-        """Stop listening and end every relayed connection."""
+    def close(self, drain: float = DRAIN) -> None:
+        """Stop listening, let the relays copy what is in flight (up to ``drain`` seconds: the
+        server behind is stopped first, so each relay meets its end), then end the rest."""
         with self._lock:
             self._closed = True
-            open_ = list(self._open)
         with contextlib.suppress(OSError):
             self._listener.shutdown(socket.SHUT_RDWR)
         self._listener.close()
+        deadline = time.monotonic() + drain
+        with self._drained:
+            while self._open and time.monotonic() < deadline:
+                self._drained.wait(max(0.0, deadline - time.monotonic()))
+            open_ = list(self._open)
         for sock in open_:
             with contextlib.suppress(OSError):
                 sock.shutdown(socket.SHUT_RDWR)
@@ -122,6 +130,7 @@ class SubprotocolGate:
     def _drop(self, sock: socket.socket) -> None:
         with self._lock:
             self._open.discard(sock)
+            self._drained.notify_all()
         sock.close()
 
     def _accept_loop(self) -> None:

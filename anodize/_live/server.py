@@ -371,10 +371,10 @@ class LiveView:
             for sock, _ in self._groups.values():
                 with contextlib.suppress(OSError):
                     sock.shutdown(socket.SHUT_RDWR)
+        if self.server is not None:  # first: what it sent reaches the clients through the gate
+            self.server.stop()
         if self.gate is not None:
             self.gate.close()
-        if self.server is not None:
-            self.server.stop()
         shutil.rmtree(self._folder, ignore_errors=True)
 
     # ---- the groups' taps -------------------------------------------------------------------
