@@ -25,6 +25,7 @@ from ..errors import AnodizeError, ConfigurationError
 from ..taps import ChannelTap, TapRun
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
 from .legacy import legacy_run, legacy_system, legacy_taps
+from .params import ParamValue, check_params, check_value
 from .plan import RunPlan
 from .report import GroupStatus, RunReport
 from .rosbridge import RosBridge
@@ -56,6 +57,11 @@ class System:
         capacities: ``{"Control->Move": 4}``: channels that hold at most so many messages;
             their senders wait while they are full (between threads of one process, and on
             DDS; between processes a pipe's buffer bounds a channel instead, as the report says).
+        params: ``{"Planner": {"speed": 0.3}}``: each role's parameters, given to its function as
+            keyword arguments (it declares them: ``def planner(ep, *, speed: float = 0.35)``);
+            bool, int, float, str or a list of one of them, as ROS parameters
+            (docs/guide/system-files.md, "Parameters"). Checked against the functions when the
+            system runs (:meth:`check_params` checks them sooner).
         domain, run_id, ros_topics, external, ros_distro, ros_domain: deprecated (with a
             ``transport`` string): the fields of ``Dds`` and ``RosBridge`` they now are.
 
@@ -65,6 +71,7 @@ class System:
 
     def __init__(self, global_type: GlobalType, transport: Transport | str = _INPROC, monitors: bool = True, *,
                  ros: RosBridge | None = None, capacities: Mapping[str, int] | None = None,
+                 params: Mapping[str, Mapping[str, ParamValue]] | None = None,
                  domain: int | None = None, run_id: str | None = None, ros_topics: Mapping[str, str] | None = None,
                  external: Iterable[str] | None = None, ros_distro: str | None = None,
                  ros_domain: int | None = None) -> None:
@@ -97,6 +104,7 @@ class System:
             raise ConfigurationError(f"external roles ({', '.join(sorted(external_roles))}) are ROS 2 nodes: they "
                                      f"need transport Dds(...), not {transport!r}")
         self.external = external_roles
+        self.params = _params(global_type, params or {})
         self.groups: dict[str, Group] = {}
         self._placed: dict[str, str] = {}
 
@@ -225,8 +233,9 @@ class System:
         opened = tuple(tap.begin(shape) for tap in taps)
         if taps:
             on_status = _with_tap_status(on_status, taps)
+        params = self.check_params()
         plan = RunPlan(gt, machines, channels, dict(self.groups), dict(self._placed), self.monitors,
-                       dict(self.capacities), self.ros, opened)
+                       dict(self.capacities), self.ros, opened, params)
         runner = transport.runner(plan)
         scope = runner.scope
         report = Supervisor(gt.name, scope.roles, scope.groups, scope.channels, runner, timeout, grace, on_status,
@@ -234,6 +243,28 @@ class System:
         notes = [note for tap in taps for note in tap.end()]
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()},
                                    notes=(*report.notes, *notes))
+
+    def check_params(self) -> dict[str, dict[str, ParamValue]]:
+        """Each placed role's parameters, checked against its function (an int given for a
+        declared float becomes a float).
+
+        Raises:
+            ConfigurationError: a role given parameters is in no group, its function takes no
+                such parameter, a value is not of the declared type, or a keyword-only
+                parameter without a default has no value.
+        """
+        functions = {role: function for group in self.groups.values() for role, function in group.roles.items()}
+        checked: dict[str, dict[str, ParamValue]] = {}
+        for role in self.params:
+            if role not in functions:
+                raise ConfigurationError(f"parameters of role {role}: it is in no group (external roles are ROS 2 "
+                                         "nodes: give them their parameters there)")
+        for role, function in functions.items():
+            target = resolve_function(function) if isinstance(function, str) else function
+            values = check_params(role, target, self.params.get(role, {}))
+            if values:
+                checked[role] = values
+        return checked
 
     def _functions(self) -> dict[str, str]:
         """role -> ``module:function`` of the roles that can be named so (a recording keeps them for replay)."""
@@ -268,6 +299,27 @@ def _with_tap_status(on_status: Callable[[dict[str, GroupStatus]], None] | None,
         if on_status is not None:
             on_status(statuses)
     return each
+
+
+def _params(global_type: GlobalType,
+            given: Mapping[str, Mapping[str, ParamValue]]) -> dict[str, dict[str, ParamValue]]:
+    """``{"Role": {"name": value}}`` checked against the protocol's roles and ROS's parameter types.
+
+    Raises:
+        ConfigurationError: not a role of the global type, or not a parameter value.
+    """
+    if not isinstance(given, Mapping):
+        raise ConfigurationError(f'params: expected a mapping such as {{"Planner": {{"speed": 0.3}}}}, got {given!r}')
+    found: dict[str, dict[str, ParamValue]] = {}
+    for role, values in given.items():
+        if role not in global_type.roles:
+            raise ConfigurationError(f"parameters of role {role}: global {global_type.name} has no such role; "
+                                     f"expected one of {', '.join(global_type.roles)}")
+        if not isinstance(values, Mapping):
+            raise ConfigurationError(f'parameters of role {role}: expected a mapping such as {{"speed": 0.3}}, '
+                                     f"got {values!r}")
+        found[role] = {str(name): check_value(role, str(name), value) for name, value in values.items()}
+    return found
 
 
 def _capacities(global_type: GlobalType, given: Mapping[str, int]) -> dict[tuple[str, str], int]:
