@@ -20,7 +20,7 @@ import typing
 from collections.abc import Callable, Mapping
 from typing import Any, TypeAlias
 
-from ..errors import ConfigurationError
+from ..errors import ParameterError
 
 __all__ = ["ParamValue", "check_value", "check_params", "type_name"]
 
@@ -43,10 +43,10 @@ def check_value(role: str, name: str, value: object) -> ParamValue:
     A list of ints and floats is a list of floats (as TOML writes ``[1, 2.5]``).
 
     Raises:
-        ConfigurationError: not a bool, int, float, str, or a list of one of them.
+        ParameterError: not a bool, int, float, str, or a list of one of them.
     """
     if not name.isidentifier():
-        raise ConfigurationError(f"role {role}: parameter name {name!r}: expected a Python identifier such as speed")
+        raise ParameterError(role, name, "expected a name that is a Python identifier, such as speed")
     if isinstance(value, _SCALARS):
         return value  # type: ignore[return-value]  # one of the scalar members of ParamValue
     if isinstance(value, list):
@@ -55,10 +55,10 @@ def check_value(role: str, name: str, value: object) -> ParamValue:
             return [float(v) for v in value]
         if len(kinds) <= 1 and kinds <= set(_SCALARS):
             return list(value)
-        raise ConfigurationError(f"role {role}: parameter {name}: expected an array of one type (bool, int, float "
-                                 f"or str, as ROS parameters), got {type_name(value)}")
-    raise ConfigurationError(f"role {role}: parameter {name}: expected a bool, int, float, str or an array of one "
-                             f"of them (as ROS parameters), got {type_name(value)}")
+        raise ParameterError(role, name, "expected an array of one type (bool, int, float or str, as ROS "
+                                         f"parameters), got {type_name(value)}")
+    raise ParameterError(role, name, "expected a bool, int, float, str or an array of one of them (as ROS "
+                                     f"parameters), got {type_name(value)}")
 
 
 def check_params(role: str, function: Callable[..., Any], given: Mapping[str, object]) -> dict[str, ParamValue]:
@@ -67,7 +67,7 @@ def check_params(role: str, function: Callable[..., Any], given: Mapping[str, ob
     An int given where the function declares a float becomes a float; nothing else is converted.
 
     Raises:
-        ConfigurationError: a parameter the function does not take, a value not of its
+        ParameterError: a parameter the function does not take, a value not of its
             declared type, or a keyword-only parameter without a default that no value is given for.
     """
     values = {name: check_value(role, name, value) for name, value in given.items()}
@@ -88,15 +88,15 @@ def check_params(role: str, function: Callable[..., Any], given: Mapping[str, ob
             if open_ended:
                 continue
             known = ", ".join(sorted(taken)) or "none"
-            raise ConfigurationError(f"role {role}: {shown} takes no parameter {name}; its parameters: {known}")
+            raise ParameterError(role, name, f"{shown} takes no such parameter; its parameters: {known}")
         expected = hints.get(name)
         if expected is not None:
             values[name] = _as_declared(role, name, value, expected)
     missing = sorted(n for n, p in taken.items() if p.kind is p.KEYWORD_ONLY and p.default is p.empty
                      and n not in values)
     if missing:
-        raise ConfigurationError(f"role {role}: parameter {missing[0]} of {shown} has no default and no value; "
-                                 f"give one ([params.{role}] {missing[0]} = ...)")
+        raise ParameterError(role, missing[0], f"{shown} declares no default and no value is given "
+                                               f"([params.{role}] {missing[0]} = ...)")
     return values
 
 
@@ -109,15 +109,14 @@ def _hints(function: Callable[..., Any]) -> dict[str, Any]:
 
 
 def _as_declared(role: str, name: str, value: ParamValue, expected: Any) -> ParamValue:
-    """``value`` as the declared type ``expected`` (an int as a float), or a ConfigurationError."""
+    """``value`` as the declared type ``expected`` (an int as a float), or a ParameterError."""
     options = typing.get_args(expected) if _is_union(expected) else (expected,)
     for option in options:
         converted = _fits(value, option)
         if converted is not None:
             return converted
     shown = " | ".join(_declared_name(o) for o in options)
-    raise ConfigurationError(f"role {role}: parameter {name}: expected {shown}, got {type_name(value)} "
-                             f"({_literal(value)})")
+    raise ParameterError(role, name, f"expected {shown}, got {type_name(value)} ({_literal(value)})")
 
 
 def _fits(value: ParamValue, option: Any) -> ParamValue | None:

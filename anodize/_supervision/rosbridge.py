@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from sessiontypes import StateMachine
 
 from .._transport.ros_lanes import RosSettings, ros_settings
 from ..errors import ConfigurationError
+from .rosnames import check_namespace, check_relative_name, resolve_topics
 
 __all__ = ["RosBridge"]
 
@@ -23,11 +24,16 @@ class RosBridge:
 
     Args:
         topics: ``{"Move->Gazebo": "/cmd_vel", "Camera->VisOdom:color": "/camera/color/image_raw"}``
-            (a channel with one label may leave the label out).
+            (a channel with one label may leave the label out). A name without a leading ``/``
+            (``"cmd_vel"``) is relative: it is resolved in the namespace, as ROS resolves a node's.
         external: roles that ROS 2 nodes play (they need :class:`~anodize.Dds`); anodize
             runs no code for them, and every message to or from them must be on a topic.
         distro: the ROS 2 distribution whose message definitions are used ("" for Jazzy).
         domain: the ROS domain when ``ROS_DOMAIN_ID`` is not set (None: 0, as for every node).
+        namespace: the system's ROS namespace (``"/robot1"``), in which relative topic names
+            (and relative group namespaces, ``System.group(namespace=...)``) are resolved.
+        remap: ``{"/cmd_vel": "/r1/cmd_vel"}``: topics renamed after the namespaces are applied
+            (each side resolved in ``namespace``), as ``ros2 run ... --remap from:=to``.
 
     Raises:
         ConfigurationError: a field of the wrong type or range, naming what was expected.
@@ -37,6 +43,8 @@ class RosBridge:
     external: frozenset[str] = frozenset()
     distro: str = ""
     domain: int | None = None
+    namespace: str = ""
+    remap: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         topics = self.topics
@@ -55,12 +63,44 @@ class RosBridge:
         if domain is not None and (isinstance(domain, bool) or not isinstance(domain, int)
                                    or not 0 <= domain <= 232):
             raise ConfigurationError(f"RosBridge domain: expected a DDS domain id 0..232 or None, got {domain!r}")
+        problem = check_namespace(self.namespace)
+        if problem is not None:
+            raise ConfigurationError(f"RosBridge namespace {self.namespace!r}: {problem}")
+        remap = self.remap
+        if not isinstance(remap, Mapping):
+            raise ConfigurationError(f'RosBridge remap: expected a mapping such as {{"/cmd_vel": "/r1/cmd_vel"}}, '
+                                     f"got {remap!r}")
+        for name in (*remap.keys(), *remap.values()):
+            problem = check_relative_name(name)
+            if problem is not None:
+                raise ConfigurationError(f"RosBridge remap {name!r}: {problem}")
+        for key, name in topics.items():
+            problem = check_relative_name(name)
+            if problem is not None:
+                raise ConfigurationError(f"ros topic {key!r} = {name!r}: {problem}")
         # A copy: the caller's dict changing later must not change the value.
+        object.__setattr__(self, "remap", dict(remap))
         object.__setattr__(self, "topics", dict(topics))
         object.__setattr__(self, "external", frozenset(external))
 
     def __hash__(self) -> int:
-        return hash((tuple(sorted(self.topics.items())), self.external, self.distro, self.domain))
+        return hash((tuple(sorted(self.topics.items())), self.external, self.distro, self.domain, self.namespace,
+                     tuple(sorted(self.remap.items()))))
+
+    def resolved(self, namespace_of: Mapping[str, str]) -> RosBridge:
+        """The bridge with every topic fully qualified: namespaces then remaps applied.
+
+        Args:
+            namespace_of: role -> its group's namespace ("" for the system's).
+
+        Raises:
+            ConfigurationError: a remap whose source is no topic of the system.
+        """
+        if not self.namespace and not self.remap and not any(namespace_of.values()) and all(
+                name.startswith("/") for name in self.topics.values()):
+            return self
+        topics = resolve_topics(self.topics, self.namespace, namespace_of, self.remap)
+        return replace(self, topics=topics, namespace="", remap={})
 
     def settings(self, machines: Mapping[str, StateMachine], channels: Iterable[tuple[str, str]]) -> RosSettings:
         """The bridge checked against a protocol, with its lanes worked out.

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 from sessiontypes import GlobalType, StateMachine
 from sessiontypes.graph import communication_graph
 
-from ..errors import AnodizeError, ConfigurationError
+from ..errors import AnodizeError, ConfigurationError, ParameterError
 from ..taps import ChannelTap, TapRun
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
 from .legacy import legacy_run, legacy_system, legacy_taps
@@ -29,6 +29,7 @@ from .params import ParamValue, check_params, check_value
 from .plan import RunPlan
 from .report import GroupStatus, RunReport
 from .rosbridge import RosBridge
+from .rosnames import check_namespace
 from .supervisor import Supervisor
 from .transports import Dds, Inproc, Processes, Transport
 
@@ -111,7 +112,7 @@ class System:
     def group(self, name: str, priority: int | None = None, memory: int | str | None = None,
               cpus: set[int] | frozenset[int] | None = None, on_failure: str = FailurePolicy.STOP,
               max_restarts: int = 3, host: str | None = None, priority_inheritance: bool = True,
-              nice: int | None = None) -> Group:
+              nice: int | None = None, namespace: str = "") -> Group:
         """Declare a group; add its roles with ``.role(name, function)``.
 
         Args:
@@ -131,6 +132,8 @@ class System:
                 -20..19: below every real-time group, yet a larger share of the CPU than
                 ordinary work at nice 0 (TinMan's simulated world runs so: it must not be starved
                 by the machine's other work, nor run real time, as its renderer fills a CPU).
+            namespace: the ROS namespace the relative topic names its roles publish resolve in:
+                relative (``"planning"``) under the system's (``RosBridge.namespace``), or absolute.
 
         Raises:
             ConfigurationError: (a ``ValueError``) a duplicate name, a priority outside 1..99, a nice
@@ -163,8 +166,11 @@ class System:
         if not isinstance(priority_inheritance, bool):
             raise ConfigurationError(f"group {name}: priority_inheritance must be True or False, "
                                      f"got {priority_inheritance!r}")
+        problem = check_namespace(namespace)
+        if problem is not None:
+            raise ConfigurationError(f"group {name}: namespace {namespace!r}: {problem}")
         group = Group(name, priority, parse_memory(memory), cpus or None, policy, max_restarts, host,
-                      priority_inheritance=priority_inheritance, nice=nice, _system=self)
+                      priority_inheritance=priority_inheritance, nice=nice, namespace=namespace, _system=self)
         self.groups[name] = group
         return group
 
@@ -228,14 +234,15 @@ class System:
             raise AnodizeError(f"global {gt.name}: roles {', '.join(missing)} are in no group")
         machines = {role: gt.project(role).fsm() for role in gt.roles}
         channels = tuple(communication_graph(gt).edges)
-        topics = self.ros.topic_names(machines, channels) if self.ros is not None else {}
+        ros = self.resolved_ros()
+        topics = ros.topic_names(machines, channels) if ros is not None else {}
         shape = TapRun(gt, machines, dict(self._placed), topics, transport.kind, self._functions())
         opened = tuple(tap.begin(shape) for tap in taps)
         if taps:
             on_status = _with_tap_status(on_status, taps)
         params = self.check_params()
         plan = RunPlan(gt, machines, channels, dict(self.groups), dict(self._placed), self.monitors,
-                       dict(self.capacities), self.ros, opened, params)
+                       dict(self.capacities), ros, opened, params)
         runner = transport.runner(plan)
         scope = runner.scope
         report = Supervisor(gt.name, scope.roles, scope.groups, scope.channels, runner, timeout, grace, on_status,
@@ -249,7 +256,7 @@ class System:
         declared float becomes a float).
 
         Raises:
-            ConfigurationError: a role given parameters is in no group, its function takes no
+            ParameterError: a role given parameters is in no group, its function takes no
                 such parameter, a value is not of the declared type, or a keyword-only
                 parameter without a default has no value.
         """
@@ -257,8 +264,8 @@ class System:
         checked: dict[str, dict[str, ParamValue]] = {}
         for role in self.params:
             if role not in functions:
-                raise ConfigurationError(f"parameters of role {role}: it is in no group (external roles are ROS 2 "
-                                         "nodes: give them their parameters there)")
+                raise ParameterError(role, "", "it is in no group, so it takes no parameters (an external role "
+                                               "is a ROS 2 node: give it its parameters there)")
         for role, function in functions.items():
             target = resolve_function(function) if isinstance(function, str) else function
             values = check_params(role, target, self.params.get(role, {}))
@@ -282,12 +289,23 @@ class System:
         Raises:
             ConfigurationError: a topic entry or an external role that cannot be, naming it.
         """
-        if self.ros is None or not (self.ros.topics or self.ros.external) or not isinstance(self.transport, Dds):
+        ros = self.resolved_ros()
+        if ros is None or not (ros.topics or ros.external) or not isinstance(self.transport, Dds):
             return None
         gt = self.global_type
         machines = machines if machines is not None else {role: gt.project(role).fsm() for role in gt.roles}
         channels = channels if channels is not None else tuple(communication_graph(gt).edges)
-        return self.ros.settings(machines, channels)
+        return ros.settings(machines, channels)
+
+    def resolved_ros(self) -> RosBridge | None:
+        """The bridge with every topic fully qualified (namespaces, then remaps), or None.
+
+        Raises:
+            ConfigurationError: a remap whose source is no topic of the system.
+        """
+        if self.ros is None:
+            return None
+        return self.ros.resolved({role: self.groups[group].namespace for role, group in self._placed.items()})
 
 
 def _with_tap_status(on_status: Callable[[dict[str, GroupStatus]], None] | None,
@@ -313,11 +331,11 @@ def _params(global_type: GlobalType,
     found: dict[str, dict[str, ParamValue]] = {}
     for role, values in given.items():
         if role not in global_type.roles:
-            raise ConfigurationError(f"parameters of role {role}: global {global_type.name} has no such role; "
-                                     f"expected one of {', '.join(global_type.roles)}")
+            raise ParameterError(role, "", f"global {global_type.name} has no such role, so it takes no parameters; "
+                                           f"expected one of {', '.join(global_type.roles)}")
         if not isinstance(values, Mapping):
-            raise ConfigurationError(f'parameters of role {role}: expected a mapping such as {{"speed": 0.3}}, '
-                                     f"got {values!r}")
+            raise ParameterError(role, "", f'expected a mapping of its parameters such as {{"speed": 0.3}}, '
+                                           f"got {values!r}")
         found[role] = {str(name): check_value(role, str(name), value) for name, value in values.items()}
     return found
 

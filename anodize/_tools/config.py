@@ -46,65 +46,36 @@ import os
 import re
 import sys
 import threading
-import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import sessiontypes
-from sessiontypes.limits import SYSTEM_FILE, read_limited
 
 from .._supervision.group import FailurePolicy, parse_memory
+from .._supervision.params import ParamValue, check_value
 from .._supervision.rosbridge import RosBridge
+from .._supervision.rosnames import check_namespace, check_relative_name
 from .._supervision.system import System
 from .._supervision.transports import KINDS, Dds, Transport
-from ..errors import AnodizeError, ConfigurationError
+from ..errors import AnodizeError, ConfigurationError, ParameterError
+from .config_error import COMMAND_LINE, ConfigError
+from .includes import SystemData, read_system_data
+from .overrides import parse_param, parse_remap
 
 __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
-           "add_pythonpath"]
+           "add_pythonpath", "with_overrides"]
 
 _TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id",
-             "ros", "channels")
+             "ros", "channels", "params", "include")
 _CHANNEL_KEYS = ("capacity",)
-_ROS_KEYS = ("topics", "external", "distro", "domain")
+_ROS_KEYS = ("topics", "external", "distro", "domain", "namespace", "remap")
 _OLD_DDS_KEYS = ("domain", "run_id")  # top-level keys of the earlier form, now fields of [transport]
 _RUN_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 _GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host",
-               "priority_inheritance", "nice")
+               "priority_inheritance", "nice", "namespace")
 _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
-_TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
-
-
-class ConfigError(ConfigurationError):
-    """Raised for a system file that cannot be read, parsed, or turned into a system.
-
-    Attributes:
-        path: the system file, as given.
-        key: the dotted key at fault (``groups.control.priority``), or None.
-        problem: what is wrong, e.g. ``expected an int 1..99, got 120``.
-        line: for TOML syntax errors, the 1-based line (else None).
-        column: for TOML syntax errors, the 1-based column (else None).
-        source_line: for TOML syntax errors, the text of that line.
-    """
-
-    def __init__(self, path: str, key: str | None, problem: str, line: int | None = None,
-                 column: int | None = None, source_line: str = "") -> None:
-        self.path = path
-        self.key = key
-        self.problem = problem
-        self.line = line
-        self.column = column
-        self.source_line = source_line
-        super().__init__(str(self))
-
-    def __str__(self) -> str:
-        if self.line is not None:
-            caret = " " * ((self.column or 1) - 1) + "^"
-            context = f"\n    {self.source_line}\n    {caret}" if self.source_line.strip() else ""
-            return f"{self.path}:{self.line}:{self.column}: {self.problem}{context}"
-        if self.key is None:
-            return f"{self.path}: {self.problem}"
-        return f"{self.path}: {self.key}: {self.problem}"
 
 
 @dataclass(frozen=True)
@@ -124,6 +95,7 @@ class GroupConfig:
         priority_inheritance: whether a higher-priority role waiting on this group's roles
             raises their priority while it waits (default True).
         nice: with no priority, the group's nice value under ordinary scheduling, or None.
+        namespace: the ROS namespace of the group's topics ("": the system's).
     """
 
     name: str
@@ -137,6 +109,7 @@ class GroupConfig:
     host: str | None = None
     priority_inheritance: bool = True
     nice: int | None = None
+    namespace: str = ""
 
 
 @dataclass(frozen=True)
@@ -154,6 +127,8 @@ class SystemConfig:
         groups: group name -> its configuration, in file order.
         ros: ``[ros]``: the ROS 2 bridge (topics, external roles, distro, domain), or None.
         capacities: ``[channels."A->B"] capacity``: channels that hold at most so many messages.
+        params: ``[params.Role]``: role -> its parameters (``System(params=...)``).
+        given_on_command_line: the ``(role, parameter)`` pairs ``-p`` gave (for messages).
     """
 
     path: Path
@@ -166,6 +141,8 @@ class SystemConfig:
     groups: dict[str, GroupConfig]
     ros: RosBridge | None = None
     capacities: dict[str, int] = field(default_factory=dict)
+    params: dict[str, dict[str, ParamValue]] = field(default_factory=dict)
+    given_on_command_line: frozenset[tuple[str, str]] = frozenset()
 
     @property
     def external(self) -> frozenset[str]:
@@ -193,6 +170,48 @@ class SystemConfig:
         return replace(self, transport=cls(**{f.name: kept[f.name] for f in fields(cls) if f.name in kept}))
 
 
+def with_overrides(config: SystemConfig, params: Sequence[str] = (), remaps: Sequence[str] = (),
+                   namespace: str | None = None) -> SystemConfig:
+    """``config`` with what the command line gives laid over it (``anodize run FILE -p ... -r ...``).
+
+    Args:
+        params: ``"Role.name=value"`` each (``-p``), the value in TOML; later ones win.
+        remaps: ``"from:=to"`` each (``-r``), added to ``[ros.remap]`` (the same source: the command line's).
+        namespace: the system's ROS namespace (``--namespace``), instead of ``[ros] namespace``.
+
+    Raises:
+        ConfigError: at ``command line`` (:attr:`ConfigError.on_command_line`): a malformed
+            override, a role in no group, a namespace or remap that is not a ROS name.
+    """
+    values = {role: dict(given) for role, given in config.params.items()}
+    given_here: set[tuple[str, str]] = set(config.given_on_command_line)
+    for text in params:
+        role, name, value = parse_param(text)
+        if config.group_of(role) is None:
+            placed = [r for group in config.groups.values() for r in group.roles]
+            raise ConfigError(COMMAND_LINE, f"-p {role}.{name}", f"no role {role} runs in a group of {config.path}; "
+                                                                 f"expected one of {', '.join(placed)}")
+        try:
+            values.setdefault(role, {})[name] = check_value(role, name, value)
+        except ParameterError as error:
+            raise ConfigError(COMMAND_LINE, f"-p {role}.{name}", error.problem) from None
+        given_here.add((role, name))
+    ros = config.ros
+    if remaps or namespace is not None:
+        ros = ros or RosBridge()
+        remap = dict(ros.remap)
+        for text in remaps:
+            source, target = parse_remap(text)
+            problem = check_relative_name(source) or check_relative_name(target)
+            if problem is not None:
+                raise ConfigError(COMMAND_LINE, f"-r {text}", problem)
+            remap[source] = target
+        if namespace is not None and check_namespace(namespace) is not None:
+            raise ConfigError(COMMAND_LINE, f"--namespace {namespace}", f"{check_namespace(namespace)}")
+        ros = replace(ros, remap=remap, namespace=ros.namespace if namespace is None else namespace)
+    return replace(config, params=values, given_on_command_line=frozenset(given_here), ros=ros)
+
+
 def load_config(path: str | Path) -> SystemConfig:
     """Read and check a system file; nothing is imported or loaded yet.
 
@@ -203,43 +222,20 @@ def load_config(path: str | Path) -> SystemConfig:
     """
     path = Path(path)
     shown = str(path)
-    try:
-        text = read_limited(path, SYSTEM_FILE).decode("utf-8")
-    except UnicodeDecodeError:
-        raise ConfigError(shown, None, "expected UTF-8 text") from None
-    except OSError as error:
-        raise ConfigError(shown, None, f"cannot read: {error.strerror or error}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise _syntax_error(shown, text, str(error)) from None
-    except RecursionError:  # tomllib recurses once per level of nested arrays and tables
-        raise ConfigError(shown, None, "arrays or tables nested too deeply; expected at most a few levels") from None
-    return _Reader(shown, path).system(data)
-
-
-def _syntax_error(shown: str, text: str, message: str) -> ConfigError:
-    match = _TOML_POSITION.match(message)
-    problem = match.group(1) if match else message
-    problem = problem[:1].lower() + problem[1:]
-    lines = text.split("\n")
-    if match and match.group(2):
-        line, column = int(match.group(2)), int(match.group(3))
-    else:  # "at end of document"
-        line, column = len(lines), len(lines[-1]) + 1
-    source = lines[line - 1] if 0 < line <= len(lines) else ""
-    return ConfigError(shown, None, problem, line, column, source)
+    read = read_system_data(path, shown)
+    return _Reader(shown, path, read).system(read.data)
 
 
 class _Reader:
     """Checks the parsed TOML of one file, key by key."""
 
-    def __init__(self, shown: str, path: Path) -> None:
+    def __init__(self, shown: str, path: Path, read: SystemData) -> None:
         self.shown = shown
         self.directory = path.parent
+        self.read = read
 
     def error(self, key: str | None, problem: str) -> ConfigError:
-        return ConfigError(self.shown, key, problem)
+        return ConfigError(self.read.origin(key, self.shown), key, problem)
 
     def system(self, data: dict[str, Any]) -> SystemConfig:
         self.known_keys(data, _TOP_KEYS, None)
@@ -257,7 +253,23 @@ class _Reader:
             timeout=None if timeout is None else float(timeout), monitors=monitors,
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
             groups=self.groups(data.get("groups")), ros=self.ros(data.get("ros")),
-            capacities=self.capacities(data.get("channels", {})))
+            capacities=self.capacities(data.get("channels", {})), params=self.params(data.get("params", {})))
+
+    def params(self, table: Any) -> dict[str, dict[str, ParamValue]]:
+        """``[params.Role]`` tables: the values' types here; the roles and their functions when built."""
+        if not isinstance(table, dict):
+            raise self.error("params", f"expected tables such as [params.Planner], got {_show(table)}")
+        found: dict[str, dict[str, ParamValue]] = {}
+        for role, values in table.items():
+            if not isinstance(values, dict):
+                raise self.error(f"params.{role}", f"expected a table such as {{ speed = 0.3 }}, got {_show(values)}")
+            found[role] = {}
+            for name, value in values.items():
+                try:
+                    found[role][name] = check_value(role, name, value)
+                except ParameterError as error:
+                    raise self.error(f"params.{role}.{name}", error.problem) from None
+        return found
 
     def transport(self, data: dict[str, Any]) -> Transport:
         """``[transport]`` (kind and fields), or the earlier form: ``transport = "kind"`` with
@@ -344,7 +356,24 @@ class _Reader:
         domain = table.get("domain")
         if domain is not None and (not _is_int(domain) or not 0 <= domain <= 232):
             raise self.error("ros.domain", f"expected a DDS domain id 0..232, got {_show(domain)}")
-        return RosBridge(topics=dict(topics), external=frozenset(external), distro=distro, domain=domain)
+        namespace = table.get("namespace", "")
+        problem = check_namespace(namespace)
+        if problem is not None:
+            raise self.error("ros.namespace", f"{problem}, got {_show(namespace)}")
+        remap = table.get("remap", {})
+        if not isinstance(remap, dict):
+            raise self.error("ros.remap", 'expected a table such as { "/cmd_vel" = "/r1/cmd_vel" }, '
+                                          f"got {_show(remap)}")
+        for source, target in remap.items():
+            problem = check_relative_name(source) or check_relative_name(target)
+            if problem is not None:
+                raise self.error(f"ros.remap.{source}", f"{problem}, got {_show(source)} = {_show(target)}")
+        for key, name in topics.items():
+            problem = check_relative_name(name)
+            if problem is not None:
+                raise self.error(f"ros.topics.{key}", f"{problem}, got {_show(name)}")
+        return RosBridge(topics=dict(topics), external=frozenset(external), distro=distro, domain=domain,
+                         namespace=namespace, remap=dict(remap))
 
     def known_keys(self, table: dict[str, Any], allowed: tuple[str, ...], prefix: str | None) -> None:
         for key in table:
@@ -423,9 +452,13 @@ class _Reader:
         if nice is not None and priority is not None:
             raise self.error(f"{prefix}.nice", f"priority {priority} (SCHED_FIFO) and nice {nice} (ordinary "
                                                "scheduling) exclude each other: give one")
+        namespace = table.get("namespace", "")
+        problem = check_namespace(namespace)
+        if problem is not None:
+            raise self.error(f"{prefix}.namespace", f"{problem}, got {_show(namespace)}")
         return GroupConfig(name, priority, memory_bytes, self.cpus(prefix, table.get("cpus")),
                            on_failure, max_restarts, self.roles(prefix, table),
-                           f"{self.shown}: {prefix}", host, inherit, nice)
+                           f"{self.read.origin(prefix, self.shown)}: {prefix}", host, inherit, nice, namespace)
 
     def cpus(self, prefix: str, value: Any) -> tuple[int, ...] | None:
         if value is None:
@@ -512,8 +545,9 @@ def build_system(config: SystemConfig) -> System:
     add_pythonpath(config)
     try:
         system = System(global_type, transport=config.transport, monitors=config.monitors, ros=config.ros,
-                        capacities=config.capacities)
-        system.ros_settings()  # the topics against the protocol, now rather than when the run starts
+                        capacities=config.capacities, params=config.params)
+    except ParameterError as error:
+        raise _parameter_error(config, error) from None
     except ConfigurationError as error:
         key = "channels" if str(error).startswith("capacity of") else "ros"
         raise ConfigError(shown, key, str(error)) from None
@@ -523,7 +557,7 @@ def build_system(config: SystemConfig) -> System:
                                     cpus=set(group.cpus) if group.cpus else None,
                                     on_failure=group.on_failure, max_restarts=group.max_restarts,
                                     host=group.host, priority_inheritance=group.priority_inheritance,
-                                    nice=group.nice)
+                                    nice=group.nice, namespace=group.namespace)
             for role, reference in group.roles.items():
                 declared.role(role, reference)
         except (ValueError, AnodizeError) as error:
@@ -533,4 +567,20 @@ def build_system(config: SystemConfig) -> System:
         raise ConfigError(shown, "groups", f"{'role' if len(missing) == 1 else 'roles'} "
                                            f"{', '.join(missing)} of global {global_type.name} "
                                            f"{'is' if len(missing) == 1 else 'are'} in no group")
+    try:
+        system.check_params()
+    except ParameterError as error:
+        raise _parameter_error(config, error) from None
+    try:
+        system.ros_settings()  # the topics against the protocol, now rather than when the run starts
+    except ConfigurationError as error:
+        raise ConfigError(shown, "ros", str(error)) from None
     return system
+
+
+def _parameter_error(config: SystemConfig, error: ParameterError) -> ConfigError:
+    """A refused parameter, located where it was given: ``-p Role.name`` or ``[params.Role] name``."""
+    if (error.role, error.parameter) in config.given_on_command_line:
+        return ConfigError(COMMAND_LINE, f"-p {error.role}.{error.parameter}", error.problem)
+    key = f"params.{error.role}.{error.parameter}" if error.parameter else f"params.{error.role}"
+    return ConfigError(str(config.path), key, error.problem)

@@ -11,7 +11,7 @@ from param_roles import consumer, needs_rate, producer
 import sessiontypes
 from anodize import Inproc, Processes, System
 from anodize._supervision.params import check_params, check_value
-from anodize.errors import ConfigurationError
+from anodize.errors import ConfigurationError, ParameterError
 
 STREAM = sessiontypes.loads("global Stream(P, C) = mu t. P -> C : { data(int). t, stop. end }\n").globals["Stream"]
 
@@ -42,7 +42,8 @@ def test_a_role_without_parameters_runs_on_its_defaults(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("params", "message"), [
-    ({"P": {"speed": 1.0}}, "role P: producer takes no parameter speed; its parameters: count, flags, gain, out, tag"),
+    ({"P": {"speed": 1.0}}, "role P: parameter speed: producer takes no such parameter; its parameters: count, flags, gain, "
+                            "out, tag"),
     ({"P": {"count": 2.5}}, "role P: parameter count: expected int, got float (2.5)"),
     ({"P": {"count": True}}, "role P: parameter count: expected int, got bool (true)"),
     ({"P": {"tag": 3}}, "role P: parameter tag: expected str, got int (3)"),
@@ -58,15 +59,16 @@ def test_a_parameter_the_function_does_not_take_as_given_is_refused_before_the_r
 
 
 def test_a_keyword_parameter_without_default_needs_a_value() -> None:
-    with pytest.raises(ConfigurationError, match=r"^role P: parameter rate of needs_rate has no default and no "
-                                                 r"value; give one \(\[params\.P\] rate = \.\.\.\)$"):
+    with pytest.raises(ParameterError, match=r"^role P: parameter rate: needs_rate declares no default and no value "
+                                             r"is given \(\[params\.P\] rate = \.\.\.\)$") as raised:
         _system(Inproc(), {}, needs_rate).check_params()
+    assert (raised.value.role, raised.value.parameter) == ("P", "rate")
     assert _system(Inproc(), {"P": {"rate": 2}}, needs_rate).check_params() == {"P": {"rate": 2.0}}
 
 
 def test_the_system_refuses_an_unknown_role_and_a_value_no_ros_parameter_has() -> None:
-    with pytest.raises(ConfigurationError, match=r"^parameters of role Q: global Stream has no such role; "
-                                                 r"expected one of P, C$"):
+    with pytest.raises(ConfigurationError, match=r"^role Q: global Stream has no such role, so it "
+                                                 r"takes no parameters; expected one of P, C$"):
         System(STREAM, params={"Q": {"x": 1}})
     with pytest.raises(ConfigurationError, match=r"^role P: parameter x: expected an array of one type \(bool, int, "
                                                  r"float or str, as ROS parameters\), got list\[int \| str\]$"):
