@@ -25,7 +25,9 @@ def check_namespace(namespace: object) -> str | None:
     if namespace in ("", "/"):
         return None
     problem = check_topic_name(namespace if namespace.startswith("/") else "/" + namespace)
-    return None if problem is None else problem.replace("an absolute ROS topic name", "a ROS namespace").replace('"/cmd_vel"', '"/robot1"')
+    if problem is None:
+        return None
+    return problem.replace("an absolute ROS topic name", "a ROS namespace").replace('"/cmd_vel"', '"/robot1"')
 
 
 def check_relative_name(name: object) -> str | None:

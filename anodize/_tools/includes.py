@@ -64,7 +64,8 @@ def _read(path: Path, shown: str, chain: tuple[Path, ...]) -> SystemData:
     data = _parse(path, shown)
     given = data.pop("include", [])
     if not isinstance(given, list) or not all(isinstance(p, str) and p for p in given):
-        raise ConfigError(shown, "include", f'expected an array of system files such as ["base.toml"], got {json.dumps(given, default=str)}')
+        raise ConfigError(shown, "include", 'expected an array of system files such as ["base.toml"], '
+                                            f"got {json.dumps(given, default=str)}")
     here = Path(os.path.realpath(path))
     merged = SystemData({})
     for entry in given:

@@ -42,8 +42,8 @@ def test_a_role_without_parameters_runs_on_its_defaults(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("params", "message"), [
-    ({"P": {"speed": 1.0}}, "role P: parameter speed: producer takes no such parameter; its parameters: count, flags, gain, "
-                            "out, tag"),
+    ({"P": {"speed": 1.0}}, ("role P: parameter speed: producer takes no such parameter; its parameters: count, "
+                             "flags, gain, out, tag")),
     ({"P": {"count": 2.5}}, "role P: parameter count: expected int, got float (2.5)"),
     ({"P": {"count": True}}, "role P: parameter count: expected int, got bool (true)"),
     ({"P": {"tag": 3}}, "role P: parameter tag: expected str, got int (3)"),

@@ -129,20 +129,20 @@ BAD = {
         "include: cannot read base.toml: no such file (paths are relative to the including file's folder)"),
     "ros_namespace_not_a_name": (
         MINIMAL + "[ros]\nnamespace = \"/r-1\"\n" + GROUP,
-        "ros.namespace: expected a ROS namespace such as \"/robot1\" (tokens of letters, digits and '_'), "
-        "got \"/r-1\""),
+        ("ros.namespace: expected a ROS namespace such as \"/robot1\" (tokens of letters, digits and '_'), "
+        "got \"/r-1\"")),
     "ros_remap_not_names": (
         MINIMAL + "[ros.remap]\n\"/cmd_vel\" = \"r 1\"\n" + GROUP,
-        "ros.remap./cmd_vel: expected a ROS topic name such as \"/cmd_vel\" or, relative to the namespace, "
-        "\"cmd_vel\" (tokens of letters, digits and '_'), got \"/cmd_vel\" = \"r 1\""),
+        ("ros.remap./cmd_vel: expected a ROS topic name such as \"/cmd_vel\" or, relative to the namespace, "
+        "\"cmd_vel\" (tokens of letters, digits and '_'), got \"/cmd_vel\" = \"r 1\"")),
     "ros_topic_not_a_name": (
         MINIMAL + "[ros.topics]\n\"A->B\" = \"9lives\"\n" + GROUP,
-        "ros.topics.A->B: expected a ROS topic name such as \"/cmd_vel\" or, relative to the namespace, "
-        "\"cmd_vel\" (tokens of letters, digits and '_'), got \"9lives\""),
+        ("ros.topics.A->B: expected a ROS topic name such as \"/cmd_vel\" or, relative to the namespace, "
+        "\"cmd_vel\" (tokens of letters, digits and '_'), got \"9lives\"")),
     "group_namespace_not_a_name": (
         MINIMAL + GROUP + "namespace = \"a//b\"\n",
-        "groups.g.namespace: expected a ROS namespace such as \"/robot1\" (tokens of letters, digits and "
-        "'_'), got \"a//b\""),
+        ("groups.g.namespace: expected a ROS namespace such as \"/robot1\" (tokens of letters, digits and "
+        "'_'), got \"a//b\"")),
     "channel_capacity_zero": (
         MINIMAL + '[channels."A->B"]\ncapacity = 0\n' + GROUP,
         "channels.A->B.capacity: expected a whole number of messages >= 1, got 0"),
