@@ -73,7 +73,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_ERRORS
     except AnodizeError as error:  # e.g. a system file's ConfigError: 'path: key: ...'
         print(f"error: {error}", file=sys.stderr)
-        return EXIT_ERRORS
+        return EXIT_USAGE if getattr(error, "on_command_line", False) else EXIT_ERRORS  # -p, -r: a usage error
     except KeyboardInterrupt as interrupt:  # SIGINT or SIGTERM while reading or checking: one line
         terminated = isinstance(interrupt, Terminated)
         print(f"anodize {args.command}: {'terminated (SIGTERM)' if terminated else 'interrupted'}",
@@ -165,6 +165,7 @@ def _parser() -> argparse.ArgumentParser:
     run_system.add_argument("--record", metavar="PATH",
                             help="record every message between groups: PATH.mcap is an MCAP file, any other PATH "
                                  "a rosbag2 folder (see 'anodize verify' and 'anodize replay')")
+    _add_composition_arguments(run_system)
     run_system.add_argument("--record-inside", action="store_true",
                             help="with --record: record the channels inside each group too, so that every role "
                                  "can be replayed alone ('anodize replay')")
@@ -429,7 +430,7 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f"--timeout {args.timeout}: expected a number of seconds > 0")
     if args.wait is not None and not args.wait > 0:
         raise UsageError(f"--wait {args.wait}: expected a number of seconds > 0")
-    config = load_config(_system_file(args.file, named=True))
+    config = load_config(_system_file(args.file, named=True)).with_overrides(args.param, args.remap, args.namespace)
     if args.transport is not None:
         config = config.on_transport(args.transport)
     if args.host is not None and not isinstance(config.transport, Dds):
@@ -481,6 +482,12 @@ def _add_recording_arguments(parser: argparse.ArgumentParser) -> None:
                              "[ros.topics], or the same entries at its top level), for recordings made by "
                              "other tools")
     parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
+
+
+def _add_composition_arguments(parser: argparse.ArgumentParser) -> None:
+    from .composition_args import add_composition_arguments
+
+    add_composition_arguments(parser)
 
 
 def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
@@ -579,6 +586,7 @@ def _run_named(name: str, rest: list[str]) -> int:
     parser = argparse.ArgumentParser(prog=f"anodize run {name}", description=named.summary)
     parser.add_argument("--quiet", action="store_true", help="no live progress line")
     _add_foxglove_argument(parser)
+    _add_composition_arguments(parser)  # prepare() applies them: SystemConfig.with_overrides
     named.add_arguments(parser)
     try:
         args = parser.parse_args(rest)

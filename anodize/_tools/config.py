@@ -65,7 +65,7 @@ from .includes import SystemData, read_system_data
 from .overrides import parse_param, parse_remap
 
 __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
-           "add_pythonpath", "with_overrides"]
+           "add_pythonpath"]
 
 _TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id",
              "ros", "channels", "params", "include")
@@ -129,6 +129,7 @@ class SystemConfig:
         capacities: ``[channels."A->B"] capacity``: channels that hold at most so many messages.
         params: ``[params.Role]``: role -> its parameters (``System(params=...)``).
         given_on_command_line: the ``(role, parameter)`` pairs ``-p`` gave (for messages).
+        remapped_on_command_line: the sources of the remaps ``-r`` gave (for messages).
     """
 
     path: Path
@@ -143,6 +144,7 @@ class SystemConfig:
     capacities: dict[str, int] = field(default_factory=dict)
     params: dict[str, dict[str, ParamValue]] = field(default_factory=dict)
     given_on_command_line: frozenset[tuple[str, str]] = frozenset()
+    remapped_on_command_line: frozenset[str] = frozenset()
 
     @property
     def external(self) -> frozenset[str]:
@@ -152,6 +154,48 @@ class SystemConfig:
     def group_of(self, role: str) -> str | None:
         """The group that runs ``role``, or None."""
         return next((g.name for g in self.groups.values() if role in g.roles), None)
+
+    def with_overrides(self, params: Sequence[str] = (), remaps: Sequence[str] = (),
+                           namespace: str | None = None) -> SystemConfig:
+        """The system with what the command line gives laid over it (``anodize run FILE -p ... -r ...``).
+
+        Args:
+            params: ``"Role.name=value"`` each (``-p``), the value in TOML; later ones win.
+            remaps: ``"from:=to"`` each (``-r``), added to ``[ros.remap]`` (the same source: the command line's).
+            namespace: the system's ROS namespace (``--namespace``), instead of ``[ros] namespace``.
+
+        Raises:
+            ConfigError: at ``command line`` (:attr:`ConfigError.on_command_line`): a malformed
+                override, a role in no group, a namespace or remap that is not a ROS name.
+        """
+        values = {role: dict(given) for role, given in self.params.items()}
+        given_here: set[tuple[str, str]] = set(self.given_on_command_line)
+        for text in params:
+            role, name, value = parse_param(text)
+            if self.group_of(role) is None:
+                placed = [r for group in self.groups.values() for r in group.roles]
+                raise ConfigError(COMMAND_LINE, f"-p {role}.{name}", f"no role {role} runs in a group of {self.path}; "
+                                                                     f"expected one of {', '.join(placed)}")
+            try:
+                values.setdefault(role, {})[name] = check_value(role, name, value)
+            except ParameterError as error:
+                raise ConfigError(COMMAND_LINE, f"-p {role}.{name}", error.problem) from None
+            given_here.add((role, name))
+        ros = self.ros
+        if remaps or namespace is not None:
+            ros = ros or RosBridge()
+            remap = dict(ros.remap)
+            for text in remaps:
+                source, target = parse_remap(text)
+                problem = check_relative_name(source) or check_relative_name(target)
+                if problem is not None:
+                    raise ConfigError(COMMAND_LINE, f"-r {text}", problem)
+                remap[source] = target
+            if namespace is not None and check_namespace(namespace) is not None:
+                raise ConfigError(COMMAND_LINE, f"--namespace {namespace}", f"{check_namespace(namespace)}")
+            ros = replace(ros, remap=remap, namespace=ros.namespace if namespace is None else namespace)
+        return replace(self, params=values, given_on_command_line=frozenset(given_here), ros=ros,
+                       remapped_on_command_line=self.remapped_on_command_line | {parse_remap(r)[0] for r in remaps})
 
     def on_transport(self, kind: str) -> SystemConfig:
         """The same system on the transport ``kind`` (``anodize run --transport``): the file's
@@ -168,48 +212,6 @@ class SystemConfig:
         kept = {f.name: getattr(self.transport, f.name) for f in fields(self.transport)}
         cls = KINDS[kind]
         return replace(self, transport=cls(**{f.name: kept[f.name] for f in fields(cls) if f.name in kept}))
-
-
-def with_overrides(config: SystemConfig, params: Sequence[str] = (), remaps: Sequence[str] = (),
-                   namespace: str | None = None) -> SystemConfig:
-    """``config`` with what the command line gives laid over it (``anodize run FILE -p ... -r ...``).
-
-    Args:
-        params: ``"Role.name=value"`` each (``-p``), the value in TOML; later ones win.
-        remaps: ``"from:=to"`` each (``-r``), added to ``[ros.remap]`` (the same source: the command line's).
-        namespace: the system's ROS namespace (``--namespace``), instead of ``[ros] namespace``.
-
-    Raises:
-        ConfigError: at ``command line`` (:attr:`ConfigError.on_command_line`): a malformed
-            override, a role in no group, a namespace or remap that is not a ROS name.
-    """
-    values = {role: dict(given) for role, given in config.params.items()}
-    given_here: set[tuple[str, str]] = set(config.given_on_command_line)
-    for text in params:
-        role, name, value = parse_param(text)
-        if config.group_of(role) is None:
-            placed = [r for group in config.groups.values() for r in group.roles]
-            raise ConfigError(COMMAND_LINE, f"-p {role}.{name}", f"no role {role} runs in a group of {config.path}; "
-                                                                 f"expected one of {', '.join(placed)}")
-        try:
-            values.setdefault(role, {})[name] = check_value(role, name, value)
-        except ParameterError as error:
-            raise ConfigError(COMMAND_LINE, f"-p {role}.{name}", error.problem) from None
-        given_here.add((role, name))
-    ros = config.ros
-    if remaps or namespace is not None:
-        ros = ros or RosBridge()
-        remap = dict(ros.remap)
-        for text in remaps:
-            source, target = parse_remap(text)
-            problem = check_relative_name(source) or check_relative_name(target)
-            if problem is not None:
-                raise ConfigError(COMMAND_LINE, f"-r {text}", problem)
-            remap[source] = target
-        if namespace is not None and check_namespace(namespace) is not None:
-            raise ConfigError(COMMAND_LINE, f"--namespace {namespace}", f"{check_namespace(namespace)}")
-        ros = replace(ros, remap=remap, namespace=ros.namespace if namespace is None else namespace)
-    return replace(config, params=values, given_on_command_line=frozenset(given_here), ros=ros)
 
 
 def load_config(path: str | Path) -> SystemConfig:
@@ -574,6 +576,9 @@ def build_system(config: SystemConfig) -> System:
     try:
         system.ros_settings()  # the topics against the protocol, now rather than when the run starts
     except ConfigurationError as error:
+        source = str(error).partition(":")[0].removeprefix("remap ")
+        if source in config.remapped_on_command_line:
+            raise ConfigError(COMMAND_LINE, f"-r {source}", str(error).partition(": ")[2]) from None
         raise ConfigError(shown, "ros", str(error)) from None
     return system
 
