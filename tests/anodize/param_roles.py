@@ -31,3 +31,12 @@ def consumer(ep: Endpoint, *, out: str = "") -> None:
 def needs_rate(ep: Endpoint, *, rate: float) -> None:
     """A role whose parameter has no default."""
     ep.send("C", "stop")
+
+
+def ros_producer(ep: Endpoint, *, count: int = 3, out: str = "") -> None:
+    """As :func:`producer`, with ROS messages (``std_msgs/msg/Int32``), for channels on ROS topics."""
+    from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Int32 as Int32
+
+    for i in range(count):
+        ep.send("C", "data", Int32(data=i))
+    ep.send("C", "stop", Int32(data=count))
