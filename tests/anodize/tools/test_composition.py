@@ -75,13 +75,13 @@ def test_p_overrides_the_file_and_adds_parameters_as_toml_values(
 
 @pytest.mark.parametrize(("override", "message"), [
     ("Q.count=1", "error: command line: -p Q.count: no role Q runs in a group of {system}; expected one of P, C"),
-    ("P.speed=1", "error: command line: -p P.speed: producer takes no such parameter; its parameters: count, "
-                  "flags, gain, out, tag"),
+    ("P.speed=1", ("error: command line: -p P.speed: producer takes no such parameter; its parameters: count, "
+                  "flags, gain, out, tag")),
     ("P.count=0.5", "error: command line: -p P.count: expected int, got float (0.5)"),
-    ("P.tag=front", 'error: command line: -p P.tag: expected a TOML value such as 0.3, true, "text" or [1, 2], '
-                    "got front (a string is quoted: -p 'P.tag=\"front\"')"),
-    ("P.xs=[1, \"a\"]", "error: command line: -p P.xs: expected an array of one type (bool, int, float or str, "
-                        "as ROS parameters), got list[int | str]"),
+    ("P.tag=front", ('error: command line: -p P.tag: expected a TOML value such as 0.3, true, "text" or [1, 2], '
+                    "got front (a string is quoted: -p 'P.tag=\"front\"')")),
+    ("P.xs=[1, \"a\"]", ("error: command line: -p P.xs: expected an array of one type (bool, int, float or str, "
+                        "as ROS parameters), got list[int | str]")),
     ("count=1", "error: command line: -p count=1: expected Role.name=value, such as Planner.speed=0.3"),
 ])
 def test_a_bad_override_is_a_usage_error_naming_it(capsys: pytest.CaptureFixture[str], system: Path,
@@ -166,8 +166,8 @@ def test_namespace_and_remaps_name_the_recorded_topics(capsys: pytest.CaptureFix
         "[groups.a]", '[ros.topics]\n"P->C:data" = "data"\n"P->C:stop" = "stop"\n\n[groups.a]'), encoding="utf-8")
     system.write_text(system.read_text().replace("param_roles:producer", "param_roles:ros_producer"), encoding="utf-8")
     recording = tmp_path / "run.mcap"
-    status, _, err = run(capsys, "run", str(system), "--quiet", "-p", "P.count=1", "--namespace", "/r1", "-r", "stop:=/halt",
-                         "--record", str(recording))
+    status, _, err = run(capsys, "run", str(system), "--quiet", "-p", "P.count=1", "--namespace", "/r1",
+                         "-r", "stop:=/halt", "--record", str(recording))
     assert status == 0, err
     topics = {topic.topic for topic in open_recording(recording).topics}
     assert {"/r1/data", "/halt"} <= topics, topics
@@ -176,8 +176,8 @@ def test_namespace_and_remaps_name_the_recorded_topics(capsys: pytest.CaptureFix
 def test_a_bad_namespace_or_remap_on_the_command_line_is_a_usage_error(
         capsys: pytest.CaptureFixture[str], system: Path) -> None:
     assert run(capsys, "run", str(system), "--namespace", "r 1") == (
-        2, "", "error: command line: --namespace r 1: expected a ROS namespace such as \"/robot1\" (tokens of "
-               "letters, digits and '_')\n")
+        2, "", ("error: command line: --namespace r 1: expected a ROS namespace such as \"/robot1\" (tokens of "
+               "letters, digits and '_')\n"))
     assert run(capsys, "run", str(system), "-r", "/cmd_vel") == (
         2, "", "error: command line: -r /cmd_vel: expected from:=to, such as /cmd_vel:=/r1/cmd_vel\n")
     assert run(capsys, "run", str(system), "-r", "/cmd_vel:=/x") == (
