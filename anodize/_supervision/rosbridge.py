@@ -88,7 +88,8 @@ class RosBridge:
                      tuple(sorted(self.remap.items()))))
 
     def resolved(self, namespace_of: Mapping[str, str]) -> RosBridge:
-        """The bridge with every topic fully qualified: namespaces then remaps applied.
+        """The bridge with every topic fully qualified: namespaces then remaps applied (resolving
+        it again changes nothing: its names are absolute, its remaps applied).
 
         Args:
             namespace_of: role -> its group's namespace ("" for the system's).
@@ -100,7 +101,7 @@ class RosBridge:
                 name.startswith("/") for name in self.topics.values()):
             return self
         topics = resolve_topics(self.topics, self.namespace, namespace_of, self.remap)
-        return replace(self, topics=topics, namespace="", remap={})
+        return replace(self, topics=topics, remap={})  # the namespace stays: it names the run (Dds run_id)
 
     def settings(self, machines: Mapping[str, StateMachine], channels: Iterable[tuple[str, str]]) -> RosSettings:
         """The bridge checked against a protocol, with its lanes worked out.
