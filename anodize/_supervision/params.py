@@ -15,6 +15,7 @@ with the role, the parameter, what was expected and what was given.
 from __future__ import annotations
 
 import inspect
+import json
 import types
 import typing
 from collections.abc import Callable, Mapping
@@ -148,5 +149,5 @@ def _declared_name(annotation: Any) -> str:
 
 
 def _literal(value: ParamValue) -> str:
-    text = repr(value).replace("True", "true").replace("False", "false")
+    text = json.dumps(value)  # as TOML writes it: true, "text", [1, 2]
     return text if len(text) <= 40 else text[:37] + "..."

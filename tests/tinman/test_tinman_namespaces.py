@@ -89,9 +89,9 @@ def _load(error: dict[str, str]) -> bool:
 
 
 @pytest.mark.parametrize(("override", "message"), [
-    ("Move.max_speed=\"fast\"", 'error: command line: -p Move.max_speed: expected float, got str (\'fast\')'),
-    ("Move.top_speed=0.3", "error: command line: -p Move.top_speed: move takes no such parameter; its parameters: "
-                           "max_speed"),
+    ("Move.max_speed=\"fast\"", 'error: command line: -p Move.max_speed: expected float, got str ("fast")'),
+    ("Move.top_speed=0.3", ("error: command line: -p Move.top_speed: move takes no such parameter; its parameters: "
+                           "max_speed")),
     ("Mover.max_speed=0.3", "error: command line: -p Mover.max_speed: no role Mover runs in a group of "),
 ])
 def test_a_bad_parameter_of_tinman_is_a_usage_error(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,

@@ -94,7 +94,7 @@ def test_a_wrong_parameter_in_the_file_is_located_at_its_key(capsys: pytest.Capt
                                                              system: Path) -> None:
     system.write_text(system.read_text().replace("count = 2", 'count = "2"'), encoding="utf-8")
     assert run(capsys, "run", str(system), "--quiet") == (
-        1, "", f'error: {system}: params.P.count: expected int, got str (\'2\')\n')
+        1, "", f'error: {system}: params.P.count: expected int, got str ("2")\n')
 
 
 # ---- include ----------------------------------------------------------------------------------
