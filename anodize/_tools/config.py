@@ -4,6 +4,7 @@ A system file is TOML. Paths in it are relative to the file itself. It maps one 
 one onto the values a Python program builds (``System(g, transport=Dds(...),
 ros=RosBridge(...))``; docs/guide/transports.md)::
 
+    include = ["base.toml"]                  # other system files this one is laid over, key by key
     protocol = "../protocols/stream.proto"   # the .proto file (required)
     global = "Pipeline"                      # the global type's name in it (required)
     timeout = 10.0                           # seconds; roles still running then are stopped
@@ -15,8 +16,13 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     liveness = 2.0                           # its fields: process: liveness; dds: domain, run_id,
                                              # host, wait, liveness; inproc: none
 
-    [ros]                                    # RosBridge: topics, external, distro, domain
-    topics = { "Move->Gazebo" = "/cmd_vel" }
+    [ros]                                    # RosBridge: topics, external, distro, domain, namespace, remap
+    topics = { "Source->Sink" = "cmd_vel" }  # relative: in its group's namespace, in the system's
+    namespace = "/robot1"
+    remap = { "control/cmd_vel" = "/cmd_vel" }   # after the namespaces: /robot1/control/cmd_vel -> /cmd_vel
+
+    [params.Source]                          # System(params={"Source": {"rate": 50.0}}): keyword arguments
+    rate = 50.0                              # of the role's function (bool, int, float, str, arrays of one)
 
     [channels."A->B"]                        # capacities
     capacity = 8
@@ -31,6 +37,7 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     host = "robot"                           # kind = "dds": the host it runs on
     priority_inheritance = true              # roles waiting on this group lend it their priority (default)
     roles = { Source = "memory_hog:source", Sink = "memory_hog:sink" }   # role -> "module:function"
+    namespace = "control"                    # its roles' relative topics: /robot1/control/...
 
 Only ``protocol``, ``global``, ``groups`` and each group's ``roles`` are required.
 Files of the earlier form (``transport = "dds"`` as a string, with ``domain`` and
