@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
+from dds_hosts import domain
 from param_roles import consumer, needs_rate, producer
 
 import sessiontypes
-from anodize import Inproc, Processes, System
+from anodize import Dds, Inproc, Processes, System
 from anodize._supervision.params import check_params, check_value
 from anodize.errors import ConfigurationError, ParameterError
 
@@ -23,7 +25,10 @@ def _system(transport: object, params: dict[str, dict[str, object]], p: object =
     return system
 
 
-@pytest.mark.parametrize("transport", [Inproc(), Processes()], ids=["inproc", "process"])
+@pytest.mark.parametrize("transport", [
+    Inproc(), Processes(),
+    pytest.param(Dds(domain=domain(), run_id=f"params-{os.getpid()}"), marks=pytest.mark.slow),
+], ids=["inproc", "process", "dds"])
 def test_parameters_reach_each_role_as_keyword_arguments(tmp_path: Path, transport: object) -> None:
     given, seen = tmp_path / "given.json", tmp_path / "seen.txt"
     system = _system(transport, {"P": {"count": 5, "gain": 2, "tag": "x", "flags": [True, False], "out": str(given)},
