@@ -6,11 +6,14 @@ import json
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from anodize import RosBridge, build_system, load_config
 from anodize._supervision.rosnames import resolve_topics
 from anodize._tools.cli import main
 from anodize._tools.config import ConfigError
+from anodize._tools.includes import read_system_data
 from anodize.errors import ConfigurationError
 
 STREAM = "global Stream(P, C) = mu t. P -> C : { data(int). t, stop. end }\n"
@@ -53,7 +56,7 @@ def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
     return status, out, err
 
 
-def given(system: Path) -> dict[str, object]:
+def given_to_p(system: Path) -> dict[str, object]:
     return json.loads((system.parent / "given.json").read_text())  # type: ignore[no-any-return]
 
 
@@ -62,7 +65,7 @@ def given(system: Path) -> dict[str, object]:
 def test_the_file_s_parameters_reach_the_role(capsys: pytest.CaptureFixture[str], system: Path) -> None:
     status, _, err = run(capsys, "run", str(system), "--quiet")
     assert status == 0, err
-    assert given(system) == {"count": 2, "gain": 1.0, "gain_type": "float", "tag": "", "flags": None}
+    assert given_to_p(system) == {"count": 2, "gain": 1.0, "gain_type": "float", "tag": "", "flags": None}
 
 
 def test_p_overrides_the_file_and_adds_parameters_as_toml_values(
@@ -70,7 +73,7 @@ def test_p_overrides_the_file_and_adds_parameters_as_toml_values(
     status, _, err = run(capsys, "run", str(system), "--quiet", "-p", "P.count=4", "-p", "P.gain=0.5",
                          "--param", 'P.tag="front"', "-p", "P.flags=[true, false]", "-p", "P.count=3")
     assert status == 0, err
-    assert given(system) == {"count": 3, "gain": 0.5, "gain_type": "float", "tag": "front", "flags": [True, False]}
+    assert given_to_p(system) == {"count": 3, "gain": 0.5, "gain_type": "float", "tag": "front", "flags": [True, False]}
 
 
 @pytest.mark.parametrize(("override", "message"), [
@@ -115,7 +118,7 @@ def test_an_including_file_wins_key_by_key_and_paths_stay_relative_to_their_file
     assert config.params["P"] == {"count": 5, "tag": "base", "out": str(system.parent / "given.json")}
     assert config.groups["a"].priority == 10 and config.groups["a"].roles == {"P": "param_roles:producer"}
     assert run(capsys, "run", str(top), "--quiet")[0] == 0
-    assert given(system)["count"] == 5
+    assert given_to_p(system)["count"] == 5
 
 
 def test_an_error_in_an_included_value_names_the_included_file(system: Path) -> None:
@@ -188,3 +191,54 @@ def test_the_python_api_takes_the_same_values(system: Path) -> None:
     built = build_system(load_config(system).with_overrides(["P.count=1"], [], "/r1"))
     assert built.params == {"P": {"count": 1, "out": str(system.parent / "given.json")}}
     assert built.ros is not None and built.ros.namespace == "/r1"
+
+
+# ---- the include merge, as a property -------------------------------------------------------
+
+_TABLES = st.recursive(st.integers(0, 9), lambda inner: st.dictionaries(st.sampled_from("abc"), inner, max_size=3),
+                       max_leaves=8)
+_FILES = st.dictionaries(st.sampled_from("abc"), _TABLES, max_size=3)
+
+
+def _toml(table: dict[str, object]) -> str:
+    def value(v: object) -> str:
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
+        return str(v)
+    return "".join(f"{key} = {value(v)}\n" for key, v in table.items())
+
+
+def _leaves(table: dict[str, object], prefix: str = "") -> dict[str, object]:
+    found: dict[str, object] = {}
+    for key, v in table.items():
+        dotted = f"{prefix}.{key}" if prefix else key
+        found.update(_leaves(v, dotted) if isinstance(v, dict) else {dotted: v})  # an empty table: no leaf
+    return found
+
+
+def _paths(table: dict[str, object], prefix: str = "") -> set[str]:
+    """Every dotted key of ``table``, tables' too."""
+    found: set[str] = set()
+    for key, v in table.items():
+        dotted = f"{prefix}.{key}" if prefix else key
+        found |= {dotted} | (_paths(v, dotted) if isinstance(v, dict) else set())
+    return found
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(base=_FILES, top=_FILES)
+def test_the_including_file_wins_key_by_key_and_every_value_names_its_file(
+        tmp_path: Path, base: dict[str, object], top: dict[str, object]) -> None:
+    (tmp_path / "base.toml").write_text(_toml(base), encoding="utf-8")
+    (tmp_path / "top.toml").write_text('include = ["base.toml"]\n' + _toml(top), encoding="utf-8")
+    merged = read_system_data(tmp_path / "top.toml", "top.toml")
+    leaves, base_leaves, top_leaves = _leaves(merged.data), _leaves(base), _leaves(top)
+    top_paths = _paths(top)
+    for key, value in top_leaves.items():  # everything the including file says holds
+        assert leaves[key] == value and merged.origin(key, "?") == "top.toml"
+    for key, value in base_leaves.items():  # and the base's, where the including file says nothing on its path
+        said = key in top_paths or any(k.startswith(key + ".") for k in top_paths) or any(
+            key.startswith(k + ".") for k in top_leaves)  # (a table of the including file merges: says nothing)
+        if not said:
+            assert leaves[key] == value and merged.origin(key, "?") == str(tmp_path / "base.toml")
+    assert set(leaves) <= set(top_leaves) | set(base_leaves)
