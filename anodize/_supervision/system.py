@@ -235,12 +235,12 @@ class System:
         machines = {role: gt.project(role).fsm() for role in gt.roles}
         channels = tuple(communication_graph(gt).edges)
         ros = self.resolved_ros()
+        params = self.check_params()  # before the taps open: a refused parameter leaves no file behind
         topics = ros.topic_names(machines, channels) if ros is not None else {}
         shape = TapRun(gt, machines, dict(self._placed), topics, transport.kind, self._functions())
         opened = tuple(tap.begin(shape) for tap in taps)
         if taps:
             on_status = _with_tap_status(on_status, taps)
-        params = self.check_params()
         plan = RunPlan(gt, machines, channels, dict(self.groups), dict(self._placed), self.monitors,
                        dict(self.capacities), ros, opened, params)
         runner = transport.runner(plan)
