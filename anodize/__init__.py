@@ -50,6 +50,7 @@ from .errors import (
     LinearityError,
     MemoryBoundError,
     MissingExtraError,
+    ParameterError,
     PeerFailedError,
     ProtocolViolationError,
     RoleError,
@@ -62,7 +63,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
-    "AnodizeError", "ConfigurationError", "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
+    "AnodizeError", "ConfigurationError", "ParameterError",
+    "ProtocolViolationError", "PeerFailedError", "MemoryBoundError",
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
     # Time constraints: a missed deadline or period, and the label of an `else timeout`.
     "DeadlineMissedError", "TIMEOUT",

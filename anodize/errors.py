@@ -12,7 +12,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 __all__ = [
-    "AnodizeError", "ConfigurationError", "ProtocolViolationError", "DeadlineMissedError", "PeerFailedError",
+    "AnodizeError", "ConfigurationError", "ParameterError",
+    "ProtocolViolationError", "DeadlineMissedError", "PeerFailedError",
     "MemoryBoundError",
     "LinearityError", "MissingExtraError", "Action", "RoleError", "RoleStopped", "error_to_data", "error_from_data",
 ]
@@ -25,6 +26,29 @@ class AnodizeError(Exception):
 class ConfigurationError(AnodizeError, ValueError):
     """A system declared wrongly: a bad group, priority, memory size, CPU set, policy,
     transport or role placement (also a ``ValueError``, as lark's configuration errors are)."""
+
+
+class ParameterError(ConfigurationError):
+    """A role's parameter refused: one its function does not take, a value of another type than
+    it declares, or one it needs and is not given. Raised by ``System(params=...)`` for a value
+    no ROS parameter has, and before a run starts for the rest.
+
+    Attributes:
+        role: the role.
+        parameter: the parameter's name ("" when the fault is not one parameter's).
+        problem: what is wrong, e.g. ``expected float, got str ("fast")``.
+    """
+
+    def __init__(self, role: str, parameter: str, problem: str) -> None:
+        self.role = role
+        self.parameter = parameter
+        self.problem = problem
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        if self.parameter:
+            return f"role {self.role}: parameter {self.parameter}: {self.problem}"
+        return f"role {self.role}: {self.problem}"
 
 
 class MissingExtraError(AnodizeError, ImportError):

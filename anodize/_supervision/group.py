@@ -138,6 +138,7 @@ class Group:
     host: str | None = None  # on Dds: the host it runs on (None: wherever the run is started)
     priority_inheritance: bool = True  # roles waiting on this group's roles lend them their priority
     nice: int | None = None  # ordinary scheduling at this nice value (only without a priority)
+    namespace: str = ""  # the ROS namespace its roles' relative topic names resolve in ("": the system's)
     roles: dict[str, Callable[..., Any] | str] = field(default_factory=dict)
     _system: Any = field(default=None, repr=False)
 

@@ -108,6 +108,7 @@ class GroupSpec:
     taps: tuple[GroupTapPlan, ...] = ()    # what the group opens to tap its channels (recording, live view)
     dds: DdsSettings | None = None         # transport Dds: how the group joins the run's domain (else pipes)
     inheritance: tuple[tuple[RoleSeat, ...], str | None] | None = None  # the inheritance table's seats and file
+    params: dict[str, dict[str, object]] = field(default_factory=dict)  # role -> its parameters, checked
 
 
 def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
@@ -256,7 +257,7 @@ class _GroupProcess:
     def _role_thread(self, role: str, function: Any, endpoint: Endpoint) -> None:
         self.gate.wait()
         run_role(self.spec.name, None, None, role, function, endpoint, self.results.put, schedule=False,
-                 inheritance=self.inheritance)
+                 inheritance=self.inheritance, params=self.spec.params.get(role))
 
     def _supervise(self, count: int) -> None:
         reported = 0

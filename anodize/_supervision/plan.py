@@ -28,6 +28,7 @@ class RunPlan:
         capacities: channels that hold at most so many messages.
         ros: the system's ROS 2 side, or None.
         taps: what each group opens to tap its channels (a recording, the live view).
+        params: role -> its parameters, checked: the keyword arguments its function is called with.
     """
 
     global_type: GlobalType
@@ -39,6 +40,7 @@ class RunPlan:
     capacities: Mapping[tuple[str, str], int] | None = None
     ros: RosBridge | None = None
     taps: tuple[GroupTapPlan, ...] = ()
+    params: Mapping[str, Mapping[str, object]] | None = None
 
     @property
     def protocol(self) -> str:

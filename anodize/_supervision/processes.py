@@ -159,7 +159,8 @@ class ProcessRunner:
             priority=group.priority, nice=group.nice, cpus=group.cpus, memory=group.memory,
             sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
             taps=self.plan.taps, dds=dds,
-            inheritance=None if self.inheritance is None else (self.inheritance.seats, self.inheritance.path))
+            inheritance=None if self.inheritance is None else (self.inheritance.seats, self.inheritance.path),
+            params={role: dict(values) for role, values in (self.plan.params or {}).items() if role in group.roles})
         parent_end, child_end = self.context.Pipe()
         process = self.context.Process(target=group_main, args=(spec, child_end, pipes),
                                        name=f"anodize:{name}", daemon=True)

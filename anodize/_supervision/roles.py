@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import os
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from .._isolation.inherit import BoostTable
@@ -47,13 +47,15 @@ def where_raised(error: BaseException) -> tuple[str, tuple[str, ...]]:
 def run_role(group: str, priority: int | None, cpus: frozenset[int] | None, role: str,
              function: Callable[..., Any], endpoint: Endpoint,
              report: Callable[[RoleReport], None], schedule: bool = True,
-             inheritance: BoostTable | None = None, nice: int | None = None) -> None:
+             inheritance: BoostTable | None = None, nice: int | None = None,
+             params: Mapping[str, object] | None = None) -> None:
     """Run ``function`` for ``role`` on the calling thread and ``report`` how it ended.
 
     ``schedule`` False leaves the thread's scheduling alone (a group process has
     already applied it to the whole process). ``inheritance``: the run's priority
     inheritance table, which learns this thread and forgets it when the role ends. ``nice``: the
-    group's nice value, applied where it asked no priority.
+    group's nice value, applied where it asked no priority. ``params``: the role's parameters,
+    checked (``System.check_params``), passed as keyword arguments.
     """
     scheduling = ""
     bind_role(role)  # what this thread logs is the role's (anodize._session.logs)
@@ -63,7 +65,7 @@ def run_role(group: str, priority: int | None, cpus: frozenset[int] | None, role
         if inheritance is not None:
             inheritance.enter(role)
         try:
-            function(argument_for(function, endpoint))
+            function(argument_for(function, endpoint), **(params or {}))
         finally:
             if inheritance is not None:  # before the report: no boost outlives the role
                 inheritance.leave(role)

@@ -22,14 +22,16 @@ from sessiontypes import GlobalType, StateMachine
 from sessiontypes.graph import communication_graph
 
 from .._session.logs import LogEntry
-from ..errors import AnodizeError, ConfigurationError
+from ..errors import AnodizeError, ConfigurationError, ParameterError
 from ..taps import ChannelTap, TapRun
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
 from .legacy import legacy_run, legacy_system, legacy_taps
 from .logfanout import log_receivers
+from .params import ParamValue, check_params, check_value
 from .plan import RunPlan
 from .report import GroupStatus, RunReport, lossy_channels
 from .rosbridge import RosBridge
+from .rosnames import check_namespace
 from .supervisor import Supervisor
 from .transports import Dds, Inproc, Processes, Transport
 
@@ -58,6 +60,11 @@ class System:
         capacities: ``{"Control->Move": 4}``: channels that hold at most so many messages;
             their senders wait while they are full (between threads of one process, and on
             DDS; between processes a pipe's buffer bounds a channel instead, as the report says).
+        params: ``{"Planner": {"speed": 0.3}}``: each role's parameters, given to its function as
+            keyword arguments (it declares them: ``def planner(ep, *, speed: float = 0.35)``);
+            bool, int, float, str or a list of one of them, as ROS parameters
+            (docs/guide/system-files.md, "Parameters"). Checked against the functions when the
+            system runs (:meth:`check_params` checks them sooner).
         domain, run_id, ros_topics, external, ros_distro, ros_domain: deprecated (with a
             ``transport`` string): the fields of ``Dds`` and ``RosBridge`` they now are.
 
@@ -67,6 +74,7 @@ class System:
 
     def __init__(self, global_type: GlobalType, transport: Transport | str = _INPROC, monitors: bool = True, *,
                  ros: RosBridge | None = None, capacities: Mapping[str, int] | None = None,
+                 params: Mapping[str, Mapping[str, ParamValue]] | None = None,
                  domain: int | None = None, run_id: str | None = None, ros_topics: Mapping[str, str] | None = None,
                  external: Iterable[str] | None = None, ros_distro: str | None = None,
                  ros_domain: int | None = None) -> None:
@@ -99,13 +107,14 @@ class System:
             raise ConfigurationError(f"external roles ({', '.join(sorted(external_roles))}) are ROS 2 nodes: they "
                                      f"need transport Dds(...), not {transport!r}")
         self.external = external_roles
+        self.params = _params(global_type, params or {})
         self.groups: dict[str, Group] = {}
         self._placed: dict[str, str] = {}
 
     def group(self, name: str, priority: int | None = None, memory: int | str | None = None,
               cpus: set[int] | frozenset[int] | None = None, on_failure: str = FailurePolicy.STOP,
               max_restarts: int = 3, host: str | None = None, priority_inheritance: bool = True,
-              nice: int | None = None) -> Group:
+              nice: int | None = None, namespace: str = "") -> Group:
         """Declare a group; add its roles with ``.role(name, function)``.
 
         Args:
@@ -125,6 +134,8 @@ class System:
                 -20..19: below every real-time group, yet a larger share of the CPU than
                 ordinary work at nice 0 (TinMan's simulated world runs so: it must not be starved
                 by the machine's other work, nor run real time, as its renderer fills a CPU).
+            namespace: the ROS namespace the relative topic names its roles publish resolve in:
+                relative (``"planning"``) under the system's (``RosBridge.namespace``), or absolute.
 
         Raises:
             ConfigurationError: (a ``ValueError``) a duplicate name, a priority outside 1..99, a nice
@@ -157,8 +168,11 @@ class System:
         if not isinstance(priority_inheritance, bool):
             raise ConfigurationError(f"group {name}: priority_inheritance must be True or False, "
                                      f"got {priority_inheritance!r}")
+        problem = check_namespace(namespace)
+        if problem is not None:
+            raise ConfigurationError(f"group {name}: namespace {namespace!r}: {problem}")
         group = Group(name, priority, parse_memory(memory), cpus or None, policy, max_restarts, host,
-                      priority_inheritance=priority_inheritance, nice=nice, _system=self)
+                      priority_inheritance=priority_inheritance, nice=nice, namespace=namespace, _system=self)
         self.groups[name] = group
         return group
 
@@ -227,7 +241,9 @@ class System:
             raise AnodizeError(f"global {gt.name}: roles {', '.join(missing)} are in no group")
         machines = {role: gt.project(role).fsm() for role in gt.roles}
         channels = tuple(communication_graph(gt).edges)
-        topics = self.ros.topic_names(machines, channels) if self.ros is not None else {}
+        bridge = self.resolved_ros()
+        params = self.check_params()  # before the taps open: a refused parameter leaves no file behind
+        topics = bridge.topic_names(machines, channels) if bridge is not None else {}
         ros = self.ros_settings(machines, channels)  # the QoS of its topics: on the wire, recorded, lost counted
         shape = TapRun(gt, machines, dict(self._placed), topics, transport.kind, self._functions(),
                        {name: profile.yaml() for name, profile in ros.qos.items()} if ros is not None else {})
@@ -235,7 +251,7 @@ class System:
         if taps:
             on_status = _with_tap_status(on_status, taps)
         plan = RunPlan(gt, machines, channels, dict(self.groups), dict(self._placed), self.monitors,
-                       dict(self.capacities), self.ros, opened)
+                       dict(self.capacities), bridge, opened, params)
         runner = transport.runner(plan)
         scope = runner.scope
         fanout = log_receivers(on_log, taps, runner)
@@ -247,6 +263,28 @@ class System:
         return dataclasses.replace(report, capacities={f"{a}->{b}": n for (a, b), n in self.capacities.items()},
                                    notes=(*report.notes, *notes), lost={
                                        c: max(0, report.messages.get(c, 0) - report.received.get(c, 0)) for c in lossy})
+
+    def check_params(self) -> dict[str, dict[str, ParamValue]]:
+        """Each placed role's parameters, checked against its function (an int given for a
+        declared float becomes a float).
+
+        Raises:
+            ParameterError: a role given parameters is in no group, its function takes no
+                such parameter, a value is not of the declared type, or a keyword-only
+                parameter without a default has no value.
+        """
+        functions = {role: function for group in self.groups.values() for role, function in group.roles.items()}
+        checked: dict[str, dict[str, ParamValue]] = {}
+        for role in self.params:
+            if role not in functions:
+                raise ParameterError(role, "", "it is in no group, so it takes no parameters (an external role "
+                                               "is a ROS 2 node: give it its parameters there)")
+        for role, function in functions.items():
+            target = resolve_function(function) if isinstance(function, str) else function
+            values = check_params(role, target, self.params.get(role, {}))
+            if values:
+                checked[role] = values
+        return checked
 
     def _functions(self) -> dict[str, str]:
         """role -> ``module:function`` of the roles that can be named so (a recording keeps them for replay)."""
@@ -264,12 +302,23 @@ class System:
         Raises:
             ConfigurationError: a topic entry or an external role that cannot be, naming it.
         """
-        if self.ros is None or not (self.ros.topics or self.ros.external) or not isinstance(self.transport, Dds):
+        ros = self.resolved_ros()
+        if ros is None or not (ros.topics or ros.external) or not isinstance(self.transport, Dds):
             return None
         gt = self.global_type
         machines = machines if machines is not None else {role: gt.project(role).fsm() for role in gt.roles}
         channels = channels if channels is not None else tuple(communication_graph(gt).edges)
-        return self.ros.settings(machines, channels)
+        return ros.settings(machines, channels)
+
+    def resolved_ros(self) -> RosBridge | None:
+        """The bridge with every topic fully qualified (namespaces, then remaps), or None.
+
+        Raises:
+            ConfigurationError: a remap whose source is no topic of the system.
+        """
+        if self.ros is None:
+            return None
+        return self.ros.resolved({role: self.groups[group].namespace for role, group in self._placed.items()})
 
 
 def _with_tap_status(on_status: Callable[[dict[str, GroupStatus]], None] | None,
@@ -281,6 +330,27 @@ def _with_tap_status(on_status: Callable[[dict[str, GroupStatus]], None] | None,
         if on_status is not None:
             on_status(statuses)
     return each
+
+
+def _params(global_type: GlobalType,
+            given: Mapping[str, Mapping[str, ParamValue]]) -> dict[str, dict[str, ParamValue]]:
+    """``{"Role": {"name": value}}`` checked against the protocol's roles and ROS's parameter types.
+
+    Raises:
+        ConfigurationError: not a role of the global type, or not a parameter value.
+    """
+    if not isinstance(given, Mapping):
+        raise ConfigurationError(f'params: expected a mapping such as {{"Planner": {{"speed": 0.3}}}}, got {given!r}')
+    found: dict[str, dict[str, ParamValue]] = {}
+    for role, values in given.items():
+        if role not in global_type.roles:
+            raise ParameterError(role, "", f"global {global_type.name} has no such role, so it takes no parameters; "
+                                           f"expected one of {', '.join(global_type.roles)}")
+        if not isinstance(values, Mapping):
+            raise ParameterError(role, "", f'expected a mapping of its parameters such as {{"speed": 0.3}}, '
+                                           f"got {values!r}")
+        found[role] = {str(name): check_value(role, str(name), value) for name, value in values.items()}
+    return found
 
 
 def _capacities(global_type: GlobalType, given: Mapping[str, int]) -> dict[tuple[str, str], int]:

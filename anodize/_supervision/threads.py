@@ -133,7 +133,7 @@ class ThreadRunner:
                 inc.network.fail(role, describe_error(role_report.error))
 
         run_role(group.name, group.priority, group.cpus, role, function, inc.endpoints[role], report,
-                 inheritance=self.inheritance, nice=group.nice)
+                 inheritance=self.inheritance, nice=group.nice, params=(self.plan.params or {}).get(role))
 
     def go(self, group: str) -> None:
         self.current[group].gate.set()

@@ -74,7 +74,8 @@ class Dds:
         domain: the DDS domain id (the environment variable ``ANODIZE_DDS_DOMAIN`` overrides it;
             with a :class:`~anodize.RosBridge` the run lives on the ROS domain instead).
         run_id: keeps two runs of the same system on one domain apart; every host of a run
-            must use the same one ("" = the global type's name). Over several hosts, give
+            must use the same one ("" = the global type's name, followed by the ROS namespace
+            as ``TinManParallel.r1`` when the system has one). Over several hosts, give
             every host the same secret in ``ANODIZE_DDS_TOKEN`` too (one host makes its own).
         host: run only the groups placed on this host (``group(..., host=...)``); the others
             are started on theirs, with the same run id and domain. None runs every group here.
@@ -134,7 +135,10 @@ class Dds:
         if plan.ros is not None and (plan.ros.topics or plan.ros.external):
             ros = plan.ros.settings(plan.machines, plan.channels)
             domain = ros.domain  # ROS 2 nodes meet on their domain; anodize's own topics are there too
-        settings = DdsSettings(domain=domain, run_id=self.run_id or plan.protocol, host=here,
+        # Two runs of one system under two ROS namespaces are two runs: the namespace is in the default run id.
+        namespace = plan.ros.namespace.strip("/").replace("/", ".") if plan.ros is not None else ""
+        run_id = self.run_id or (f"{plan.protocol}.{namespace}"[:64] if namespace else plan.protocol)
+        settings = DdsSettings(domain=domain, run_id=run_id, host=here,
                                group_of=dict(plan.group_of), host_of=host_of, wait=self.wait, ros=ros)
         elsewhere = {name: host_of[name] for name, g in plan.groups.items() if host is not None and g.host != host}
         return DdsRunner(plan, settings, elsewhere, self.liveness)

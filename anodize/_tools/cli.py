@@ -80,7 +80,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_ERRORS
     except AnodizeError as error:  # e.g. a system file's ConfigError: 'path: key: ...'
         print(f"error: {error}", file=sys.stderr)
-        return EXIT_ERRORS
+        return EXIT_USAGE if getattr(error, "on_command_line", False) else EXIT_ERRORS  # -p, -r: a usage error
     except KeyboardInterrupt as interrupt:  # SIGINT or SIGTERM while reading or checking: one line
         terminated = isinstance(interrupt, Terminated)
         print(f"anodize {args.command}: {'terminated (SIGTERM)' if terminated else 'interrupted'}",
@@ -181,6 +181,7 @@ def _parser() -> argparse.ArgumentParser:
     run_system.add_argument("--record-between", action="store_true",
                             help="with --record: record only the channels between groups (cheaper; a role that "
                                  "talks inside its group then cannot be replayed alone)")
+    _add_composition_arguments(run_system)
     run_system.add_argument("--record-inside", action="store_true",
                             help="the default now (every channel is recorded): accepted, and does nothing more")
     run_system.add_argument("--sign-key", metavar="KEYFILE",
@@ -455,7 +456,7 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f"--wait {args.wait}: expected a number of seconds > 0")
     if args.sign_key is not None and args.record is None:
         raise UsageError("--sign-key needs --record PATH")
-    config = load_config(_system_file(args.file, named=True))
+    config = load_config(_system_file(args.file, named=True)).with_overrides(args.param, args.remap, args.namespace)
     if args.transport is not None:
         config = config.on_transport(args.transport)
     if args.host is not None and not isinstance(config.transport, Dds):
@@ -519,6 +520,12 @@ def _add_recording_arguments(parser: argparse.ArgumentParser) -> None:
                              "[ros.topics], or the same entries at its top level), for recordings made by "
                              "other tools")
     parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
+
+
+def _add_composition_arguments(parser: argparse.ArgumentParser) -> None:
+    from .composition_args import add_composition_arguments
+
+    add_composition_arguments(parser)
 
 
 def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
@@ -645,6 +652,7 @@ def _run_named(name: str, rest: list[str]) -> int:
     parser = argparse.ArgumentParser(prog=f"anodize run {name}", description=named.summary)
     parser.add_argument("--quiet", action="store_true", help="no live progress line")
     _add_foxglove_argument(parser)
+    _add_composition_arguments(parser)  # prepare() applies them: SystemConfig.with_overrides
     named.add_arguments(parser)
     try:
         args = parser.parse_args(rest)

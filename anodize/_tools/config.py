@@ -4,6 +4,7 @@ A system file is TOML. Paths in it are relative to the file itself. It maps one 
 one onto the values a Python program builds (``System(g, transport=Dds(...),
 ros=RosBridge(...))``; docs/guide/transports.md)::
 
+    include = ["base.toml"]                  # other system files this one is laid over, key by key
     protocol = "../protocols/stream.proto"   # the .proto file (required)
     global = "Pipeline"                      # the global type's name in it (required)
     timeout = 10.0                           # seconds; roles still running then are stopped
@@ -15,8 +16,13 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     liveness = 2.0                           # its fields: process: liveness; dds: domain, run_id,
                                              # host, wait, liveness; inproc: none
 
-    [ros]                                    # RosBridge: topics, external, distro, domain
-    topics = { "Move->Gazebo" = "/cmd_vel" }
+    [ros]                                    # RosBridge: topics, external, distro, domain, namespace, remap
+    topics = { "Source->Sink" = "cmd_vel" }  # relative: in its group's namespace, in the system's
+    namespace = "/robot1"
+    remap = { "control/cmd_vel" = "/cmd_vel" }   # after the namespaces: /robot1/control/cmd_vel -> /cmd_vel
+
+    [params.Source]                          # System(params={"Source": {"rate": 50.0}}): keyword arguments
+    rate = 50.0                              # of the role's function (bool, int, float, str, arrays of one)
 
     [ros.qos]                                # QoS per ROS topic (default: reliable, keep all)
     "/scan" = "sensor_data"                  # a ROS 2 profile, or { reliability = ..., depth = ... }
@@ -37,6 +43,7 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     host = "robot"                           # kind = "dds": the host it runs on
     priority_inheritance = true              # roles waiting on this group lend it their priority (default)
     roles = { Source = "memory_hog:source", Sink = "memory_hog:sink" }   # role -> "module:function"
+    namespace = "control"                    # its roles' relative topics: /robot1/control/...
 
 Only ``protocol``, ``global``, ``groups`` and each group's ``roles`` are required.
 Files of the earlier form (``transport = "dds"`` as a string, with ``domain`` and
@@ -52,68 +59,39 @@ import os
 import re
 import sys
 import threading
-import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import sessiontypes
 from sessiontypes.graph import communication_graph
-from sessiontypes.limits import SYSTEM_FILE, read_limited
 
 from .._recording.selection import RecordSelection, SelectionError, selection_from_table
 from .._supervision.group import FailurePolicy, parse_memory
+from .._supervision.params import ParamValue, check_value
 from .._supervision.rosbridge import RosBridge
+from .._supervision.rosnames import check_namespace, check_relative_name
 from .._supervision.system import System
 from .._supervision.transports import KINDS, Dds, Transport
 from .._transport.qos_profiles import QosError, QosProfile, qos_profile
-from ..errors import AnodizeError, ConfigurationError
+from ..errors import AnodizeError, ConfigurationError, ParameterError
+from .config_error import COMMAND_LINE, ConfigError
+from .includes import SystemData, read_system_data
+from .overrides import parse_param, parse_remap
 
 __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
            "add_pythonpath"]
 
 _TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id",
-             "ros", "channels", "record")
+             "ros", "channels", "record", "params", "include")
 _CHANNEL_KEYS = ("capacity", "qos")
-_ROS_KEYS = ("topics", "external", "distro", "domain", "qos")
+_ROS_KEYS = ("topics", "external", "distro", "domain", "qos", "namespace", "remap")
 _OLD_DDS_KEYS = ("domain", "run_id")  # top-level keys of the earlier form, now fields of [transport]
 _RUN_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 _GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host",
-               "priority_inheritance", "nice")
+               "priority_inheritance", "nice", "namespace")
 _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
-_TOML_POSITION = re.compile(r"^(.*) \(at (?:line (\d+), column (\d+)|end of document)\)$", re.S)
-
-
-class ConfigError(ConfigurationError):
-    """Raised for a system file that cannot be read, parsed, or turned into a system.
-
-    Attributes:
-        path: the system file, as given.
-        key: the dotted key at fault (``groups.control.priority``), or None.
-        problem: what is wrong, e.g. ``expected an int 1..99, got 120``.
-        line: for TOML syntax errors, the 1-based line (else None).
-        column: for TOML syntax errors, the 1-based column (else None).
-        source_line: for TOML syntax errors, the text of that line.
-    """
-
-    def __init__(self, path: str, key: str | None, problem: str, line: int | None = None,
-                 column: int | None = None, source_line: str = "") -> None:
-        self.path = path
-        self.key = key
-        self.problem = problem
-        self.line = line
-        self.column = column
-        self.source_line = source_line
-        super().__init__(str(self))
-
-    def __str__(self) -> str:
-        if self.line is not None:
-            caret = " " * ((self.column or 1) - 1) + "^"
-            context = f"\n    {self.source_line}\n    {caret}" if self.source_line.strip() else ""
-            return f"{self.path}:{self.line}:{self.column}: {self.problem}{context}"
-        if self.key is None:
-            return f"{self.path}: {self.problem}"
-        return f"{self.path}: {self.key}: {self.problem}"
 
 
 @dataclass(frozen=True)
@@ -133,6 +111,7 @@ class GroupConfig:
         priority_inheritance: whether a higher-priority role waiting on this group's roles
             raises their priority while it waits (default True).
         nice: with no priority, the group's nice value under ordinary scheduling, or None.
+        namespace: the ROS namespace of the group's topics ("": the system's).
     """
 
     name: str
@@ -146,6 +125,7 @@ class GroupConfig:
     host: str | None = None
     priority_inheritance: bool = True
     nice: int | None = None
+    namespace: str = ""
 
 
 @dataclass(frozen=True)
@@ -164,6 +144,9 @@ class SystemConfig:
         ros: ``[ros]``: the ROS 2 bridge (topics, external roles, distro, domain), or None.
         capacities: ``[channels."A->B"] capacity``: channels that hold at most so many messages.
         record: ``[record]``: the channels ``--record`` records (default: every one).
+        params: ``[params.Role]``: role -> its parameters (``System(params=...)``).
+        given_on_command_line: the ``(role, parameter)`` pairs ``-p`` gave (for messages).
+        remapped_on_command_line: the sources of the remaps ``-r`` gave (for messages).
     """
 
     path: Path
@@ -177,6 +160,9 @@ class SystemConfig:
     ros: RosBridge | None = None
     capacities: dict[str, int] = field(default_factory=dict)
     record: RecordSelection = field(default_factory=RecordSelection)
+    params: dict[str, dict[str, ParamValue]] = field(default_factory=dict)
+    given_on_command_line: frozenset[tuple[str, str]] = frozenset()
+    remapped_on_command_line: frozenset[str] = frozenset()
 
     @property
     def external(self) -> frozenset[str]:
@@ -186,6 +172,48 @@ class SystemConfig:
     def group_of(self, role: str) -> str | None:
         """The group that runs ``role``, or None."""
         return next((g.name for g in self.groups.values() if role in g.roles), None)
+
+    def with_overrides(self, params: Sequence[str] = (), remaps: Sequence[str] = (),
+                           namespace: str | None = None) -> SystemConfig:
+        """The system with what the command line gives laid over it (``anodize run FILE -p ... -r ...``).
+
+        Args:
+            params: ``"Role.name=value"`` each (``-p``), the value in TOML; later ones win.
+            remaps: ``"from:=to"`` each (``-r``), added to ``[ros.remap]`` (the same source: the command line's).
+            namespace: the system's ROS namespace (``--namespace``), instead of ``[ros] namespace``.
+
+        Raises:
+            ConfigError: at ``command line`` (:attr:`ConfigError.on_command_line`): a malformed
+                override, a role in no group, a namespace or remap that is not a ROS name.
+        """
+        values = {role: dict(given) for role, given in self.params.items()}
+        given_here: set[tuple[str, str]] = set(self.given_on_command_line)
+        for text in params:
+            role, name, value = parse_param(text)
+            if self.group_of(role) is None:
+                placed = [r for group in self.groups.values() for r in group.roles]
+                raise ConfigError(COMMAND_LINE, f"-p {role}.{name}", f"no role {role} runs in a group of {self.path}; "
+                                                                     f"expected one of {', '.join(placed)}")
+            try:
+                values.setdefault(role, {})[name] = check_value(role, name, value)
+            except ParameterError as error:
+                raise ConfigError(COMMAND_LINE, f"-p {role}.{name}", error.problem) from None
+            given_here.add((role, name))
+        ros = self.ros
+        if remaps or namespace is not None:
+            ros = ros or RosBridge()
+            remap = dict(ros.remap)
+            for text in remaps:
+                source, target = parse_remap(text)
+                problem = check_relative_name(source) or check_relative_name(target)
+                if problem is not None:
+                    raise ConfigError(COMMAND_LINE, f"-r {text}", problem)
+                remap[source] = target
+            if namespace is not None and check_namespace(namespace) is not None:
+                raise ConfigError(COMMAND_LINE, f"--namespace {namespace}", f"{check_namespace(namespace)}")
+            ros = replace(ros, remap=remap, namespace=ros.namespace if namespace is None else namespace)
+        return replace(self, params=values, given_on_command_line=frozenset(given_here), ros=ros,
+                       remapped_on_command_line=self.remapped_on_command_line | {parse_remap(r)[0] for r in remaps})
 
     def on_transport(self, kind: str) -> SystemConfig:
         """The same system on the transport ``kind`` (``anodize run --transport``): the file's
@@ -214,43 +242,20 @@ def load_config(path: str | Path) -> SystemConfig:
     """
     path = Path(path)
     shown = str(path)
-    try:
-        text = read_limited(path, SYSTEM_FILE).decode("utf-8")
-    except UnicodeDecodeError:
-        raise ConfigError(shown, None, "expected UTF-8 text") from None
-    except OSError as error:
-        raise ConfigError(shown, None, f"cannot read: {error.strerror or error}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise _syntax_error(shown, text, str(error)) from None
-    except RecursionError:  # tomllib recurses once per level of nested arrays and tables
-        raise ConfigError(shown, None, "arrays or tables nested too deeply; expected at most a few levels") from None
-    return _Reader(shown, path).system(data)
-
-
-def _syntax_error(shown: str, text: str, message: str) -> ConfigError:
-    match = _TOML_POSITION.match(message)
-    problem = match.group(1) if match else message
-    problem = problem[:1].lower() + problem[1:]
-    lines = text.split("\n")
-    if match and match.group(2):
-        line, column = int(match.group(2)), int(match.group(3))
-    else:  # "at end of document"
-        line, column = len(lines), len(lines[-1]) + 1
-    source = lines[line - 1] if 0 < line <= len(lines) else ""
-    return ConfigError(shown, None, problem, line, column, source)
+    read = read_system_data(path, shown)
+    return _Reader(shown, path, read).system(read.data)
 
 
 class _Reader:
     """Checks the parsed TOML of one file, key by key."""
 
-    def __init__(self, shown: str, path: Path) -> None:
+    def __init__(self, shown: str, path: Path, read: SystemData) -> None:
         self.shown = shown
         self.directory = path.parent
+        self.read = read
 
     def error(self, key: str | None, problem: str) -> ConfigError:
-        return ConfigError(self.shown, key, problem)
+        return ConfigError(self.read.origin(key, self.shown), key, problem)
 
     def system(self, data: dict[str, Any]) -> SystemConfig:
         self.known_keys(data, _TOP_KEYS, None)
@@ -268,7 +273,8 @@ class _Reader:
             timeout=None if timeout is None else float(timeout), monitors=monitors,
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
             groups=self.groups(data.get("groups")), ros=self.ros(data.get("ros"), data.get("channels")),
-            capacities=self.capacities(data.get("channels", {})), record=self.record(data.get("record")))
+            capacities=self.capacities(data.get("channels", {})), record=self.record(data.get("record")),
+            params=self.params(data.get("params", {})))
 
     def record(self, table: Any) -> RecordSelection:
         """``[record]``: its shape here; its channels against the protocol when the system is built."""
@@ -276,6 +282,22 @@ class _Reader:
             return selection_from_table(table)
         except SelectionError as error:
             raise self.error(f"record.{error.key}".rstrip("."), error.problem) from None
+
+    def params(self, table: Any) -> dict[str, dict[str, ParamValue]]:
+        """``[params.Role]`` tables: the values' types here; the roles and their functions when built."""
+        if not isinstance(table, dict):
+            raise self.error("params", f"expected tables such as [params.Planner], got {_show(table)}")
+        found: dict[str, dict[str, ParamValue]] = {}
+        for role, values in table.items():
+            if not isinstance(values, dict):
+                raise self.error(f"params.{role}", f"expected a table such as {{ speed = 0.3 }}, got {_show(values)}")
+            found[role] = {}
+            for name, value in values.items():
+                try:
+                    found[role][name] = check_value(role, name, value)
+                except ParameterError as error:
+                    raise self.error(f"params.{role}.{name}", error.problem) from None
+        return found
 
     def transport(self, data: dict[str, Any]) -> Transport:
         """``[transport]`` (kind and fields), or the earlier form: ``transport = "kind"`` with
@@ -368,12 +390,28 @@ class _Reader:
         domain = table.get("domain")
         if domain is not None and (not _is_int(domain) or not 0 <= domain <= 232):
             raise self.error("ros.domain", f"expected a DDS domain id 0..232, got {_show(domain)}")
+        namespace = table.get("namespace", "")
+        problem = check_namespace(namespace)
+        if problem is not None:
+            raise self.error("ros.namespace", f"{problem}, got {_show(namespace)}")
+        remap = table.get("remap", {})
+        if not isinstance(remap, dict):
+            raise self.error("ros.remap", 'expected a table such as { "/cmd_vel" = "/r1/cmd_vel" }, '
+                                          f"got {_show(remap)}")
+        for source, target in remap.items():
+            problem = check_relative_name(source) or check_relative_name(target)
+            if problem is not None:
+                raise self.error(f"ros.remap.{source}", f"{problem}, got {_show(source)} = {_show(target)}")
+        for key, name in topics.items():
+            problem = check_relative_name(name)
+            if problem is not None:
+                raise self.error(f"ros.topics.{key}", f"{problem}, got {_show(name)}")
         qos = table.get("qos", {})
         if not isinstance(qos, dict):
             raise self.error("ros.qos", f'expected a table such as {{ "/scan" = "sensor_data" }}, got {_show(qos)}')
         profiles = {**channel_qos, **{topic: self.qos(value, f'ros.qos."{topic}"') for topic, value in qos.items()}}
         return RosBridge(topics=dict(topics), external=frozenset(external), distro=distro, domain=domain,
-                         qos=profiles)
+                         qos=profiles, namespace=namespace, remap=dict(remap))
 
     def channel_qos(self, channels: Any) -> dict[str, QosProfile]:
         """``[channels."A->B"] qos``, per channel (the shape of ``[channels]`` is checked by capacities)."""
@@ -465,9 +503,13 @@ class _Reader:
         if nice is not None and priority is not None:
             raise self.error(f"{prefix}.nice", f"priority {priority} (SCHED_FIFO) and nice {nice} (ordinary "
                                                "scheduling) exclude each other: give one")
+        namespace = table.get("namespace", "")
+        problem = check_namespace(namespace)
+        if problem is not None:
+            raise self.error(f"{prefix}.namespace", f"{problem}, got {_show(namespace)}")
         return GroupConfig(name, priority, memory_bytes, self.cpus(prefix, table.get("cpus")),
                            on_failure, max_restarts, self.roles(prefix, table),
-                           f"{self.shown}: {prefix}", host, inherit, nice)
+                           f"{self.read.origin(prefix, self.shown)}: {prefix}", host, inherit, nice, namespace)
 
     def cpus(self, prefix: str, value: Any) -> tuple[int, ...] | None:
         if value is None:
@@ -554,13 +596,9 @@ def build_system(config: SystemConfig) -> System:
     add_pythonpath(config)
     try:
         system = System(global_type, transport=config.transport, monitors=config.monitors, ros=config.ros,
-                        capacities=config.capacities)
-        system.ros_settings()  # the topics against the protocol, now rather than when the run starts
-        if config.ros is not None and config.ros.qos:  # and the QoS on any transport (`run --transport dds`)
-            config.ros.settings({role: global_type.project(role).fsm() for role in global_type.roles},
-                                tuple(communication_graph(global_type).edges))
-    except QosError as error:
-        raise ConfigError(shown, error.key, error.problem) from None
+                        capacities=config.capacities, params=config.params)
+    except ParameterError as error:
+        raise _parameter_error(config, error) from None
     except ConfigurationError as error:
         key = "channels" if str(error).startswith("capacity of") else "ros"
         raise ConfigError(shown, key, str(error)) from None
@@ -574,7 +612,7 @@ def build_system(config: SystemConfig) -> System:
                                     cpus=set(group.cpus) if group.cpus else None,
                                     on_failure=group.on_failure, max_restarts=group.max_restarts,
                                     host=group.host, priority_inheritance=group.priority_inheritance,
-                                    nice=group.nice)
+                                    nice=group.nice, namespace=group.namespace)
             for role, reference in group.roles.items():
                 declared.role(role, reference)
         except (ValueError, AnodizeError) as error:
@@ -584,4 +622,29 @@ def build_system(config: SystemConfig) -> System:
         raise ConfigError(shown, "groups", f"{'role' if len(missing) == 1 else 'roles'} "
                                            f"{', '.join(missing)} of global {global_type.name} "
                                            f"{'is' if len(missing) == 1 else 'are'} in no group")
+    try:
+        system.check_params()
+    except ParameterError as error:
+        raise _parameter_error(config, error) from None
+    try:
+        system.ros_settings()  # the topics against the protocol, now rather than when the run starts
+        bridge = system.resolved_ros()
+        if bridge is not None and bridge.qos:  # and the QoS on any transport (`run --transport dds`)
+            bridge.settings({role: global_type.project(role).fsm() for role in global_type.roles},
+                            tuple(communication_graph(global_type).edges))
+    except QosError as error:
+        raise ConfigError(shown, error.key, error.problem) from None
+    except ConfigurationError as error:
+        source = str(error).partition(":")[0].removeprefix("remap ")
+        if source in config.remapped_on_command_line:
+            raise ConfigError(COMMAND_LINE, f"-r {source}", str(error).partition(": ")[2]) from None
+        raise ConfigError(shown, "ros", str(error)) from None
     return system
+
+
+def _parameter_error(config: SystemConfig, error: ParameterError) -> ConfigError:
+    """A refused parameter, located where it was given: ``-p Role.name`` or ``[params.Role] name``."""
+    if (error.role, error.parameter) in config.given_on_command_line:
+        return ConfigError(COMMAND_LINE, f"-p {error.role}.{error.parameter}", error.problem)
+    key = f"params.{error.role}.{error.parameter}" if error.parameter else f"params.{error.role}"
+    return ConfigError(str(config.path), key, error.problem)

@@ -73,6 +73,10 @@ class NamedSystem(Protocol):
     def prepare(self, args: argparse.Namespace, log: Callable[[str], None]) -> Prepared:
         """Build the system for these options (raise ``AnodizeError`` for bad ones).
 
+        ``args.param``, ``args.remap`` and ``args.namespace`` are the composition options
+        ``anodize run NAME`` always offers (``-p``, ``-r``, ``--namespace``): give them to the
+        system file's :meth:`SystemConfig.with_overrides`.
+
         ``log`` shows a line to the user (e.g. that a long preparation is under way).
         """
 

@@ -22,6 +22,7 @@ from sessiontypes.limits import PROTOCOL, SYSTEM_FILE, check_text, read_limited
 from .._recording.metadata import recorded_protocol, role_functions
 from .._recording.reader import Recording
 from .._supervision.group import resolve_function
+from .._supervision.rosnames import resolve_topics
 from .._transport.ros_lanes import ros_settings
 from ..errors import ConfigurationError
 
@@ -82,10 +83,26 @@ def topic_map(path: str, global_type: GlobalType) -> dict[str, tuple[str, str, s
     channels = {(t.peer, role) for role, m in machines.items() for t in m.all_transitions()
                 if t.action == "recv" and t.peer is not None}
     try:
-        settings = ros_settings(machines, channels, entries)
+        settings = ros_settings(machines, channels, _resolved(data, entries))
     except ConfigurationError as error:
         raise ConfigurationError(f"{path}: {error}") from None
     return {topic.name: key for key, topic in settings.topics.items()}
+
+
+def _resolved(data: dict[str, Any], entries: dict[str, str]) -> dict[str, str]:
+    """A system file's topic entries fully qualified, as the run named them: relative names in
+    their groups' and the file's ``[ros] namespace``, then its ``[ros.remap]``.
+
+    Raises:
+        ConfigurationError: a namespace or remap that is not a ROS name, or a remap of no topic.
+    """
+    ros: dict[str, Any] = data["ros"] if isinstance(data.get("ros"), dict) else {}
+    groups: dict[str, Any] = data["groups"] if isinstance(data.get("groups"), dict) else {}
+    namespace_of = {role: str(group.get("namespace", "")) for group in groups.values() if isinstance(group, dict)
+                    and isinstance(group.get("roles"), dict) for role in group["roles"]}
+    remap = ros.get("remap", {})
+    return resolve_topics(entries, str(ros.get("namespace", "")), namespace_of,
+                          remap if isinstance(remap, dict) else {})
 
 
 def role_function(recording: Recording, role: str, reference: str | None,

@@ -107,8 +107,42 @@ GROUP = '[groups.g]\nroles = { A = "m:f" }\n'
 BAD = {
     "unknown_top_key": (
         MINIMAL + "protocl = 1\n" + GROUP,
-        ("protocl: unknown key; expected one of channels, domain, global, groups, monitors, protocol, pythonpath, "
-         "record, ros, run_id, timeout, transport")),
+        ("protocl: unknown key; expected one of channels, domain, global, groups, include, monitors, params, "
+         "protocol, pythonpath, record, ros, run_id, timeout, transport")),
+    "params_not_tables": (
+        MINIMAL + "params = 3\n" + GROUP,
+        "params: expected tables such as [params.Planner], got 3"),
+    "params_of_a_role_not_a_table": (
+        MINIMAL + "params = { A = 3 }\n" + GROUP,
+        "params.A: expected a table such as { speed = 0.3 }, got 3"),
+    "param_value_not_a_ros_type": (
+        MINIMAL + "[params.A]\nat = 1979-05-27\n" + GROUP,
+        "params.A.at: expected a bool, int, float, str or an array of one of them (as ROS parameters), got date"),
+    "param_array_of_two_types": (
+        MINIMAL + "[params.A]\nxs = [1, \"a\"]\n" + GROUP,
+        "params.A.xs: expected an array of one type (bool, int, float or str, as ROS parameters), got list[int | str]"),
+    "include_not_paths": (
+        "include = \"base.toml\"\n" + MINIMAL + GROUP,
+        "include: expected an array of system files such as [\"base.toml\"], got \"base.toml\""),
+    "include_missing": (
+        "include = [\"base.toml\"]\n" + MINIMAL + GROUP,
+        "include: cannot read base.toml: no such file (paths are relative to the including file's folder)"),
+    "ros_namespace_not_a_name": (
+        MINIMAL + "[ros]\nnamespace = \"/r-1\"\n" + GROUP,
+        ("ros.namespace: expected a ROS namespace such as \"/robot1\" (tokens of letters, digits and '_'), "
+        "got \"/r-1\"")),
+    "ros_remap_not_names": (
+        MINIMAL + "[ros.remap]\n\"/cmd_vel\" = \"r 1\"\n" + GROUP,
+        ("ros.remap./cmd_vel: expected a ROS topic name such as \"/cmd_vel\" or, relative to the namespace, "
+        "\"cmd_vel\" (tokens of letters, digits and '_'), got \"/cmd_vel\" = \"r 1\"")),
+    "ros_topic_not_a_name": (
+        MINIMAL + "[ros.topics]\n\"A->B\" = \"9lives\"\n" + GROUP,
+        ("ros.topics.A->B: expected a ROS topic name such as \"/cmd_vel\" or, relative to the namespace, "
+        "\"cmd_vel\" (tokens of letters, digits and '_'), got \"9lives\"")),
+    "group_namespace_not_a_name": (
+        MINIMAL + GROUP + "namespace = \"a//b\"\n",
+        ("groups.g.namespace: expected a ROS namespace such as \"/robot1\" (tokens of letters, digits and "
+        "'_'), got \"a//b\"")),
     "channel_capacity_zero": (
         MINIMAL + '[channels."A->B"]\ncapacity = 0\n' + GROUP,
         "channels.A->B.capacity: expected a whole number of messages >= 1, got 0"),
@@ -117,7 +151,7 @@ BAD = {
         "channels.A->B.size: unknown key; expected one of capacity, qos"),
     "unknown_ros_key": (
         MINIMAL + "[ros]\ntopic = {}\n" + GROUP,
-        "ros.topic: unknown key; expected one of distro, domain, external, qos, topics"),
+        "ros.topic: unknown key; expected one of distro, domain, external, namespace, qos, remap, topics"),
     "ros_topics_not_a_table": (
         MINIMAL + "[ros]\ntopics = [\"/cmd_vel\"]\n" + GROUP,
         'ros.topics: expected a table such as { "Move->Gazebo" = "/cmd_vel" }, got ["/cmd_vel"]'),
@@ -129,8 +163,8 @@ BAD = {
         "ros.domain: expected a DDS domain id 0..232, got 300"),
     "unknown_group_key": (
         MINIMAL + GROUP + "prio = 3\n",
-        ("groups.g.prio: unknown key; expected one of cpus, host, max_restarts, memory, nice, on_failure, "
-         "priority, priority_inheritance, roles")),
+        ("groups.g.prio: unknown key; expected one of cpus, host, max_restarts, memory, namespace, nice, "
+         "on_failure, priority, priority_inheritance, roles")),
     "priority_inheritance_not_a_bool": (
         MINIMAL + GROUP + "priority_inheritance = 0\n",
         "groups.g.priority_inheritance: expected true or false, got 0"),

@@ -109,7 +109,8 @@ class TinMan:
             args.duration = PATROL_LIMIT if patrol else SHORT_RUN
         if not args.duration > 0:
             raise TinManError(f"--duration {args.duration}: expected a number of seconds > 0")
-        config = load_config(SYSTEM_FILE)
+        config = load_config(SYSTEM_FILE).with_overrides(getattr(args, "param", []), getattr(args, "remap", []),
+                                                         getattr(args, "namespace", None))
         if args.paper:
             config = dataclasses.replace(config, global_name=PAPER_GLOBAL)
         if getattr(args, "transport", None) is not None:

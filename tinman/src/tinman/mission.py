@@ -49,9 +49,10 @@ DOCK = (DEFAULT_WORLD.start[0], DEFAULT_WORLD.start[1])  # where the robot start
 REPLAN_PERIOD = 0.5       # seconds, the live Planner's default
 
 
-def patrol_pursuit() -> PurePursuit:
-    """The path follower the patrol drives with (give it to ``Mixer`` live, too)."""
-    return PurePursuit(speed=CRUISE_SPEED, max_angular=MAX_TURN_RATE)
+def patrol_pursuit(speed: float = CRUISE_SPEED) -> PurePursuit:
+    """The path follower the patrol drives with (give it to ``Mixer`` live, too), cruising at
+    ``speed`` m/s (Move's parameter ``max_speed``: ``anodize run tinman -p Move.max_speed=0.3``)."""
+    return PurePursuit(speed=speed, max_angular=MAX_TURN_RATE)
 
 
 @dataclass(frozen=True)

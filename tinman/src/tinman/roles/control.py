@@ -26,7 +26,7 @@ from ..messages import (
     twist_planar,
 )
 from ..messages import joy as joy_message
-from ..mission import patrol_pursuit
+from ..mission import CRUISE_SPEED, patrol_pursuit
 from ..mixer import Mixer
 from ..records import percentiles, save_record
 from ..settings import current
@@ -35,6 +35,7 @@ from ..world import DEFAULT_WORLD
 __all__ = ["joy", "control", "move"]
 
 CLIENT_HOLD = 0.5  # seconds a Foxglove client's joystick state counts after it arrived
+MAX_PATH_SPEED = 0.5  # m/s: the protocol refuses faster commands (Control -> Move's refinement)
 
 
 def joy(ep: Endpoint) -> None:
@@ -98,19 +99,25 @@ def control(ep: Endpoint) -> None:
         save_record("Control", {"contract": contract_of(ep)})
 
 
-def move(ep: Endpoint) -> None:
+def move(ep: Endpoint, *, max_speed: float = CRUISE_SPEED) -> None:
     """The mixer: a command to the robot for every command from Control, steering by the
     fused estimate (VisOdom's Pose: wheel and visual odometry in one estimator), each checked
     by the safety layer against the range scanner's latest scan (Gazebo's LaserScan) before it
     goes to the robot.
 
+    ``max_speed`` (a role parameter, m/s): the speed it follows the planned path at
+    (``anodize run tinman -p Move.max_speed=0.3``; ``[params.Move]`` in a system file).
+
     Time is the endpoint's clock: each of Move's threads reads the clock of the branch it
     acts through (:class:`_ThreadClock`), so ``anodize replay`` gives each the times it read
     in the recorded run."""
+    if not 0 < max_speed <= MAX_PATH_SPEED:
+        raise ValueError(f"Move's parameter max_speed: expected a speed in m/s, 0 < max_speed <= {MAX_PATH_SPEED}, "
+                         f"got {max_speed}")
     settings = current()
     start_faults("Move")
     clock = _ThreadClock(ep)
-    mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate, patrol_pursuit(),  # as the mission drives
+    mixer = Mixer(DEFAULT_WORLD, 1.0 / settings.control_rate, patrol_pursuit(max_speed),  # as the mission drives
                   clock=clock, scanned=True)
     planner_lost: list[str] = []
     perception_lost: list[str] = []
