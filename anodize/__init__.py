@@ -21,6 +21,7 @@ from ._live.server import LiveView, open_live_view
 from ._recording.reader import RecordingError
 from ._recording.replay_network import ReplayDivergenceError
 from ._recording.run import Recording
+from ._recording.selection import SelectionError
 from ._ros.messages import RosDecodeError, RosEncodeError
 from ._session import TIMEOUT, Endpoint, EndpointStatistics, Message, State
 from ._session.logs import LogEntry
@@ -41,6 +42,7 @@ from ._tools.config import ConfigError, SystemConfig, build_system, load_config
 from ._tools.named import Finished, NamedSystem, Prepared
 from ._transport.codec import DecodeError, EncodeError
 from ._transport.links import PayloadError
+from ._transport.qos_profiles import QosError
 from ._transport.shm import RingAllocationError, RingFullError
 from .errors import (
     Action,
@@ -81,7 +83,7 @@ __all__ = [
     # Every other error a user can meet, wherever it is raised.
     "RoleError", "MissingExtraError", "ConfigError", "EncodeError", "DecodeError", "PayloadError",
     "RingFullError", "RingAllocationError", "RecordingError", "ReplayDivergenceError",
-    "RosEncodeError", "RosDecodeError",
+    "RosEncodeError", "RosDecodeError", "QosError", "SelectionError",
 ]
 
 # Public names whose module needs an extra: imported on first use, so `import anodize` needs none
