@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -23,15 +24,11 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A recorded 6 s run in ``<tmp>/out/tinman``: the folder the default settings name, seen from ``<tmp>``."""
-    root = tmp_path_factory.mktemp("replayed")
-    out = root / "out" / "tinman"
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the run: the run exports its own
-        status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", "--out", str(out)])
+def recorded(tinman_recorded: Any) -> Path:
+    """The session's recorded 6 s run (tests/conftest.py) in ``<tmp>/out/tinman``: the folder the
+    default settings name, seen from ``<tmp>``."""
+    out: Path = tinman_recorded.out
     report = json.loads((out / "report.json").read_text())
-    assert status == (0 if report["ok"] else 1)
     assert report["messages"].get("VisOdom->Planner", 0) >= 2, report["messages"]
     return out
 
