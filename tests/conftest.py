@@ -44,6 +44,16 @@ def tinman_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return generate(tmp_path_factory.mktemp("sequence") / "room", duration=6.0)
 
 
+@pytest.fixture(scope="session")
+def mypy_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One ``--cache-dir`` for the suite's mypy runs over generated code (tests/anodize/tools/test_codegen*.py,
+    tests/anodize/test_timed_end_to_end.py): anodize, sessiontypes and numpy, which every run follows, are
+    analysed once instead of once per run (most of each run's time). mypy checks each cached module
+    against its source's hash and the options it was checked with, so an entry that does not fit is
+    analysed again, never trusted; the files a test names are judged as without a cache."""
+    return tmp_path_factory.mktemp("mypy_cache")
+
+
 class RecordedTinMan(NamedTuple):
     """One recorded TinMan run: its folder, the command's exit status and what it printed."""
 
