@@ -7,20 +7,23 @@ This is also the set of channels a runtime needs: no edge, no channel.
 
 from __future__ import annotations
 
-from typing import Any
-
-import networkx as nx
+from typing import TYPE_CHECKING, Any
 
 from . import global_types as g
 from .declarations import GlobalType
 from .dot import to_dot
 from .sorts import print_message
 
+if TYPE_CHECKING:
+    import networkx as nx
+
 __all__ = ["communication_graph", "graph_to_dot"]
 
 
 def communication_graph(global_type: GlobalType) -> nx.DiGraph[str]:
     """Return a ``networkx.DiGraph``: nodes are roles, edges carry ``messages`` (a list)."""
+    import networkx as nx  # here, not at import: a tenth of a second that every group process paid
+
     graph: nx.DiGraph[str] = nx.DiGraph(name=global_type.name)
     graph.add_nodes_from(global_type.roles)
     stack: list[g.GlobalTerm] = [global_type.body]
@@ -53,6 +56,8 @@ def communication_graph(global_type: GlobalType) -> nx.DiGraph[str]:
 
 def graph_to_dot(graph: nx.DiGraph[str]) -> str:
     """Graphviz DOT text for a communication graph."""
+    import networkx as nx
+
     styled: Any = nx.DiGraph()
     for node in graph.nodes:
         styled.add_node(node, shape="box", style="rounded")

@@ -485,14 +485,25 @@ def _token(kind: str, value: str, start: int, newlines: list[int]) -> Token:
 
 
 _builder = _Builder()
-_parser = lark.Lark(
-    resources.files(__package__).joinpath("grammar.lark").read_text(encoding="utf-8"),
-    parser="lalr",
-    lexer=_FastLexer,
-    start=["start", "expression_only"],
-    transformer=_builder,
-    maybe_placeholders=False,
-)
+_built: list[lark.Lark] = []  # the parser, once a parse needed it
+
+
+def _parser() -> lark.Lark:
+    """The grammar's LALR parser, built at the first parse (under ``_lock``): building it takes a
+    sixth of a second, which every process importing anodize paid, its group processes too, though
+    most never parse a protocol."""
+    if not _built:
+        _built.append(lark.Lark(
+            resources.files(__package__).joinpath("grammar.lark").read_text(encoding="utf-8"),
+            parser="lalr",
+            lexer=_FastLexer,
+            start=["start", "expression_only"],
+            transformer=_builder,
+            maybe_placeholders=False,
+        ))
+    return _built[0]
+
+
 # The builder knows the current file's path; one parse at a time uses it.
 _lock = threading.Lock()
 
@@ -516,7 +527,7 @@ def parse_expression(text: str, path: str = "<string>") -> c.Expr:
     with _lock:
         _builder.path, _builder.lines = path, lines
         try:
-            return cast("c.Expr", _parser.parse(text, start="expression_only"))
+            return cast("c.Expr", _parser().parse(text, start="expression_only"))
         except lark.exceptions.UnexpectedInput as error:
             raise _syntax_error(error, text, lines, path) from None
 
@@ -531,7 +542,7 @@ def _parse(text: str, path: str) -> s.SourceFile:
         _builder.path, _builder.lines = path, lines
         try:
             # The builder's start() turns the tree into the declarations.
-            declarations = cast("tuple[s.Declaration, ...]", _parser.parse(text, start="start"))
+            declarations = cast("tuple[s.Declaration, ...]", _parser().parse(text, start="start"))
         except lark.exceptions.UnexpectedInput as error:
             raise _syntax_error(error, text, lines, path) from None
     return s.SourceFile(path, lines, declarations)

@@ -16,8 +16,12 @@ profile's multiplier reaches tests that set ``max_examples`` explicitly.
 
 from __future__ import annotations
 
+import contextlib
+import io
+import json
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -38,3 +42,40 @@ def tinman_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from tinman.sequences import generate
 
     return generate(tmp_path_factory.mktemp("sequence") / "room", duration=6.0)
+
+
+@pytest.fixture(scope="session")
+def mypy_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One ``--cache-dir`` for the suite's mypy runs over generated code (tests/anodize/tools/test_codegen*.py,
+    tests/anodize/test_timed_end_to_end.py): anodize, sessiontypes and numpy, which every run follows, are
+    analysed once instead of once per run (most of each run's time). mypy checks each cached module
+    against its source's hash and the options it was checked with, so an entry that does not fit is
+    analysed again, never trusted; the files a test names are judged as without a cache."""
+    return tmp_path_factory.mktemp("mypy_cache")
+
+
+class RecordedTinMan(NamedTuple):
+    """One recorded TinMan run: its folder, the command's exit status and what it printed."""
+
+    out: Path
+    status: int
+    printed: str
+
+
+@pytest.fixture(scope="session")
+def tinman_recorded(tmp_path_factory: pytest.TempPathFactory) -> RecordedTinMan:
+    """``anodize run tinman --duration 6 --record`` (the README's run, shorter: live camera,
+    default world, no --patrol), once per session, in ``<tmp>/out/tinman`` (the folder the default
+    settings name, seen from ``<tmp>``). The tests that read a whole TinMan run's recording, report
+    or output share it (replay, verify, the live camera's odometry); they only read it."""
+    from anodize._tools import cli
+    from tinman.settings import ENVIRONMENT_VARIABLE
+
+    out = tmp_path_factory.mktemp("recorded") / "out" / "tinman"
+    printed = io.StringIO()
+    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(printed):
+        patch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the run: the run exports its own
+        status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", "--out", str(out)])
+    report = json.loads((out / "report.json").read_text())
+    assert status == (0 if report["ok"] else 1), printed.getvalue()
+    return RecordedTinMan(out, status, printed.getvalue())

@@ -146,8 +146,8 @@ def test_a_generated_send_refuses_a_payload_out_of_range_located_at_the_refineme
 
 
 @pytest.mark.slow
-def test_the_generated_modules_pass_mypy_strict(tmp_path: Path,
-                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_generated_modules_pass_mypy_strict(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                mypy_cache: Path) -> None:
     proto = _proto(tmp_path)
     out_dir = tmp_path / "gen"
     code, out = _cli(capsys, "project", str(proto), "-o", str(out_dir))
@@ -158,7 +158,7 @@ def test_the_generated_modules_pass_mypy_strict(tmp_path: Path,
     assert "every 500ms +- 450ms" in text and "{abs(v) <= 1.5}" in text and "within 300ms else timeout" in text
     result = subprocess.run(
         [sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent", "--no-color-output",
-         "--cache-dir", str(tmp_path / ".mypy_cache"), *map(str, modules)],
+         "--cache-dir", str(mypy_cache), *map(str, modules)],
         capture_output=True, text=True, cwd=out_dir, timeout=300, check=False)
     assert result.returncode == 0, result.stdout + result.stderr
 

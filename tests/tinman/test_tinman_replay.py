@@ -1,5 +1,5 @@
-"""``anodize replay`` of a recorded TinMan run (plain ``--record DIR``: a rosbag2 folder that holds
-every channel, those inside a group too): every role's replay but the simulator's matches its
+"""``anodize replay`` of a recorded TinMan run (plain ``--record``, which records every channel,
+those inside a group too): every role's replay but the simulator's matches its
 recording message for message (the roles read time through their endpoints, which a recording
 records and a replay gives back; Move's and VisOdom's threads go through their recorded order);
 the Visualizer, which only receives, compares nothing and says so (exit 1); no replay writes
@@ -12,6 +12,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -28,21 +29,15 @@ pytestmark = pytest.mark.slow  # runs the whole system in processes for seconds,
 ROOT = Path(__file__).resolve().parents[2]
 
 
-BAG = "bag"  # the recording: a rosbag2 folder in the run's folder
+BAG = "run.mcap"  # the recording plain --record writes in the run's folder
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A recorded 6 s run in ``<tmp>/out/tinman``: the folder the default settings name, seen from
-    ``<tmp>``; the recording, plain ``--record DIR``, in its folder ``bag``."""
-    root = tmp_path_factory.mktemp("replayed")
-    out = root / "out" / "tinman"
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the run: the run exports its own
-        status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", str(out / BAG),
-                           "--out", str(out)])
+def recorded(tinman_recorded: Any) -> Path:
+    """The session's recorded 6 s run (tests/conftest.py) in ``<tmp>/out/tinman``: the folder the
+    default settings name, seen from ``<tmp>``."""
+    out: Path = tinman_recorded.out
     report = json.loads((out / "report.json").read_text())
-    assert status == (0 if report["ok"] else 1)
     assert report["messages"].get("VisOdom->Planner", 0) >= 2, report["messages"]
     return out
 

@@ -291,14 +291,10 @@ def test_verify_of_something_that_is_not_a_recording_is_an_error_not_a_traceback
 # ---- a ROS-typed system across processes -------------------------------------------------------
 
 @pytest.mark.slow
-def test_tinman_records_and_its_recording_verifies(tmp_path: Path) -> None:
-    import subprocess
-
-    out = tmp_path / "tinman"
-    done = subprocess.run([sys.executable, "-m", "anodize._tools.cli", "run", "tinman", "--duration", "4", "--quiet",
-                           "--world", "easy", "--out", str(out), "--record"], capture_output=True, text=True,
-                          timeout=240, cwd=ROOT)
-    assert "recorded" in done.stdout, done.stdout + done.stderr
+def test_tinman_records_and_its_recording_verifies(tmp_path: Path, tinman_recorded: Any) -> None:
+    """On the session's recorded ``anodize run tinman --record`` (tests/conftest.py)."""
+    out: Path = tinman_recorded.out
+    assert "recorded" in tinman_recorded.printed, tinman_recorded.printed
     assert main(["verify", str(out / "run.mcap")]) == 0
     with open_recording(out / "run.mcap") as recording:
         types = {t.topic: t.type_name for t in recording.topics}

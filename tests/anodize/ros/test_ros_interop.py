@@ -101,10 +101,19 @@ def run_tinman(monkeypatch: pytest.MonkeyPatch, out: Path, sequence: Path, *opti
 
 def test_fast_dds_sees_tinmans_cmd_vel_during_the_run(ros_domain: int, monkeypatch: pytest.MonkeyPatch,
                                                        tmp_path: Path, sequence: Path) -> None:
+    """TinMan on DDS, its channels ROS topics in a ROS domain of the test's own (never 0, where real
+    ROS nodes may be): the whole system runs (every channel carried messages) and a Fast DDS node
+    reads its /cmd_vel."""
     wheels = start_peer("listen-twist", topic="rt/cmd_vel", domain=ros_domain, count=50, timeout=90)
     report = run_tinman(monkeypatch, tmp_path, sequence, "--duration", "4")
     code, out, err = finish_peer(wheels, 60)
     assert report["ok"] and report["violations"] == 0, report["problems"]
+    assert report["transport"] == "dds" and report["frames_processed"] > 10  # type: ignore[operator]
+    messages = report["messages"]
+    assert isinstance(messages, dict)
+    for channel in ("Joy->Control", "Control->Move", "Move->Gazebo", "Camera->VisOdom",
+                    "VisOdom->Visualizer", "VisOdom->Planner", "Planner->Move"):
+        assert messages[channel] > 0, channel
     twists = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
     assert code == 0 and len(twists) == 50, out + err  # a 50 Hz loop: the first second of it
     assert all(len(t["linear"]) == 3 and len(t["angular"]) == 3 for t in twists)

@@ -9,9 +9,12 @@ import json
 from pathlib import Path
 
 import dds_roles
+import pytest
 from dds_hosts import HERE, domain, finish, start_host
 
 from anodize._supervision.report import RoleStatus
+
+pytestmark = pytest.mark.slow  # each runs DDS hosts in processes for seconds
 
 HEADER = """\
 protocol = "system.proto"

@@ -440,7 +440,7 @@ BROKEN_PROGRAMS: dict[str, tuple[str, str, str, str]] = {
 
 
 @pytest.mark.slow
-def test_generated_modules_and_programs_pass_mypy_strict(programs: Path) -> None:
+def test_generated_modules_and_programs_pass_mypy_strict(programs: Path, mypy_cache: Path) -> None:
     """One mypy run: every generated module, the correct programs, and the broken ones."""
     for name, (source, old, new, _) in BROKEN_PROGRAMS.items():
         program = (FIXTURES / source).read_text(encoding="utf-8")
@@ -458,7 +458,7 @@ def test_generated_modules_and_programs_pass_mypy_strict(programs: Path) -> None
     environment = {**os.environ, "MYPYPATH": os.pathsep.join((str(REPO), str(REPO / "tinman" / "src")))}
     result = subprocess.run(
         [sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent", "--no-color-output",
-         "--no-error-summary", "--cache-dir", str(programs / ".mypy_cache"), *files],
+         "--no-error-summary", "--cache-dir", str(mypy_cache), *files],
         cwd=programs, env=environment, capture_output=True, text=True, timeout=120)
     errors: dict[str, list[str]] = {}
     for line in result.stdout.splitlines():

@@ -202,7 +202,7 @@ def move(start: loop_m.Initial) -> None:
 
 
 @pytest.mark.slow
-def test_constrained_modules_and_a_program_using_them_pass_mypy_strict(tmp_path: Path) -> None:
+def test_constrained_modules_and_a_program_using_them_pass_mypy_strict(tmp_path: Path, mypy_cache: Path) -> None:
     for role in ("C", "M", "O"):
         module = _generate(role)
         (tmp_path / module.filename).write_text(module.text, encoding="utf-8")
@@ -213,7 +213,7 @@ def test_constrained_modules_and_a_program_using_them_pass_mypy_strict(tmp_path:
     environment = {**os.environ, "MYPYPATH": os.pathsep.join((str(REPO), str(REPO / "tinman" / "src")))}
     result = subprocess.run(
         [sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent", "--no-color-output",
-         "--no-error-summary", "--cache-dir", str(tmp_path / ".mypy_cache"), *files],
+         "--no-error-summary", "--cache-dir", str(mypy_cache), *files],
         cwd=tmp_path, env=environment, capture_output=True, text=True, timeout=120)
     errors = [line for line in result.stdout.splitlines() if ": error:" in line]
     assert [e.split(":")[0] for e in errors] == ["broken_loop_program.py"], result.stdout + result.stderr

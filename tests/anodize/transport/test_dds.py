@@ -40,6 +40,7 @@ def test_a_protocol_with_choices_and_recursion_completes(monkeypatch: pytest.Mon
     assert report.groups["consuming"].received == 2001
 
 
+@pytest.mark.slow  # DDS groups in processes for seconds
 def test_the_two_hosts_example_runs_here_with_both_groups() -> None:
     result = subprocess.run([sys.executable, "-m", "anodize._tools.cli", "run", "--quiet", "--timeout", "60",
                              str(REPO / "examples/two_hosts/two_hosts.toml")],
@@ -49,6 +50,7 @@ def test_the_two_hosts_example_runs_here_with_both_groups() -> None:
     assert "protocol Teleop: ok" in result.stdout
 
 
+@pytest.mark.slow  # DDS groups in processes for seconds
 def test_a_slow_receiver_holds_the_sender_back(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DDS_TEST_COUNT", "1000")
     progress = tmp_path / "consumed"
@@ -62,6 +64,7 @@ def test_a_slow_receiver_holds_the_sender_back(tmp_path: Path, monkeypatch: pyte
     assert ahead <= 224 + 1, ahead
 
 
+@pytest.mark.slow  # DDS groups in processes for seconds
 def test_a_slow_receiver_of_frames_holds_the_sender_to_a_few_megabytes(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DDS_TEST_COUNT", "200")
@@ -107,6 +110,7 @@ def test_an_unknown_host_is_a_configuration_error() -> None:
         system.run()
 
 
+@pytest.mark.slow  # DDS groups in processes for seconds
 def test_a_killed_host_is_reported_to_the_other_as_a_peer_failure(tmp_path: Path) -> None:
     system = write_system(tmp_path, "slow_producer", "killed")
     flowing = {"DDS_TEST_FLOWING": str(tmp_path / "flowing")}
@@ -153,6 +157,7 @@ FORGER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # DDS groups in processes for seconds
 def test_a_forged_writer_is_rejected_and_reported(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # The forger knows the run's token (as one that read the discovery traffic of a run would),
     # so it meets the run's reader in the run's partition; it claims some other identity.

@@ -123,11 +123,11 @@ def test_the_two_hosts_example_across_namespaces(hosts: Hosts, tmp_path: Path, f
     assert a["ok"] and b["ok"], out
 
 
-@pytest.mark.parametrize("loss", [0, 10])
-def test_messages_and_frames_cross_in_order(hosts: Hosts, tmp_path: Path, loss: int,
-                                            monkeypatch: pytest.MonkeyPatch) -> None:
-    if loss and shutil.which("nft") is None:
-        pytest.skip("nftables is not installed (scripts/bootstrap installs it when run as root)")
+def test_messages_and_frames_cross_in_order(hosts: Hosts, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Over a link that drops 10% of the packets: what crosses a lossless link in order crosses this
+    # one too (the lossless case was a run of its own, the same assertions on an easier link). Where
+    # nftables is missing, the link is lossless and the test proves that much.
+    loss = 10 if shutil.which("nft") is not None else 0  # scripts/bootstrap installs nftables as root
     if loss:
         hosts.drop(loss)
     # 20,000 messages and 200 frames: about 90 of the sender's 224-message windows and 12 of its

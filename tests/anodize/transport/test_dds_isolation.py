@@ -53,6 +53,7 @@ def stream_system(producer: Callable[..., Any], consumer: Callable[..., Any], ru
     return system
 
 
+@pytest.mark.slow  # DDS groups in processes for seconds
 def test_a_stray_reader_of_another_run_does_not_hold_a_channel_back(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # Before the fix the stray readers matched the channel's writer and, never taking, held
@@ -67,6 +68,7 @@ def test_a_stray_reader_of_another_run_does_not_hold_a_channel_back(
     assert "another_run" not in notes, notes  # never matched: nothing to reject or name
 
 
+@pytest.mark.slow  # DDS groups in processes for seconds
 def test_a_forger_that_claims_the_groups_before_the_run_never_wins(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # Before the fix the forger, there first, was accepted at the start barrier (its garbage
@@ -79,6 +81,7 @@ def test_a_forger_that_claims_the_groups_before_the_run_never_wins(
     assert report.roles["P"].status == RoleStatus.DONE, report.summary()  # the honest sender is not blamed
 
 
+@pytest.mark.slow  # DDS groups in processes for seconds
 def test_a_reader_of_every_partition_that_holds_a_channel_back_is_named(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # A reader subscribed to every partition is one of this run's as far as DDS is concerned:
@@ -98,6 +101,7 @@ def test_a_reader_of_every_partition_that_holds_a_channel_back_is_named(
     assert report.roles["P"].status != RoleStatus.FAILED, report.summary()
 
 
+@pytest.mark.slow  # DDS groups in processes for seconds
 def test_over_two_hosts_a_token_both_are_given_keeps_an_early_forger_out(tmp_path: Path) -> None:
     # Two `anodize run --host` processes share only what the user gives them: the run id, and
     # here the token. The forger knows the run id and claims both groups before either starts.
