@@ -9,7 +9,10 @@ recording of every channel is then verified with ``anodize verify``'s code; its 
 compared with the rate the run wrote the recording at (the target: verified faster than
 it was recorded).
 
-    .venv/bin/python bench/recording.py [--runs 3] [--duration 10]
+    .venv/bin/python bench/recording.py [--runs 3] [--duration 10] [--hogs 2]
+
+``--hogs N``: N processes spin at normal priority through every run (the machine a user
+shares), as bench/criticality.py's ``hogs`` scenario.
 
 Prints a table and writes bench/results/recording.json.
 """
@@ -17,6 +20,7 @@ Prints a table and writes bench/results/recording.json.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import statistics
@@ -30,7 +34,7 @@ from typing import Any
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from runs import LoadWatch, print_table, write_results  # noqa: E402
+from runs import LoadWatch, hogs, print_table, write_results  # noqa: E402
 
 ROOT = HERE.parent
 
@@ -85,12 +89,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--duration", type=float, default=10.0)
+    parser.add_argument("--hogs", type=int, default=0, metavar="N",
+                        help="N CPU hogs at normal priority through every run (default none)")
     parser.add_argument("--json", default=str(HERE / "results" / "recording.json"))
     args = parser.parse_args(argv)
     started = time.monotonic()
     watch = LoadWatch()
     runs: dict[str, list[dict[str, Any]]] = {mode: [] for mode in MODES}
-    with tempfile.TemporaryDirectory(prefix="anodize-bench-rec-") as folder:
+    busy = hogs(args.hogs) if args.hogs else contextlib.nullcontext()
+    with tempfile.TemporaryDirectory(prefix="anodize-bench-rec-") as folder, busy:
         for number in range(args.runs):
             for mode, into in runs.items():
                 out = Path(folder) / f"{mode}{number}"
@@ -129,8 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     print_table(rows, text_columns=(0,))
     how = (f"anodize run tinman --world easy for {args.duration:g} s, {args.runs} runs each not recording, recording "
            f"every channel and recording between groups only, in turn; medians (lowest..highest); "
-           f"{os.cpu_count()} CPUs")
-    write_results(Path(args.json), {"runs": args.runs, "duration_s": args.duration, "table": rows,
+           f"{os.cpu_count()} CPUs" + (f", {args.hogs} CPU hogs at nice 0 throughout" if args.hogs else ""))
+    write_results(Path(args.json), {"runs": args.runs, "duration_s": args.duration, "hogs": args.hogs, "table": rows,
                                     **{f"runs_{mode}": found for mode, found in runs.items()}}, started,
                   title="What recording costs TinMan", how=how, watch=watch)
     return 0
