@@ -195,6 +195,7 @@ class Introspection:
                             samples.popleft()
         with self._lock:
             self._groups.pop(connection, None)
+            self._samples.pop(connection, None)  # a group gone has no rate (its counts stay in the totals)
 
     def _seen(self) -> list[int]:
         """Messages so far per label (every group's tap, every incarnation); under the lock."""

@@ -64,7 +64,7 @@ class ChainFault:
     def __str__(self) -> str:
         if not self.channel:
             return f"the chain heads: {self.detail}"
-        where = f"channel {self.channel}"
+        where = f"channel {self.channel}" if "->" in self.channel else f"topic {self.channel}"
         if self.index is not None:
             where += f", message {self.index}"
         return f"{where} {self.kind}: {self.detail}"
@@ -103,7 +103,9 @@ class Evidence:
         if self.ok:
             signature = ("; signature checked" if self.signature_checked else
                          "; signed: give --key to check the signature" if self.signed else "; not signed")
-            held = f"evidence: the hash chain holds on {self.channels} channels ({self.messages} messages)"
+            chains = f"{self.channels} chain{'' if self.channels == 1 else 's'}"
+            held = (f"evidence: the hash chains hold ({chains}, one per channel or other topic; "
+                    f"{self.messages} messages)")
             return [f"{held}; chain heads sha256 {self.digest}{signature}"]
         digest = self.digest or "unknown"
         lines = [f"NOT evidence (chain heads sha256 {digest}): the hash chain does not vouch for this recording"]

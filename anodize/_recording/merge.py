@@ -26,7 +26,7 @@ from typing import Any
 from .._extras import import_extra
 from .chain import CHAIN_KEY, CHAIN_TOPIC, HEADS_RECORD, HeadCollector, chain_of, heads_record, identity
 from .encoding import codec_for_sort
-from .plan import CLOCK_KEY, META, PROFILE
+from .plan import CLOCK_KEY, GAP_KEY, META, PROFILE
 from .rosout import LOG_KEY
 
 __all__ = ["MergeResult", "merge_parts", "recording_file"]
@@ -87,6 +87,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
         collector = HeadCollector(run_info.get("run_id", ""))
         pairs: set[tuple[str, str]] = set()  # the protocol's channels (sender, receiver) recorded
         logs: set[int] = set()  # and its log channel
+        gaps: set[int] = set()  # and its gap channel
 
         def channel_of(number: int, channel_id: int) -> int:
             """The recording's channel of a part's, registered at its first message (one pass)."""
@@ -106,13 +107,14 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
                     pairs.add((metadata[f"{META}.sender"], metadata.get(f"{META}.receiver", "")))
                 elif LOG_KEY in metadata:  # the roles' log records (/rosout): no channel either
                     logs.add(new)
+                elif GAP_KEY in metadata:  # the recorder's gap records: no message, no channel, no topic
+                    gaps.add(new)
                 topics[new] = {"name": topic, "type": type_name, "hash": metadata.get("topic_type_hash", ""),
                                "qos": metadata.get("offered_qos_profiles", ""), "count": 0}
             ids[(number, channel_id)] = new
             return new
 
         start, end = 2**63 - 1, 0
-        linked = 0  # link records of the hash chain (not counted in messages)
         for number, channel_id, log_time, publish_time, sequence, data in heapq.merge(
                 *(source.messages(n) for n, source in enumerate(sources)), key=lambda m: m[2]):
             new = ids.get((number, channel_id)) or channel_of(number, channel_id)
@@ -121,28 +123,27 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
             start, end = min(start, log_time), max(end, log_time)
             if new in links:
                 collector.see(data)
-                linked += 1
             elif new in clocks:
                 result.readings += 1
             elif new in logs:
                 result.logs += 1
-            else:
+            elif new not in gaps:  # the recorder's gap records count as none of these
                 result.messages += 1
             result.bytes += len(data)
         for source in sources:
             if source.heads is not None:
                 collector.check_part(source.path.stem, source.heads)
                 continue
-            # Not closed (its group was killed): the merge links what its writer had not linked yet.
+            # Not closed by a recorder (its group was killed), or the supervisor's /rosout part
+            # (written at the end, :mod:`.rosout`): the merge links what no writer had linked.
             for log_time, data in collector.link_tail(source.path.stem, _Part(source.path).chained()):
                 if not links:
                     links.add(_link_channel(writer, topics))
                 writer.add_message(min(links), log_time, data, log_time, 0)
                 topics[min(links)]["count"] += 1
                 result.bytes += len(data)
-                linked += 1
         result.channels = len(pairs)
-        result.topics = len(topics) - len(clocks) - len(links) - len(logs)
+        result.topics = len(topics) - len(clocks) - len(links) - len(logs) - len(gaps)
         for source in sources:
             result.notes.extend(source.notes)
         result.notes.extend(collector.notes)
@@ -155,7 +156,7 @@ def merge_parts(parts: Path, target: Path, run_info: dict[str, str], sign_key: b
                 f"{priority} ({', '.join(parts)})" for priority, parts in sorted(ran_at.items())))
         if result.messages + result.readings + result.logs == 0:  # nothing was written: no time span
             start = end = 0
-        bag = _bag_metadata(path.name, topics, start, end, result.messages + result.readings + linked + result.logs)
+        bag = _bag_metadata(path.name, topics, start, end, sum(topic["count"] for topic in topics.values()))
         writer.add_metadata("rosbag2", {"serialized_metadata": _yaml(bag)})
         writer.add_metadata(META, run_info)
         chain = heads_record(collector.run_id, collector.heads, sign_key)

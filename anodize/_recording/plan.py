@@ -21,12 +21,14 @@ from .._transport.ros_lanes import check_topic_name
 from .selection import RecordSelection
 
 __all__ = ["RecordPlan", "ChannelLabel", "record_plan", "default_topic", "channel_labels", "PROFILE", "META",
-           "CLOCK_KEY", "CLOCK_TOPIC"]
+           "CLOCK_KEY", "CLOCK_TOPIC", "GAP_TOPIC", "GAP_KEY"]
 
 PROFILE = "ros2"          # the MCAP profile rosbag2 writes
 META = "anodize"          # prefix of anodize's keys in channel metadata, and its metadata record's name
 CLOCK_TOPIC = "/anodize/clock/{role}"  # where a role's clock readings are recorded (no channel of the protocol)
 CLOCK_KEY = f"{META}.clock"  # a clock channel's metadata key (its value: the role)
+GAP_TOPIC = "/anodize/recording/gaps"  # where a part says which messages it could not record
+GAP_KEY = f"{META}.gaps"  # the gap channel's metadata key (its value: "1")
 
 
 @dataclass(frozen=True)

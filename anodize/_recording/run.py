@@ -19,9 +19,10 @@ from .rosout import write_part
 from .selection import RecordSelection
 from .tap import GroupRecording
 
-__all__ = ["Recording", "LOGS_KEPT"]
+__all__ = ["Recording", "LOGS_KEPT", "LOG_TEXT_KEPT"]
 
 LOGS_KEPT = 1_000_000  # log records a recording holds for /rosout; beyond them, records are counted, not kept
+LOG_TEXT_KEPT = 64 * 2**20  # and the characters of their messages: the supervisor holds them until the end
 
 
 class Recording:
@@ -49,7 +50,8 @@ class Recording:
         self.plan: RecordPlan | None = None
         self._run: TapRun | None = None
         self._logs: list[LogEntry] = []
-        self._logs_over = 0  # records past LOGS_KEPT
+        self._logs_over = 0  # records past LOGS_KEPT or LOG_TEXT_KEPT
+        self._log_text = 0  # characters of the kept records' messages
 
     def begin(self, run: TapRun) -> GroupRecording:
         """Plan which channels each group records, under which topics."""
@@ -71,9 +73,12 @@ class Recording:
 
     def log(self, entries: Sequence[LogEntry]) -> None:
         """The roles' log records, as they reach the supervisor: recorded on ``/rosout`` at the end."""
-        room = LOGS_KEPT - len(self._logs)
-        self._logs.extend(entries[:max(0, room)])
-        self._logs_over += max(0, len(entries) - max(0, room))
+        for entry in entries:
+            if len(self._logs) < LOGS_KEPT and self._log_text + len(entry.message) <= LOG_TEXT_KEPT:
+                self._logs.append(entry)
+                self._log_text += len(entry.message)
+            else:
+                self._logs_over += 1
 
     def end(self) -> list[str]:
         """Merge the groups' parts into the recording; returns notes for the run's report."""
@@ -102,7 +107,8 @@ class Recording:
         notes.append(f"recording: {_count(result.chains, 'hash chain')}, heads sha256 {result.heads_digest}{signed}")
         if self._logs:
             notes.append(f"recording: {result.logs} log records on /rosout" + (
-                f"; {self._logs_over} more were not recorded (over {LOGS_KEPT})" if self._logs_over else ""))
+                f"; {self._logs_over} more were not recorded (over {LOGS_KEPT} records or "
+                f"{LOG_TEXT_KEPT // 2**20} MiB of text)" if self._logs_over else ""))
         notes.extend(f"recording: {note}" for note in result.notes)
         return notes
 

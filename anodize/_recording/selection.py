@@ -68,8 +68,11 @@ class RecordSelection:
 
         Raises:
             SelectionError: an excluded name is not of the form ``"Sender->Receiver"``, or not a
-                channel of ``global_type``.
+                channel of ``global_type``; ``between`` beside a ``[record] channels`` list.
         """
+        if between and self.channels is not None:  # it would change nothing: say so rather than ignore it
+            raise SelectionError("--record-between", "the system file's [record] channels already names the "
+                                                     "channels recorded; leave one of the two out")
         chosen = RecordSelection(False, self.channels, self.exclude) if between else self
         names = frozenset(parse_channel(name, f"--record-exclude {name}") for name in exclude)
         excluded = RecordSelection(exclude=names)

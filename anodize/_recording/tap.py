@@ -46,7 +46,7 @@ from .._session.endpoint import put_each
 from ..taps import TapGroup
 from .chain import ChainedWriter
 from .encoding import SortCodec, codec_for_sort
-from .plan import CLOCK_KEY, CLOCK_TOPIC, META, PROFILE, ChannelLabel, RecordPlan
+from .plan import CLOCK_KEY, CLOCK_TOPIC, GAP_KEY, GAP_TOPIC, META, PROFILE, ChannelLabel, RecordPlan
 
 __all__ = ["GroupRecording", "Recorder", "RecordingChannel", "TappedChannel", "SEQUENCE_WRAP", "BACKLOG",
            "channel_metadata", "QOS_PROFILES", "GAP_TOPIC", "GAP_KEY", "CLOSE_WITHIN", "open_part",
@@ -57,8 +57,6 @@ BACKLOG = 64 * 2**20  # bytes a group's recorder may hold; beyond it, messages b
 SEQUENCE_WRAP = 2**32 - 1  # the largest MCAP sequence number
 CLOSE_WITHIN = 1.0    # seconds the writer has, once its group ends, to write what is queued (the
                       # group keeps beating meanwhile, so a longer close is no liveness verdict)
-GAP_TOPIC = "/anodize/recording/gaps"  # where a part says which messages it could not record
-GAP_KEY = f"{META}.gaps"  # the gap channel's metadata key (its value: "1")
 _FLUSH_EVERY = 0.1    # seconds
 _BATCH = 64           # messages the writer takes from its queue at a time
 _GAP = -1             # in the queue, in place of an MCAP channel: a gap record

@@ -111,7 +111,8 @@ class RosBridge:
             ConfigurationError: a remap whose source is no topic of the system.
         """
         if not self.namespace and not self.remap and not any(namespace_of.values()) and all(
-                name.startswith("/") for name in self.topics.values()):
+                name.startswith("/") for name in self.topics.values()) and all(
+                key.startswith("/") or "->" in key for key in self.qos):
             return self
         topics = resolve_topics(self.topics, self.namespace, namespace_of, self.remap)
         # The namespace stays: it names the run (Dds run_id).
@@ -120,14 +121,17 @@ class RosBridge:
     def _resolved_qos(self, resolved: Mapping[str, str]) -> dict[str, QosProfile | str | Mapping[str, object]]:
         """The QoS entries keyed by resolved topic names: an entry written as a topic of
         ``[ros.topics]`` follows that topic (namespaces, remaps); another is resolved in the
-        system's namespace; a channel's entry (``"A->B"``) stays."""
+        system's namespace when a topic is named so, else kept as written (and refused so); a
+        channel's entry (``"A->B"``) stays."""
         qos: dict[str, QosProfile | str | Mapping[str, object]] = {}
         for key, profile in self.qos.items():
             if "->" in key:
                 qos[key] = profile
                 continue
             names = {resolved[entry] for entry, written in self.topics.items() if written == key}
-            for name in names or {resolve_name(key, self.namespace)}:
+            if not names and resolve_name(key, self.namespace) in resolved.values():
+                names = {resolve_name(key, self.namespace)}
+            for name in names or {key}:  # a key on no topic stays as written, to be refused by that name
                 qos[name] = profile
         return qos
 

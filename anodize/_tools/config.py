@@ -71,7 +71,7 @@ from .._recording.selection import RecordSelection, SelectionError, selection_fr
 from .._supervision.group import FailurePolicy, parse_memory
 from .._supervision.params import ParamValue, check_value
 from .._supervision.rosbridge import RosBridge
-from .._supervision.rosnames import check_namespace, check_relative_name
+from .._supervision.rosnames import check_namespace, check_relative_name, resolve_name
 from .._supervision.system import System
 from .._supervision.transports import KINDS, Dds, Transport
 from .._transport.qos_profiles import QosError, QosProfile, qos_profile
@@ -636,8 +636,10 @@ def build_system(config: SystemConfig) -> System:
         raise ConfigError(shown, error.key, error.problem) from None
     except ConfigurationError as error:
         source = str(error).partition(":")[0].removeprefix("remap ")
-        if source in config.remapped_on_command_line:
-            raise ConfigError(COMMAND_LINE, f"-r {source}", str(error).partition(": ")[2]) from None
+        namespace = config.ros.namespace if config.ros is not None else ""
+        given = {resolve_name(name, namespace): name for name in config.remapped_on_command_line}  # as resolved
+        if source in given:
+            raise ConfigError(COMMAND_LINE, f"-r {given[source]}", str(error).partition(": ")[2]) from None
         raise ConfigError(shown, "ros", str(error)) from None
     return system
 

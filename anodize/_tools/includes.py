@@ -63,7 +63,7 @@ def read_system_data(path: Path, shown: str) -> SystemData:
 def _read(path: Path, shown: str, chain: tuple[Path, ...]) -> SystemData:
     data = _parse(path, shown)
     given = data.pop("include", [])
-    if not isinstance(given, list) or not all(isinstance(p, str) and p for p in given):
+    if not isinstance(given, list) or not all(isinstance(p, str) and p and "\0" not in p for p in given):
         raise ConfigError(shown, "include", 'expected an array of system files such as ["base.toml"], '
                                             f"got {json.dumps(given, default=str)}")
     here = Path(os.path.realpath(path))

@@ -31,6 +31,8 @@ def parse_param(given: str) -> tuple[str, str, ParamValue]:
     role, name, text = match.groups()
     try:
         value = tomllib.loads(f"value = {text.strip()}")["value"]
+    except RecursionError:
+        raise ConfigError(COMMAND_LINE, f"-p {role}.{name}", "a value nested too deeply to read") from None
     except tomllib.TOMLDecodeError:
         hint = f" (a string is quoted: -p '{role}.{name}=\"{text.strip()}\"')" if text.strip() else ""
         got = text.strip() or "nothing"

@@ -22,7 +22,7 @@ from sessiontypes.limits import PROTOCOL, SYSTEM_FILE, check_text, read_limited
 from .._recording.metadata import recorded_protocol, role_functions
 from .._recording.reader import Recording
 from .._supervision.group import resolve_function
-from .._supervision.rosnames import resolve_topics
+from .._supervision.rosnames import check_namespace, check_relative_name, resolve_topics
 from .._transport.ros_lanes import ros_settings
 from ..errors import ConfigurationError
 
@@ -98,11 +98,19 @@ def _resolved(data: dict[str, Any], entries: dict[str, str]) -> dict[str, str]:
     """
     ros: dict[str, Any] = data["ros"] if isinstance(data.get("ros"), dict) else {}
     groups: dict[str, Any] = data["groups"] if isinstance(data.get("groups"), dict) else {}
-    namespace_of = {role: str(group.get("namespace", "")) for group in groups.values() if isinstance(group, dict)
+    namespace_of = {role: group.get("namespace", "") for group in groups.values() if isinstance(group, dict)
                     and isinstance(group.get("roles"), dict) for role in group["roles"]}
-    remap = ros.get("remap", {})
-    return resolve_topics(entries, str(ros.get("namespace", "")), namespace_of,
-                          remap if isinstance(remap, dict) else {})
+    remap: dict[Any, Any] = ros["remap"] if isinstance(ros.get("remap"), dict) else {}
+    namespace = ros.get("namespace", "")
+    for given in (namespace, *namespace_of.values()):  # checked as the run checks them: never a traceback
+        problem = check_namespace(given)
+        if problem is not None:
+            raise ConfigurationError(f"namespace {given!r}: {problem}")
+    for name in (*remap, *remap.values()):
+        problem = check_relative_name(name)
+        if problem is not None:
+            raise ConfigurationError(f"[ros.remap] {name!r}: {problem}")
+    return resolve_topics(entries, namespace, namespace_of, remap)
 
 
 def role_function(recording: Recording, role: str, reference: str | None,

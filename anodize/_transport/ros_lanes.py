@@ -301,7 +301,7 @@ def ros_settings(machines: Mapping[str, StateMachine], channels: Iterable[tuple[
 
 def qos_key(entry: str) -> str:
     """Where the system file gives a QoS entry: ``ros.qos."/scan"`` or ``channels."A->B".qos``."""
-    return f'ros.qos."{entry}"' if entry.startswith("/") else f'channels."{entry}".qos'
+    return f'channels."{entry}".qos' if "->" in entry else f'ros.qos."{entry}"'
 
 
 def _topic_qos(qos: Mapping[str, QosProfile],
@@ -309,17 +309,14 @@ def _topic_qos(qos: Mapping[str, QosProfile],
     """Each ROS topic given a QoS, with it and the entry that gives it (a topic's own entry wins
     over its channel's)."""
     found: dict[str, tuple[QosProfile, str]] = {}
-    for entry, profile in sorted(qos.items(), key=lambda item: item[0].startswith("/")):  # channels first
-        if entry.startswith("/"):
+    for entry, profile in sorted(qos.items(), key=lambda item: "->" not in item[0]):  # channels first
+        if "->" not in entry:
             if not any(topic.name == entry for topic in mapped.values()):
                 named = ", ".join(sorted(topic.name for topic in mapped.values())) or "none"
                 raise QosError(qos_key(entry), f"no label of the protocol is on ROS topic {entry} "
                                                f"([ros.topics]); the topics are: {named}")
             found[entry] = (profile, entry)
             continue
-        if "->" not in entry:
-            raise QosError(qos_key(entry), "expected a ROS topic name such as \"/scan\" or a channel such as "
-                                           "\"Gazebo->Move\"")
         sender, receiver, label = _parse_key(entry)
         topics = [topic for (s, r, carried), topic in mapped.items()
                   if (s, r) == (sender, receiver) and label in (None, carried)]

@@ -358,7 +358,7 @@ def test_malformed_link_records_and_heads_are_findings_not_tracebacks(
     rewrite(recorded[0], tmp_path / "m.mcap", garble)
     status, out = _cli(capsys, "verify", str(tmp_path / "m.mcap"))
     assert status == EXIT_NOT_EVIDENCE, out
-    assert "chain: channel /anodize/recording/chain altered: a link record cannot be read" in out, out
+    assert "chain: topic /anodize/recording/chain altered: a link record cannot be read" in out, out
     for heads in ("[1", '{"b-0": {"B->S": [-1, "00"]}}', '{"b-0": 7}', "null"):
         copy = tmp_path / "h.mcap"
         copy.write_bytes(recorded[0].read_bytes())

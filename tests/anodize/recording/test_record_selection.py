@@ -171,6 +171,17 @@ def test_a_mistake_in_record_is_a_located_error(capsys: pytest.CaptureFixture[st
     assert (status, out, err) == (1, "", f"error: {system}: {message}\n")
 
 
+
+def test_record_between_beside_a_list_of_channels_is_refused_not_ignored(capsys: pytest.CaptureFixture[str],
+                                                                          tmp_path: Path) -> None:
+    system = _system(tmp_path, '[record]\nchannels = ["B1->S", "S->B1"]\n')
+    status, out, err = _cli(capsys, "run", str(system), "--record", str(tmp_path / "r.mcap"), "--record-between",
+                            "--quiet")
+    assert (status, out) == (1, "")
+    assert err == ("error: --record-between: the system file's [record] channels already names the channels "
+                   "recorded; leave one of the two out\n")
+    assert not (tmp_path / "r.mcap").exists()
+
 def test_record_exclude_mistakes(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     system = _system(tmp_path)
     status, _, err = _cli(capsys, "run", str(system), "--record-exclude", "S->B2", "--quiet")

@@ -242,3 +242,40 @@ def test_the_including_file_wins_key_by_key_and_every_value_names_its_file(
         if not said:
             assert leaves[key] == value and merged.origin(key, "?") == str(tmp_path / "base.toml")
     assert set(leaves) <= set(top_leaves) | set(base_leaves)
+
+
+# ---- what a review found (each failed before its fix) -------------------------------------------
+
+def test_a_relative_remap_on_the_command_line_is_blamed_on_the_command_line(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    (tmp_path / "stream.proto").write_text(ROS_STREAM, encoding="utf-8")
+    system = tmp_path / "system.toml"
+    system.write_text(SYSTEM.format(out=tmp_path / "given.json").replace(
+        "[groups.a]", '[ros]\nnamespace = "/r1"\n[ros.topics]\n"P->C:data" = "data"\n"P->C:stop" = "stop"\n\n'
+                      "[groups.a]"), encoding="utf-8")
+    status, _, err = run(capsys, "run", str(system), "-r", "nosuch:=/x")
+    assert (status, err.split(": no topic")[0]) == (2, "error: command line: -r nosuch"), err
+
+
+def test_a_value_nested_too_deeply_and_an_include_with_a_nul_are_errors_not_tracebacks(
+        capsys: pytest.CaptureFixture[str], system: Path, tmp_path: Path) -> None:
+    deep = "[" * 3000 + "]" * 3000
+    status, _, err = run(capsys, "run", str(system), "-p", f"P.count={deep}")
+    assert (status, err) == (2, "error: command line: -p P.count: a value nested too deeply to read\n")
+    included = tmp_path / "nul.toml"
+    included.write_text('include = ["a\\u0000b"]\n', encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"include: expected an array of system files"):
+        load_config(included)
+
+
+def test_a_topic_map_whose_remap_is_no_name_is_an_error_not_a_traceback(tmp_path: Path) -> None:
+    import sessiontypes
+    from anodize._tools.recordings import topic_map
+
+    (tmp_path / "stream.proto").write_text(ROS_STREAM, encoding="utf-8")
+    stream = sessiontypes.load(str(tmp_path / "stream.proto")).globals["Stream"]
+    topics = tmp_path / "topics.toml"
+    topics.write_text('[ros.topics]\n"P->C:data" = "data"\n"P->C:stop" = "stop"\n[ros.remap]\n"/data" = 5\n',
+                      encoding="utf-8")
+    with pytest.raises(ConfigurationError, match=r"\[ros.remap\] 5: "):
+        topic_map(str(topics), stream)

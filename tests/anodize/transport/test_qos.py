@@ -180,3 +180,19 @@ def test_a_channel_qos_without_ros_topics_is_refused(tmp_path: Path) -> None:
     path.write_text(path.read_text().split("[ros.topics]")[0] + '[channels."S->C"]\nqos = "sensor_data"\n')
     with pytest.raises(ConfigError, match=re.escape('channels."S->C".qos: a QoS is a ROS topic\'s, and this system')):
         load_config(path)
+
+
+@pytest.mark.parametrize("namespace", ["", '[ros]\nnamespace = "/r1"\n'])
+def test_a_relative_qos_key_follows_its_topic_and_one_on_no_topic_is_refused_as_written(
+        tmp_path: Path, namespace: str) -> None:
+    # A relative key names the topic written so (under any namespace); one on no topic is refused
+    # by the key the file has, not by a name the namespace made of it.
+    path = write_system(tmp_path, f'{namespace}[ros.qos]\n"scan" = "sensor_data"\n')
+    path.write_text(path.read_text().replace('"S->R" = "/scan"', '"S->R" = "scan"'))
+    settings = build_system(load_config(path)).ros_settings()
+    scan = "/r1/scan" if namespace else "/scan"
+    assert settings is not None and settings.qos_of(scan) == PROFILES["sensor_data"]
+    path.write_text(path.read_text().replace('"scan" = "sensor_data"', '"nosuch" = "sensor_data"'))
+    with pytest.raises(ConfigError, match=re.escape(f'{path}: ros.qos."nosuch": no label of the protocol is on '
+                                                    "ROS topic nosuch")):
+        build_system(load_config(path))
