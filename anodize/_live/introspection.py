@@ -33,6 +33,7 @@ from typing import Any
 
 from .._isolation.sched import side_work_priority
 from .._recording.encoding import SortCodec, codec_for_sort
+from ..errors import MissingExtraError
 from ..taps import TapRun
 from .plan import LivePlan, live_plan
 from .runs import in_use, listen, run_dir, run_id, same_user, socket_path, taps_path
@@ -99,7 +100,6 @@ class Introspection:
         plan = live_plan(str(self._taps_path), run.machines, run.group_of, run.topics, on_demand=True)
         with self._lock:
             self._ros_topics = set(run.topics)
-            self._codecs = [codec_for_sort(x.sort) for x in plan.labels]
             self._names = [f"{x.sender}->{x.receiver}:{x.label}" for x in plan.labels]
             self.info.update(transport=run.transport, protocol=run.global_type.name,
                              groups=sorted(set(run.group_of.values())), state="running")
@@ -317,6 +317,12 @@ class Introspection:
             if self.info["state"] == "ended":
                 _answer(sock, {"error": f"run {self.run} has ended"})
                 return
+            if mode == WANT_MESSAGES and not self._codecs:  # made at the first echo: hz needs no extra
+                try:
+                    self._codecs = [codec_for_sort(x.sort) for x in self.plan.labels] if self.plan else []
+                except MissingExtraError as error:
+                    _answer(sock, {"error": str(error)})
+                    return
             watcher = Watcher(sock, mode, self._names, self._codecs, lambda: self._tap_losses(labels))
             self.watchers.append(watcher)
             for label in labels:

@@ -77,7 +77,8 @@ def test_two_tinmans_in_one_domain_under_two_namespaces_do_not_meet(tmp_path: Pa
         # The channels between groups (inside a group, /joy and the camera's images are no DDS topics).
         assert {f"rt/{ns}/cmd_vel", f"rt/{ns}/odom", f"rt/{ns}/plan"} <= ros_topics, ros_topics
     assert "rt/cmd_vel" not in ros_topics and "rt/odom" not in ros_topics  # nothing left un-namespaced
-    assert {name.split("/")[1] for name in ros_topics} == {"r1", "r2"}
+    # Every topic is under a robot's namespace but /rosout, which is global in ROS 2 too: both robots' logs.
+    assert {name.split("/")[1] for name in ros_topics} == {"r1", "r2", "rosout"}, ros_topics
     # Each run's own DDS traffic (its internal channels) is named by its run id: the namespace is in it.
     assert "DDS domain" in outputs["r1"] and "run TinManParallel.r1" in outputs["r1"], outputs["r1"][-2000:]
     assert "run TinManParallel.r2" in outputs["r2"]
