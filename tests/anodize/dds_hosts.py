@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -11,6 +12,21 @@ from pathlib import Path
 import dds_roles
 
 HERE = Path(__file__).resolve().parent
+
+
+def namespaces_unavailable(needs_nft: bool = False) -> str | None:
+    """Why this machine cannot give a test network namespaces (and, ``needs_nft``, nftables to
+    drop packets in them), or None: the reason a namespace test is skipped."""
+    if os.geteuid() != 0:
+        return "creating network namespaces needs root"
+    if shutil.which("ip") is None or (needs_nft and shutil.which("nft") is None):
+        return ("no 'ip' (iproute2) or 'nft' (nftables) command (scripts/bootstrap installs them when run as root)"
+                if needs_nft else "no 'ip' command (iproute2)")
+    probe = f"anz-probe-{os.getpid()}"
+    if subprocess.run(["ip", "netns", "add", probe], capture_output=True).returncode != 0:
+        return "this machine refuses 'ip netns add' (no CAP_SYS_ADMIN in a container?)"
+    subprocess.run(["ip", "netns", "del", probe], capture_output=True)
+    return None
 
 
 def domain() -> int:

@@ -15,7 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from dds_hosts import finish, start_host, wait_for_group, wait_until_flowing, write_system
+from dds_hosts import finish, namespaces_unavailable, start_host, wait_for_group, wait_until_flowing, write_system
 
 from anodize import PeerFailedError
 from anodize._supervision.report import RoleStatus
@@ -24,19 +24,7 @@ REPO = Path(__file__).resolve().parents[3]
 pytestmark = pytest.mark.slow
 
 
-def _unavailable() -> str | None:
-    if os.geteuid() != 0:
-        return "creating network namespaces needs root"
-    if shutil.which("ip") is None:
-        return "no 'ip' command (iproute2)"
-    probe = f"anz-probe-{os.getpid()}"
-    if subprocess.run(["ip", "netns", "add", probe], capture_output=True).returncode != 0:
-        return "this machine refuses 'ip netns add' (no CAP_SYS_ADMIN in a container?)"
-    subprocess.run(["ip", "netns", "del", probe], capture_output=True)
-    return None
-
-
-REASON = _unavailable()
+REASON = namespaces_unavailable()
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(REASON is not None, reason=REASON or "")]
 
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -16,24 +15,12 @@ from pathlib import Path
 
 import pytest
 import qos_roles
-from dds_hosts import domain
+from dds_hosts import domain, namespaces_unavailable
 
 HERE = Path(qos_roles.__file__).resolve().parent
 
 
-def _unavailable() -> str | None:
-    if os.geteuid() != 0:
-        return "creating network namespaces needs root"
-    if shutil.which("ip") is None or shutil.which("nft") is None:
-        return "no 'ip' (iproute2) or 'nft' (nftables) command (scripts/bootstrap installs them when run as root)"
-    probe = f"anz-qprobe-{os.getpid()}"
-    if subprocess.run(["ip", "netns", "add", probe], capture_output=True).returncode != 0:
-        return "this machine refuses 'ip netns add' (no CAP_SYS_ADMIN in a container?)"
-    subprocess.run(["ip", "netns", "del", probe], capture_output=True)
-    return None
-
-
-REASON = _unavailable()
+REASON = namespaces_unavailable(needs_nft=True)
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(REASON is not None, reason=REASON or "")]
 
 
