@@ -55,11 +55,13 @@ def mypy_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 class RecordedTinMan(NamedTuple):
-    """One recorded TinMan run: its folder, the command's exit status and what it printed."""
+    """One recorded TinMan run: its folder, the command's exit status, what it printed, and the
+    key its recording's chain heads were signed with."""
 
     out: Path
     status: int
     printed: str
+    key: Path
 
 
 @pytest.fixture(scope="session")
@@ -72,10 +74,14 @@ def tinman_recorded(tmp_path_factory: pytest.TempPathFactory) -> RecordedTinMan:
     from tinman.settings import ENVIRONMENT_VARIABLE
 
     out = tmp_path_factory.mktemp("recorded") / "out" / "tinman"
+    key = out.parent.parent / "run.key"
+    key.write_bytes(os.urandom(32))
+    key.chmod(0o600)
     printed = io.StringIO()
     with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(printed):
         patch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the run: the run exports its own
-        status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", "--out", str(out)])
+        status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", "--sign-key", str(key),
+                           "--out", str(out)])
     report = json.loads((out / "report.json").read_text())
     assert status == (0 if report["ok"] else 1), printed.getvalue()
-    return RecordedTinMan(out, status, printed.getvalue())
+    return RecordedTinMan(out, status, printed.getvalue(), key)

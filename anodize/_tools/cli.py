@@ -184,9 +184,7 @@ def _parser() -> argparse.ArgumentParser:
     _add_composition_arguments(run_system)
     run_system.add_argument("--record-inside", action="store_true",
                             help="the default now (every channel is recorded): accepted, and does nothing more")
-    run_system.add_argument("--sign-key", metavar="KEYFILE",
-                            help="with --record: sign the recording's hash chain heads with the secret key in "
-                                 "KEYFILE (HMAC-SHA256; 'anodize verify --key KEYFILE' checks it)")
+    _add_sign_key_argument(run_system)
     _add_foxglove_argument(run_system)
     run_system.set_defaults(run=_run)
 
@@ -528,6 +526,12 @@ def _add_composition_arguments(parser: argparse.ArgumentParser) -> None:
     add_composition_arguments(parser)
 
 
+def _add_sign_key_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--sign-key", metavar="KEYFILE",
+                        help="with --record: sign the recording's hash chain heads with the secret key in "
+                             "KEYFILE (HMAC-SHA256; 'anodize verify --key KEYFILE' checks it)")
+
+
 def _add_foxglove_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--foxglove", nargs="?", type=int, const=8765, default=None, metavar="PORT",
                         help="serve every channel and each group's status live to the Foxglove app on "
@@ -645,6 +649,7 @@ def _is_named_run(argv: list[str]) -> bool:
 
 
 def _run_named(name: str, rest: list[str]) -> int:
+    from .keys import read_signing_key
     from .named import find_named
 
     named = find_named(name)
@@ -652,18 +657,22 @@ def _run_named(name: str, rest: list[str]) -> int:
     parser = argparse.ArgumentParser(prog=f"anodize run {name}", description=named.summary)
     parser.add_argument("--quiet", action="store_true", help="no live progress line")
     _add_foxglove_argument(parser)
+    _add_sign_key_argument(parser)
     _add_composition_arguments(parser)  # prepare() applies them: SystemConfig.with_overrides
     named.add_arguments(parser)
     try:
         args = parser.parse_args(rest)
     except SystemExit as exit_:
         return exit_.code if isinstance(exit_.code, int) else EXIT_USAGE
+    sign_key = read_signing_key(args.sign_key, "--sign-key") if args.sign_key is not None else None
     prepared = named.prepare(args, lambda line: print(line, flush=True))
+    if sign_key is not None and prepared.record is None:
+        raise UsageError("--sign-key needs --record")
     progress = None if args.quiet else ProgressLine(sys.stdout, named.progress)
     logs = LogLines(sys.stdout, logging.WARNING if args.quiet else logging.DEBUG,
                     progress.clear if progress is not None else None)
     try:
-        with _taps(prepared.record, args.foxglove, prepared.selection()) as taps, \
+        with _taps(prepared.record, args.foxglove, prepared.selection(), sign_key) as taps, \
                 _introspection(name, name) as served:
             report = prepared.system.run(timeout=prepared.timeout, grace=prepared.grace, on_status=progress,
                                          taps=[*taps, *served], stop_when=prepared.stop_when, on_log=logs)

@@ -395,3 +395,12 @@ def test_a_part_cut_short_before_its_links_were_written_is_linked_by_the_merge(
         report = verify(recording, global_type)
     assert report.evidence is not None and report.evidence.ok, report.text()
     assert report.evidence.messages == 5
+
+
+def test_a_named_run_signs_only_what_it_records(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # `anodize run tinman --sign-key` (the signed run is the suite's recorded TinMan, tests/conftest.py).
+    key = tmp_path / "run.key"
+    key.write_bytes(b"k" * 32)
+    key.chmod(0o600)
+    status = main(["run", "tinman", "--sign-key", str(key), "--duration", "1", "--out", str(tmp_path / "out")])
+    assert (status, capsys.readouterr().err) == (2, "anodize run: error: --sign-key needs --record\n")

@@ -296,6 +296,8 @@ def test_tinman_records_and_its_recording_verifies(tmp_path: Path, tinman_record
     out: Path = tinman_recorded.out
     assert "recorded" in tinman_recorded.printed, tinman_recorded.printed
     assert main(["verify", str(out / "run.mcap")]) == 0
+    assert main(["verify", str(out / "run.mcap"), "--key", str(tinman_recorded.key)]) == 0  # signed: `run tinman`
+    assert ", signed (HMAC-SHA256)" in tinman_recorded.printed
     with open_recording(out / "run.mcap") as recording:
         types = {t.topic: t.type_name for t in recording.topics}
     assert types["/cmd_vel"] == "geometry_msgs/msg/Twist"
