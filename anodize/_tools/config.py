@@ -147,6 +147,8 @@ class SystemConfig:
         params: ``[params.Role]``: role -> its parameters (``System(params=...)``).
         given_on_command_line: the ``(role, parameter)`` pairs ``-p`` gave (for messages).
         remapped_on_command_line: the sources of the remaps ``-r`` gave (for messages).
+        origins: dotted key -> the included file that gave its value (for messages about
+            what is found when the system is built, :meth:`origin`).
     """
 
     path: Path
@@ -163,6 +165,11 @@ class SystemConfig:
     params: dict[str, dict[str, ParamValue]] = field(default_factory=dict)
     given_on_command_line: frozenset[tuple[str, str]] = frozenset()
     remapped_on_command_line: frozenset[str] = frozenset()
+    origins: dict[str, str] = field(default_factory=dict, compare=False)
+
+    def origin(self, key: str | None) -> str:
+        """The file that wrote ``key`` (or its nearest enclosing table): an included one, else this."""
+        return SystemData({}, self.origins).origin(key, str(self.path))
 
     @property
     def external(self) -> frozenset[str]:
@@ -274,7 +281,7 @@ class _Reader:
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
             groups=self.groups(data.get("groups")), ros=self.ros(data.get("ros"), data.get("channels")),
             capacities=self.capacities(data.get("channels", {})), record=self.record(data.get("record")),
-            params=self.params(data.get("params", {})))
+            params=self.params(data.get("params", {})), origins=dict(self.read.origins))
 
     def record(self, table: Any) -> RecordSelection:
         """``[record]``: its shape here; its channels against the protocol when the system is built."""
@@ -601,11 +608,11 @@ def build_system(config: SystemConfig) -> System:
         raise _parameter_error(config, error) from None
     except ConfigurationError as error:
         key = "channels" if str(error).startswith("capacity of") else "ros"
-        raise ConfigError(shown, key, str(error)) from None
+        raise ConfigError(config.origin(key), key, str(error)) from None
     try:
         config.record.check(communication_graph(global_type).edges, f"global {global_type.name}")
     except SelectionError as error:
-        raise ConfigError(shown, f"record.{error.key}", error.problem) from None
+        raise ConfigError(config.origin("record"), f"record.{error.key}", error.problem) from None
     for group in config.groups.values():
         try:
             declared = system.group(group.name, priority=group.priority, memory=group.memory,
@@ -616,7 +623,7 @@ def build_system(config: SystemConfig) -> System:
             for role, reference in group.roles.items():
                 declared.role(role, reference)
         except (ValueError, AnodizeError) as error:
-            raise ConfigError(shown, f"groups.{group.name}", str(error)) from None
+            raise ConfigError(config.origin(f"groups.{group.name}"), f"groups.{group.name}", str(error)) from None
     missing = [role for role in global_type.roles if config.group_of(role) is None and role not in config.external]
     if missing:
         raise ConfigError(shown, "groups", f"{'role' if len(missing) == 1 else 'roles'} "
@@ -633,15 +640,20 @@ def build_system(config: SystemConfig) -> System:
             bridge.settings({role: global_type.project(role).fsm() for role in global_type.roles},
                             tuple(communication_graph(global_type).edges))
     except QosError as error:
-        raise ConfigError(shown, error.key, error.problem) from None
+        raise ConfigError(config.origin(_dotted(error.key)), error.key, error.problem) from None
     except ConfigurationError as error:
         source = str(error).partition(":")[0].removeprefix("remap ")
         namespace = config.ros.namespace if config.ros is not None else ""
         given = {resolve_name(name, namespace): name for name in config.remapped_on_command_line}  # as resolved
         if source in given:
             raise ConfigError(COMMAND_LINE, f"-r {given[source]}", str(error).partition(": ")[2]) from None
-        raise ConfigError(shown, "ros", str(error)) from None
+        raise ConfigError(config.origin("ros"), "ros", str(error)) from None
     return system
+
+
+def _dotted(key: str) -> str:
+    """A QoS error's key (``ros.qos."/scan"``, ``channels."A->B".qos``) as the reader's dotted origins name it."""
+    return key.replace('"', "")
 
 
 def _parameter_error(config: SystemConfig, error: ParameterError) -> ConfigError:
@@ -649,4 +661,4 @@ def _parameter_error(config: SystemConfig, error: ParameterError) -> ConfigError
     if (error.role, error.parameter) in config.given_on_command_line:
         return ConfigError(COMMAND_LINE, f"-p {error.role}.{error.parameter}", error.problem)
     key = f"params.{error.role}.{error.parameter}" if error.parameter else f"params.{error.role}"
-    return ConfigError(str(config.path), key, error.problem)
+    return ConfigError(config.origin(key), key, error.problem)

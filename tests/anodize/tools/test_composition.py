@@ -279,3 +279,13 @@ def test_a_topic_map_whose_remap_is_no_name_is_an_error_not_a_traceback(tmp_path
                       encoding="utf-8")
     with pytest.raises(ConfigurationError, match=r"\[ros.remap\] 5: "):
         topic_map(str(topics), stream)
+
+
+def test_an_included_value_refused_when_the_system_is_built_names_the_included_file(system: Path) -> None:
+    # A parameter the role's function does not take is found only when the system is built.
+    system.write_text(system.read_text().replace("count = 2", "count = 2\nnosuch = 1"), encoding="utf-8")
+    top = system.parent / "top.toml"
+    top.write_text('include = ["system.toml"]\ntimeout = 3\n', encoding="utf-8")
+    with pytest.raises(ConfigError) as raised:
+        build_system(load_config(top))
+    assert (raised.value.path, raised.value.key) == (str(system), "params.P.nosuch")
