@@ -225,14 +225,17 @@ class Introspection:
                        for index, counts in dict(stats.get("labels", {})).items() if int(index) in labels)
 
     def _want(self, labels: list[int]) -> None:
-        """Tell the groups what is wanted of ``labels`` now; under the lock."""
-        changed = []
-        for label in labels:
-            mode = max((w.mode for w in self._watchers.get(label, ())), default=0)
-            if self._wanted.get(label, 0) != mode:
-                self._wanted[label] = mode
-                changed.append((label, mode))
-        for sock, lock in list(self._groups.values()):
+        """Tell the groups what is wanted of ``labels`` now. The change is decided under the
+        lock; the frames go out after it, so a group slow to read holds up no status."""
+        with self._lock:
+            changed = []
+            for label in labels:
+                mode = max((w.mode for w in self._watchers.get(label, ())), default=0)
+                if self._wanted.get(label, 0) != mode:
+                    self._wanted[label] = mode
+                    changed.append((label, mode))
+            groups = list(self._groups.values())
+        for sock, lock in groups:
             with lock, contextlib.suppress(OSError):
                 for label, mode in changed:
                     send_frame(sock, WANT, label, mode, b"")
@@ -327,15 +330,15 @@ class Introspection:
             self.watchers.append(watcher)
             for label in labels:
                 self._watchers[label] = [*self._watchers.get(label, []), watcher]  # readers iterate the old list
-            _answer(sock, {"watching": [self._names[i] for i in labels]})
-            self._want(labels)
+        _answer(sock, {"watching": [self._names[i] for i in labels]})
+        self._want(labels)
         try:
             watcher.serve()
         finally:
             with self._lock:
                 for label in labels:
                     self._watchers[label] = [w for w in self._watchers.get(label, []) if w is not watcher]
-                self._want(labels)
+            self._want(labels)
 
 
 def _request_line(sock: socket.socket) -> str:
