@@ -634,9 +634,10 @@ def build_system(config: SystemConfig) -> System:
     except ParameterError as error:
         raise _parameter_error(config, error) from None
     try:
-        system.ros_settings()  # the topics against the protocol, now rather than when the run starts
+        # The topics against the protocol, now rather than when the run starts; on Dds that checks
+        # the QoS too, on another transport the QoS is checked alone (for `run --transport dds`).
         bridge = system.resolved_ros()
-        if bridge is not None and bridge.qos:  # and the QoS on any transport (`run --transport dds`)
+        if system.ros_settings() is None and bridge is not None and bridge.qos:
             bridge.settings({role: global_type.project(role).fsm() for role in global_type.roles},
                             tuple(communication_graph(global_type).edges))
     except QosError as error:
