@@ -43,6 +43,7 @@ from .._extras import import_extra
 from .._isolation.sched import restore_thread_scheduling, side_work_priority, thread_scheduling
 from .._session.channel import Channel
 from .._session.endpoint import put_each
+from .._transport.qos_profiles import RELIABLE_KEEP_ALL
 from ..taps import TapGroup
 from .chain import ChainedWriter
 from .encoding import SortCodec, codec_for_sort
@@ -68,15 +69,7 @@ def open_part(path: Path) -> IO[bytes]:
     return path.open("wb")
 
 # What anodize's channels offer, as rosbag2 writes it (metadata version 9): reliable, keep all, volatile.
-QOS_PROFILES = """- history: keep_all
-  depth: 0
-  reliability: reliable
-  durability: volatile
-  deadline: {sec: 9223372036, nsec: 854775807}
-  lifespan: {sec: 9223372036, nsec: 854775807}
-  liveliness: automatic
-  liveliness_lease_duration: {sec: 9223372036, nsec: 854775807}
-  avoid_ros_namespace_conventions: false"""
+QOS_PROFILES = RELIABLE_KEEP_ALL.yaml()
 
 
 def channel_metadata(item: ChannelLabel, codec: SortCodec, protocol: str,
