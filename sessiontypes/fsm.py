@@ -10,6 +10,7 @@ is. Stepping is one dictionary look-up: ``table[state][(action, peer, label)]``.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -73,16 +74,17 @@ class StateMachine:
     def states(self) -> range:
         return range(len(self.table))
 
-    def all_transitions(self) -> list[Transition]:
-        """Every transition of this machine and of the machines of its parallel branches."""
-        found: list[Transition] = []
+    def with_branches(self) -> Iterator[StateMachine]:
+        """This machine, then the machines of its parallel branches, at any depth."""
         stack = [self]
         while stack:
             machine = stack.pop()
-            for transitions in machine.table:
-                found.extend(transitions.values())
+            yield machine
             stack.extend(b for branches in machine.forks.values() for b in branches)
-        return found
+
+    def all_transitions(self) -> list[Transition]:
+        """Every transition of this machine and of the machines of its parallel branches."""
+        return [t for machine in self.with_branches() for transitions in machine.table for t in transitions.values()]
 
     def is_final(self, state: int) -> bool:
         """No action is left in ``state`` (a fork is final when its branches are)."""
@@ -98,13 +100,8 @@ class StateMachine:
         Such a role takes whichever message comes first (``Endpoint.recv_any``);
         a transport gives it a doorbell, as it does a role with parallel branches.
         """
-        stack = [self]
-        while stack:
-            machine = stack.pop()
-            if any(len({p for (a, p, _) in keys if a == "recv"}) > 1 for keys in machine.table):
-                return True
-            stack.extend(b for branches in machine.forks.values() for b in branches)
-        return False
+        return any(len({p for (a, p, _) in keys if a == "recv"}) > 1
+                   for machine in self.with_branches() for keys in machine.table)
 
     def step(self, state: int, action: Action, peer: str | None, label: str) -> Transition | None:
         """The transition for that action from ``state``, or None if not allowed."""

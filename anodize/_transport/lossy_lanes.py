@@ -16,7 +16,7 @@ which the monitor would report as a deadline the sender missed.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 
 from sessiontypes import StateMachine
 from sessiontypes.fsm import Transition
@@ -38,7 +38,7 @@ def check_lossy(machine: StateMachine, sender: str, receiver: str, label: str, t
     if not profile.lossy:
         return
     lossy = f"{topic} is {profile.describe()} and may lose messages, but"
-    for branch in _branches(machine):
+    for branch in machine.with_branches():
         for state, actions in enumerate(branch.table):
             transition = actions.get(("recv", sender, label))
             if transition is None:
@@ -61,14 +61,6 @@ def check_lossy(machine: StateMachine, sender: str, receiver: str, label: str, t
                                     f"changes after {label}: a lost {label} would leave {receiver} reading the wrong "
                                     "topic; give this topic a reliable keep_all QoS")
 
-
-def _branches(machine: StateMachine) -> Iterator[StateMachine]:
-    """The machine and the machines of its parallel branches, at any depth."""
-    stack = [machine]
-    while stack:
-        current = stack.pop()
-        yield current
-        stack.extend(branch for branches in current.forks.values() for branch in branches)
 
 
 def _where(transition: Transition, sender: str, receiver: str, label: str) -> str:

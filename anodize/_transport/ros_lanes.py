@@ -133,7 +133,7 @@ def lane_plan(machine: StateMachine, sender: str, topic_of: Mapping[str, str], c
             branches while its labels use several topics, or two labels on different
             topics may come next from one point of the protocol.
     """
-    owners = [m for m in _machines(machine) if any(k[0] == "recv" and k[1] == sender for t in m.table for k in t)]
+    owners = [m for m in machine.with_branches() if any(k[0] == "recv" and k[1] == sender for t in m.table for k in t)]
     topics = {topic_of.get(label) for label in _labels(owners, sender)}
     if len(topics) <= 1:  # one lane whatever comes: no order to work out
         return LanePlan(0, (next(iter(topics), None),), {})
@@ -142,13 +142,6 @@ def lane_plan(machine: StateMachine, sender: str, topic_of: Mapping[str, str], c
                                  "different topics: their order could not be known; put them on one")
     return _determinise(owners[0], sender, topic_of, channel)
 
-
-def _machines(machine: StateMachine) -> Iterable[StateMachine]:
-    stack = [machine]
-    while stack:
-        current = stack.pop()
-        yield current
-        stack.extend(b for branches in current.forks.values() for b in branches)
 
 
 def _labels(machines: list[StateMachine], sender: str) -> set[str]:
