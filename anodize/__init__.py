@@ -13,7 +13,7 @@ The public API is what this module exports (``__all__``) and :mod:`anodize.error
 other module under ``anodize`` is private, whatever its name (tests/test_exports.py).
 """
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ._isolation.sched import lower_thread_priority
 from ._live.inputs import ClientInput, client_input
@@ -23,6 +23,7 @@ from ._recording.replay_network import ReplayDivergenceError
 from ._recording.run import Recording
 from ._recording.selection import SelectionError
 from ._ros.messages import RosDecodeError, RosEncodeError
+from ._ros.rmw_zenoh import RmwZenohFormatError
 from ._session import TIMEOUT, Endpoint, EndpointStatistics, Message, State
 from ._session.logs import LogEntry
 from ._supervision import (
@@ -37,13 +38,14 @@ from ._supervision import (
     RunReport,
     System,
     Transport,
+    Zenoh,
 )
 from ._tools.config import ConfigError, SystemConfig, build_system, load_config
 from ._tools.named import Finished, NamedSystem, Prepared
 from ._transport.codec import DecodeError, EncodeError
-from ._transport.links import PayloadError
+from ._transport.links import PayloadError, SplitBrainError, StartBarrierError
 from ._transport.qos_profiles import QosError
-from ._transport.shm import RingAllocationError, RingFullError
+from ._transport.shm import RingAllocationError, RingFullError, StaleBufferError
 from .errors import (
     Action,
     AnodizeError,
@@ -60,9 +62,6 @@ from .errors import (
 )
 from .taps import ChannelTap
 
-if TYPE_CHECKING:
-    from ._transport.dds import StartBarrierError as StartBarrierError
-
 __all__ = [
     "System", "Group", "Endpoint", "Message", "RunReport", "RoleReport", "GroupReport",
     "AnodizeError", "ConfigurationError", "ParameterError",
@@ -70,7 +69,7 @@ __all__ = [
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
     # Time constraints: a missed deadline or period, and the label of an `else timeout`.
     "DeadlineMissedError", "TIMEOUT",
-    "Inproc", "Processes", "Dds", "RosBridge", "ChannelTap", "Transport",
+    "Inproc", "Processes", "Dds", "Zenoh", "RosBridge", "ChannelTap", "Transport",
     # The taps a program can hand to System.run itself: a recording, the live view in Foxglove.
     "Recording", "open_live_view", "LiveView",
     "EndpointStatistics",
@@ -82,14 +81,15 @@ __all__ = [
     "ClientInput", "client_input", "lower_thread_priority",
     # Every other error a user can meet, wherever it is raised.
     "RoleError", "MissingExtraError", "ConfigError", "EncodeError", "DecodeError", "PayloadError",
-    "RingFullError", "RingAllocationError", "RecordingError", "ReplayDivergenceError",
-    "RosEncodeError", "RosDecodeError", "QosError", "SelectionError",
+    "RingFullError", "RingAllocationError", "StaleBufferError", "RecordingError", "ReplayDivergenceError",
+    "RosEncodeError", "RosDecodeError", "QosError", "SelectionError", "StartBarrierError", "SplitBrainError",
+    "RmwZenohFormatError",
 ]
 
 # Public names whose module needs an extra: imported on first use, so `import anodize` needs none
-# (a missing extra raises MissingExtraError there). Reachable as attributes (anodize.StartBarrierError)
-# but not in __all__, so `from anodize import *` works without the extra too.
-_NEEDS_AN_EXTRA = {"StartBarrierError": ("._transport.dds", "cyclonedds", "dds")}
+# (a missing extra raises MissingExtraError there). Reachable as attributes but not in __all__, so
+# `from anodize import *` works without the extra too.
+_NEEDS_AN_EXTRA: dict[str, tuple[str, str, str]] = {}  # none now: the barriers' errors live in _transport.links
 
 
 def __getattr__(name: str) -> Any:

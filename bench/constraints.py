@@ -9,7 +9,8 @@ every ratio compares measurements taken side by side):
   monitored    the protocol as written, no constraint (the baseline of the ratios)
   refined      ``data(v: float{abs(v) <= 1.5})``: a refinement checked on send and on arrival
   timed        the same, and ``within 1s`` on data: the sender reads its clock at each send, the
-               receiver waits under a deadline each time (the Python path of its receive)
+               receiver waits under a deadline each time (a message already there is taken by
+               the compiled core; waiting for one is the Python core's)
 
 Times are taken inside the role functions (first send to last receive); the median of
 --repeat repetitions and its spread (min, max) are reported, with the ratios to ``monitored``.

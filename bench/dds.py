@@ -68,7 +68,7 @@ os.environ["PYTHONPATH"] = os.pathsep.join(
 
 import dds_roles as roles  # noqa: E402
 import numpy as np  # noqa: E402
-from runs import LoadWatch, bench_env, print_table, write_results  # noqa: E402
+from runs import LoadWatch, bench_env, print_table, run_raw, write_results  # noqa: E402
 
 import sessiontypes  # noqa: E402
 from anodize import Dds, Inproc, Processes, System  # noqa: E402
@@ -88,6 +88,10 @@ global Frames(P, C) = mu t. P -> C : {frame(Image). t, stop}
 global PingPong(A, B) = mu t. A -> B : {ping(int). B -> A : pong(int). t, stop}
 """, "dds_bench.proto").globals
 _runs = itertools.count()
+# A way's name -> its transport, given a fresh run id; bench/zenoh.py adds the Zenoh transport's
+# ways, and measures them with this module's streams and frames.
+CARRIERS: dict[str, Callable[[str], Any]] = {"dds": lambda run_id: Dds(domain=DOMAIN, run_id=run_id, wait=20),
+                                             "process": lambda _: Processes()}
 
 
 # ---- running one measurement ----------------------------------------------------------------
@@ -95,32 +99,13 @@ def run_anodize(transport: str, global_name: str, groups: dict[str, tuple[str, C
                 timeout: float, monitors: bool = True) -> None:
     """Run a two-group system; raise if it did not end well."""
     run_id = f"bench{os.getpid()}_{next(_runs)}"
-    carrier = (Dds(domain=DOMAIN, run_id=run_id, wait=20) if transport == "dds"
-               else Processes() if transport == "process" else Inproc())
-    system = System(GLOBALS[global_name], transport=carrier, monitors=monitors)
+    system = System(GLOBALS[global_name], transport=CARRIERS.get(transport, lambda _: Inproc())(run_id),
+                    monitors=monitors)
     for name, (role, function) in groups.items():
         system.group(name).role(role, function)
     report = system.run(timeout=timeout)
     if not report.ok:
         raise RuntimeError(f"anodize ({transport}) run failed:\n{report.summary()}")
-
-
-def run_raw(targets: list[tuple[Callable[..., None], tuple[Any, ...]]], timeout: float) -> None:
-    """Start the raw processes, join them within ``timeout`` s, kill what is left."""
-    ctx = multiprocessing.get_context("spawn")
-    processes = [ctx.Process(target=fn, args=args, daemon=True) for fn, args in targets]
-    for process in processes:
-        process.start()
-    deadline = time.monotonic() + timeout
-    for process in processes:
-        process.join(max(0.0, deadline - time.monotonic()))
-    failed = [p.exitcode for p in processes if p.exitcode != 0]
-    for process in processes:
-        if process.is_alive():
-            process.kill()
-            process.join(5)
-    if failed:
-        raise RuntimeError(f"raw process(es) failed or timed out: exit codes {failed}")
 
 
 def _prefix(kind: str) -> str:

@@ -56,7 +56,8 @@ def run_tinman(out: Path, duration: float, mode: str) -> dict[str, Any]:
         raise RuntimeError(f"tinman wrote no report:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
     report = json.loads(report_file.read_text(encoding="utf-8"))
     result = {"p50_ms": report["control_period_ms"]["p50"], "p99_ms": report["control_period_ms"]["p99"],
-              "frames_tracked": report["frames_processed"], "duration_s": report["duration_s"]}
+              "frames_tracked": report["frames_processed"], "duration_s": report["duration_s"],
+              "outcome": report["outcome"], "ok": bool(report["ok"]), "problems": report.get("problems", [])[:3]}
     if record:
         path = out / "run.mcap"
         result["recording_mib"] = path.stat().st_size / 2**20
@@ -103,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
                 out = Path(folder) / f"{mode}{number}"
                 into.append(run_tinman(out, args.duration, mode))
                 watch.sample()
-                print(f"run {number + 1}/{args.runs} {SHOWN[mode]}: p99 {into[-1]['p99_ms']:.2f} ms, "
+                print(f"run {number + 1}/{args.runs} {SHOWN[mode]}: {into[-1]['outcome']} in "
+                      f"{into[-1]['duration_s']:.1f} s, p99 {into[-1]['p99_ms']:.2f} ms, "
                       f"{into[-1]['frames_tracked']} frames", flush=True)
 
     def values(mode: str, key: str) -> list[float]:
@@ -121,6 +123,8 @@ def main(argv: list[str] | None = None) -> int:
         ratios = [f"{statistics.median(values(mode, key)) / base:.3f}x" if base else "-"
                   for mode in ("everything", "between")]  # no frames tracked: a run too short for VO
         rows.append([name, cell("none", key), cell("everything", key), cell("between", key), *ratios])
+    rows.append(["runs that failed (counted above too)", *(str(sum(not r["ok"] for r in runs[m])) for m in MODES),
+                 "", ""])
     rows.append(["recording size (MiB)", "", cell("everything", "recording_mib"), cell("between", "recording_mib"),
                  "", ""])
     rows.append(["runs whose recording lost messages", "", str(sum(r["lost"] > 0 for r in runs["everything"])),

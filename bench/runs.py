@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import multiprocessing
 import os
 import shutil
 import subprocess
@@ -181,3 +182,25 @@ class LoadWatch:
         if found["busy"]:
             line = f"MACHINE BUSY: do not publish ({'; '.join(found['reasons'])})\n{line}"
         return line
+
+
+def run_raw(targets: list[tuple[Callable[..., None], tuple[Any, ...]]], timeout: float,
+            what: str = "raw process(es)") -> None:
+    """Start the peers' processes (spawned), join them within ``timeout`` s, kill what is left;
+    RuntimeError naming ``what`` when one failed or timed out."""
+    ctx = multiprocessing.get_context("spawn")
+    processes = [ctx.Process(target=fn, args=args, daemon=True) for fn, args in targets]
+    try:
+        for process in processes:
+            process.start()
+        deadline = time.monotonic() + timeout
+        for process in processes:
+            process.join(max(0.0, deadline - time.monotonic()))
+        failed = [p.exitcode for p in processes if p.exitcode != 0]
+    finally:
+        for process in processes:
+            if process.is_alive():
+                process.kill()
+                process.join(5)
+    if failed:
+        raise RuntimeError(f"{what} failed or timed out: exit codes {failed}")

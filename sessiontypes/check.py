@@ -18,7 +18,7 @@ from .declarations import GlobalType, LocalType
 from .deep import run_deep
 from .errors import Diagnostic, ProjectionError
 from .location import Location
-from .refinecheck import check_refinements
+from .refinecheck import check_refinements, has_refinement
 from .resolve import Reporter, SortTable, global_walk, local_walk, resolve_global, resolve_local
 from .sharing import Sharing
 from .sorts import BUILTIN_SORTS, Sort
@@ -78,11 +78,14 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
         global_type = GlobalType(decl.name.text, roles, body, decl.location, sorts.defined(),
                                    source.lines, shared)
         global_types[decl.name.text] = global_type
+        # The refinement and time checks walk the whole body: only where it holds what they
+        # check (answers remembered per node across the globals, which share their callees).
         if not _has_error(reporter.diagnostics[before:]):
-            for location, message in check_refinements(body):
-                reporter.error(location, message)
+            if _reaches(body, shared.table("refined"), _is_refined):
+                for location, message in check_refinements(body):
+                    reporter.error(location, message)
             _check_projectable(global_type, reporter, unprojectable)
-        if not _has_error(reporter.diagnostics[before:]):
+        if not _has_error(reporter.diagnostics[before:]) and _reaches(body, shared.table("periodic"), _is_periodic):
             for location, message in check_timing(global_type):
                 reporter.error(location, message)
 
@@ -105,6 +108,38 @@ def _check(source: s.SourceFile) -> tuple[ProtocolModule, list[Diagnostic]]:
     module = ProtocolModule(source.path, global_types, local_types, sorts.defined(),
                             tuple([d for d in diagnostics if d.severity == "warning"]))
     return module, diagnostics
+
+
+def _reaches(term: g.GlobalTerm, table: dict[int, tuple[object, bool]],
+             here: Callable[[g.GlobalTerm], bool]) -> bool:
+    """Whether ``here`` holds for ``term`` or a term below it. ``table`` remembers the answer
+    per node (with the node, so its id stays its own) across the globals of a file: each
+    node is looked at once, however many globals reach it."""
+    pending: list[tuple[g.GlobalTerm, bool]] = [(term, False)]
+    visits = 0
+    while pending:  # post-order with an explicit stack: sequences can be long
+        node, ready = pending.pop()
+        if id(node) in table:
+            continue
+        below = g.children(node)
+        if not ready:
+            pending.append((node, True))
+            pending.extend((child, False) for child in below if id(child) not in table)
+            continue
+        visits += 1
+        table[id(node)] = (node, here(node) or any(table[id(child)][1] for child in below))
+    METER.add("reaches", visits)
+    return table[id(term)][1]
+
+
+def _is_refined(term: g.GlobalTerm) -> bool:
+    """A message of ``term`` itself (not below it) has a refinement, or a field of its payload does."""
+    return isinstance(term, g.Choice | g.Routed) and any(has_refinement(branch.message) for branch in term.branches)
+
+
+def _is_periodic(term: g.GlobalTerm) -> bool:
+    """``term`` is an interaction with ``every``."""
+    return isinstance(term, g.Choice) and term.timing is not None and term.timing.every is not None
 
 
 def _declarations(source: s.SourceFile, reporter: Reporter) -> dict[str, dict[str, s.Declaration]]:

@@ -27,8 +27,9 @@ from .location import NOWHERE, Location
 from .refinesat import conjuncts, unsatisfiable
 from .refinetypes import article, type_errors
 from .sorts import Interaction, Sort
+from .work import METER
 
-__all__ = ["check_refinements", "MAX_SCOPE_WORK"]
+__all__ = ["check_refinements", "has_refinement", "MAX_SCOPE_WORK"]
 
 # How many (name, interaction) pairs the scope's dataflow may hold: each point of the term
 # keeps what each role saw of each name refinements take from earlier messages. Far beyond
@@ -144,6 +145,12 @@ def _messages(term: GlobalTerm) -> Iterator[Interaction]:
                 stack.append(node.body)
             case Parallel():
                 stack.extend(node.branches)
+    METER.add("refinements", len(done))
+
+
+def has_refinement(message: Interaction) -> bool:
+    """Whether ``message`` or a field of its payload has a refinement (what :func:`check_refinements` checks)."""
+    return bool(_refinements(message))
 
 
 def _refinements(message: Interaction) -> list[Expr]:

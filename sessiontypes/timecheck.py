@@ -15,6 +15,7 @@ from .constraints import Timing, format_duration
 from .declarations import GlobalType
 from .fsm import StateMachine, Transition
 from .location import Location
+from .work import METER
 
 __all__ = ["check_timing"]
 
@@ -58,6 +59,7 @@ def _periodic_choices(body: g.GlobalTerm) -> list[g.Choice]:
         if isinstance(term, g.Choice) and term.timing is not None and term.timing.every is not None:
             found.append(term)
         stack.extend(g.children(term))
+    METER.add("timing", len(seen))
     return found
 
 

@@ -37,7 +37,7 @@ def test_generated_example_code_is_up_to_date(proto: str, monkeypatch: pytest.Mo
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("transport", ["process", "dds"])
+@pytest.mark.parametrize("transport", ["process", "dds", "zenoh"])
 def test_mixed_criticality_example_stops_the_memory_hog_and_not_the_control_loop(tmp_path: Path,
                                                                                   transport: str) -> None:
     report_path = tmp_path / "report.json"

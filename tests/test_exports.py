@@ -44,7 +44,7 @@ USER_CODE = {
     "examples": ROOT / "examples",  # with examples/generated, the output of `anodize project`
 }
 # The extras' top-level modules (pyproject.toml, [project.optional-dependencies]).
-EXTRA_MODULES = ("cyclonedds", "rosbags", "mcap", "foxglove", "matplotlib")
+EXTRA_MODULES = ("cyclonedds", "zenoh", "rosbags", "mcap", "foxglove", "matplotlib")
 
 
 def _python_files(folder: Path) -> list[Path]:
@@ -158,8 +158,9 @@ class Block(importlib.abc.MetaPathFinder):
 sys.meta_path.insert(0, Block())
 import anodize, anodize.errors
 from anodize import *
+print(anodize.StartBarrierError.__name__, anodize.SplitBrainError.__name__)  # DDS's and Zenoh's, no extra
 try:
-    anodize.StartBarrierError
+    anodize.Zenoh().runner(None)
 except anodize.MissingExtraError as error:
     print(error)
 print(sorted(m for m in sys.modules if m.split(".")[0] in {EXTRA_MODULES!r}))
@@ -168,7 +169,8 @@ print(sorted(m for m in sys.modules if m.split(".")[0] in {EXTRA_MODULES!r}))
                           check=False)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines() == [
-        ("anodize.StartBarrierError needs the Python package of module 'cyclonedds', which is not installed; "
-         "install it with: pip install 'anodize[dds]'"),
+        "StartBarrierError SplitBrainError",
+        ("the Zenoh transport needs the Python package of module 'zenoh', which is not installed; "
+         "install it with: pip install 'anodize[zenoh]'"),
         "[]",
     ]

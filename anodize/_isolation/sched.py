@@ -12,13 +12,16 @@ import contextlib
 import errno
 import os
 import threading
+from collections.abc import Callable
+from typing import Any
 
 from ..errors import ConfigurationError
 
-__all__ = ["apply_thread_scheduling", "nice_for", "lower_thread_priority", "side_work_priority", "SIDE_WORK_NICE",
-           "SIDE_WORK_RT", "NICE_MIN", "NICE_MAX", "ThreadScheduling", "thread_scheduling", "restore_thread_scheduling"]
+__all__ = ["apply_thread_scheduling", "nice_for", "lower_thread_priority", "side_work_priority",
+           "start_side_work_thread", "SIDE_WORK_BELOW", "SIDE_WORK_RT", "NICE_MIN", "NICE_MAX", "ThreadScheduling",
+           "thread_scheduling", "restore_thread_scheduling"]
 
-SIDE_WORK_NICE = 19  # the weakest nice value: side work in a process that is not real time
+SIDE_WORK_BELOW = 5  # nice steps side work runs below the thread it came from (not real time)
 SIDE_WORK_RT = 1     # the lowest SCHED_FIFO priority: side work in a real-time group's process
 NICE_MIN, NICE_MAX = -20, 19  # a group's nice value (ordinary scheduling, no priority)
 
@@ -98,20 +101,31 @@ def lower_thread_priority(nice: int = 10) -> None:
 
 
 def side_work_priority(thread: int | None = None) -> str:
-    """Put a thread of side work (the live view, a recording's writer) below every group that
-    matters, yet where it cannot hold up the threads it shares a process with; describe what
-    was applied.
+    """Put a thread of side work (the live view, a recording's writer) just below the group it
+    serves, yet where it cannot hold up the threads it shares a process with; describe what
+    was applied. The thread is one the group started: it has the group's scheduling.
 
     A thread of a real-time group (SCHED_FIFO/RR, inherited from the group) gets SCHED_FIFO
     :data:`SIDE_WORK_RT` (1), the lowest real-time priority: below every group with a higher
-    one, above every process that is not real time. Any other thread gets SCHED_OTHER at nice
-    :data:`SIDE_WORK_NICE` (19), the weakest share of the CPU that is still a share.
+    one, above every process that is not real time. Any other thread gets SCHED_OTHER at
+    :data:`SIDE_WORK_BELOW` (5) nice steps above the nice it had (at most 19): when it and a
+    role of its group both want a CPU, the role gets three quarters of it; the side work's own
+    need is bounded by what the group sends, so it keeps up on a busy machine.
 
-    Not SCHED_IDLE, though it is lower still: a Python thread holds the GIL (and the locks it
-    shares with the roles) while it runs, and a SCHED_IDLE thread preempted while holding it
-    waits for every other thread on its CPU, whichever process it is in, so the group's own
-    roles would wait behind the machine's load for it (measured with bench/criticality.py's
-    recording scenario: the control loop's period stretched to hundreds of milliseconds).
+    Not nice 19 whatever the group's nice (as before decision 0064): below the whole machine's
+    load, a writer whose group is busy (TinMan's simulation renders without pause) got a
+    fraction of a percent of a CPU beside two CPU hogs and fell its whole backlog behind. And
+    not SCHED_IDLE, though it is lower still: a Python thread holds the GIL (and the locks it
+    shares with the roles) while it runs, and a thread preempted while holding it keeps its
+    process's roles waiting until it runs again; the weaker its share, the longer they wait
+    (measured with bench/criticality.py's recording scenario at SCHED_IDLE: the control loop's
+    period stretched to hundreds of milliseconds).
+
+    A thread side work started (:func:`start_side_work_thread`) has its creator's scheduling
+    already and keeps it; so does a thread (by ``thread``) this function lowered before. Side
+    work that starts threads, or a second call, does not push them further down. (A thread id
+    the kernel gives again to a new thread that happens to have what the old one was given is
+    taken as lowered already.)
 
     Args:
         thread: the native id of the thread (``threading.get_native_id()`` of it, or a task
@@ -119,6 +133,9 @@ def side_work_priority(thread: int | None = None) -> str:
     """
     tid = threading.get_native_id() if thread is None else thread
     target = 0 if thread is None else tid  # 0: the calling thread, on Linux
+    current = _describe(target)
+    if tid in _INHERITING or current == _LOWERED.get(tid):
+        return current
     refused = ""
     with contextlib.suppress(OSError, AttributeError):
         if os.sched_getscheduler(target) in (os.SCHED_FIFO, os.SCHED_RR):
@@ -130,10 +147,43 @@ def side_work_priority(thread: int | None = None) -> str:
     with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(target, os.SCHED_OTHER, os.sched_param(0))
     try:
-        os.setpriority(os.PRIO_PROCESS, tid, SIDE_WORK_NICE)
+        nice = min(NICE_MAX, os.getpriority(os.PRIO_PROCESS, tid) + SIDE_WORK_BELOW)
+        os.setpriority(os.PRIO_PROCESS, tid, nice)
     except OSError as error:
-        return f"unchanged (nice {SIDE_WORK_NICE} refused: {_reason(error)}){refused}"
-    return f"nice {SIDE_WORK_NICE}{refused}"
+        return f"unchanged (nice +{SIDE_WORK_BELOW} refused: {_reason(error)}){refused}"
+    _LOWERED[tid] = f"nice {nice}"
+    return f"nice {nice}{refused}"
+
+
+_INHERITING: set[int] = set()  # threads side work started, while they run: they have its scheduling
+_LOWERED: dict[int, str] = {}  # thread id -> what it was given (a thread that has it still is not lowered again)
+
+
+def _describe(target: int) -> str:
+    """A thread's scheduling as side_work_priority says it (0: the calling thread)."""
+    try:
+        if os.sched_getscheduler(target) in (os.SCHED_FIFO, os.SCHED_RR):
+            return f"SCHED_FIFO {os.sched_getparam(target).sched_priority}"
+        return f"nice {os.getpriority(os.PRIO_PROCESS, target or threading.get_native_id())}"
+    except OSError:
+        return "unknown"
+
+
+def start_side_work_thread(target: Callable[..., object], name: str, args: tuple[Any, ...] = ()) -> threading.Thread:
+    """Start a daemon thread from a thread of side work: it inherits its creator's scheduling (already
+    below the group), and :func:`side_work_priority` in it keeps that rather than going lower."""
+
+    def run() -> None:
+        tid = threading.get_native_id()
+        _INHERITING.add(tid)
+        try:
+            target(*args)
+        finally:
+            _INHERITING.discard(tid)
+
+    thread = threading.Thread(target=run, name=name, daemon=True)
+    thread.start()
+    return thread
 
 
 ThreadScheduling = tuple[int, int, int]  # policy, real-time priority, nice

@@ -20,6 +20,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from .._isolation.sched import start_side_work_thread
+
 __all__ = ["SUBPROTOCOL", "Handshake", "SubprotocolGate", "describe_offer", "parse_head", "refusal"]
 
 SUBPROTOCOL = "foxglove.sdk.v1"  # what foxglove-sdk 0.30's server accepts, and nothing else
@@ -140,8 +142,7 @@ class SubprotocolGate:
                 client, address = self._listener.accept()
             except OSError:  # closed
                 return
-            threading.Thread(target=self._serve, args=(client, str(address[0])), name="anodize-live-gate-client",
-                             daemon=True).start()
+            start_side_work_thread(self._serve, "anodize-live-gate-client", (client, str(address[0])))
 
     def _serve(self, client: socket.socket, address: str) -> None:
         self._lower()
@@ -165,8 +166,7 @@ class SubprotocolGate:
             client.settimeout(None)
             if not self._keep(server):
                 return
-            threading.Thread(target=self._relay, args=(server, client, b""), name="anodize-live-gate-relay",
-                             daemon=True).start()
+            start_side_work_thread(self._relay, "anodize-live-gate-relay", (server, client, b""))
             relaying = True
         except OSError:  # the client went away, or the SDK's server is gone (the view is closing)
             return

@@ -31,7 +31,7 @@ from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
-from .._isolation.sched import side_work_priority
+from .._isolation.sched import side_work_priority, start_side_work_thread
 from .._recording.encoding import SortCodec, codec_for_sort
 from ..errors import MissingExtraError
 from ..taps import TapRun
@@ -166,8 +166,7 @@ class Introspection:
                 continue
             with self._lock:
                 connection = self._connections = self._connections + 1
-            threading.Thread(target=self._read_group, args=(sock, connection), daemon=True,
-                             name=f"anodize-introspect-group-{connection}").start()
+            start_side_work_thread(self._read_group, f"anodize-introspect-group-{connection}", (sock, connection))
 
     def _read_group(self, sock: socket.socket, connection: int) -> None:
         side_work_priority()
@@ -248,8 +247,7 @@ class Introspection:
                 sock, _ = self._listener.accept()
             except OSError:  # closed
                 return
-            threading.Thread(target=self._serve_client, args=(sock,), name="anodize-introspect-client",
-                             daemon=True).start()
+            start_side_work_thread(self._serve_client, "anodize-introspect-client", (sock,))
 
     def _serve_client(self, sock: socket.socket) -> None:
         side_work_priority()

@@ -14,8 +14,8 @@ can make it hurt a group: the threads that read the groups' taps never wait for 
 client (they leave messages in a bounded :class:`~.outbox.Outbox`); one publisher
 thread hands them to the SDK, which holds at most :data:`CLIENT_BACKLOG` messages per
 client (its oldest go first); every thread of the view, the SDK's included, runs at
-the side-work priority (:func:`~anodize._isolation.sched.side_work_priority`: nice 19 in
-a supervisor that is not real time).
+the side-work priority (:func:`~anodize._isolation.sched.side_work_priority`: 5 nice
+steps below a supervisor that is not real time).
 What was not shown is counted per topic, on the status topic as the run goes and in
 the run's report at its end.
 """
@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from .._extras import import_extra
-from .._isolation.sched import side_work_priority
+from .._isolation.sched import side_work_priority, start_side_work_thread
 from .._recording.encoding import SortCodec, codec_for_sort
 from .._session.logs import LogEntry
 from .._session.payloads import validator_for
@@ -388,8 +388,7 @@ class LiveView:
             with self._lock:
                 self._readers += 1
                 connection = self._connections = self._connections + 1
-            threading.Thread(target=self._read_group, args=(sock, connection), name=f"anodize-live-group-{connection}",
-                             daemon=True).start()
+            start_side_work_thread(self._read_group, f"anodize-live-group-{connection}", (sock, connection))
 
     def _read_group(self, sock: socket.socket, connection: int) -> None:
         self.lower()

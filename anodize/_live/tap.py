@@ -11,7 +11,7 @@ it), small ones in a bounded queue (the oldest go first when it is full). The li
 view may thus skip messages, counted per label and sent to the supervisor every
 :data:`STATS_EVERY` seconds; the protocol and a recording (``--record``) never do. The
 tap's threads run at the side-work priority (SCHED_FIFO 1 in a real-time group, else
-nice 19: :func:`~anodize._isolation.sched.side_work_priority`).
+5 nice steps below the group: :func:`~anodize._isolation.sched.side_work_priority`).
 
 Introspection (``anodize echo|hz``) taps every channel the same way, on demand
 (:attr:`~.plan.LivePlan.on_demand`): a label is forwarded only while the supervisor wants

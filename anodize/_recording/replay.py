@@ -49,7 +49,7 @@ from ..errors import AnodizeError, ConfigurationError, ProtocolViolationError, R
 from .compare import TopicCodecs, payload_difference
 from .encoding import class_sorts, codec_for_sort, imported_class
 from .metadata import group_of, left_out_by, recorded_channels
-from .plan import CLOCK_KEY, META
+from .plan import CLOCK_KEY, GAP_KEY, META
 from .reader import RecordedMessage, Recording
 from .replay_network import (
     DIVERGED,
@@ -199,7 +199,7 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
     sends_to, receives_from = peers_of(machine)
     listed, groups = recorded_channels(recording), group_of(recording)  # checked before anything runs
     readings: dict[str, list[tuple[str, float, int]]] = {}
-    cut: set[tuple[str, str]] = set()  # channels whose numbering breaks: taken up to the break
+    cut: dict[tuple[str, str], int] = {}  # channels cut short: taken up to the cut; when it was (ns)
     streams = _streams(recording, role, topics or {}, report.notes, readings, cut)
     recorded = set(streams) if listed is None else listed
     why = _why_unrecorded(groups, left_out_by(recording))
@@ -214,6 +214,7 @@ def replay(recording: Recording, global_type: GlobalType, role: str, function: C
     network = ReplayNetwork(
         role,
         feeds={p: streams.get((p, role), []) for p in sorted(receives_from) if (p, role) in recorded},
+        cuts={p: cut[(p, role)] for p in sorted(receives_from) if (p, role) in cut},
         expected={p: streams.get((role, p), []) for p in sorted(sends_to) if (role, p) in recorded},
         unrecorded_in={p: why(p, role) for p in sorted(receives_from) if (p, role) not in recorded},
         unrecorded_out=[p for p in sorted(sends_to) if (role, p) not in recorded],
@@ -302,6 +303,11 @@ def _account(network: ReplayNetwork, report: ReplayReport, cut_in: list[str]) ->
             report.notes.append(f"the recorded messages {report.role} sent after the break on {', '.join(cut_in)} "
                                 "are not compared: it did not get the input that made it send them")
         return
+    if network.time_unknown:
+        left = sum(len(network.unsent(peer)) for peer in network.checks if network.checks[peer].recorded)
+        report.notes.append(f"the last {left} recorded message(s) {report.role} sent are not compared: it made "
+                            "them after reading its clock past the readings the recording holds")
+        return
     for peer in network.checks:
         unsent = network.unsent(peer) if network.checks[peer].recorded else []
         if unsent:
@@ -313,17 +319,21 @@ def _account(network: ReplayNetwork, report: ReplayReport, cut_in: list[str]) ->
 
 
 def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, str, str]],
-             notes: list[str], readings: dict[str, list[tuple[str, float, int]]], broken: set[tuple[str, str]],
+             notes: list[str], readings: dict[str, list[tuple[str, float, int]]], broken: dict[tuple[str, str], int],
              ) -> dict[tuple[str, str], list[RecordedItem]]:
     """The recorded messages of the channels into and out of ``role``, per channel, in order;
     the role's clock readings go into ``readings``, per endpoint, in order.
 
     A channel's messages are taken up to the first break in their numbering (a message lost,
-    or the sender's group started again): what follows is not the same run of the role. So
-    are the clock's readings. The channels cut so go into ``broken``.
+    or the sender's group started again), or up to a gap the recording records on it (its
+    recorder fell behind: the messages after the last one kept are lost, none may follow): what
+    follows is not the same run of the role. So are the clock's readings. The channels cut so
+    go into ``broken``, with the time of the cut (ns since the epoch: a gap's, else the last
+    message's kept).
     """
     keys: dict[int, tuple[str, str, str]] = {}
     clock_topics = {topic.id for topic in recording.topics if topic.metadata.get(CLOCK_KEY) == role}
+    gap_topics = {topic.id for topic in recording.topics if topic.metadata.get(GAP_KEY)}
     clock_read = 0
     for topic in recording.topics:
         meta = topic.metadata
@@ -337,18 +347,38 @@ def _streams(recording: Recording, role: str, topics: Mapping[str, tuple[str, st
             if clock_read >= 0:
                 clock_read = _reading(message, clock_read, readings, notes)
             continue
+        if message.topic.id in gap_topics:
+            _gap(message, role, streams, broken, notes)
+            continue
         key = keys.get(message.topic.id)
         if key is None or key[:2] in broken:
             continue
         items = streams.setdefault(key[:2], [])
         if message.sequence and message.sequence != len(items) + 1:
-            broken.add(key[:2])
+            broken[key[:2]] = items[-1].log_time if items else message.log_time
             restart = message.sequence == 1
             notes.append(f"{key[0]}->{key[1]}: replayed up to message {len(items) - 1}; the next one is numbered "
                          f"{message.sequence} ({'its sender started again' if restart else 'messages are missing'})")
             continue
         items.append(RecordedItem(len(items), key[2], message.log_time, bytes(message.data), message.topic))
     return streams
+
+
+def _gap(message: RecordedMessage, role: str, streams: dict[tuple[str, str], list[RecordedItem]],
+         broken: dict[tuple[str, str], int], notes: list[str]) -> None:
+    """A gap record: a channel into ``role`` is cut where its recorder lost messages."""
+    try:
+        found = json.loads(codec_for_sort(None).ros.deserialize(bytes(message.data)).data)  # type: ignore[attr-defined]
+        sender, receiver = str(found["channel"]).split("->", 1)
+        first, count = int(found["first"]), int(found["count"])
+    except (ValueError, KeyError, TypeError, AttributeError):
+        return  # not a gap record anodize wrote: verify says so, the replay goes by the numbering
+    pair = (sender, receiver)
+    if receiver != role or pair in broken:
+        return
+    broken[pair] = message.log_time  # when the first message lost was sent
+    notes.append(f"{sender}->{receiver}: replayed up to message {len(streams.get(pair, [])) - 1}; the recording "
+                 f"lost {count} message(s) from number {first} on (its recorder fell behind)")
 
 
 def _reading(message: RecordedMessage, done: int, readings: dict[str, list[tuple[str, float, int]]],

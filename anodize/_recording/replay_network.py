@@ -150,8 +150,13 @@ class ReplayClock(threading.Event):
         self._readings = {branch: deque((kind, value) for kind, value, _ in items)
                           for branch, items in (readings or {}).items()}
         self.recorded = sum(len(items) for items in self._readings.values())
+        self._held = {branch for branch, items in self._readings.items() if items}
         self.replayed = 0     # readings given back as recorded
         self.from_messages = 0  # readings made of message time
+        # Of those, readings past the last one the recording holds for an endpoint that had some: the
+        # time the role read there is not known (the run stopped, or the group ended, before the
+        # recorder had it; or a crash lost it), so a send that differs after one is not judged a divergence.
+        self.past_recorded = 0
         self.differs = ""     # the first reading the role took otherwise than in the run
         self._start = start
         # Per endpoint, its last replayed now() reading and the message time when it was read.
@@ -199,6 +204,13 @@ class ReplayClock(threading.Event):
     def _read(self, branch: str, kind: str) -> float:
         if self._readings.get(branch):
             self._network.turnstile.take(("clock", branch), self._network.role)  # the reading's turn
+        elif self.recorded and not self.differs:
+            # A reading the recording lacks came after every event it holds of the role: a group's
+            # recorder writes its roles' sends and readings in the order they happened, and what a
+            # run stopped (or a group ended) before writing is the last of them. So it waits for
+            # them all: a thread that takes inputs the role never took in the run (sent as the run
+            # stopped) acts on them after the role's recorded sends, as it would have in the run.
+            self._network.turnstile.take(BEYOND, self._network.role)
         with self._lock:
             readings = self._readings.get(branch)
             if readings:
@@ -215,6 +227,8 @@ class ReplayClock(threading.Event):
                     self._network.turnstile.drop(("clock", other))
                 self._readings.clear()  # out of step: the rest would be given to other reads
             self.from_messages += 1
+            if branch in self._held and not self.differs:
+                self.past_recorded += 1
             anchor = self._anchors.get(branch) if kind == "now" else None
         if anchor is not None:
             value, then = anchor
@@ -242,18 +256,22 @@ class ReplayNetwork:
         readings: per endpoint of the role, its recorded clock readings (:class:`ReplayClock`).
         threads: the role may run several threads (it forks): keep their recorded order
             (:class:`~.turnstile.Turnstile`).
+        cuts: per peer whose channel into the role the recording cuts short (messages lost, or
+            its sender's group started again), when (ns since the epoch): past its messages, the
+            replay ends there.
     """
 
     def __init__(self, role: str, feeds: Mapping[str, Sequence[RecordedItem]],
                  expected: Mapping[str, Sequence[RecordedItem]], unrecorded_in: Mapping[str, str],
                  unrecorded_out: Sequence[str], decode: Callable[[RecordedItem], object],
                  difference: Callable[[RecordedItem, object], str],
-                 readings: Mapping[str, Sequence[tuple[str, float, int]]] | None = None, threads: bool = False) -> None:
+                 readings: Mapping[str, Sequence[tuple[str, float, int]]] | None = None, threads: bool = False,
+                 cuts: Mapping[str, int] | None = None) -> None:
         self.role = role
         self._decode = decode
         self._difference = difference
         self._expected = {peer: list(items) for peer, items in expected.items()}
-        self.feeds = {peer: _Feed(self, peer, items) for peer, items in feeds.items()}
+        self.feeds = {peer: _Feed(self, peer, items, cut=(cuts or {}).get(peer)) for peer, items in feeds.items()}
         self.feeds.update({peer: _Feed(self, peer, (), why) for peer, why in unrecorded_in.items()})
         self.checks = {peer: _Check(self, peer) for peer in expected}
         self.checks.update({peer: _Check(self, peer, recorded=False) for peer in unrecorded_out})
@@ -273,6 +291,7 @@ class ReplayNetwork:
         self.clocks = {role: self.clock}  # the role's Endpoint.now() and wall() (anodize._session.clock)
         self.ending: tuple[str, str] | None = None  # (outcome, detail), the first reason to end
         self.divergence: Divergence | None = None
+        self.time_unknown = False  # ended at a send made past the recorded clock readings (ReplayClock)
         self.endpoint: Endpoint | None = None  # set once made: its state goes into the messages
         self._lock = threading.RLock()
 
@@ -329,6 +348,13 @@ class ReplayNetwork:
             reason = "another label" if item.label != label else self._difference(item, payload)
             if not reason:
                 return
+            if self.clock.past_recorded:
+                check.sent -= 1  # not compared: the time it was made from is not in the recording
+                self.time_unknown = True
+                raise self.end(RECORDING_ENDS, f"the recording ends here for {self.role}'s time: it sends "
+                                               f"{_message(label, payload)} on {channel} after reading its clock "
+                                               f"{self.clock.past_recorded} time(s) past the readings the recording "
+                                               "holds, so what it read, and what it sends from here, is not known")
             divergence = Divergence(self.role, channel, item.index, self.recorded_text(item),
                                     _message(label, payload), "" if item.label != label else reason,
                                     item.log_time)
@@ -364,13 +390,14 @@ class _Feed:
     """A channel into the replayed role: the recording's messages on it, then the end."""
 
     def __init__(self, network: ReplayNetwork, peer: str, items: Sequence[RecordedItem],
-                 unrecorded: str | None = None) -> None:
+                 unrecorded: str | None = None, cut: int | None = None) -> None:
         self._network = network
         self._peer = peer
         self._items: deque[object] = deque(items)
         self.recorded = len(self._items)
         self.delivered = 0
         self.unrecorded = unrecorded
+        self.cut = cut  # the recording cuts this channel short from then on (ns since the epoch)
 
     def put(self, item: object) -> None:  # a signal the endpoint puts back
         self._items.append(item)
@@ -384,6 +411,16 @@ class _Feed:
             raise network.end(NOT_RECORDED, f"{network.role}{network.state()} receives from {self._peer} on {channel}, "
                                       f"which the recording does not have ({self.unrecorded}): "
                                       f"{network.role} cannot be replayed alone from here")
+        if not self._items and self.cut is not None:
+            # The next message is lost: what the role did after it came cannot be replayed, but what
+            # its other threads did before it was sent can (they may wait for this thread's events,
+            # which wait for the lost input: every recorded event is too many to wait for).
+            network.turnstile.take_before(self.cut, network.role)
+            if network.ending is not None:
+                raise RoleStopped(network.detail())
+            raise network.end(RECORDING_ENDS, f"the recording ends here: {network.role}{network.state()} waits for "
+                                              f"message {self.recorded} on {channel}, where the recording cuts the "
+                                              "channel short (see the note on it)")
         if not self._items:
             network.turnstile.take(BEYOND, network.role)  # the role's other threads do what they did first
             if network.ending is not None:
@@ -449,7 +486,11 @@ class _Rings:
                 raise RoleStopped(network.detail())
             if self._order:
                 return self._order.popleft()
-        network.turnstile.take(BEYOND, network.role)  # the role's other threads do what they did first
+        cuts = [feed.cut for feed in network.feeds.values() if feed.cut is not None]
+        if cuts:  # the next input may be one the recording lost: as _Feed.get
+            network.turnstile.take_before(min(cuts), network.role)
+        else:
+            network.turnstile.take(BEYOND, network.role)  # the role's other threads do what they did first
         with network._lock:
             if network.ending is not None:
                 raise RoleStopped(network.detail())
@@ -457,7 +498,9 @@ class _Rings:
                 return self._order.popleft()
         unrecorded = sorted(f"{peer}->{network.role}" for peer, feed in network.feeds.items()
                             if feed.unrecorded is not None)
-        also = f" ({', '.join(unrecorded)} not recorded)" if unrecorded else ""
+        lost = sorted(f"{peer}->{network.role}" for peer, feed in network.feeds.items() if feed.cut is not None)
+        also = "".join(f" ({', '.join(names)} {what})" for names, what in (
+            (unrecorded, "not recorded"), (lost, "cut short")) if names)
         raise network.end(RECORDING_ENDS, f"the recording ends here: {network.role}{network.state()} waits for a "
                                     f"message from any peer, and every recorded one has been delivered{also}")
 

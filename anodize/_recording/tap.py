@@ -6,7 +6,7 @@ sent, even if the sender changes the payload afterwards; a thread of the group w
 it to the group's part file (an MCAP file without chunks, flushed every 0.1 s, so a
 group that is killed loses at most its last tenth of a second). That thread runs at
 the side-work priority (:func:`~anodize._isolation.sched.side_work_priority`: SCHED_FIFO 1
-in a real-time group, else nice 19), below every role of the group, so recording does
+in a real-time group, else 5 nice steps below the group), below every role of the group, so recording does
 not delay the control loop; a sender never touches the disk (channels are registered
 in the part by the writer). Its queue is bounded: when it
 falls behind by more than :data:`BACKLOG` bytes (an eighth of the group's memory bound,

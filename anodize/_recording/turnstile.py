@@ -13,8 +13,10 @@ did. So a replay of such a role takes its threads through the recording's order:
   hands over state just *after* an event (reads its clock, then writes) has usually
   written it before another thread, woken by the event, reads it; one that writes just
   *before* its next event is seen not to have written yet, as in the run;
-- an action beyond the recording (a message it has no more of) waits until every
-  recorded event has happened.
+- an action beyond the recording (a message it has no more of, a clock reading it
+  does not hold) waits until every recorded event has happened; a receive of an input
+  the recording lost (its recorder fell behind) waits for the events recorded before
+  that input was sent (:meth:`Turnstile.take_before`), and the replay ends there.
 
 Receiving is no event (the recording has the time a message was sent, not the time the
 role took it): a thread that reads its clock as it takes a message (as a ROS node stamps
@@ -31,7 +33,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 
 __all__ = ["Turnstile", "PATIENCE", "BEYOND"]
 
@@ -63,9 +65,15 @@ class Turnstile:
         if not self.active:
             self._pop(key)
             return
+        self._wait(lambda: self._ready(key), role, key)
+
+    def _wait(self, ready: Callable[[], bool], role: str, key: Hashable | None = BEYOND) -> None:
+        """Wait until ``ready()`` (or patience runs out); then take stream ``key``'s turn, if any."""
+        if not self.active:
+            return
         began = time.monotonic()  # patience counts from the later of this wait's start and the last turn:
         with self._turn:          # a role that computed for a while before it waits has not lost its turn
-            while self.active and not self._stopped and not self._ready(key):
+            while self.active and not self._stopped and not ready():
                 if time.monotonic() - max(self._last_event, began) > PATIENCE:
                     self.out_of_order = self.out_of_order or (
                         f"a thread of {role} ({threading.current_thread().name}) waited {PATIENCE:g} s for its "
@@ -77,6 +85,11 @@ class Turnstile:
             self._pop(key)
             self._last_event = time.monotonic()
             self._turn.notify_all()
+
+    def take_before(self, stamp: int, role: str) -> None:
+        """Wait until every event recorded before ``stamp`` (ns since the epoch) has happened: those
+        the role did before an input sent at ``stamp`` could have reached it."""
+        self._wait(lambda: all(times[0] >= stamp for times in self._streams.values()), role)
 
     def drop(self, key: Hashable) -> None:
         """Stream ``key`` has no more events (its recorded ones will not happen)."""

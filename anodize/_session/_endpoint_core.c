@@ -50,23 +50,104 @@ typedef struct {
     Py_ssize_t send_state, recv_state;
     PyObject *send_peer, *send_label, *send_step;
     PyObject *recv_peer, *recv_label, *recv_step;
+    /* Per state of the cached monitor, the step last taken there each way and the peer last found
+     * in recv_peers there (Memo), so that a protocol whose loop has several states takes each
+     * without a look-up either. Allocated with the tables' cache, cleared with it. */
+    Py_ssize_t states;
+    struct Memo *memos;
+    /* The state object last looked up each way (0 send, 1 receive) and its memo: a loop that
+     * stays in one state, or alternates a send state and a receive state, finds it by identity. */
+    PyObject *memo_state[2];
+    struct Memo *memo_found[2];
+    Py_ssize_t lookups; /* table look-ups made (a memo missed): what the tests count, as _lookups */
 } Core;
+
+/* What a state remembers: the step taken on (peer, label), by identity, each way; the exact
+ * types and target of that step (borrowed from it); a peer whose receive was allowed there.
+ * Strong references to peer, label, step and allowed: an identity compared is never reused. */
+typedef struct Memo {
+    PyObject *send_peer, *send_label, *send_step;
+    PyObject *recv_peer, *recv_label, *recv_step;
+    PyObject *allowed;
+} Memo;
 
 static PyObject *empty_error; /* queue.Empty */
 static PyObject *str_get_nowait;
 static PyObject *str_state, *str_sends, *str_recvs, *str_recv_peers, *str_alarm, *str_put, *str_get,
     *str_send, *str_recv, *str_send_python, *str_recv_python, *str_refuse_if_down, *str_no_channel,
     *str_accept, *str_route, *kw_timeout;
+static PyTypeObject *simple_queue_type; /* queue.SimpleQueue: the channels between threads */
 static PyTypeObject *message_type; /* anodize._session.endpoint.Message, set by configure() */
+static PyTypeObject *monitor_type, *rule_type; /* Monitor and timed.Rule, set by configure() */
+static PyObject *str_clock, *str_previous, *str_earlier, *str_checked, *str_closest, *str_receives_from;
+static PyObject *monotonic_ns; /* time.monotonic_ns: the clock of a live monitor */
 static PyObject *one;
+
+static void clear_memos(Core *self)
+{
+    Memo *memos = self->memos;
+    Py_ssize_t states = self->states;
+    self->memos = NULL; /* first: a decref below may run code that calls back into this core */
+    self->states = 0;
+    for (int way = 0; way < 2; way++) {
+        self->memo_found[way] = NULL;
+        Py_CLEAR(self->memo_state[way]);
+    }
+    for (Py_ssize_t i = 0; i < states; i++) {
+        Py_XDECREF(memos[i].send_peer);
+        Py_XDECREF(memos[i].send_label);
+        Py_XDECREF(memos[i].send_step);
+        Py_XDECREF(memos[i].recv_peer);
+        Py_XDECREF(memos[i].recv_label);
+        Py_XDECREF(memos[i].recv_step);
+        Py_XDECREF(memos[i].allowed);
+    }
+    PyMem_Free(memos);
+}
+
+/* The memo of state `state` (an int object), or NULL: not an exact int in the range memoised.
+ * `way`: which of the two last look-ups to try first and to replace (0 send, 1 receive). */
+static Memo *memo_of(Core *self, PyObject *state, int way)
+{
+    if (state == self->memo_state[way] && state != NULL) {
+        return self->memo_found[way];
+    }
+    if (state == NULL || !PyLong_CheckExact(state) || self->memos == NULL) {
+        return NULL;
+    }
+    int overflow;
+    long index = PyLong_AsLongAndOverflow(state, &overflow); /* an exact int: no code runs */
+    if (overflow || index < 0 || index >= self->states) {
+        if (index == -1 && PyErr_Occurred()) {
+            PyErr_Clear();
+        }
+        return NULL;
+    }
+    Py_XSETREF(self->memo_state[way], Py_NewRef(state)); /* an int: its deallocation runs no code */
+    self->memo_found[way] = &self->memos[index];
+    return self->memo_found[way];
+}
+
+/* The state object in the monitor's slot, borrowed, when the slot is known (the cached monitor's). */
+static PyObject *peek_state(Core *self, PyObject *monitor)
+{
+    if (self->state_offset < 0 || self->cached != monitor) {
+        return NULL;
+    }
+    return *(PyObject **)((char *)monitor + self->state_offset);
+}
 
 /* The monitor's tables, cached for `monitor`; -1 with an exception set if they are not what they
  * should be. Getting them may run code (a stand-in monitor's attributes): the caller holds `monitor`. */
-static int cache_tables(Core *self, PyObject *monitor)
+static int cache_tables_anew(Core *self, PyObject *monitor);
+
+static inline int cache_tables(Core *self, PyObject *monitor)
 {
-    if (self->cached == monitor) {
-        return 0;
-    }
+    return self->cached == monitor ? 0 : cache_tables_anew(self, monitor);
+}
+
+static int cache_tables_anew(Core *self, PyObject *monitor)
+{
     PyObject *sends = PyObject_GetAttr(monitor, str_sends);
     PyObject *recvs = sends ? PyObject_GetAttr(monitor, str_recvs) : NULL;
     PyObject *peers = recvs ? PyObject_GetAttr(monitor, str_recv_peers) : NULL;
@@ -89,6 +170,17 @@ static int cache_tables(Core *self, PyObject *monitor)
     Py_CLEAR(self->recv_peer);
     Py_CLEAR(self->recv_label);
     Py_CLEAR(self->recv_step);
+    clear_memos(self);
+    Py_ssize_t states = PyList_GET_SIZE(self->sends);
+    if (states > 0 && states <= (Py_ssize_t)(PY_SSIZE_T_MAX / sizeof(Memo))) {
+        Memo *memos = PyMem_Calloc((size_t)states, sizeof(Memo));
+        if (memos == NULL) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        self->memos = memos;
+        self->states = states;
+    }
     /* Monitor declares __slots__: its `state` is then a member descriptor holding an object at
      * a fixed offset, read and written there as the descriptor itself does. */
     self->state_offset = -1;
@@ -157,6 +249,183 @@ static int exact_type(PyObject *types, PyObject *kind)
     return 0;
 }
 
+/* Whether `payload` is a dict with exactly the record's fields, each value of one of its field's
+ * exact types: `fields` is ((name, (type, ...)), ...). Every key must be an exact str first, so
+ * that the look-ups compare strs only: no code of the payload's runs here. */
+static int record_fits(PyObject *fields, PyObject *payload)
+{
+    if (!PyDict_CheckExact(payload) || !PyTuple_CheckExact(fields) || PyDict_GET_SIZE(payload) != PyTuple_GET_SIZE(fields)) {
+        return 0;
+    }
+    Py_ssize_t position = 0;
+    PyObject *key, *value;
+    while (PyDict_Next(payload, &position, &key, &value)) {
+        if (!PyUnicode_CheckExact(key)) {
+            return 0;
+        }
+    }
+    for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(fields); i++) {
+        PyObject *field = PyTuple_GET_ITEM(fields, i);
+        if (!PyTuple_CheckExact(field) || PyTuple_GET_SIZE(field) != 2 || !PyUnicode_CheckExact(PyTuple_GET_ITEM(field, 0))
+                || !PyTuple_CheckExact(PyTuple_GET_ITEM(field, 1))) {
+            return 0;
+        }
+        value = PyDict_GetItemWithError(payload, PyTuple_GET_ITEM(field, 0)); /* borrowed; strs only compared */
+        if (value == NULL) {
+            PyErr_Clear();
+            return 0;
+        }
+        if (!exact_type(PyTuple_GET_ITEM(field, 1), (PyObject *)Py_TYPE(value))) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* A C long long from an exact int, or 0 with *ok cleared (anything else, or out of range). */
+static long long as_nanos(PyObject *value, int *ok)
+{
+    if (!PyLong_CheckExact(value)) {
+        *ok = 0;
+        return 0;
+    }
+    int overflow = 0;
+    long long nanos = PyLong_AsLongLongAndOverflow(value, &overflow);
+    if (overflow || (nanos == -1 && PyErr_Occurred())) {
+        PyErr_Clear();
+        *ok = 0;
+    }
+    return nanos;
+}
+
+/* setattr on an object of one of anodize's own slotted classes (exact type: no code runs). */
+static int set_field(PyObject *obj, PyObject *name, PyObject *value)
+{
+    if (value == NULL) {
+        return -1;
+    }
+    int result = PyObject_SetAttr(obj, name, value);
+    Py_DECREF(value);
+    return result;
+}
+
+/* A step with constraints (`step`, held by the caller), checked here as Monitor._constrained
+ * checks it, when its plan (step[7], monitor.CompiledRule) allows: the payload's exact type or
+ * record, the clock read once where the rule is timed, a send's deadline, the refinement's fast
+ * check. Anything not passed at once goes to Monitor.send / recv, with the clock's reading if
+ * one was taken (so the clock is read once per action, as in the Python core), which decides
+ * and raises; nothing is changed before that. 1 taken, 0 not taken (the caller calls the
+ * monitor without a reading), -1 error. */
+static int constrained_step(Core *self, PyObject *monitor, int sending, PyObject *peer, PyObject *label,
+                            PyObject *payload, PyObject *step)
+{
+    PyObject *plan = PyTuple_GET_ITEM(step, 7);
+    if (!PyTuple_CheckExact(plan) || PyTuple_GET_SIZE(plan) != 6 || monitor_type == NULL || rule_type == NULL
+            || !Py_IS_TYPE(monitor, monitor_type) || self->cached != monitor || self->state_offset < 0
+            || (PyTuple_GET_ITEM(plan, 5) != Py_None && !Py_IS_TYPE(PyTuple_GET_ITEM(plan, 5), rule_type))) {
+        return 0;
+    }
+    PyObject *types = PyTuple_GET_ITEM(plan, 0), *fields = PyTuple_GET_ITEM(plan, 1),
+        *fast = PyTuple_GET_ITEM(plan, 2), *within = PyTuple_GET_ITEM(plan, 3), *rule = PyTuple_GET_ITEM(plan, 5);
+    int stamps = PyTuple_GET_ITEM(plan, 4) == Py_True;
+    if (fields == Py_None ? !PyTuple_CheckExact(types) || !exact_type(types, (PyObject *)Py_TYPE(payload))
+                          : !record_fits(fields, payload)) {
+        return 0;
+    }
+    PyObject *state = peek_state(self, monitor);
+    if (state == NULL) {
+        return 0;
+    }
+    Py_INCREF(state); /* compared after the code below: the identity is not reused meanwhile */
+    int ok = 1, timed = within != Py_None || stamps;
+    long long now = 0, deadline = 0, elapsed = 0, previous = 0;
+    PyObject *now_obj = NULL, *previous_obj = NULL;
+    int result = -1;
+    if (timed) {
+        PyObject *clock = PyObject_GetAttr(monitor, str_clock);
+        now_obj = clock ? PyObject_CallNoArgs(clock) : NULL; /* may run code: a replay's clock */
+        Py_XDECREF(clock);
+        if (now_obj == NULL) {
+            goto done;
+        }
+        now = as_nanos(now_obj, &ok);
+        previous_obj = PyObject_GetAttr(monitor, str_previous);
+        if (previous_obj == NULL) {
+            goto done;
+        }
+        previous = previous_obj == Py_None ? now : as_nanos(previous_obj, &ok);
+        if (within != Py_None) {
+            deadline = as_nanos(within, &ok);
+            long long margin;
+            if (__builtin_sub_overflow(now, previous, &elapsed) || __builtin_sub_overflow(deadline, elapsed, &margin)) {
+                ok = 0; /* times beyond a C long long: Python's ints */
+            } else if (sending && elapsed > deadline) {
+                ok = 0; /* missed: the monitor raises */
+            }
+        }
+    }
+    if (ok && fast != Py_None) {
+        PyObject *earlier = PyObject_GetAttr(monitor, str_earlier);
+        PyObject *held = earlier ? PyObject_CallFunctionObjArgs(fast, payload, earlier, NULL) : NULL;
+        Py_XDECREF(earlier);
+        if (held == NULL) {
+            PyErr_Clear(); /* the reference evaluates it again, and says why */
+        }
+        ok = held == Py_True;
+        Py_XDECREF(held);
+    }
+    /* Code ran (a clock, a predicate's reads): the step stands only if the state it was found
+     * for is still the monitor's. */
+    if (!ok || self->cached != monitor || peek_state(self, monitor) != state) {
+        if (now_obj == NULL) {
+            result = 0;
+        } else {
+            PyObject *args[6] = {NULL, monitor, peer, label, payload, now_obj};
+            PyObject *done = PyObject_VectorcallMethod(sending ? str_send : str_recv, args + 1,
+                                                       5 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+            result = done == NULL ? -1 : 1;
+            Py_XDECREF(done);
+        }
+        goto done;
+    }
+    if (rule == Py_None) { /* a record's fields, no constraint: Monitor.send's plain step */
+        result = set_state(self, monitor, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
+        goto done;
+    }
+    /* Taken: what Monitor._constrained changes, in its order. */
+    PyObject *checked = PyObject_GetAttr(rule, str_checked);
+    if (set_field(rule, str_checked, checked ? PyNumber_Add(checked, one) : NULL) < 0) {
+        Py_XDECREF(checked);
+        goto done;
+    }
+    Py_DECREF(checked);
+    if (timed && within != Py_None) {
+        long long margin = deadline - elapsed; /* a receive's: only if the message was there in time */
+        if (sending || (previous_obj != Py_None && margin >= 0)) {
+            PyObject *closest = PyObject_GetAttr(rule, str_closest);
+            if (closest == NULL) {
+                goto done;
+            }
+            int known = 1;
+            long long so_far = closest == Py_None ? 0 : as_nanos(closest, &known);
+            Py_DECREF(closest);
+            if ((closest == Py_None || (known && margin < so_far))
+                    && set_field(rule, str_closest, PyLong_FromLongLong(margin)) < 0) {
+                goto done;
+            }
+        }
+    }
+    if (stamps && PyObject_SetAttr(monitor, str_previous, now_obj) < 0) {
+        goto done;
+    }
+    result = set_state(self, monitor, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
+done:
+    Py_DECREF(state);
+    Py_XDECREF(now_obj);
+    Py_XDECREF(previous_obj);
+    return result;
+}
+
 /* The step `monitor` takes on (peer, label) with `payload`, sending or receiving, taken at once
  * if allowed with an exact payload type: 1 taken, 0 not found or needs the full check, -1 error.
  * Every object used across a call that may run code is held here; the last step taken each way
@@ -168,6 +437,27 @@ static int try_step(Core *self, PyObject *monitor, int sending, PyObject *peer, 
     }
     if (cache_tables(self, monitor) < 0) {
         return -1;
+    }
+    /* The step taken last in this state on the same (peer, label): no look-up and no reference
+     * counted but the state's. Nothing here runs code: the state read is an exact int (so is
+     * the one it replaces), the payload's type is compared by identity. */
+    Memo *memo = memo_of(self, peek_state(self, monitor), !sending);
+    if (memo != NULL) {
+        PyObject *step = sending ? memo->send_step : memo->recv_step;
+        if (step != NULL && peer == (sending ? memo->send_peer : memo->recv_peer)
+                && label == (sending ? memo->send_label : memo->recv_label)) {
+            if (exact_type(PyTuple_GET_ITEM(step, 4), (PyObject *)Py_TYPE(payload))) {
+                PyObject **slot = (PyObject **)((char *)monitor + self->state_offset);
+                Py_SETREF(*slot, Py_NewRef(PyTuple_GET_ITEM(step, 0)));
+                return 1;
+            }
+            if (PyTuple_GET_SIZE(step) >= 8 && PyTuple_GET_ITEM(step, 7) != Py_None) {
+                Py_INCREF(step); /* the constrained check runs code (the clock, the predicate) */
+                int taken = constrained_step(self, monitor, sending, peer, label, payload, step);
+                Py_DECREF(step);
+                return taken;
+            }
+        }
     }
     PyObject *tables = Py_NewRef(sending ? self->sends : self->recvs);
     Py_ssize_t state = current_state(self, monitor, tables); /* may run code: a stand-in's `state` */
@@ -192,6 +482,7 @@ static int try_step(Core *self, PyObject *monitor, int sending, PyObject *peer, 
             PyErr_SetString(PyExc_TypeError, "EndpointCore: a monitor table must be a dict");
             return -1;
         }
+        self->lookups++;
         PyObject *key = PyTuple_Pack(2, peer, label);
         step = key ? PyDict_GetItemWithError(table, key) : NULL; /* borrowed */
         Py_XINCREF(step);
@@ -211,12 +502,23 @@ static int try_step(Core *self, PyObject *monitor, int sending, PyObject *peer, 
             Py_XSETREF(*last_peer, Py_NewRef(peer));
             Py_XSETREF(*last_label, Py_NewRef(label));
             Py_XSETREF(*last_step, Py_NewRef(step));
+            if (self->memos != NULL && state < self->states) { /* the tables are those the memos were made for */
+                Memo *here = &self->memos[state];
+                PyObject **memo_peer = sending ? &here->send_peer : &here->recv_peer;
+                PyObject **memo_label = sending ? &here->send_label : &here->recv_label;
+                PyObject **memo_step = sending ? &here->send_step : &here->recv_step;
+                Py_XSETREF(*memo_peer, Py_NewRef(peer)); /* exact strs and a tuple: no code runs */
+                Py_XSETREF(*memo_label, Py_NewRef(label));
+                Py_XSETREF(*memo_step, Py_NewRef(step));
+            }
         }
     }
     Py_DECREF(tables);
     int exact = exact_type(PyTuple_GET_ITEM(step, 4), (PyObject *)Py_TYPE(payload));
     if (exact) {
         exact = set_state(self, monitor, PyTuple_GET_ITEM(step, 0)) < 0 ? -1 : 1;
+    } else if (PyTuple_GET_SIZE(step) >= 8 && PyTuple_GET_ITEM(step, 7) != Py_None) {
+        exact = constrained_step(self, monitor, sending, peer, label, payload, step);
     }
     Py_DECREF(step);
     return exact;
@@ -399,6 +701,68 @@ static PyObject *as_message(PyObject *item)
     return message;
 }
 
+/* Whether the monitor's state may receive from `frm` now without a timer (its recv_peers):
+ * 1 yes, 0 no, -1 error. A yes is remembered for the state, by frm's identity (an exact str:
+ * the caller checked), when the state is an exact int the memos cover. */
+static int may_receive(Core *self, PyObject *monitor, PyObject *frm)
+{
+    self->lookups++;
+    PyObject *table = Py_NewRef(self->recv_peers); /* what reading the state may run cannot free it */
+    Py_ssize_t state = current_state(self, monitor, table);
+    PyObject *peers = state < 0 ? NULL : Py_NewRef(PyList_GET_ITEM(table, state)); /* nor frm's __eq__ */
+    int same = self->cached == monitor && self->recv_peers == table;
+    Py_DECREF(table);
+    if (peers == NULL) {
+        return -1;
+    }
+    int allowed = PySequence_Contains(peers, frm);
+    if (allowed > 0 && same && PyFrozenSet_CheckExact(peers)) { /* no code of a frozenset's ran */
+        Memo *memo = memo_of(self, peek_state(self, monitor), 1);
+        if (memo != NULL && memo == &self->memos[state]) {
+            Py_XSETREF(memo->allowed, Py_NewRef(frm));
+        }
+    }
+    Py_DECREF(peers);
+    return allowed;
+}
+
+/* Whether a receive from `frm` may take a message already there in the monitor's state, where
+ * the state's deadline keeps it off recv_peers: 1 yes (frm is one of the state's peers and the
+ * monitor reads the machine's own clock, time.monotonic_ns: no replay, whose readings must come
+ * in the Python core's order), 0 no, -1 error. Nothing waits in C under a deadline: the Python
+ * core waits when nothing is there, having changed nothing. */
+static int waits_under_deadline(Core *self, PyObject *monitor, PyObject *frm)
+{
+    if (monotonic_ns == NULL || monitor_type == NULL || !Py_IS_TYPE(monitor, monitor_type) || self->cached != monitor) {
+        return 0;
+    }
+    PyObject *clock = PyObject_GetAttr(monitor, str_clock); /* exact Monitor: a slot, no code */
+    if (clock == NULL) {
+        return -1;
+    }
+    int live = clock == monotonic_ns;
+    Py_DECREF(clock);
+    if (!live) {
+        return 0;
+    }
+    PyObject *all = PyObject_GetAttr(monitor, str_receives_from);
+    if (all == NULL) {
+        return -1;
+    }
+    int allowed = 0;
+    if (PyList_CheckExact(all)) {
+        Py_ssize_t state = current_state(self, monitor, all);
+        if (state < 0) {
+            Py_DECREF(all);
+            return -1;
+        }
+        PyObject *peers = PyList_GET_ITEM(all, state);
+        allowed = PyFrozenSet_CheckExact(peers) ? PySequence_Contains(peers, frm) : 0; /* an exact str */
+    }
+    Py_DECREF(all);
+    return allowed;
+}
+
 /* What recv uses of the endpoint, read once when it starts and held to the end (see SendFields). */
 typedef struct {
     PyObject *monitor, *in, *received, *lending;
@@ -409,20 +773,18 @@ static PyObject *recv_on(Core *self, RecvFields *f, PyObject *const *args, Py_ss
 {
     PyObject *frm = args[0];
     int monitored = f->monitor != Py_None;
+    int waiting = 1; /* 0: take only a message already there; else the Python core waits */
     if (monitored) {
         if (cache_tables(self, f->monitor) < 0) {
             return NULL;
         }
-        PyObject *table = Py_NewRef(self->recv_peers); /* what reading the state may run cannot free it */
-        Py_ssize_t state = current_state(self, f->monitor, table);
-        PyObject *peers = state < 0 ? NULL : Py_NewRef(PyList_GET_ITEM(table, state)); /* nor frm's __eq__ */
-        Py_DECREF(table);
-        if (peers == NULL) {
-            return NULL;
+        Memo *memo = memo_of(self, peek_state(self, f->monitor), 1);
+        int allowed = memo != NULL && memo->allowed == frm ? 1 : may_receive(self, f->monitor, frm);
+        if (allowed == 0) { /* a deadline may run here: a message already there is taken (below) */
+            allowed = waits_under_deadline(self, f->monitor, frm);
+            waiting = allowed > 0 ? 0 : 1;
         }
-        int allowed = PySequence_Contains(peers, frm);
-        Py_DECREF(peers);
-        if (allowed <= 0) { /* not now: the Python core raises the violation */
+        if (allowed <= 0) { /* not now: the Python core raises the violation, or waits to the deadline */
             return allowed < 0 ? NULL : pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
         }
     }
@@ -433,19 +795,24 @@ static PyObject *recv_on(Core *self, RecvFields *f, PyObject *const *args, Py_ss
     Py_INCREF(channel);
     PyObject *item;
     PyObject *lend = PyDict_GET_SIZE(f->lending) > 0 ? PyDict_GetItemWithError(f->lending, frm) : NULL;
-    if (lend != NULL) {
-        /* Priority inheritance: a message already there is taken without a scheduling call; if none
-         * is, the Python core lends while it waits (nothing has happened yet: it checks again). */
+    if (lend == NULL && PyErr_Occurred()) {
+        item = NULL;
+    } else if (lend != NULL || !waiting) {
+        /* Priority inheritance, or a deadline: a message already there is taken without a
+         * scheduling call; if none is, the Python core lends while it waits, or waits no longer
+         * than the deadline (nothing has happened yet: it checks again). */
         item = PyObject_CallMethodNoArgs(channel, str_get_nowait);
         if (item == NULL && PyErr_ExceptionMatches(empty_error)) {
             PyErr_Clear();
             Py_DECREF(channel);
             return pass_on(self, str_recv_python, args, (size_t)nargsf, kwnames);
         }
-    } else if (PyErr_Occurred()) {
-        item = NULL;
+    } else if (Py_IS_TYPE(channel, simple_queue_type)) {
+        /* A SimpleQueue's get() waits for ever by default: no keyword to parse (about 200
+         * instructions a message). */
+        item = PyObject_CallMethodNoArgs(channel, str_get);
     } else {
-        PyObject *get_args[3] = {NULL, channel, Py_None}; /* channel.get(timeout=None) */
+        PyObject *get_args[3] = {NULL, channel, Py_None}; /* channel.get(timeout=None), as the Python core calls it */
         item = PyObject_VectorcallMethod(str_get, get_args + 1, 1 | PY_VECTORCALL_ARGUMENTS_OFFSET, kw_timeout);
     }
     if (item == NULL) {
@@ -516,6 +883,10 @@ static int core_traverse(Core *self, visitproc visit, void *arg)
 #define VISIT_FIELD(field) Py_VISIT(self->field);
     CORE_OBJECTS(VISIT_FIELD)
 #undef VISIT_FIELD
+    for (Py_ssize_t i = 0; i < self->states; i++) {
+        Py_VISIT(self->memos[i].send_step);
+        Py_VISIT(self->memos[i].recv_step);
+    }
     return 0;
 }
 
@@ -524,6 +895,7 @@ static int core_clear(Core *self)
 #define CLEAR_FIELD(field) Py_CLEAR(self->field);
     CORE_OBJECTS(CLEAR_FIELD)
 #undef CLEAR_FIELD
+    clear_memos(self);
     return 0;
 }
 
@@ -555,7 +927,9 @@ static PyMemberDef core_members[] = {
     MEMBER("role", role), MEMBER("_plain", plain), MEMBER("_monitor", monitor),
     MEMBER("_network", network), MEMBER("_out", out), MEMBER("_in", in), MEMBER("sent", sent),
     MEMBER("received", received), MEMBER("_waiting", waiting), MEMBER("high_water", high_water),
-    MEMBER("_doorbell", doorbell), MEMBER("_lending", lending), {NULL, 0, 0, 0, NULL},
+    MEMBER("_doorbell", doorbell), MEMBER("_lending", lending),
+    {"_lookups", T_PYSSIZET, offsetof(Core, lookups), READONLY, "table look-ups made so far (a memo missed)"},
+    {NULL, 0, 0, 0, NULL},
 };
 
 static PyMethodDef core_methods[] = {
@@ -590,20 +964,36 @@ static PyType_Spec core_spec = {
     Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC, core_slots,
 };
 
-/* configure(Message): the tuple subclass recv returns. */
-static PyObject *configure(PyObject *module, PyObject *type)
+/* configure(Message, Monitor=None, Rule=None): the tuple subclass recv returns; the monitor's
+ * and its rules' classes, whose constrained steps the core then checks itself (exact types only). */
+static PyObject *configure(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)module;
+    if (nargs < 1 || nargs > 3) {
+        PyErr_SetString(PyExc_TypeError, "configure(Message, Monitor=None, Rule=None)");
+        return NULL;
+    }
+    PyObject *type = args[0];
     if (!PyType_Check(type) || !PyType_IsSubtype((PyTypeObject *)type, &PyTuple_Type)) {
         PyErr_SetString(PyExc_TypeError, "configure(): the message type must be a tuple subclass");
         return NULL;
     }
+    for (Py_ssize_t i = 1; i < nargs; i++) {
+        if (!PyType_Check(args[i])) {
+            PyErr_SetString(PyExc_TypeError, "configure(): Monitor and Rule must be classes");
+            return NULL;
+        }
+    }
     Py_XSETREF(message_type, (PyTypeObject *)Py_NewRef(type));
+    Py_XSETREF(monitor_type, nargs > 1 ? (PyTypeObject *)Py_NewRef(args[1]) : NULL);
+    Py_XSETREF(rule_type, nargs > 2 ? (PyTypeObject *)Py_NewRef(args[2]) : NULL);
     Py_RETURN_NONE;
 }
 
 static PyMethodDef module_methods[] = {
-    {"configure", configure, METH_O, "configure(Message): the tuple subclass that recv returns."},
+    {"configure", (PyCFunction)(void (*)(void))configure, METH_FASTCALL,
+     "configure(Message, Monitor=None, Rule=None): the tuple subclass that recv returns; the classes\n"
+     "whose constrained steps the core checks itself."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -619,6 +1009,18 @@ static struct PyModuleDef core_module = {
 PyMODINIT_FUNC PyInit__endpoint_core(void)
 {
     INTERN(str_state, "state");
+    INTERN(str_clock, "clock");
+    INTERN(str_previous, "previous");
+    INTERN(str_earlier, "earlier");
+    INTERN(str_checked, "checked");
+    INTERN(str_closest, "closest");
+    INTERN(str_receives_from, "receives_from");
+    PyObject *time_module = PyImport_ImportModule("time");
+    monotonic_ns = time_module ? PyObject_GetAttrString(time_module, "monotonic_ns") : NULL;
+    Py_XDECREF(time_module);
+    if (monotonic_ns == NULL) {
+        return NULL;
+    }
     INTERN(str_sends, "sends");
     INTERN(str_recvs, "recvs");
     INTERN(str_recv_peers, "recv_peers");
@@ -628,8 +1030,9 @@ PyMODINIT_FUNC PyInit__endpoint_core(void)
     INTERN(str_get_nowait, "get_nowait");
     PyObject *queue_module = PyImport_ImportModule("queue");
     empty_error = queue_module ? PyObject_GetAttrString(queue_module, "Empty") : NULL;
+    simple_queue_type = queue_module ? (PyTypeObject *)PyObject_GetAttrString(queue_module, "SimpleQueue") : NULL;
     Py_XDECREF(queue_module);
-    if (empty_error == NULL) {
+    if (empty_error == NULL || simple_queue_type == NULL || !PyType_Check((PyObject *)simple_queue_type)) {
         return NULL;
     }
     INTERN(str_send, "send");

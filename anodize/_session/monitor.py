@@ -32,9 +32,21 @@ TIMEOUT = "timeout"
 # it came from, all the types accepted at once (the compiled core reads them; they also keep the
 # identities that follow theirs), their identities). A payload of type `kind` fits at once when
 # `kind is step[1] or id(kind) in step[5]`: one `is` for the common case, no hashing of `kind`.
-# The last item is the transition's constraints (timed.Rule), or None: a step with a rule accepts
-# no type at once (empty step[4], step[5]), so every fast path hands it to Monitor.send / recv.
-_Step = tuple[int, type | None, Validator, Transition, tuple[type, ...], frozenset[int], Rule | None]
+# Then the transition's constraints (timed.Rule), or None: a step with a rule accepts no type at
+# once (empty step[4], step[5]), so the Python fast paths hand it to Monitor.send / recv. The last
+# item is what the compiled core needs to check such a step itself (CompiledRule), or None.
+_Step = tuple[int, type | None, Validator, Transition, tuple[type, ...], frozenset[int], Rule | None,
+              "CompiledRule | None"]
+
+# A constrained step as the compiled core checks it (_endpoint_core.c): the exact payload types
+# that pass at once, or for a record the (field name, exact types) of each field (then the payload
+# must be a dict with exactly those fields); the refinement's fast check (None: none); the
+# deadline in ns checked at the action (None: none); whether the action is time-stamped; the rule,
+# whose counters it updates. Only for a rule without a period and without remembered fields; the
+# compiled core reads the clock once, and hands anything it does not pass at once, with that
+# reading, to Monitor.send / recv, which decide (and raise) as for every other step.
+CompiledRule = tuple[tuple[type, ...], "tuple[tuple[str, tuple[type, ...]], ...] | None",
+                     "Callable[[object, dict[str, object]], object] | None", "int | None", bool, "Rule | None"]
 
 
 class Monitor:
@@ -86,10 +98,11 @@ class Monitor:
                     validators[key] = (validator_for(t.sort), exact, identities(exact))
                 check, exact, ids = validators[key]
                 rule = rules.get((action, peer, label))
+                compiled = _compiled_rule(rule, exact, t) if rule is not None or not exact else None
                 if rule is not None:  # no type is taken at once: the step is always checked here
                     exact, ids = (), frozenset()
                 (sends if action == "send" else recvs)[(peer, label)] = (
-                    t.target, exact[0] if exact else None, check, t, exact, ids, rule)
+                    t.target, exact[0] if exact else None, check, t, exact, ids, rule, compiled)
             self.sends.append(sends)
             self.recvs.append(recvs)
         # For each state, the peers it may receive from (checked before blocking).
@@ -100,8 +113,11 @@ class Monitor:
             frozenset() if due else peers for peers, due in zip(self.receives_from, self.deadlines, strict=True)]
         self.fork_states = frozenset(machine.forks)
 
-    def send(self, to: str | None, label: str, payload: object) -> None:
-        """Step on sending; raises ProtocolViolationError blaming this role."""
+    def send(self, to: str | None, label: str, payload: object, now: int | None = None) -> None:
+        """Step on sending; raises ProtocolViolationError blaming this role.
+
+        ``now``: the clock's reading for a constrained step, where the caller (the compiled
+        core) has taken it already; None: the monitor reads the clock if the step needs it."""
         step = self.sends[self.state].get((to, label))
         if step is None:
             raise self.violation(Action("send", to, label, _type_name(payload)), blame=self.role)
@@ -114,10 +130,11 @@ class Monitor:
         if rule is None:
             self.state = step[0]
         else:
-            self._constrained(rule, "send", to, label, payload, self.role)
+            self._constrained(rule, "send", to, label, payload, self.role, now)
 
-    def recv(self, frm: str | None, label: str, payload: object) -> None:
-        """Step on receiving; raises ProtocolViolationError blaming the sender."""
+    def recv(self, frm: str | None, label: str, payload: object, now: int | None = None) -> None:
+        """Step on receiving; raises ProtocolViolationError blaming the sender (``now``: as for
+        :meth:`send`)."""
         step = self.recvs[self.state].get((frm, label))
         if step is None:
             raise self.violation(Action("recv", frm, label, _type_name(payload)), blame=frm or "the peer")
@@ -130,19 +147,21 @@ class Monitor:
         if rule is None:
             self.state = step[0]
         else:
-            self._constrained(rule, "recv", frm, label, payload, frm or "the peer")
+            self._constrained(rule, "recv", frm, label, payload, frm or "the peer", now)
 
     def _constrained(self, rule: Rule, kind: str, peer: str | None, label: str, payload: object,
-                     blame: str) -> None:
+                     blame: str, now: int | None = None) -> None:
         """Check a step's constraints (raising, nothing changed, on a violation), then take it.
 
         A send is checked for its deadline, its period, then its refinement; a receive for its
         refinement (its deadline is the wait's, :meth:`expire`)."""
         rule.checked += 1
-        now = 0
         if rule.timed:
-            now = self.clock()
+            if now is None:  # else the compiled core read the clock for this action already
+                now = self.clock()
             self._check_time(rule, kind, now, peer, label, payload, blame)
+        else:
+            now = 0
         fast = rule.fast
         if fast is not None:
             try:
@@ -269,6 +288,28 @@ class Monitor:
         state = f"{self.state} ({self.machine.describe(self.state)})"
         return ProtocolViolationError(self.protocol, self.role, actual.peer, state, expected, actual,
                                       blame, location, reason)
+
+
+def _compiled_rule(rule: Rule | None, exact: tuple[type, ...], transition: Transition) -> CompiledRule | None:
+    """What the compiled core needs to check ``rule``'s step itself (None: a record's fields
+    alone), or None if it leaves it here."""
+    if rule is not None and (rule.period is not None or rule.remembers):
+        return None
+    fields: tuple[tuple[str, tuple[type, ...]], ...] | None = None
+    sort = transition.sort
+    if sort is not None and sort.fields is not None:
+        listed = []
+        for field in sort.fields:
+            kinds = tuple(sorted(exact_types_for(field.sort), key=lambda kind: kind is int))
+            if not kinds or field.sort is None:  # a field needing its full check (nat, a dataclass...)
+                return None
+            listed.append((field.name, kinds))
+        fields = tuple(listed)
+    elif not exact:
+        return None
+    if rule is None:
+        return (exact, fields, None, None, False, None) if fields is not None else None
+    return (exact, fields, rule.fast, rule.within, rule.stamps, rule)
 
 
 def _short(payload: object) -> str:

@@ -91,7 +91,7 @@ class _Builder:
                 return self.decide(self.emit(expr.operand), "False", "True")
             if expr.op != "-":
                 raise ValueError(f"refinement: unknown operator {expr.op!r}")
-            return f"(-_n({self.emit(expr.operand)}))"
+            return f"(-{self.number(self.emit(expr.operand))})"
         if isinstance(expr, Binary):
             left, right = self.emit(expr.left), self.emit(expr.right)
             if expr.op == "and":  # L True: R's answer; L False: False; else unknown (None)
@@ -100,26 +100,37 @@ class _Builder:
                 return self.decide(left, "True", self.decide(right, "True", "False"))
             if expr.op not in _ARITHMETIC:
                 raise ValueError(f"refinement: unknown operator {expr.op!r}")
-            return f"(_n({left}) {expr.op} _n({right}))"
+            return f"({self.number(left)} {expr.op} {self.number(right)})"
         if isinstance(expr, Compare):
             if not set(expr.ops) <= set(COMPARISONS):
                 raise ValueError(f"refinement: unknown comparison in {expr.ops!r}")
             operands = [self.emit(o) for o in expr.operands]
             held = [self.temporary() for _ in operands]
+            kinds = [self.temporary() for _ in operands]
             # Each comparison must give True to go on, False ends it; anything else is unknown.
             text = "True"
             for k in reversed(range(len(expr.ops))):
-                left = f"({held[k]} := ({operands[k]}))" if k == 0 else held[k]
-                guard = "_same" if expr.ops[k] in ("==", "!=") else "_ordered"
-                right = f"({held[k + 1]} := ({operands[k + 1]}))"
-                text = self.decide(f"{guard}({left}, {right}) {expr.ops[k]} {held[k + 1]}", text, "False")
+                left = f"({kinds[k]} := type({held[k]} := ({operands[k]})))" if k == 0 else kinds[k]
+                right = f"({kinds[k + 1]} := type({held[k + 1]} := ({operands[k + 1]})))"
+                same = expr.ops[k] in ("==", "!=")
+                comparable = _same_kinds(kinds[k], kinds[k + 1]) if same else _ordered_kinds(kinds[k], kinds[k + 1])
+                # The operands first (left, then right), then their kinds, then the comparison.
+                test = (f"(({held[k]} {expr.ops[k]} {held[k + 1]}) if (({left}, {right}) and ({comparable}))"
+                        " else _unknown())")
+                text = self.decide(test, text, "False")
             return text
         assert isinstance(expr, Call)
         if expr.function not in FUNCTIONS:
             raise ValueError(f"refinement: unknown function {expr.function!r}")
         if expr.function == "len":
             return f"len({', '.join(self.emit(a) for a in expr.args)})"
-        return f"{expr.function}({', '.join(f'_n({self.emit(a)})' for a in expr.args)})"
+        return f"{expr.function}({', '.join(self.number(self.emit(a)) for a in expr.args)})"
+
+    def number(self, text: str) -> str:
+        """``text``'s value if arithmetic takes it in the reference (an int or a float, by the
+        exact type: a bool is neither), else unknown: ``_number`` inlined, no call."""
+        value, kind = self.temporary(), self.temporary()
+        return f"({value} if (({kind} := type({value} := ({text}))) is float or {kind} is int) else _unknown())"
 
 
 class _UnknownError(Exception):
@@ -157,6 +168,20 @@ def _ordered(left: object, right: object) -> object:
     if (kinds[0] in _NUMBERS and kinds[1] in _NUMBERS) or (kinds[0] is kinds[1] and kinds[0] in _ORDERED):
         return left
     raise _UnknownError
+
+
+def _same_kinds(left: str, right: str) -> str:
+    """Source testing that kinds ``left`` and ``right`` (names of types) compare with ``==`` and
+    ``!=`` in the reference: :func:`_same_kind` inlined, by identity."""
+    return (f"({left} is {right} and ({left} is bool or {left} is str or {left} is bytes)) or "
+            f"(({left} is int or {left} is float) and ({right} is int or {right} is float))")
+
+
+def _ordered_kinds(left: str, right: str) -> str:
+    """Source testing that kinds ``left`` and ``right`` compare with ``<`` and the like in the
+    reference: :func:`_ordered` inlined, by identity."""
+    return (f"(({left} is int or {left} is float) and ({right} is int or {right} is float)) or "
+            f"({left} is {right} and ({left} is str or {left} is bytes))")
 
 
 def _head(payload: object, earlier: dict[str, object], name: str) -> object:

@@ -10,7 +10,7 @@ from .group import Group
 from .report import GroupReport, GroupStatus, RoleReport, RunReport
 from .rosbridge import RosBridge
 from .system import System
-from .transports import Dds, Inproc, Processes, Transport
+from .transports import Dds, Inproc, Processes, Transport, Zenoh
 
 __all__ = ["System", "Group", "RunReport", "RoleReport", "GroupReport", "GroupStatus", "Inproc", "Processes", "Dds",
-           "RosBridge", "Transport"]
+           "Zenoh", "RosBridge", "Transport"]

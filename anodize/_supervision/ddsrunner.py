@@ -1,7 +1,7 @@
 """The runner of ``Dds``: the groups of this host as processes, joined to the rest by DDS.
 
-It is the process runner (:mod:`.processes`: isolation, memory bounds, priorities,
-liveness of the local groups) without pipes: each group's process joins the
+It is a network runner (:mod:`.netrunner`: the process runner without pipes, this
+host's groups only): each group's process joins the
 run's DDS domain, opens a topic per channel it has with another group, and
 reports ready only once every peer has appeared (the start barrier,
 :meth:`anodize._transport.dds.links.DdsLinks.wait_for_peers`). Groups placed on other
@@ -18,16 +18,14 @@ from .._session.logs import LogEntry
 from .._transport.dds import DdsSettings
 from .._transport.dds.rosout import RosoutWriter
 from .._transport.dds.settings import run_token
-from . import processes
 from .hostlink import HostLink
+from .netrunner import NetworkRunner
 from .plan import RunPlan
-from .processes import ProcessRunner
-from .supervisor import Elsewhere, Scope
 
 __all__ = ["DdsRunner"]
 
 
-class DdsRunner(ProcessRunner):
+class DdsRunner(NetworkRunner):
     """Starts this host's groups; see the module docstring.
 
     Args:
@@ -41,37 +39,21 @@ class DdsRunner(ProcessRunner):
 
     def __init__(self, plan: RunPlan, settings: DdsSettings, elsewhere: Mapping[str, str],
                  liveness: float = 2.0) -> None:
-        everyone = dict(plan.groups)
-        local = {name: g for name, g in everyone.items() if name not in elsewhere}
-        super().__init__(replace(plan, groups=local), liveness)
+        super().__init__(plan, elsewhere, liveness, settings.wait)
         # A secret of the run keeps endpoints that were there before it started out of its
         # partition and its claims (DdsSettings.token): fresh when every group is ours, else
         # the one the user gave every host (none: the run id alone).
         settings = replace(settings, token=run_token(several_hosts=bool(elsewhere)))
         self.settings = settings
-        self.elsewhere = dict(elsewhere)
         # The supervisors of the other hosts: policies that reach beyond a group act there too.
-        self.link = HostLink(settings, set(settings.host_of.values())) if elsewhere else None
-        # The start barrier may wait for other hosts: the start-up deadline allows for it.
-        self.start_timeout = processes._START_TIMEOUT + settings.wait
+        self.connect(HostLink(settings, set(settings.host_of.values())) if elsewhere else None)
         self.rosout: RosoutWriter | None = None  # the roles' log records on ROS 2's /rosout (see log)
-        roles = self.scope.roles  # this host's (external roles are in no group)
-        self.scope = Scope(local, roles, tuple((a, b) for a, b in self.channels if a in roles and b in roles),
-                           Elsewhere(self.link, everyone, self.channels) if self.link is not None else None)
 
-    def start(self, groups: Sequence[str], incarnation: int) -> None:
-        """Start ``groups`` (of a batch that may span hosts); their channels to the other groups
-        of the batch are DDS topics, to groups outside it gone (as with pipes)."""
-        if self.link is not None and incarnation in self.link.batches:
-            batch = self.link.batches[incarnation]
-        else:  # every group starts as incarnation 0; with every group here, a restart's batch is ours
-            batch = frozenset(self.settings.host_of) if incarnation == 0 else frozenset(groups)
-        group_of = self.settings.group_of
-        for name in groups:
-            dead = {role: f"group {group_of[role]} did not start again with group {name}"
-                    for role in self.machines if role in group_of and group_of[role] not in batch}
-            self._launch(name, incarnation, dead, {},
-                         dds=replace(self.settings, host=self.settings.host_of.get(name, self.settings.host)))
+    def settings_for(self, group: str) -> DdsSettings:
+        return replace(self.settings, host=self.settings.host_of.get(group, self.settings.host))
+
+    def host_of(self) -> Mapping[str, str]:
+        return self.settings.host_of
 
     def log(self, entries: Sequence[LogEntry]) -> None:
         """The roles' log records: published on ROS 2's ``/rosout`` (the writer made at the first)."""
@@ -96,11 +78,7 @@ class DdsRunner(ProcessRunner):
         if not settings.token:
             notes.append("no ANODIZE_DDS_TOKEN: the run's DDS partition and claims rest on its run id alone, so "
                          "a program on the domain that knows the run id can claim a group before it starts")
-        if self.elsewhere:
-            notes.append("groups running elsewhere: " + ", ".join(
-                f"{name} on host {host}" for name, host in sorted(self.elsewhere.items())))
-        if self.link is not None:
-            notes.extend(self.link.notes)
+        notes.extend(self.elsewhere_notes())
         if self.rosout is not None:
             rosout = self.rosout
             notes.append(f"{rosout.written} log records published on /rosout (DDS domain "

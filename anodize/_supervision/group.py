@@ -139,6 +139,7 @@ class Group:
     priority_inheritance: bool = True  # roles waiting on this group's roles lend them their priority
     nice: int | None = None  # ordinary scheduling at this nice value (only without a priority)
     namespace: str = ""  # the ROS namespace its roles' relative topic names resolve in ("": the system's)
+    spin: int = 0  # nanoseconds a receiver may poll before it sleeps (0: never; anodize._transport.spin)
     roles: dict[str, Callable[..., Any] | str] = field(default_factory=dict)
     _system: Any = field(default=None, repr=False)
 

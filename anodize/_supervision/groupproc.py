@@ -24,6 +24,7 @@ import contextlib
 import ctypes
 import errno
 import functools
+import importlib
 import logging
 import os
 import signal
@@ -49,8 +50,9 @@ from .._session.logs import LogCapture
 from .._session.payloads import resolve_class, with_field_classes
 from .._transport.codec import MAX_FRAME, Codec, DecodeError, make_codec
 from .._transport.network import GroupNetwork
-from .._transport.process import PipeLinks
+from .._transport.process import LinkEnd, PipeLinks
 from .._transport.shm import ArrayRing, RingReader
+from .._transport.spin import SpinPolicy
 from ..errors import MemoryBoundError, error_to_data
 from ..taps import GroupTap, GroupTapPlan, TapGroup
 from .control import (
@@ -75,7 +77,7 @@ from .report import RoleReport, RoleStatus, constraint_counts
 from .roles import describe_error, run_role
 
 if TYPE_CHECKING:
-    from .._transport.dds import DdsSettings  # only a DDS run loads Cyclone DDS
+    from .._transport.links import NetworkSettings
 
 __all__ = ["GroupSpec", "group_main", "EXIT_MEMORY", "HEARTBEAT"]
 
@@ -106,17 +108,19 @@ class GroupSpec:
     sys_path: tuple[str, ...] = ()
     capacities: dict[tuple[str, str], int] = field(default_factory=dict)  # channels that hold at most so many
     taps: tuple[GroupTapPlan, ...] = ()    # what the group opens to tap its channels (recording, live view)
-    dds: DdsSettings | None = None         # transport Dds: how the group joins the run's domain (else pipes)
+    network: NetworkSettings | None = None  # Dds, Zenoh: how the group joins the run's network (else pipes)
     inheritance: tuple[tuple[RoleSeat, ...], str | None] | None = None  # the inheritance table's seats and file
     params: dict[str, dict[str, object]] = field(default_factory=dict)  # role -> its parameters, checked
+    spin: int = 0                          # nanoseconds its receivers may poll before sleeping (0: never)
+    spin_note: str = ""                    # the spin asked, or why it was refused, for the report
 
 
-def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
+def group_main(spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], LinkEnd]) -> None:
     """The entry point of a group's process (the target multiprocessing runs)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle
     _bind_to_supervisor()
-    for conn in (control, *pipes.values()):  # received over a socket: inheritable, unless told
-        os.set_inheritable(conn.fileno(), False)
+    for fd in (control.fileno(), *(end.fileno() for end in pipes.values())):  # received over a socket:
+        os.set_inheritable(fd, False)  # inheritable, unless told
     for path in reversed(spec.sys_path):
         if path not in sys.path:
             sys.path.insert(0, path)
@@ -146,7 +150,7 @@ def _bind_to_supervisor() -> None:
 
 
 class _GroupProcess:
-    def __init__(self, spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], Connection]) -> None:
+    def __init__(self, spec: GroupSpec, control: Connection, pipes: dict[tuple[str, str], LinkEnd]) -> None:
         self.spec = spec
         self.control = control
         self.pipes = pipes  # kept: closing a Connection would close its descriptor
@@ -158,10 +162,13 @@ class _GroupProcess:
         self.inheritance: BoostTable | None = None
         self.send_lock = threading.Lock()  # the control reader and the main thread both send
         self.logs = LogCapture(dict.fromkeys(spec.roles, spec.name))
+        self.spin = SpinPolicy(spec.spin / 1e9) if spec.spin else None  # its receivers' spin then park
 
     def run(self) -> None:
         spec = self.spec
         scheduling = apply_thread_scheduling(spec.priority, spec.cpus, spec.nice)  # inherited by our threads
+        if spec.spin_note:
+            scheduling += f"; {spec.spin_note}"
         functions = {role: resolve_function(ref) for role, ref in spec.roles.items()}
         threading.excepthook = self._thread_failed
         self.logs.install(root_level=logging.INFO)  # our own process: a role's module logger logs INFO too
@@ -183,6 +190,9 @@ class _GroupProcess:
         self.endpoints = endpoints
         threading.Thread(target=self._read_control, name="anodize-control", daemon=True).start()
         memory_note = self._bound_memory()  # every thread of ours exists by now
+        # Counts before "ready": the supervisor shows the group running only once it is ready, and
+        # by then it has every channel's count (none sent yet) and high-water mark to show with it.
+        self._heartbeat()
         self._send(Ready(pid=os.getpid(), scheduling=scheduling, baseline=self.baseline,
                          memory_note=memory_note))
         self._supervise(len(threads))
@@ -193,11 +203,10 @@ class _GroupProcess:
         ros_types = _payload_ros_types(spec.machines.values())
         local = set(spec.roles)
         doorbell_roles = [r for r, m in spec.machines.items() if m.forks or m.waits_on_several()]
-        dds = spec.dds
-        if dds is not None:  # every channel between groups is a DDS topic; arrays travel in the frames
-            from .._transport.dds.links import DdsLinks
-
-            links = DdsLinks(dds, spec.name, spec.incarnation, report=lambda line: self._send(Notice(text=line)))
+        if spec.network is not None:  # every channel between groups is a DDS topic or Zenoh key; arrays in the frames
+            module, _, name = spec.network.LINKS.partition(":")
+            links = getattr(importlib.import_module(module), name)(
+                spec.network, spec.name, spec.incarnation, report=lambda line: self._send(Notice(text=line)))
             network = GroupNetwork(spec.roles, spec.channels, links, spec.dead,
                                    lambda pair: make_codec(classes, None, None, ros_types), doorbell_roles,
                                    spec.capacities)
@@ -217,9 +226,8 @@ class _GroupProcess:
                              channel=f"{sender}->{receiver}", inline_max=MAX_FRAME - 2**20)
             return make_codec(classes, ring, None, ros_types)
 
-        fds = {pair: conn.fileno() for pair, conn in self.pipes.items()}
-        return GroupNetwork(spec.roles, spec.channels, PipeLinks(fds), spec.dead, codec_for, doorbell_roles,
-                            spec.capacities)
+        return GroupNetwork(spec.roles, spec.channels, PipeLinks.from_ends(self.pipes, self.spin), spec.dead, codec_for,
+                            doorbell_roles, spec.capacities)
 
     def _gone(self, receiver: str) -> str | None:
         network = self.network
@@ -281,9 +289,14 @@ class _GroupProcess:
             if report.status is RoleStatus.FAILED:
                 self.network.fail(report.name, describe_error(report.error))
         self._close_taps()  # every role has ended: nothing more will be sent
+        if self.spin is not None:  # what spinning cost and saved, for the group's line of the report
+            self._send(Notice(text=self.spin.summary()))
+        notes = getattr(getattr(self.network, "links", None), "notes", None)
+        for line in notes() if notes is not None else ():  # what a network transport saw (Zenoh: resends)
+            self._send(Notice(text=line))
         self._heartbeat(final=True)
         close = getattr(self.network, "close", None)
-        if close is not None:  # a DDS network: what was written reaches its readers before we exit
+        if close is not None:  # a DDS or Zenoh network: what was written reaches its readers before we exit
             close()
 
     def _close_taps(self) -> None:

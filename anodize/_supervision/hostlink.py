@@ -14,17 +14,20 @@ that reach beyond a group need the others:
   writers of that incarnation, and a channel to a group outside the set is gone to
   them, as with ``Processes``.
 
-Words travel on one DDS topic per run, ``anodize/<run id>/supervisors``, in the run's
+Words (:mod:`.hostwords`) travel on one DDS topic per run, ``anodize/<run id>/supervisors``, in the run's
 partition, reliable and in order per host, JSON in an ``anodize::Frame``. A word is
 taken only from a writer whose USER_DATA claims this run (with its token, if the hosts
-were given one) and a host of the system other than ours; anything else is dropped and
-noted (the same check as the channels, with the same limits: see docs/guide/dds.md).
+were given one) and a host of the system, and names the supervisor (a random id drawn at
+its start) that said it; anything else is dropped and noted (the same check as the
+channels, with the same limits: see docs/guide/dds.md). Our own words come back to our
+reader and are dropped by that id, not by the host: a second supervisor that claims our
+host is heard (that is a split brain, :mod:`.hostview`).
 """
 
 from __future__ import annotations
 
-import json
 import os
+import secrets
 from collections.abc import Collection
 
 from .._transport.dds import DdsSettings, instance_handle, participant_config, topic_name
@@ -45,11 +48,12 @@ from .._transport.dds.binding import (
     write,
 )
 from .._transport.dds.frame import Frame, cdr_sample
-from .supervisor import RestartWord, StopWord, Word
+from .hostwords import Batches, encode, parse
+from .words import Word
 
 __all__ = ["HostLink"]
 
-_TAG = "anodize-supervisor1"
+_TAG = "anodize-supervisor2"
 
 
 class HostLink:
@@ -63,29 +67,28 @@ class HostLink:
     def __init__(self, settings: DdsSettings, hosts: Collection[str]) -> None:
         self.settings = settings
         self.host = settings.host
+        self.supervisor = secrets.token_hex(4)
         self.hosts = frozenset(hosts)
         self.notes: list[str] = []
-        # incarnation -> the groups that start as it (every group starts as 0): a group's
-        # channels to groups outside its batch are gone to it.
-        self.batches: dict[int, frozenset[str]] = {0: frozenset(settings.host_of)}
+        self.batches = Batches(settings.host_of)
         previous = os.environ.get("CYCLONEDDS_URI", "")
         os.environ["CYCLONEDDS_URI"] = ",".join(p for p in (previous, participant_config(settings.lease)) if p)
         self.participant = DomainParticipant(settings.domain)
         topic = Topic(self.participant, topic_name(settings.run_id, "supervisors", "all"), Frame)
-        identity = f"{_TAG};{settings.claim_run};{settings.host};{os.getpid()}".encode()
+        identity = f"{_TAG};{settings.claim_run};{settings.host};{os.getpid()};{self.supervisor}".encode()
         reliable = (Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepAll,
                     Policy.Userdata(identity), Policy.Partition([settings.partition]))  # the run's alone
         self.writer: DataWriter[Frame] = DataWriter(self.participant, topic, qos=Qos(*reliable))
         self.reader: DataReader[Frame] = DataReader(self.participant, topic, qos=Qos(*reliable))
         self._rejected: set[int] = set()
+        # Writers already checked: a supervisor's last words (its farewell) are often taken after its
+        # writer has left the domain, when the matched publications no longer say who it was.
+        self._known: dict[int, tuple[str, str]] = {}
 
     def say(self, word: Word) -> None:
         """Tell every other host (best effort: a host that is gone cannot hear it)."""
-        if isinstance(word, RestartWord):
-            self.batches[word.incarnation] = self.batches.get(word.incarnation, frozenset()) | set(word.groups)
-        fields = {"kind": "stop" if isinstance(word, StopWord) else "restart", **word.__dict__}
-        body = json.dumps(fields).encode()
-        write(ref_of(self.writer), cdr_sample(len(body).to_bytes(4, "little") + body))
+        self.batches.hear(word)
+        write(ref_of(self.writer), cdr_sample(encode(word)))
 
     def words(self) -> list[Word]:
         """What the other hosts said since the last call, in the order each said it."""
@@ -96,27 +99,30 @@ class HostLink:
         for data, info in taken:
             if not info.valid_data:
                 continue
-            host = self._host_of(info.publication_handle)
-            if host is None or host == self.settings.host:
+            who = self._host_of(info.publication_handle)
+            if who is None or who[1] == self.supervisor:
                 continue  # our own word, or one we may not take (noted once per writer)
-            word = _parse(bytes(data[8:]), host)
+            host, supervisor = who
+            word = parse(bytes(data[8:]), host, supervisor)
             if word is None:
                 self.notes.append(f"ignored a malformed supervisor word from host {host}")
             else:
-                if isinstance(word, RestartWord):
-                    self.batches[word.incarnation] = self.batches.get(word.incarnation, frozenset()) | set(word.groups)
+                self.batches.hear(word)
                 words.append(word)
         return words
 
-    def _host_of(self, handle: int) -> str | None:
-        """The host a writer of the supervisors topic speaks for, or None (and a note)."""
+    def _host_of(self, handle: int) -> tuple[str, str] | None:
+        """The host and supervisor a writer of the supervisors topic speaks for, or None (and a note)."""
+        if instance_handle(handle) in self._known:
+            return self._known[instance_handle(handle)]
         for matched in self.reader.get_matched_publications():
             if instance_handle(matched) != instance_handle(handle):
                 continue
             data = self.reader.get_matched_publication_data(matched)
             claim = userdata_of(data.qos if data is not None else None).decode(errors="replace").split(";")
-            if len(claim) == 4 and claim[0] == _TAG and claim[1] == self.settings.claim_run and claim[2] in self.hosts:
-                return claim[2]
+            if len(claim) == 5 and claim[0] == _TAG and claim[1] == self.settings.claim_run and claim[2] in self.hosts:
+                self._known[instance_handle(handle)] = (claim[2], claim[4])
+                return claim[2], claim[4]
             if instance_handle(handle) not in self._rejected:
                 self._rejected.add(instance_handle(handle))
                 self.notes.append(f"rejected supervisor words from DDS writer {data.key if data else handle} "
@@ -131,16 +137,3 @@ class HostLink:
         finally:
             delete(self.participant)
 
-
-def _parse(body: bytes, host: str) -> Word | None:
-    try:
-        length = int.from_bytes(body[:4], "little")
-        fields = json.loads(body[4:4 + length])
-        if fields["kind"] == "stop":
-            return StopWord(host=host, why=str(fields["why"]))
-        if fields["kind"] == "restart":
-            return RestartWord(host=host, groups=tuple(str(g) for g in fields["groups"]),
-                               incarnation=int(fields["incarnation"]), why=str(fields["why"]))
-    except (ValueError, KeyError, TypeError):
-        return None
-    return None

@@ -35,7 +35,9 @@ from .._isolation.memory import (
 from .._isolation.tree import kill_remembered, kill_tree, snapshot
 from .._isolation.watchdog import Watchdog, rt_throttling
 from .._transport.codec import DecodeError
+from .._transport.process import LinkEnd, channel_ends
 from .._transport.shm import remove_run_segments, remove_stale_segments, segment_dir
+from .._transport.spin import describe_spin, spin_refusal
 from ..errors import MemoryBoundError, RoleError, error_from_data
 from . import control
 from .group import Group, reference_of
@@ -48,7 +50,7 @@ from .supervisor import Counts, Event, GroupExited, GroupFailed, Logged, Note, R
 from .watching import LivenessWatch
 
 if TYPE_CHECKING:
-    from .._transport.dds.settings import DdsSettings
+    from .._transport.links import NetworkSettings
 
 __all__ = ["ProcessRunner", "WATCHDOG_LIMIT"]
 
@@ -130,11 +132,11 @@ class ProcessRunner:
     def start(self, groups: Sequence[str], incarnation: int) -> None:
         """Start ``groups`` as one batch: pipes among them, dead channels to the others."""
         batch = set(groups)
-        pipes: dict[str, dict[tuple[str, str], Connection]] = {name: {} for name in groups}
+        pipes: dict[str, dict[tuple[str, str], LinkEnd]] = {name: {} for name in groups}
         for sender, receiver in self.channels:
             gs, gr = self.group_of[sender], self.group_of[receiver]
             if gs != gr and gs in batch and gr in batch:
-                reader, writer = self.context.Pipe(duplex=False)
+                reader, writer = channel_ends(self.context)  # a pipe and a shared-memory ring
                 pipes[gs][(sender, receiver)] = writer
                 pipes[gr][(sender, receiver)] = reader
         for name in groups:
@@ -146,10 +148,10 @@ class ProcessRunner:
                 conn.close()  # only the groups hold them now: a dead group means end-of-file
 
     def _launch(self, name: str, incarnation: int, dead: dict[str, str],
-                pipes: dict[tuple[str, str], Connection], dds: DdsSettings | None = None) -> None:
+                pipes: dict[tuple[str, str], LinkEnd], network: NetworkSettings | None = None) -> None:
         """Start group ``name``'s process: its spec, with ``dead`` (role -> why its channels are
-        gone), its ends of the pipes to the rest of its batch, and its DDS settings where channels
-        between groups are DDS topics."""
+        gone), its ends of the pipes to the rest of its batch, and its network transport's settings
+        where channels between groups are DDS topics or Zenoh keys."""
         group = self.groups[name]
         spec = GroupSpec(
             run_id=self.run_id, name=name, incarnation=incarnation, protocol=self.protocol,
@@ -158,15 +160,30 @@ class ProcessRunner:
             channels=self.channels, dead=dead, monitors=self.monitors,
             priority=group.priority, nice=group.nice, cpus=group.cpus, memory=group.memory,
             sys_path=tuple(p for p in _sys_path() if p), capacities=self.capacities,
-            taps=self.plan.taps, dds=dds,
+            taps=self.plan.taps, network=network,
             inheritance=None if self.inheritance is None else (self.inheritance.seats, self.inheritance.path),
-            params={role: dict(values) for role, values in (self.plan.params or {}).items() if role in group.roles})
+            params={role: dict(values) for role, values in (self.plan.params or {}).items() if role in group.roles},
+            **self._spin(group, network is not None))
         parent_end, child_end = self.context.Pipe()
         process = self.context.Process(target=group_main, args=(spec, child_end, pipes),
                                        name=f"anodize:{name}", daemon=True)
         process.start()
         child_end.close()
         self.current[name] = _Incarnation(group, incarnation, process, parent_end)
+
+    def _spin(self, group: Group, on_network: bool) -> dict[str, Any]:
+        """GroupSpec's ``spin`` (nanoseconds, 0: off) and ``spin_note`` for ``group``: what it asked,
+        or why it may not (a FIFO group sharing a CPU: anodize._transport.spin.spin_refusal)."""
+        if not group.spin:
+            return {}
+        asked = describe_spin(group.spin)
+        if on_network:
+            return {"spin_note": f"spin {asked} not used: network links wait in their transport"}
+        others = {g.name: g.cpus for g in self.groups.values() if g.name != group.name}
+        refusal = spin_refusal(group.priority, group.cpus, others)
+        if refusal is not None:
+            return {"spin_note": f"spin {asked} refused: {refusal}"}
+        return {"spin": group.spin, "spin_note": f"spin then park, up to {asked} (adaptive)"}
 
     def _on_ready(self, inc: _Incarnation, ready: control.Ready) -> None:
         inc.ready = True
@@ -507,7 +524,7 @@ class ProcessRunner:
             piped = sorted(f"{a}->{b}" for a, b in self.capacities if self.group_of.get(a) != self.group_of.get(b))
             if piped:
                 notes.append(f"capacity not counted in messages on {', '.join(piped)}: between processes a channel "
-                             "is a pipe, and its kernel buffer (64 KiB) is what bounds it")
+                             "is a shared-memory ring, and its size (1 MiB) is what bounds it")
         return notes
 
     def bound(self, seconds: float) -> None:

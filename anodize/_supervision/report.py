@@ -162,8 +162,8 @@ class RunReport:
             with messages in flight).
         high_water: per channel, the most messages that waited in it at once (sent, not yet
             received), where the transport can tell: channels between threads of one
-            process and DDS channels (to within a credit or two); not pipes between processes,
-            whose kernel buffer (64 KiB) bounds them.
+            process and DDS channels (to within a credit or two); not the rings between processes,
+            whose size (1 MiB) bounds them.
         capacities: per channel given a capacity, that capacity (its sender waits while
             that many messages wait).
         interrupted: the run was ended by Ctrl-C (SIGINT).

@@ -27,7 +27,7 @@ class RosBridge:
         topics: ``{"Move->Gazebo": "/cmd_vel", "Camera->VisOdom:color": "/camera/color/image_raw"}``
             (a channel with one label may leave the label out). A name without a leading ``/``
             (``"cmd_vel"``) is relative: it is resolved in the namespace, as ROS resolves a node's.
-        external: roles that ROS 2 nodes play (they need :class:`~anodize.Dds`); anodize
+        external: roles that ROS 2 nodes play (they need :class:`~anodize.Dds` or :class:`~anodize.Zenoh`); anodize
             runs no code for them, and every message to or from them must be on a topic.
         distro: the ROS 2 distribution whose message definitions are used ("" for Jazzy).
         domain: the ROS domain when ``ROS_DOMAIN_ID`` is not set (None: 0, as for every node).

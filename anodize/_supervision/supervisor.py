@@ -21,6 +21,7 @@ for every transport:
 from __future__ import annotations
 
 import dataclasses
+import os
 import statistics
 import time
 from collections.abc import Callable, Sequence
@@ -31,18 +32,21 @@ from typing import Protocol
 from .._session.logs import LogEntry
 from ..errors import RoleError
 from .group import FailurePolicy, Group
+from .hostview import HELLO_EVERY, LOST_AFTER, HostView
 from .logsummary import LogSummary
 from .report import GroupReport, GroupState, GroupStatus, RoleReport, RoleStatus, RunReport
 from .roles import describe_error
+from .words import Decision, HelloWord, RestartWord, StopWord, Word
 
 __all__ = ["Supervisor", "Runner", "RunState", "Event", "Ready", "Counts", "RoleEnded", "GroupFailed",
            "GroupExited", "Note", "Logged", "window_rates", "Link", "Elsewhere", "Scope", "StopWord", "RestartWord",
-           "Word"]
+           "HelloWord", "Word", "LINGER"]
 
 TICK = 0.1           # seconds between two looks at the clock when nothing happens
 STATUS_EVERY = 0.5   # seconds between two on_status calls
 RATE_WINDOW = 1.0    # seconds per window of the reported message rates
 KILL_BOUND = 5.0     # seconds an ended group has to be gone before the supervisor stops waiting for it
+LINGER = 15.0        # seconds a supervisor that stopped the run waits for a host cut off meanwhile to hear it
 
 
 class RunState(StrEnum):
@@ -135,32 +139,12 @@ class Logged:
 Event = Ready | Counts | RoleEnded | GroupFailed | GroupExited | Note | Logged
 
 
-# ---- what supervisors on other hosts say (Dds, anodize run --host) ---------------------------
-@dataclass(frozen=True)
-class StopWord:
-    """Every group of the run stops."""
-
-    host: str
-    why: str
-
-
-@dataclass(frozen=True)
-class RestartWord:
-    """The groups of ``groups``, wherever they run, start again as incarnation ``incarnation``."""
-
-    host: str
-    groups: tuple[str, ...]
-    incarnation: int
-    why: str
-
-
-Word = StopWord | RestartWord
-
-
+# ---- the supervisors on other hosts (Dds, anodize run --host): words in .words -------------
 class Link(Protocol):
     """This host's line to the supervisors of the same run on other hosts."""
 
     host: str
+    supervisor: str  # this supervisor's id, drawn at random (a second one claiming our groups has another)
 
     def say(self, word: Word) -> None:
         """Tell every other host."""
@@ -177,11 +161,16 @@ class Elsewhere:
         link: to those supervisors.
         groups: every group of the system (their policies decide restart sets).
         channels: every channel of the system.
+        lost_after: seconds without a word from a supervisor before its host counts as lost.
+        linger: seconds a supervisor that stopped the run while a host was lost waits for it to
+            come back and hear so.
     """
 
     link: Link
     groups: dict[str, Group]
     channels: tuple[tuple[str, str], ...]
+    lost_after: float = LOST_AFTER
+    linger: float = LINGER
 
 
 @dataclass
@@ -269,6 +258,7 @@ class _GroupRecord:
     why: _Why = _Why.NONE
     killed: bool = False  # the supervisor ended it: its death is no failure of its own
     killed_at: float = 0.0
+    stop_by: float | None = None  # asked to stop alone (the run moved on without it): ended then
     error: BaseException | None = None
     reports: dict[str, RoleReport] = field(default_factory=dict)
     scheduling: str = ""
@@ -325,6 +315,11 @@ class Supervisor:
         self.stop_since = 0.0
         self.interrupted = False
         self.notes: list[str] = []
+        self.stop_why = ""  # why every group stops, once they do
+        self.decisions: list[Decision] = []  # every restart across hosts decided or heard of
+        self.view = (HostView(elsewhere.link.host, os.getpid(), elsewhere.link.supervisor, elsewhere.lost_after)
+                     if elsewhere is not None else None)
+        self.next_hello = 0.0
 
     # ---- the run ---------------------------------------------------------------------------
     def run(self) -> RunReport:
@@ -348,8 +343,11 @@ class Supervisor:
                     self._stop_all("interrupted (Ctrl-C)")
         finally:
             self.state = RunState.ENDED
-            self.notes[:0] = self.runner.notes()
-            self.runner.close()
+            try:
+                self._farewell()
+            finally:
+                self.notes[:0] = self.runner.notes()
+                self.runner.close()
         report = self.report()
         if self.on_status is not None:
             self.on_status(self.statuses())
@@ -364,8 +362,12 @@ class Supervisor:
         if self.elsewhere is not None:
             for word in self.elsewhere.link.words():
                 self._heard(word)
+            self._look_around()
         if self.state is RunState.STOPPING and time.monotonic() - self.stop_since > self.grace:
             for name in self._running():
+                self._end(name, _Why.STOP)
+        for name, record in self.records.items():  # stopped alone: ended after the same grace
+            if record.stop_by is not None and not record.ended and time.monotonic() > record.stop_by:
                 self._end(name, _Why.STOP)
         for record in self.records.values():  # every wait for a group is bounded, the last one too
             if record.killed and not record.ended and time.monotonic() - record.killed_at > KILL_BOUND:
@@ -499,7 +501,8 @@ class Supervisor:
         record.steady = False  # a group with a role gone no longer runs at its rate
         if report.status is RoleStatus.FAILED:
             self._broadcast_failure(record.group.name, {report.name: describe_error(report.error)})
-            self._apply_policy(record, f"role {report.name}: {describe_error(report.error)}")
+            self._apply_policy(record, f"role {report.name}: {describe_error(report.error)}",
+                               split=_split_brain(report.error))
 
     def _group_failed(self, record: _GroupRecord, error: BaseException) -> None:
         """The whole group failed: every unreported role with it, and it is ended."""
@@ -512,7 +515,7 @@ class Supervisor:
             record.reports[role] = RoleReport(name=role, group=record.group.name, status=RoleStatus.FAILED,
                                               error=error, scheduling=record.scheduling)
         self._broadcast_failure(record.group.name, dict.fromkeys(missing, describe_error(error)))
-        self._apply_policy(record, describe_error(error), whole_group=True)
+        self._apply_policy(record, describe_error(error), whole_group=True, split=_split_brain(error))
 
     def _exited(self, record: _GroupRecord, unreported: str, details: dict[str, str] | None = None) -> None:
         record.ended = True
@@ -548,7 +551,7 @@ class Supervisor:
                 for role, cause in causes.items():
                     self.runner.tell_failed(name, role, cause)
 
-    def _apply_policy(self, record: _GroupRecord, what: str, whole_group: bool = False) -> None:
+    def _apply_policy(self, record: _GroupRecord, what: str, whole_group: bool = False, split: bool = False) -> None:
         record.failures.append(f"{time.monotonic() - self.started:.2f} s: {what}")
         if self.state is RunState.STOPPING:
             if whole_group:
@@ -557,7 +560,12 @@ class Supervisor:
         if record.why is _Why.RESTART:
             return  # a restart (of a set it is in) is under way: this failure is that set's too
         policy = record.group.on_failure
-        if policy is FailurePolicy.STOP_SYSTEM:
+        if split:  # as the supervisors do (split brain): a restart would meet both claimants again
+            self._stop_all(f"group {record.group.name} failed at its start barrier, where two endpoints claim one "
+                           "peer group (split brain): every group of the run stops")
+            if whole_group:
+                self._end(record.group.name, _Why.FAILED)
+        elif policy is FailurePolicy.STOP_SYSTEM:
             self._stop_all(f"group {record.group.name} failed and its policy is stop-system")
             if whole_group:
                 self._end(record.group.name, _Why.FAILED)
@@ -567,6 +575,7 @@ class Supervisor:
             if self.elsewhere is not None:  # the groups of the set elsewhere restart as the same incarnation
                 incarnation = 1 + max([r.incarnation if r.restart_as is None else r.restart_as
                                        for r in self.records.values()] + [r.incarnation for r in self.remote.values()])
+                self.decisions.append(Decision(incarnation, tuple(members), what, self.elsewhere.link.host))
                 self.elsewhere.link.say(RestartWord(self.elsewhere.link.host, tuple(members), incarnation, what))
                 self._restarted_elsewhere(members, incarnation)
             for name in members:
@@ -602,9 +611,14 @@ class Supervisor:
 
     # ---- what other hosts said -------------------------------------------------------------
     def _heard(self, word: Word) -> None:
+        if isinstance(word, HelloWord):
+            self._hello(word)
+            return
         if isinstance(word, StopWord):
             self._stop_all(f"{word.why} (on host {word.host})", tell=False)
             return
+        if all(d.incarnation != word.incarnation for d in self.decisions):
+            self.decisions.append(Decision(word.incarnation, word.groups, word.why, word.host))
         self._restarted_elsewhere(word.groups, word.incarnation)
         if self.state is RunState.STOPPING:
             return
@@ -653,7 +667,9 @@ class Supervisor:
         if tell and self.elsewhere is not None:
             self.elsewhere.link.say(StopWord(self.elsewhere.link.host, why))
         self.state = RunState.STOPPING
+        self.stop_why = why
         self.stop_since = time.monotonic()
+        self.next_hello = 0.0  # and in a hello at once: one cut off when the word was said may be back
         self.notes.append(f"stopping every group: {why}")
         for name, record in self.records.items():
             if record.why is _Why.RESTART and record.ended:
@@ -662,6 +678,114 @@ class Supervisor:
                 if record.why is _Why.NONE:
                     record.why = _Why.STOP
                 self.runner.stop(name)
+
+    # ---- the other supervisors: hellos, split brain, hosts lost and back -------------------
+    def _hello_word(self) -> HelloWord:
+        assert self.elsewhere is not None and self.view is not None
+        state = {RunState.STOPPING: "stopping", RunState.ENDED: "ended"}.get(self.state, "running")
+        return HelloWord(self.elsewhere.link.host, os.getpid(), {n: r.incarnation for n, r in self.records.items()},
+                         state, self.stop_why, tuple(self.decisions),
+                         {host: dict(groups) for host, groups in self.view.gone.items()},
+                         supervisor=self.elsewhere.link.supervisor)
+
+    def _look_around(self) -> None:
+        """Say hello when it is time; notice the supervisors lost since the last look."""
+        assert self.elsewhere is not None and self.view is not None
+        now = time.monotonic()
+        for hello in self.view.look(now):
+            self.notes.append(f"lost sight of host {hello.host} at {now - self.started:.1f} s (no word from its "
+                              f"supervisor for {self.view.lost_after:g} s): the run moves on without it")
+        if now >= self.next_hello:
+            self.next_hello = now + HELLO_EVERY
+            self.elsewhere.link.say(self._hello_word())
+
+    def _hello(self, hello: HelloWord) -> None:
+        """What another supervisor's hello tells: a second claimant of a group (split brain),
+        restarts and a stop it missed while it was cut off, or that it moved on without us."""
+        assert self.elsewhere is not None and self.view is not None
+        first = hello.supervisor not in self.view.peers  # never heard before: it could not be lost here
+        back = self.view.hear(hello, time.monotonic())
+        if back is not None:
+            self.notes.append(back)
+        split = self.view.split(hello, {name: r.incarnation for name, r in self.records.items()})
+        if split is not None:
+            text, shared = split
+            for name in shared & set(self.records):
+                record = self.records[name]
+                if record.error is None and not record.ended:
+                    record.error = RoleError("SplitBrain", text)
+            self._stop_all(text)
+            return
+        for decision in hello.restarts:  # heard again: a restart said while we were cut off is not lost
+            self._heard(RestartWord(decision.host, decision.groups, decision.incarnation, decision.why))
+        if hello.why and hello.state != "running":
+            self._stop_all(f"{hello.why} (on host {hello.host})", tell=False)
+        ours = hello.gone.get(self.elsewhere.link.host)
+        # A cut: we lost it too (not just a supervisor slow to speak), or we had never heard it at all
+        # (cut off before its first hello reached us: nothing here to lose, yet it lost us).
+        if ours and (first or hello.host in self.view.gone):
+            self._moved_on(hello, ours)
+
+    def _moved_on(self, hello: HelloWord, ours: dict[str, int]) -> None:
+        """``hello``'s supervisor lost sight of this host and moved on: our groups with channels to
+        its groups, as they were then (not restarted since, nor to be), stop (their sessions are over)."""
+        assert self.elsewhere is not None
+        theirs = set(hello.groups)
+        stopped = []
+        for name, incarnation in ours.items():
+            record = self.records.get(name)
+            if (record is None or record.ended or record.incarnation > incarnation or record.restart_as is not None
+                    or record.why is not _Why.NONE or self.state is RunState.STOPPING
+                    or not any({self.group_of[a], self.group_of[b]} & theirs and name in (self.group_of[a],
+                                                                                          self.group_of[b])
+                               for a, b in self.elsewhere.channels)):
+                continue
+            record.notes.append(f"stopped: host {hello.host} lost sight of this host and moved on without it")
+            record.why = _Why.STOP
+            record.stop_by = time.monotonic() + self.grace
+            self.runner.stop(name)
+            stopped.append(name)
+        if stopped:
+            self.notes.append(f"host {hello.host} lost sight of this host (cut off?) and moved on without it: "
+                              f"stopping {', '.join(stopped)}, whose sessions with groups there are over")
+
+    def _farewell(self) -> None:
+        """Tell the others this supervisor leaves. One that stopped the run first waits (up to
+        ``linger`` seconds) until every other supervisor has said it stops too: one cut off when
+        the stop was said hears it if it comes back meanwhile."""
+        if self.elsewhere is None or self.view is None:
+            return
+        link, view = self.elsewhere.link, self.view
+        waited_for = view.unreached() if self.stop_why else []
+        deadline = time.monotonic() + self.elsewhere.linger
+        while self.stop_why and view.unreached() and time.monotonic() < deadline:
+            now = time.monotonic()
+            if now >= self.next_hello:
+                self.next_hello = now + HELLO_EVERY
+                link.say(self._hello_word())
+            for word in link.words():
+                if isinstance(word, HelloWord):
+                    back = view.hear(word, time.monotonic())
+                    if back is not None:
+                        self.notes.append(back)
+            view.look(time.monotonic())
+            time.sleep(TICK)
+        unreached = view.unreached() if self.stop_why else []
+        if unreached:
+            self.notes.append(f"the run stopped while host{'s' if len(unreached) > 1 else ''} {', '.join(unreached)} "
+                              f"did not answer; {'they' if len(unreached) > 1 else 'it'} did not say "
+                              f"{'they' if len(unreached) > 1 else 'it'} stopped within {self.elsewhere.linger:g} s")
+        elif waited_for and any(h in view.gone for h in waited_for):
+            self.notes.append(f"host{'s' if len(waited_for) > 1 else ''} {', '.join(waited_for)}, cut off when the "
+                              "run stopped, came back and heard so")
+        # Back from a cut, the others may not have found this host again yet (the network's own
+        # discovery): say goodbye for a while, not once, so that a host waiting to hear it stops, does.
+        until = time.monotonic() + (view.lost_after if view.gone else 0.0)
+        while True:
+            link.say(self._hello_word())
+            if time.monotonic() >= until:
+                break
+            time.sleep(HELLO_EVERY)
 
     # ---- reporting -------------------------------------------------------------------------
     def statuses(self) -> dict[str, GroupStatus]:
@@ -711,6 +835,12 @@ class Supervisor:
                          boosts={f"{waiter}->{target}": {"episodes": b.episodes, "seconds": round(b.seconds, 6)}
                                  for (waiter, target), b in boosts.items()},
                          inheritance_inactive=tuple(inactive), logs=self.logs)
+
+
+def _split_brain(error: BaseException | None) -> bool:
+    """Whether a group failed because two endpoints claimed one of its peers at its start barrier."""
+    name = error.type_name if isinstance(error, RoleError) else type(error).__name__
+    return name == "SplitBrainError"
 
 
 def window_rates(samples: list[tuple[float, int]], window: float = RATE_WINDOW) -> list[float]:

@@ -22,6 +22,7 @@ from sessiontypes import GlobalType, StateMachine
 from sessiontypes.graph import communication_graph
 
 from .._session.logs import LogEntry
+from .._transport.spin import parse_spin
 from ..errors import AnodizeError, ConfigurationError, ParameterError
 from ..taps import ChannelTap, TapRun
 from .group import FailurePolicy, Group, parse_memory, reference_of, resolve_function
@@ -33,7 +34,7 @@ from .report import GroupStatus, RunReport, lossy_channels
 from .rosbridge import RosBridge
 from .rosnames import check_namespace
 from .supervisor import Supervisor
-from .transports import Dds, Inproc, Processes, Transport
+from .transports import Dds, Inproc, Processes, Transport, Zenoh
 
 if TYPE_CHECKING:
     from .._transport.ros_lanes import RosSettings
@@ -59,7 +60,7 @@ class System:
             and the roles ROS 2 nodes play (Dds only).
         capacities: ``{"Control->Move": 4}``: channels that hold at most so many messages;
             their senders wait while they are full (between threads of one process, and on
-            DDS; between processes a pipe's buffer bounds a channel instead, as the report says).
+            DDS; between processes a channel's shared-memory ring bounds it instead, as the report says).
         params: ``{"Planner": {"speed": 0.3}}``: each role's parameters, given to its function as
             keyword arguments (it declares them: ``def planner(ep, *, speed: float = 0.35)``);
             bool, int, float, str or a list of one of them, as ROS parameters
@@ -89,8 +90,9 @@ class System:
             raise ConfigurationError("domain, run_id, ros_topics, external, ros_distro and ros_domain are the "
                                      "fields of Dds(...) and RosBridge(...): give them there, not beside "
                                      f"transport={transport!r}")
-        if not isinstance(transport, Inproc | Processes | Dds):
-            raise ConfigurationError(f"transport: expected Inproc(), Processes(...) or Dds(...), got {transport!r}")
+        if not isinstance(transport, Inproc | Processes | Dds | Zenoh):
+            raise ConfigurationError(f"transport: expected Inproc(), Processes(...), Dds(...) or Zenoh(...), "
+                                     f"got {transport!r}")
         if ros is not None and not isinstance(ros, RosBridge):
             raise ConfigurationError(f"ros: expected RosBridge(...) or None, got {ros!r}")
         self.global_type = global_type
@@ -103,9 +105,9 @@ class System:
         if unknown:
             raise ConfigurationError(f"external role {unknown[0]}: global {global_type.name} has no such role; "
                                      f"expected one of {', '.join(global_type.roles)}")
-        if external_roles and not isinstance(transport, Dds):
+        if external_roles and not isinstance(transport, Dds | Zenoh):
             raise ConfigurationError(f"external roles ({', '.join(sorted(external_roles))}) are ROS 2 nodes: they "
-                                     f"need transport Dds(...), not {transport!r}")
+                                     f"need transport Dds(...) or Zenoh(...), not {transport!r}")
         self.external = external_roles
         self.params = _params(global_type, params or {})
         self.groups: dict[str, Group] = {}
@@ -114,7 +116,7 @@ class System:
     def group(self, name: str, priority: int | None = None, memory: int | str | None = None,
               cpus: set[int] | frozenset[int] | None = None, on_failure: str = FailurePolicy.STOP,
               max_restarts: int = 3, host: str | None = None, priority_inheritance: bool = True,
-              nice: int | None = None, namespace: str = "") -> Group:
+              nice: int | None = None, namespace: str = "", spin: int | str | None = None) -> Group:
         """Declare a group; add its roles with ``.role(name, function)``.
 
         Args:
@@ -136,10 +138,15 @@ class System:
                 by the machine's other work, nor run real time, as its renderer fills a CPU).
             namespace: the ROS namespace the relative topic names its roles publish resolve in:
                 relative (``"planning"``) under the system's (``RosBridge.namespace``), or absolute.
+            spin: on :class:`~anodize.Processes`, how long a receiver of this group may poll for a
+                message before it sleeps: a duration such as ``"50us"`` (at most ``"1ms"``) or an int
+                of microseconds; None or 0: never (docs/guide/spinning.md). Adaptive, bounded to a
+                share of a CPU, and refused to a SCHED_FIFO group sharing a CPU with another group.
 
         Raises:
             ConfigurationError: (a ``ValueError``) a duplicate name, a priority outside 1..99, a nice
-                value outside -20..19 or beside a priority, a bad memory size, CPU set or failure policy.
+                value outside -20..19 or beside a priority, a bad memory size, CPU set, failure policy
+                or spin.
         """
         if name in self.groups:
             raise ConfigurationError(f"group {name} is declared twice")
@@ -171,8 +178,13 @@ class System:
         problem = check_namespace(namespace)
         if problem is not None:
             raise ConfigurationError(f"group {name}: namespace {namespace!r}: {problem}")
+        try:
+            spin_nanos = parse_spin(spin)
+        except ConfigurationError as error:
+            raise ConfigurationError(f"group {name}: {error}") from None
         group = Group(name, priority, parse_memory(memory), cpus or None, policy, max_restarts, host,
-                      priority_inheritance=priority_inheritance, nice=nice, namespace=namespace, _system=self)
+                      priority_inheritance=priority_inheritance, nice=nice, namespace=namespace, spin=spin_nanos,
+                      _system=self)
         self.groups[name] = group
         return group
 

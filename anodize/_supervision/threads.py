@@ -35,12 +35,13 @@ from .._session.clock import adopt_clocks
 from .._session.endpoint import Endpoint
 from .._session.logs import LogCapture
 from .._transport.inproc import InprocNetwork
+from .._transport.spin import describe_spin
 from ..taps import GroupTap
 from .group import Group, resolve_function
 from .plan import RunPlan
 from .report import RoleReport, RoleStatus, constraint_counts
 from .roles import describe_error, run_role
-from .supervisor import Counts, Event, GroupExited, Logged, Ready, RoleEnded, Scope
+from .supervisor import Counts, Event, GroupExited, Logged, Note, Ready, RoleEnded, Scope
 
 __all__ = ["ThreadRunner"]
 
@@ -120,6 +121,9 @@ class ThreadRunner:
                     target=self._role_thread, name=f"anodize:{name}/{role}", daemon=True, args=(inc, role, target))
                 thread.start()
             self.inbox.put(Ready(group=name, incarnation=incarnation))
+            if group.spin:  # a polling thread would hold the interpreter's lock its sending peer needs
+                self.inbox.put(Note(group=name, text=f"spin {describe_spin(group.spin)} not used: roles of one "
+                                                     "process (Inproc) wait on their queues"))
 
     def _role_thread(self, inc: _Incarnation, role: str, function: Callable[..., Any]) -> None:
         inc.gate.wait()

@@ -1,4 +1,5 @@
-"""The ``anodize`` command: check, project, fsm, graph, lint, run, verify, replay, ps, status, channels, echo, hz.
+"""The ``anodize`` command: check, project, fsm, graph, lint, run, verify, replay, router, ps, status, channels,
+echo, hz.
 
 The only module that prints or exits. Exit status: 0 success, 1 the input
 has errors (printed as ``path:line:col: error: ...``), 2 usage errors.
@@ -162,14 +163,14 @@ def _parser() -> argparse.ArgumentParser:
     run_system.add_argument("--json", metavar="FILE", help="also write the run report as JSON to FILE")
     run_system.add_argument("--quiet", action="store_true",
                             help="no live status lines, and of the roles' logs only WARN and above")
-    run_system.add_argument("--transport", choices=("inproc", "process", "dds"),
+    run_system.add_argument("--transport", choices=("inproc", "process", "dds", "zenoh"),
                             help="run on this transport instead of the file's (e.g. dds, to try a system across "
                                  "hosts on one)")
     run_system.add_argument("--host", metavar="NAME",
-                            help='transport kind "dds": run only the groups placed on host NAME (default: every '
-                                 "group; the file's transport.host)")
+                            help='transport kind "dds" or "zenoh": run only the groups placed on host NAME '
+                                 "(default: every group; the file's transport.host)")
     run_system.add_argument("--wait", type=float, metavar="S",
-                            help='transport kind "dds": how long the groups wait for their peers to appear '
+                            help='transport kind "dds" or "zenoh": how long the groups wait for their peers to appear '
                                  "(default: the file's transport.wait, else 30)")
     run_system.add_argument("--record", metavar="PATH",
                             help="record every message, inside groups too (the file's [record] may choose "
@@ -218,6 +219,18 @@ def _parser() -> argparse.ArgumentParser:
     replay.add_argument("--timeout", type=float, default=60.0, metavar="S",
                         help="stop the role if it has not ended after S seconds (default 60)")
     replay.set_defaults(run=_replay)
+
+    router = commands.add_parser(
+        "router", help="run a Zenoh router here until Ctrl-C or SIGTERM (hosts of transport zenoh connect to it)",
+        description="Run a Zenoh router in this process, as ROS 2's rmw_zenohd does, until SIGINT or SIGTERM "
+                    "(then exit 0). The hosts of a run on transport zenoh in client mode connect to it "
+                    "([zenoh] connect); it prints where it listens and each client, peer or router that connects "
+                    "or leaves.")
+    router.add_argument("--listen", action="append", metavar="ENDPOINT",
+                        help="listen on ENDPOINT, e.g. tcp/10.0.0.1:7447 (repeatable; default tcp/[::]:7447)")
+    router.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                        help="connect to the router at ENDPOINT too, retrying until it answers (repeatable)")
+    router.set_defaults(run=_router)
     add_introspection_commands(commands, run=_introspect)
     return parser
 
@@ -444,7 +457,7 @@ def _lint_target(given: str) -> Path:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .._supervision.transports import Dds
+    from .._supervision.transports import Dds, Zenoh
     from .config import build_system, load_config
     from .keys import read_signing_key
 
@@ -457,9 +470,10 @@ def _run(args: argparse.Namespace) -> int:
     config = load_config(_system_file(args.file, named=True)).with_overrides(args.param, args.remap, args.namespace)
     if args.transport is not None:
         config = config.on_transport(args.transport)
-    if args.host is not None and not isinstance(config.transport, Dds):
-        raise UsageError(f"--host needs transport kind \"dds\"; {config.path} uses {config.transport.kind!r}")
-    if isinstance(config.transport, Dds) and (args.host is not None or args.wait is not None):
+    if args.host is not None and not isinstance(config.transport, Dds | Zenoh):
+        raise UsageError(f"--host needs transport kind \"dds\" or \"zenoh\"; {config.path} uses "
+                         f"{config.transport.kind!r}")
+    if isinstance(config.transport, Dds | Zenoh) and (args.host is not None or args.wait is not None):
         config = dataclasses.replace(config, transport=dataclasses.replace(
             config.transport, host=args.host if args.host is not None else config.transport.host,
             wait=args.wait if args.wait is not None else config.transport.wait))
@@ -622,6 +636,30 @@ def _replay(args: argparse.Namespace) -> int:
     if args.json:
         _write_json(Path(args.json), report.to_dict())
     return EXIT_OK if report.ok else EXIT_ERRORS
+
+
+def _router(args: argparse.Namespace) -> int:
+    from .router import DEFAULT_LISTEN, check_endpoint, open_router
+
+    for option, endpoints in (("--listen", args.listen or ()), ("--connect", args.connect)):
+        for endpoint in endpoints:
+            problem = check_endpoint(endpoint)
+            if problem is not None:
+                raise UsageError(f"{option} {endpoint}: {problem}")
+    router = open_router(args.listen or DEFAULT_LISTEN, args.connect)
+    try:
+        print(f"router {router.zid}: listening on {', '.join(router.locators)}", flush=True)
+        if args.connect:
+            print(f"router {router.zid}: connecting to {', '.join(args.connect)}", flush=True)
+        while True:
+            line = router.next_event(timeout=1.0)
+            if line is not None:  # the line and its end in one write: a signal comes between two
+                print(f"router: {line}\n", end="", flush=True)
+    except KeyboardInterrupt as interrupt:  # Ctrl-C or SIGTERM: the way a router is stopped
+        print(f"router: stopped ({'SIGTERM' if isinstance(interrupt, Terminated) else 'SIGINT'})", flush=True)
+        return EXIT_OK
+    finally:
+        router.close()
 
 
 def _write_json(out: Path, data: object) -> None:

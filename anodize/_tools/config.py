@@ -12,9 +12,14 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     pythonpath = ["."]                       # dirs prepended to sys.path (default: the file's dir)
 
     [transport]                              # the transport value (default: kind = "process")
-    kind = "process"                         # "inproc" (Inproc), "process" (Processes) or "dds" (Dds)
+    kind = "process"                         # "inproc" (Inproc), "process" (Processes), "dds" (Dds), "zenoh"
     liveness = 2.0                           # its fields: process: liveness; dds: domain, run_id,
-                                             # host, wait, liveness; inproc: none
+                                             # host, wait, liveness; zenoh: run_id, host, wait, liveness,
+                                             # lease, outage; inproc: none
+
+    [zenoh]                                  # kind = "zenoh": mode, connect, listen, scouting, and
+    mode = "client"                          # [zenoh.hosts.NAME] per host (see zenoh_table.py)
+    connect = ["tcp/10.0.0.1:7447"]
 
     [ros]                                    # RosBridge: topics, external, distro, domain, namespace, remap
     topics = { "Source->Sink" = "cmd_vel" }  # relative: in its group's namespace, in the system's
@@ -40,10 +45,11 @@ ros=RosBridge(...))``; docs/guide/transports.md)::
     cpus = [0]                               # the CPUs the group may run on
     on_failure = "stop"                      # "stop" (default), "restart" or "stop-system"
     max_restarts = 3                         # with on_failure = "restart" (default 3)
-    host = "robot"                           # kind = "dds": the host it runs on
+    host = "robot"                           # kind = "dds" or "zenoh": the host it runs on
     priority_inheritance = true              # roles waiting on this group lend it their priority (default)
     roles = { Source = "memory_hog:source", Sink = "memory_hog:sink" }   # role -> "module:function"
     namespace = "control"                    # its roles' relative topics: /robot1/control/...
+    spin = "50us"                            # a receiver polls up to this long before it sleeps (default off)
 
 Only ``protocol``, ``global``, ``groups`` and each group's ``roles`` are required.
 Files of the earlier form (``transport = "dds"`` as a string, with ``domain`` and
@@ -73,24 +79,26 @@ from .._supervision.params import ParamValue, check_value
 from .._supervision.rosbridge import RosBridge
 from .._supervision.rosnames import check_namespace, check_relative_name, resolve_name
 from .._supervision.system import System
-from .._supervision.transports import KINDS, Dds, Transport
+from .._supervision.transports import KINDS, Dds, Transport, Zenoh
 from .._transport.qos_profiles import QosError, QosProfile, qos_profile
+from .._transport.spin import parse_spin
 from ..errors import AnodizeError, ConfigurationError, ParameterError
 from .config_error import COMMAND_LINE, ConfigError
 from .includes import SystemData, read_system_data
 from .overrides import parse_param, parse_remap
+from .zenoh_table import ZENOH_KEYS, read_zenoh_table
 
 __all__ = ["ConfigError", "GroupConfig", "SystemConfig", "load_config", "build_system",
            "add_pythonpath"]
 
 _TOP_KEYS = ("protocol", "global", "transport", "timeout", "monitors", "pythonpath", "groups", "domain", "run_id",
-             "ros", "channels", "record", "params", "include")
+             "ros", "channels", "record", "params", "include", "zenoh")
 _CHANNEL_KEYS = ("capacity", "qos")
 _ROS_KEYS = ("topics", "external", "distro", "domain", "qos", "namespace", "remap")
 _OLD_DDS_KEYS = ("domain", "run_id")  # top-level keys of the earlier form, now fields of [transport]
 _RUN_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 _GROUP_KEYS = ("priority", "memory", "cpus", "on_failure", "max_restarts", "roles", "host",
-               "priority_inheritance", "nice", "namespace")
+               "priority_inheritance", "nice", "namespace", "spin")
 _REFERENCE = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
 
 
@@ -112,6 +120,7 @@ class GroupConfig:
             raises their priority while it waits (default True).
         nice: with no priority, the group's nice value under ordinary scheduling, or None.
         namespace: the ROS namespace of the group's topics ("": the system's).
+        spin: nanoseconds a receiver of the group may poll before it sleeps (0: never).
     """
 
     name: str
@@ -126,6 +135,7 @@ class GroupConfig:
     priority_inheritance: bool = True
     nice: int | None = None
     namespace: str = ""
+    spin: int = 0
 
 
 @dataclass(frozen=True)
@@ -145,6 +155,7 @@ class SystemConfig:
         capacities: ``[channels."A->B"] capacity``: channels that hold at most so many messages.
         record: ``[record]``: the channels ``--record`` records (default: every one).
         params: ``[params.Role]``: role -> its parameters (``System(params=...)``).
+        zenoh: ``[zenoh]``: the fields of :class:`~anodize.Zenoh` it gives (also for ``--transport zenoh``).
         given_on_command_line: the ``(role, parameter)`` pairs ``-p`` gave (for messages).
         remapped_on_command_line: the sources of the remaps ``-r`` gave (for messages).
         origins: dotted key -> the included file that gave its value (for messages about
@@ -163,6 +174,7 @@ class SystemConfig:
     capacities: dict[str, int] = field(default_factory=dict)
     record: RecordSelection = field(default_factory=RecordSelection)
     params: dict[str, dict[str, ParamValue]] = field(default_factory=dict)
+    zenoh: dict[str, Any] = field(default_factory=dict)
     given_on_command_line: frozenset[tuple[str, str]] = frozenset()
     remapped_on_command_line: frozenset[str] = frozenset()
     origins: dict[str, str] = field(default_factory=dict, compare=False)
@@ -235,8 +247,13 @@ class SystemConfig:
         if kind == self.transport.kind:
             return self
         kept = {f.name: getattr(self.transport, f.name) for f in fields(self.transport)}
+        if kind == "zenoh":
+            kept.update(self.zenoh)
         cls = KINDS[kind]
-        return replace(self, transport=cls(**{f.name: kept[f.name] for f in fields(cls) if f.name in kept}))
+        try:
+            return replace(self, transport=cls(**{f.name: kept[f.name] for f in fields(cls) if f.name in kept}))
+        except ConfigurationError as error:
+            raise ConfigError(str(self.path), "zenoh", str(error)) from None
 
 
 def load_config(path: str | Path) -> SystemConfig:
@@ -274,9 +291,10 @@ class _Reader:
         monitors = data.get("monitors", True)
         if not isinstance(monitors, bool):
             raise self.error("monitors", f"expected true or false, got {_show(monitors)}")
+        zenoh = read_zenoh_table(data.get("zenoh"), self.error)
         return SystemConfig(
             path=Path(self.shown), protocol=Path(os.path.normpath(self.directory / protocol)),
-            global_name=global_name, transport=self.transport(data),
+            global_name=global_name, transport=self.transport(data, zenoh), zenoh=zenoh,
             timeout=None if timeout is None else float(timeout), monitors=monitors,
             pythonpath=self.pythonpath(data.get("pythonpath", ["."])),
             groups=self.groups(data.get("groups")), ros=self.ros(data.get("ros"), data.get("channels")),
@@ -306,9 +324,9 @@ class _Reader:
                     raise self.error(f"params.{role}.{name}", error.problem) from None
         return found
 
-    def transport(self, data: dict[str, Any]) -> Transport:
+    def transport(self, data: dict[str, Any], zenoh: dict[str, Any]) -> Transport:
         """``[transport]`` (kind and fields), or the earlier form: ``transport = "kind"`` with
-        ``domain`` and ``run_id`` at the top level."""
+        ``domain`` and ``run_id`` at the top level; on kind zenoh, with what ``[zenoh]`` gives."""
         given = data.get("transport", "process")
         if isinstance(given, dict):
             stray = [key for key in _OLD_DDS_KEYS if key in data]
@@ -320,8 +338,10 @@ class _Reader:
                 raise self.error("transport.kind", f"expected {' or '.join(map(_show, KINDS))}, got "
                                                    f"{_show(kind) if 'kind' in given else 'nothing (it is required)'}")
             table, prefix = {k: v for k, v in given.items() if k != "kind"}, "transport"
-            allowed = tuple(f.name for f in fields(KINDS[kind]))
+            allowed = tuple(f.name for f in fields(KINDS[kind]) if kind != "zenoh" or f.name not in ZENOH_KEYS)
             for key in table:
+                if kind == "zenoh" and key in ZENOH_KEYS:
+                    raise self.error(f"transport.{key}", f"{key} is a key of [zenoh]: write zenoh.{key} (in [zenoh])")
                 if key not in allowed:
                     raise self.error(f"transport.{key}", f"unknown key for kind = {_show(kind)}; expected "
                                      f"{'one of ' + ', '.join(sorted(('kind', *allowed)))}")
@@ -332,6 +352,14 @@ class _Reader:
             raise self.error("transport", f"expected {' or '.join(map(_show, KINDS))}, or a table [transport] "
                                           f"with kind = ..., got {_show(given)}")
         checked = {key: self.transport_field(key, value, prefix) for key, value in table.items()}
+        if kind == "zenoh":
+            if zenoh.get("mode") == "client" and not zenoh.get("connect"):
+                raise self.error("zenoh.connect", 'mode "client": expected the endpoints of one or more routers, '
+                                                  "got none")
+            try:
+                return Zenoh(**checked, **zenoh)
+            except ConfigurationError as error:
+                raise self.error(prefix or "transport", str(error)) from None
         if kind != "dds":
             return KINDS[kind](**{k: v for k, v in checked.items() if k not in _OLD_DDS_KEYS})
         try:
@@ -348,9 +376,13 @@ class _Reader:
             raise self.error(dotted, f"expected up to 64 letters, digits, '_', '.' or '-', got {_show(value)}")
         if key == "host" and (not isinstance(value, str) or not value.isidentifier()):
             raise self.error(dotted, f"expected a name such as \"robot\", got {_show(value)}")
-        if key in ("wait", "liveness"):
+        if key in ("wait", "liveness", "lease"):
             if not _is_seconds(value):
                 raise self.error(dotted, f"expected a number of seconds > 0, got {_show(value)}")
+            return float(value)
+        if key == "outage":
+            if not (_is_seconds(value) or value == 0) or isinstance(value, bool):
+                raise self.error(dotted, f"expected a number of seconds >= 0, got {_show(value)}")
             return float(value)
         return value
 
@@ -514,9 +546,16 @@ class _Reader:
         problem = check_namespace(namespace)
         if problem is not None:
             raise self.error(f"{prefix}.namespace", f"{problem}, got {_show(namespace)}")
+        spin = table.get("spin")
+        try:
+            spin_nanos = parse_spin(spin)
+        except ConfigurationError:
+            raise self.error(f"{prefix}.spin", "expected a duration such as \"50us\" or \"0.2ms\" (at most "
+                                               f"\"1ms\"), or an int of microseconds, got {_show(spin)}") from None
         return GroupConfig(name, priority, memory_bytes, self.cpus(prefix, table.get("cpus")),
                            on_failure, max_restarts, self.roles(prefix, table),
-                           f"{self.read.origin(prefix, self.shown)}: {prefix}", host, inherit, nice, namespace)
+                           f"{self.read.origin(prefix, self.shown)}: {prefix}", host, inherit, nice, namespace,
+                           spin_nanos)
 
     def cpus(self, prefix: str, value: Any) -> tuple[int, ...] | None:
         if value is None:
@@ -619,7 +658,8 @@ def build_system(config: SystemConfig) -> System:
                                     cpus=set(group.cpus) if group.cpus else None,
                                     on_failure=group.on_failure, max_restarts=group.max_restarts,
                                     host=group.host, priority_inheritance=group.priority_inheritance,
-                                    nice=group.nice, namespace=group.namespace)
+                                    nice=group.nice, namespace=group.namespace,
+                                    spin=f"{group.spin}ns" if group.spin else None)
             for role, reference in group.roles.items():
                 declared.role(role, reference)
         except (ValueError, AnodizeError) as error:

@@ -107,7 +107,7 @@ def _anchor(data: dict[str, Any], directory: Path) -> None:
     """Make an included file's paths absolute, so that they keep meaning what its author wrote."""
     for key in _PATH_KEYS:
         if isinstance(data.get(key), str):
-            data[key] = os.path.normpath(directory / data[key])
+            data[key] = os.path.abspath(directory / data[key])
     for key in _PATH_LISTS:
         value = data.get(key)
         if isinstance(value, list) and all(isinstance(v, str) for v in value):

@@ -150,6 +150,218 @@ static PyObject *decode_run(PyObject *module, PyObject *const *args, Py_ssize_t 
     return PyLong_FromSsize_t(at);
 }
 
+
+/* ---- the shared-memory byte ring (anodize/_transport/ring.py documents the layout and the
+ * protocol; ring_write_python and ring_read_python are the reference, to the byte). The indices
+ * come from another process: every use checks 0 <= tail - head <= capacity first, and every
+ * position is taken modulo the capacity, so no index the peer writes reaches outside the data. */
+#define RING_HEADER 4096
+#define RING_TAIL 0
+#define RING_HEAD 64
+#define RING_SLEEPING 128
+#define RING_WAITING 192
+#define RING_CLOSED 256
+
+static uint64_t *ring_u64(unsigned char *ring, int offset)
+{
+    return (uint64_t *)(void *)(ring + offset);
+}
+
+static uint32_t *ring_u32(unsigned char *ring, int offset)
+{
+    return (uint32_t *)(void *)(ring + offset);
+}
+
+static int as_int(PyObject *object)
+{
+    long value = PyLong_AsLong(object);
+    if (value == -1 && PyErr_Occurred()) {
+        return -1;
+    }
+    if (value < INT_MIN || value > INT_MAX) {
+        PyErr_SetString(PyExc_OverflowError, "an int of C's int size was expected");
+        return -1;
+    }
+    return (int)value;
+}
+
+/* Checked indices: 0 and *used set, or -1 when they break the invariant. */
+static int ring_published(unsigned char *ring, uint64_t capacity, uint64_t *tail, uint64_t *head, uint64_t *used)
+{
+    *head = __atomic_load_n(ring_u64(ring, RING_HEAD), __ATOMIC_ACQUIRE);
+    *tail = __atomic_load_n(ring_u64(ring, RING_TAIL), __ATOMIC_ACQUIRE);
+    *used = *tail - *head; /* unsigned: a tail behind the head is a huge number */
+    return *used > capacity ? -1 : 0;
+}
+
+/* Clear a set flag; 1 if this call cleared it (the caller rings), 0 if it was clear. */
+static int ring_take(unsigned char *ring, int flag)
+{
+    uint32_t expected = 1;
+    if (__atomic_load_n(ring_u32(ring, flag), __ATOMIC_RELAXED) == 0) {
+        return 0;
+    }
+    return __atomic_compare_exchange_n(ring_u32(ring, flag), &expected, 0, 0, __ATOMIC_SEQ_CST, __ATOMIC_RELAXED);
+}
+
+/* Copy up to `size` bytes in and publish them: the bytes written, or -1 (broken indices). With
+ * `whole`, nothing unless all of them fit. */
+static Py_ssize_t ring_put_bytes(unsigned char *ring, uint64_t capacity, const char *data, Py_ssize_t size, int whole)
+{
+    uint64_t tail, head, used;
+    if (ring_published(ring, capacity, &tail, &head, &used) < 0) {
+        return -1;
+    }
+    uint64_t room = capacity - used;
+    if ((uint64_t)size > room) {
+        if (whole) {
+            return 0;
+        }
+        size = (Py_ssize_t)room;
+    }
+    if (size == 0) {
+        return 0;
+    }
+    uint64_t at = tail & (capacity - 1);
+    uint64_t first = capacity - at < (uint64_t)size ? capacity - at : (uint64_t)size;
+    memcpy(ring + RING_HEADER + at, data, (size_t)first);
+    if (first < (uint64_t)size) {
+        memcpy(ring + RING_HEADER, data + first, (size_t)((uint64_t)size - first));
+    }
+    __atomic_store_n(ring_u64(ring, RING_TAIL), tail + (uint64_t)size, __ATOMIC_RELEASE);
+    return size;
+}
+
+/* The ring's memory from a writable buffer: 0, or -1 with an exception set. */
+static int ring_view(PyObject *object, Py_buffer *view, uint64_t *capacity)
+{
+    if (PyObject_GetBuffer(object, view, PyBUF_WRITABLE) != 0) {
+        return -1;
+    }
+    uint64_t size = view->len > RING_HEADER ? (uint64_t)(view->len - RING_HEADER) : 0;
+    if (size == 0 || (size & (size - 1)) != 0 || ((uintptr_t)view->buf & 63) != 0) {
+        PyBuffer_Release(view);
+        PyErr_SetString(PyExc_ValueError, "a ring is a 64-byte aligned header of 4096 bytes and a power of two");
+        return -1;
+    }
+    *capacity = size;
+    return 0;
+}
+
+static PyObject *ring_corrupt(void)
+{
+    PyErr_SetString(PyExc_ValueError, "the ring's indices are impossible: more than its capacity apart");
+    return NULL;
+}
+
+/* ring_write(memory, data) -> int: ring.ring_write_python. */
+static PyObject *ring_write(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)module;
+    if (nargs != 2) {
+        PyErr_Format(PyExc_TypeError, "ring_write() takes 2 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    Py_buffer view, data;
+    uint64_t capacity;
+    if (ring_view(args[0], &view, &capacity) < 0) {
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[1], &data, PyBUF_SIMPLE) != 0) {
+        PyBuffer_Release(&view);
+        return NULL;
+    }
+    Py_ssize_t written = ring_put_bytes(view.buf, capacity, data.buf, data.len, 0);
+    PyBuffer_Release(&data);
+    PyBuffer_Release(&view);
+    return written < 0 ? ring_corrupt() : PyLong_FromSsize_t(written);
+}
+
+/* ring_read(memory, into, limit, room_fd) -> int: ring.ring_read_python. */
+static PyObject *ring_read(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)module;
+    if (nargs != 4) {
+        PyErr_Format(PyExc_TypeError, "ring_read() takes 4 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    if (!PyByteArray_Check(args[1])) {
+        PyErr_SetString(PyExc_TypeError, "ring_read(): into must be a bytearray");
+        return NULL;
+    }
+    Py_ssize_t limit = PyLong_AsSsize_t(args[2]);
+    int room_fd = as_int(args[3]);
+    if ((limit == -1 || room_fd == -1) && PyErr_Occurred()) {
+        return NULL;
+    }
+    Py_buffer view;
+    uint64_t capacity;
+    if (ring_view(args[0], &view, &capacity) < 0) {
+        return NULL;
+    }
+    unsigned char *ring = view.buf;
+    uint64_t tail, head, used;
+    if (ring_published(ring, capacity, &tail, &head, &used) < 0) {
+        PyBuffer_Release(&view);
+        return ring_corrupt();
+    }
+    uint64_t size = limit <= 0 ? 0 : used < (uint64_t)limit ? used : (uint64_t)limit;
+    if (size == 0) {
+        PyBuffer_Release(&view);
+        return PyLong_FromLong(0);
+    }
+    PyObject *into = args[1];
+    Py_ssize_t before = PyByteArray_GET_SIZE(into);
+    if (PyByteArray_Resize(into, before + (Py_ssize_t)size) < 0) {
+        PyBuffer_Release(&view);
+        return NULL;
+    }
+    char *out = PyByteArray_AS_STRING(into) + before;
+    uint64_t at = head & (capacity - 1);
+    uint64_t first = capacity - at < size ? capacity - at : size;
+    memcpy(out, ring + RING_HEADER + at, (size_t)first);
+    if (first < size) {
+        memcpy(out + first, ring + RING_HEADER, (size_t)(size - first));
+    }
+    /* The copy is done before the head says the room is free; then a full fence before the
+     * sender's flag is read (Dekker: the sender sets it, fences, and reads the head). */
+    __atomic_store_n(ring_u64(ring, RING_HEAD), head + size, __ATOMIC_RELEASE);
+    __atomic_thread_fence(__ATOMIC_SEQ_CST);
+    if (ring_take(ring, RING_WAITING)) {
+        uint64_t one = 1;
+        ssize_t rung = write(room_fd, &one, sizeof one);
+        (void)rung; /* a full eventfd is rung already; a bad one is the sender's own loss */
+    }
+    PyBuffer_Release(&view);
+    return PyLong_FromUnsignedLongLong(size);
+}
+
+/* ring_take_flag(memory, flag) -> bool: ring.take_flag_python, atomically. */
+static PyObject *ring_take_flag(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)module;
+    if (nargs != 2) {
+        PyErr_Format(PyExc_TypeError, "ring_take_flag() takes 2 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    int flag = as_int(args[1]);
+    if (flag == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    if (flag != RING_SLEEPING && flag != RING_WAITING && flag != RING_CLOSED) {
+        PyErr_SetString(PyExc_ValueError, "ring_take_flag(): not a flag's offset");
+        return NULL;
+    }
+    Py_buffer view;
+    uint64_t capacity;
+    if (ring_view(args[0], &view, &capacity) < 0) {
+        return NULL;
+    }
+    int taken = ring_take(view.buf, flag);
+    PyBuffer_Release(&view);
+    return PyBool_FromLong(taken);
+}
+
 /* SmallFrameWriter(fd, empty_frames, int_prefixes, fallback): PipeSender.put for the commonest
  * messages. Called with (label, payload): when the payload is None or an int of 8 bytes and the
  * codec has already built that label's frame (empty_frames) or prefix (int_prefixes), it writes
@@ -172,6 +384,11 @@ typedef struct {
      * in which a write that must wait for room lends the sender's priority. Set, every write first
      * tries without waiting (RWF_NOWAIT): the fast path makes no extra call. */
     PyObject *lend;
+    /* Shared memory (ring.py): when has_ring, frames go into the ring and `fd` (the pipe's write
+     * end, non-blocking) only carries a doorbell byte to a receiver that sleeps. */
+    Py_buffer ring;
+    int has_ring;
+    uint64_t capacity;
 } Writer;
 
 /* Take the lock, waiting without the GIL if another thread holds it. */
@@ -237,8 +454,41 @@ static int exit_context(PyObject *context)
 /* write_out, lending the sender's priority while it waits for room (self->lend set): one try
  * without waiting first; what did not fit is written inside the lend context. The bytes that
  * went are counted in *written even when the context fails (the frame is always completed). */
+/* A frame into the ring, whole or not at all: 0 (published, the doorbell rung if the receiver
+ * sleeps), EAGAIN (no room: nothing written; the Python path waits), EPIPE (the receiving end is
+ * gone; *written says whether the frame went first), EBADMSG (the receiver broke the indices). */
+static int ring_send(Writer *self, const char *data, Py_ssize_t size, Py_ssize_t *written)
+{
+    unsigned char *ring = self->ring.buf;
+    *written = 0;
+    if (__atomic_load_n(ring_u32(ring, RING_CLOSED), __ATOMIC_ACQUIRE) != 0) {
+        return EPIPE;
+    }
+    Py_ssize_t put = ring_put_bytes(ring, self->capacity, data, size, 1);
+    if (put < 0) {
+        return EBADMSG;
+    }
+    if (put == 0) {
+        return EAGAIN;
+    }
+    *written = size;
+    /* Dekker with the receiver: tail published, full fence, then its flag (ring.py). */
+    __atomic_thread_fence(__ATOMIC_SEQ_CST);
+    if (ring_take(ring, RING_SLEEPING)) {
+        char bell = 0;
+        if (write(self->fd, &bell, 1) < 0 && errno == EPIPE) { /* a full pipe of bells wakes it too */
+            __atomic_store_n(ring_u32(ring, RING_CLOSED), 1, __ATOMIC_RELEASE);
+            return EPIPE;
+        }
+    }
+    return 0;
+}
+
 static int write_lending(Writer *self, const char *data, Py_ssize_t size, Py_ssize_t *written)
 {
+    if (self->has_ring) {
+        return ring_send(self, data, size, written);
+    }
     if (self->lend == NULL || self->lend == Py_None) {
         return write_out(self->fd, data, size, written);
     }
@@ -311,6 +561,22 @@ static Py_ssize_t small_frame(Writer *self, PyObject *item, char *frame)
 
 #define BATCH_BYTES (64 * 1024) /* one write of a batch; the receiver reads as much at once */
 
+/* The most bytes of the next batch: BATCH_BYTES, or less when the ring has less room (the room only
+ * grows but for our own writes, made holding the lock: a batch sized so is written whole, and a
+ * ring filling up does not send every frame to the Python path one by one). */
+static Py_ssize_t batch_limit(Writer *self)
+{
+    if (!self->has_ring) {
+        return BATCH_BYTES;
+    }
+    uint64_t tail, head, used;
+    if (ring_published(self->ring.buf, self->capacity, &tail, &head, &used) < 0) {
+        return BATCH_BYTES; /* the write reports the broken indices */
+    }
+    uint64_t room = self->capacity - used;
+    return room < BATCH_BYTES ? (Py_ssize_t)room : BATCH_BYTES;
+}
+
 /* write_many(items, start) -> (taken, errno): the longest run of items from `start` whose frames
  * the codec has cached, written in writes of up to BATCH_BYTES; taken counts the items whose
  * frames are wholly in the pipe, errno is 0 or why the last write failed (the caller then
@@ -337,6 +603,7 @@ static PyObject *writer_write_many(Writer *self, PyObject *args)
         return PyErr_NoMemory();
     }
     Py_ssize_t taken = 0, in_batch = 0, size = 0;
+    Py_ssize_t limit = batch_limit(self);
     int error = 0;
     for (Py_ssize_t index = start; !error; index++) {
         Py_ssize_t framed = 0;
@@ -351,7 +618,7 @@ static PyObject *writer_write_many(Writer *self, PyObject *args)
                 return NULL;
             }
         }
-        if (in_batch > 0 && (framed == 0 || size + framed > BATCH_BYTES || in_batch == MOST_FRAMES)) {
+        if (in_batch > 0 && (framed == 0 || size + framed > limit || in_batch == MOST_FRAMES)) {
             Py_ssize_t written;
             take_lock(self);
             error = write_lending(self, batch, size, &written);
@@ -365,6 +632,11 @@ static PyObject *writer_write_many(Writer *self, PyObject *args)
                 taken++;
             }
             in_batch = size = 0;
+            limit = batch_limit(self);
+            if (error == EAGAIN && self->has_ring) { /* the ring is full: put_many waits in Python */
+                error = 0;
+                break;
+            }
         }
         if (framed == 0 || error) {
             break;
@@ -469,10 +741,10 @@ static PyObject *writer_call(Writer *self, PyObject *const *args, size_t nargsf,
 static PyObject *writer_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
 {
     int fd;
-    PyObject *empty_frames, *int_prefixes, *fallback;
-    static char *names[] = {"fd", "empty_frames", "int_prefixes", "fallback", NULL};
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "iO!O!O:SmallFrameWriter", names, &fd, &PyDict_Type,
-                                     &empty_frames, &PyDict_Type, &int_prefixes, &fallback)) {
+    PyObject *empty_frames, *int_prefixes, *fallback, *ring = Py_None;
+    static char *names[] = {"fd", "empty_frames", "int_prefixes", "fallback", "ring", NULL};
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "iO!O!O|O:SmallFrameWriter", names, &fd, &PyDict_Type,
+                                     &empty_frames, &PyDict_Type, &int_prefixes, &fallback, &ring)) {
         return NULL;
     }
     if (!PyCallable_Check(fallback)) {
@@ -493,6 +765,13 @@ static PyObject *writer_new(PyTypeObject *type, PyObject *args, PyObject *kwargs
     if (self->lock == NULL) {
         Py_DECREF(self);
         return PyErr_NoMemory();
+    }
+    if (ring != Py_None) {
+        if (ring_view(ring, &self->ring, &self->capacity) < 0) {
+            Py_DECREF(self);
+            return NULL;
+        }
+        self->has_ring = 1;
     }
     return (PyObject *)self;
 }
@@ -521,6 +800,10 @@ static void writer_dealloc(Writer *self)
     PyTypeObject *type = Py_TYPE(self);
     PyObject_GC_UnTrack(self);
     writer_clear(self);
+    if (self->has_ring) {
+        self->has_ring = 0;
+        PyBuffer_Release(&self->ring);
+    }
     if (self->lock != NULL) {
         if (self->locked) {
             PyThread_release_lock(self->lock);
@@ -559,6 +842,12 @@ static PyType_Spec writer_spec = {
 static PyMethodDef methods[] = {
     {"decode_run", (PyCFunction)(void (*)(void))decode_run, METH_FASTCALL,
      "decode_run(buffer, at, names, into) -> int\n\nCodec.decode_run in C (see anodize._transport.codec)."},
+    {"ring_write", (PyCFunction)(void (*)(void))ring_write, METH_FASTCALL,
+     "ring_write(memory, data) -> int\n\nring.ring_write_python in C (see anodize._transport.ring)."},
+    {"ring_read", (PyCFunction)(void (*)(void))ring_read, METH_FASTCALL,
+     "ring_read(memory, into, limit, room_fd) -> int\n\nring.ring_read_python in C."},
+    {"ring_take_flag", (PyCFunction)(void (*)(void))ring_take_flag, METH_FASTCALL,
+     "ring_take_flag(memory, flag) -> bool\n\nring.take_flag_python, atomically."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,18 +1,24 @@
-"""The process transport's links: OS pipes between group processes.
+"""The process transport's links: a shared-memory byte ring and an OS pipe per channel.
 
 A group's :class:`~anodize._transport.network.GroupNetwork` links its channels to
-roles of other groups with :class:`PipeLinks`: each is a pipe carrying
-frames (:mod:`anodize._transport.codec`); large arrays go through shared-memory rings
-(:mod:`anodize._transport.shm`). Only the sending group holds a pipe's write end, so when
-that group's process dies the receiver reads end-of-file: a crashed peer is
-always noticed, never waited on. A role that fails in a live process has a
-failure frame written after its last message, so nothing it sent is lost.
+roles of other groups with :class:`PipeLinks`. A channel's frames
+(:mod:`anodize._transport.codec`) travel through a single-producer/single-consumer byte
+ring in memory both processes map (:mod:`anodize._transport.ring`): a send is a copy and
+a store, with no system call while the receiver is awake. The channel's pipe stays for
+what only the kernel can give: a receiver that has nothing to read sleeps in ``poll()`` on
+it and the sender writes one doorbell byte there; and only the sending group holds its
+write end, so when that group's process dies the receiver reads end-of-file: a crashed
+peer is always noticed, never waited on. A role that fails in a live process has a
+failure frame written after its last message, so nothing it sent is lost. Large arrays
+go through shared-memory slots (:mod:`anodize._transport.shm`). Built without a ring
+(``PipeLinks(fds)``), a channel's frames travel in the pipe itself, as before the ring.
 """
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import mmap
 import os
 import select
 import threading
@@ -20,36 +26,151 @@ import time
 from collections import deque
 from collections.abc import Callable, Collection, Iterable, Mapping
 from contextlib import AbstractContextManager
+from multiprocessing import reduction
+from multiprocessing.connection import Connection
+from operator import itemgetter
 from queue import Empty
-from typing import Any
+from typing import Any, NamedTuple, Protocol
 
 from .._session.channel import STOP, Corrupt, PeerFailure
 from ..errors import AnodizeError, PeerFailedError, RoleStopped
 from .codec import HEADER, MAX_FRAME, Codec, DecodeError, EncodeError, FrameKind
 from .frames import SmallFrameWriter
-from .links import LinkNetwork, PayloadError
+from .links import LinkNetwork, PayloadError, WritingEnd
+from .ring import (
+    SLEEPING,
+    WAITING,
+    create_ring_memory,
+    doorbell_due,
+    ring_close,
+    ring_closed,
+    ring_read,
+    ring_ready,
+    ring_room,
+    ring_write,
+    set_flag,
+    take_flag,
+)
+from .spin import SpinPolicy
 
-__all__ = ["PipeLinks", "PipeSender", "PipeReceiver"]
+__all__ = ["PipeLinks", "PipeSender", "PipeReceiver", "Ring", "LinkEnd", "SharedFd", "channel_ends", "map_ring",
+           "Spin"]
 
 # Reads of at most 64 KiB: larger ones make malloc mmap and munmap a buffer on every call.
 _READ_SIZE = 64 * 1024
+_MESSAGE = itemgetter(0)  # of a decoded (message, frame size) entry
+# A ring's receiver takes at most this much at once. The decoder turns all it took into message
+# objects at once: 64 KiB of small frames are some 4,000 of them (over half a MiB of objects),
+# evicted from the cache before a batch of 1,024 reaches them, which cost recv_many a third more
+# CPU per message than 16 KiB (about one such batch). No system call is saved by more: the ring
+# is read without one.
+_RING_READ = 16 * 1024
 _PIPE_SIZE = 1 << 20  # ask the kernel for 1 MiB pipes: fewer blocked senders when streaming
 # A failure frame stays within PIPE_BUF (4096 bytes; 4 UTF-8 bytes a character at most): one
 # write, which a reader sees whole even when the writer dies right after it.
 _CAUSE_CHARS = (select.PIPE_BUF - 16) // 4
 
 
+_ROOM_CHECK = 1.0  # seconds between a waiting sender's looks at the supervisor's word on its receiver
+
+
+class Ring(NamedTuple):
+    """A channel's ring, as one process sees it: the mapped memory and the sender's room eventfd."""
+
+    memory: memoryview
+    room_fd: int
+
+
+class Spin(Protocol):
+    """How a receiver may wait a little, awake, before it sleeps (set by another part of anodize)."""
+
+    def wait(self, ready: Callable[[], bool], limit: float | None = None) -> bool:
+        """Return True as soon as ``ready()`` is, False when it is time to sleep (or ``limit``
+        seconds, the receive's own timeout, have passed)."""
+
+
+class SharedFd:
+    """A file descriptor that a spawned group process receives (duplicated into it as a pipe's
+    :class:`~multiprocessing.connection.Connection` is)."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+
+    def __reduce__(self) -> tuple[Callable[[Any], SharedFd], tuple[object]]:
+        return _rebuild_fd, (reduction.DupFd(self.fd),)
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            os.close(self.fd)
+
+
+def _rebuild_fd(duplicate: Any) -> SharedFd:
+    return SharedFd(duplicate.detach())
+
+
+class LinkEnd:
+    """One group's end of a channel to another group: the pipe's end, the ring's memory (a memfd)
+    and the sender's room eventfd. Sent to the group's process with its spec."""
+
+    def __init__(self, pipe: Connection, memory: SharedFd, room: SharedFd) -> None:
+        self.pipe = pipe
+        self.memory = memory
+        self.room = room
+
+    def fileno(self) -> int:
+        """The pipe's end."""
+        return self.pipe.fileno()
+
+    def close(self) -> None:
+        """Close what this process holds of it (the supervisor, once the groups have theirs)."""
+        self.pipe.close()
+        self.memory.close()
+        self.room.close()
+
+    def ring(self) -> Ring:
+        """Map the ring (in the group's process); the memfd is closed, the mapping stays."""
+        memory = map_ring(self.memory.fd)
+        self.memory.close()
+        os.set_inheritable(self.room.fd, False)  # as the pipe: a role's child process holds none
+        return Ring(memory, self.room.fd)
+
+
+def channel_ends(context: Any) -> tuple[LinkEnd, LinkEnd]:
+    """A new channel between two group processes: (the receiver's end, the sender's end)."""
+    reader, writer = context.Pipe(duplex=False)
+    memory = create_ring_memory()
+    room = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+    # Each end its own descriptors: the supervisor closes both ends once the groups have theirs.
+    return (LinkEnd(reader, SharedFd(memory), SharedFd(room)),
+            LinkEnd(writer, SharedFd(os.dup(memory)), SharedFd(os.dup(room))))
+
+
+def map_ring(memory_fd: int) -> memoryview:
+    """The ring in ``memory_fd`` (a memfd), mapped shared, as a memoryview."""
+    return memoryview(mmap.mmap(memory_fd, 0, mmap.MAP_SHARED, mmap.PROT_READ | mmap.PROT_WRITE))
+
+
 class PipeLinks:
-    """The links of a group's channels to other groups' processes: one pipe each.
+    """The links of a group's channels to other groups' processes: a ring and a pipe each.
 
     Args:
         fds: for each pair with one end here and the other in another group, the
             pipe's file descriptor (the write end for our senders, the read end for
             our receivers).
+        rings: the pairs' rings (a pair without one carries its frames in the pipe).
     """
 
-    def __init__(self, fds: Mapping[tuple[str, str], int]) -> None:
+    @classmethod
+    def from_ends(cls, ends: Mapping[tuple[str, str], LinkEnd], spin: SpinPolicy | None = None) -> PipeLinks:
+        """The links of a group's process from the ends the supervisor sent it."""
+        return cls({pair: end.fileno() for pair, end in ends.items()},
+                   {pair: end.ring() for pair, end in ends.items()}, spin)
+
+    def __init__(self, fds: Mapping[tuple[str, str], int], rings: Mapping[tuple[str, str], Ring] | None = None,
+                 spin: SpinPolicy | None = None) -> None:
         self.fds = dict(fds)
+        self.rings = dict(rings or {})
+        self.spin = spin  # the group's spin then park (anodize._transport.spin), or None
         # Rung when the run stops: every pipe reader polls it (never drained: stop is final).
         self.wake_fd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
         self._failure_listeners: dict[str, list[int]] = {}  # sender -> its readers' notice eventfds
@@ -61,16 +182,22 @@ class PipeLinks:
         return list(self.fds)
 
     def writer(self, pair: tuple[str, str], codec: Codec, network: LinkNetwork) -> PipeSender:
-        return PipeSender(self.fds[pair], codec, network, *pair)
+        return PipeSender(self.fds[pair], codec, network, *pair, ring=self.rings.get(pair), wake_fd=self.wake_fd)
 
     def reader(self, pair: tuple[str, str], codec: Codec, network: LinkNetwork) -> PipeReceiver:
-        receiver = PipeReceiver(self.fds[pair], codec, network, pair[0], self.wake_fd)
+        receiver = PipeReceiver(self.fds[pair], codec, network, pair[0], self.wake_fd, ring=self.rings.get(pair))
+        receiver.spin = None if self.spin is None else self.spin.spinner()
         self._incoming[pair] = self.fds[pair]
         self._failure_listeners.setdefault(pair[0], []).append(receiver.notice_fd)
         return receiver
 
     def silence(self, pair: tuple[str, str]) -> None:
         if pair in self._incoming:
+            ring = self.rings.get(pair)
+            if ring is not None:  # its next write fails; a waiting one is woken to see it
+                ring_close(ring.memory)
+                with contextlib.suppress(BlockingIOError):  # full (the sender holds it too): it wakes anyway
+                    os.eventfd_write(ring.room_fd, 1)
             _silence(self._incoming[pair])  # its blocked senders get EPIPE
 
     def noted_failed(self, role: str) -> None:
@@ -84,11 +211,16 @@ class PipeLinks:
         """Nothing to flush: what was written is in the pipe."""
 
 
-class PipeSender:
+class PipeSender(WritingEnd):
     """The write end of a channel to a role in another process."""
 
-    def __init__(self, fd: int, codec: Codec, network: LinkNetwork, sender: str, receiver: str) -> None:
+    read_where = "in the receiver's process"
+
+    def __init__(self, fd: int, codec: Codec, network: LinkNetwork, sender: str, receiver: str,
+                 ring: Ring | None = None, wake_fd: int | None = None) -> None:
         self.fd = fd
+        self.ring = ring
+        self._wake_fd = wake_fd
         self.codec = codec
         self.network = network
         self.sender = sender
@@ -97,21 +229,26 @@ class PipeSender:
         # another thread) lands inside another that takes several writes.
         self._lock: Any = threading.Lock()
         self.closed = False
-        _grow_pipe(fd)
+        if ring is None:
+            _grow_pipe(fd)
+        else:  # the pipe carries doorbells only: a full one has woken the receiver already
+            os.set_blocking(fd, False)
         self._small: Any = None
         if SmallFrameWriter is not None:
             # Compiled (frames.py): messages without a payload or with a small int, whose frame
-            # the codec has built once, are written in C; it hands every other item to put_python.
-            # Its lock is the channel's lock.
-            self._small = self._lock = SmallFrameWriter(fd, *codec.small_frames(), self.put_python)
+            # the codec has built once, are written in C (into the ring, when it has room); it
+            # hands every other item to put_python. Its lock is the channel's lock.
+            self._small = self._lock = SmallFrameWriter(fd, *codec.small_frames(), self.put_python,
+                                                        None if ring is None else ring.memory)
             self.put = self._small  # type: ignore[method-assign]
         self._lend: Callable[[], AbstractContextManager[None]] | None = None
 
     @property
     def lend_while_full(self) -> Callable[[], AbstractContextManager[None]] | None:
         """Set by the sender's endpoint under priority inheritance: the context in which a write
-        that must wait for room in the pipe lends the sender's priority (anodize._session.inheriting).
-        Every write then first tries without waiting (``RWF_NOWAIT``): no extra call on the fast path."""
+        that must wait for room in the ring (or the pipe) lends the sender's priority
+        (anodize._session.inheriting). A pipe's write then first tries without waiting (``RWF_NOWAIT``),
+        a ring's never waits while it has room: no extra call on the fast path."""
         return self._lend
 
     @lend_while_full.setter
@@ -208,6 +345,9 @@ class PipeSender:
     def _write(self, data: bytes) -> None:
         if not data:
             return
+        if self.ring is not None:
+            self._write_ring(self.ring, data)
+            return
         with self._lock:
             try:
                 if self._lend is None:
@@ -223,41 +363,92 @@ class PipeSender:
             except OSError:
                 raise self._peer_gone() from None
 
-    def buffer(self, shape: tuple[int, ...], dtype: object) -> object:
-        """A numpy array in a shared-memory slot of this channel, to fill and send."""
+    def _write_ring(self, ring: Ring, data: bytes) -> None:
+        """Put ``data`` in the ring, in pieces when it is larger than the room; wait for room."""
+        view = memoryview(data)
+        with self._lock:
+            while view:
+                if ring_closed(ring.memory):
+                    raise self._peer_gone()
+                try:
+                    written = ring_write(ring.memory, view)
+                except ValueError:  # the receiver broke the indices: it is not a peer to wait for
+                    ring_close(ring.memory)
+                    raise self._peer_gone() from None
+                if written:
+                    view = view[written:]
+                    self._ring_bell(ring)
+                elif self._lend is None:
+                    self._wait_for_room(ring)
+                else:
+                    with self._lend():
+                        self._wait_for_room(ring)
+
+    def _ring_bell(self, ring: Ring) -> None:
+        """Wake the receiver if it sleeps (the tail is published: see anodize._transport.ring)."""
+        if doorbell_due(ring.memory):
+            try:
+                os.write(self.fd, b"\0")
+            except BlockingIOError:  # a pipe full of doorbells: the receiver has been woken
+                pass
+            except OSError:  # no reader: the receiver's process is gone, or its role silenced
+                ring_close(ring.memory)
+                raise self._peer_gone() from None
+
+    def _wait_for_room(self, ring: Ring) -> None:
+        """Sleep until the receiver frees room, goes away, or the run stops."""
+        set_flag(ring.memory, WAITING, 1)
+        try:
+            if ring_room(ring.memory) or ring_closed(ring.memory):  # freed before the flag was seen
+                return
+            poller = select.poll()
+            poller.register(ring.room_fd, select.POLLIN)
+            poller.register(self.fd, 0)  # POLLERR when the read end has gone
+            if self._wake_fd is not None:
+                poller.register(self._wake_fd, select.POLLIN)
+            while True:
+                events = dict(poller.poll(int(_ROOM_CHECK * 1000)))
+                if events.get(self.fd, 0) & (select.POLLERR | select.POLLHUP):
+                    ring_close(ring.memory)
+                    return
+                if self.network.stopping or self.receiver in self.network.failed:
+                    raise self._peer_gone()
+                if ring.room_fd in events or ring_room(ring.memory):
+                    with contextlib.suppress(BlockingIOError):
+                        os.eventfd_read(ring.room_fd)
+                    return
+        except ValueError:  # broken indices: the next write says so
+            return
+        finally:
+            take_flag(ring.memory, WAITING)
+
+    def buffer(self, shape: tuple[int, ...], dtype: object, strict: bool = False) -> object:
+        """A numpy array in a shared-memory slot of this channel, to fill and send (``strict``:
+        handed over by making its pages read-only here)."""
         ring = self.codec.ring
         if ring is None:
             import numpy as np
 
             return np.empty(shape, dtype)  # type: ignore[call-overload]
-        return ring.claim_array(shape, dtype)
+        return ring.claim_array(shape, dtype, strict)
 
     def put_failure(self, cause: str) -> None:
         """Best effort, from another thread: tell the receiver this sender failed."""
         if self._lock.acquire(timeout=1.0):  # a writer blocked on a full pipe must not block us
             try:
-                _write_all(self.fd, Codec.failure_frame(_fitted(cause)))
-            except OSError:
+                frame = Codec.failure_frame(_fitted(cause))
+                if self.ring is not None:  # whole or not at all: the supervisor's word comes anyway
+                    if not ring_closed(self.ring.memory) and ring_room(self.ring.memory) >= len(frame):
+                        ring_write(self.ring.memory, frame)
+                        if doorbell_due(self.ring.memory):
+                            with contextlib.suppress(OSError):
+                                os.write(self.fd, b"\0")
+                    return
+                _write_all(self.fd, frame)
+            except (OSError, ValueError):  # ValueError: the ring's indices are broken
                 pass
             finally:
                 self._lock.release()
-
-    # The read side of the Channel protocol: the receiving process holds the read end.
-    def get(self, *, timeout: float | None = None) -> object:
-        """Never used: this is the write end of the pipe.
-
-        Raises:
-            AnodizeError: always.
-        """
-        raise AnodizeError(f"the channel {self.sender}->{self.receiver} is read in {self.receiver}'s process")
-
-    def get_nowait(self) -> object:
-        """Never used: as :meth:`get`."""
-        return self.get()
-
-    def empty(self) -> bool:
-        """True: nothing arrives at the write end."""
-        return True
 
     def _peer_gone(self) -> BaseException:
         if self.network.stopping:  # the receiver stopped with the run: so do we
@@ -275,8 +466,14 @@ class PipeReceiver:
     # only when a receive must wait for the pipe.
     lend_while_empty: Callable[[], AbstractContextManager[None]] | None = None
 
-    def __init__(self, fd: int, codec: Codec, network: LinkNetwork, sender: str, wake_fd: int) -> None:
+    # Set by the group's spin policy: wait awake a little before sleeping (see :meth:`ready`).
+    spin: Spin | None = None
+
+    def __init__(self, fd: int, codec: Codec, network: LinkNetwork, sender: str, wake_fd: int,
+                 ring: Ring | None = None) -> None:
         self.fd = fd
+        self.ring = ring
+        self._ring_broken = False  # the sender's indices were impossible: nothing more is read from it
         self.codec = codec
         self.network = network
         self.sender = sender
@@ -327,6 +524,8 @@ class PipeReceiver:
                     return PeerFailure(self.sender, failed)
                 continue  # decode what that read brought before waiting for more
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            if self.spin is not None and self.ring is None and left != 0 and self.spin.wait(self._readable, left):
+                left = 0  # it came while spinning: read it without sleeping (a ring's receiver spins in _fill_ring)
             lend = self.lend_while_empty
             if lend is not None and left != 0:
                 filled = self._fill(0)  # what the pipe holds now, without waiting
@@ -357,7 +556,7 @@ class PipeReceiver:
         else:
             entries = [ready.popleft() for _ in range(limit)]
         self.frame_size = entries[-1][1]
-        return [entry[0] for entry in entries]  # type: ignore[misc]
+        return list(map(_MESSAGE, entries))  # the messages without their frame sizes, in C
 
     def give_back(self, items: list[tuple[str, object]]) -> None:
         """Put messages taken with :meth:`take_ready` back, first in line, in order."""
@@ -368,6 +567,10 @@ class PipeReceiver:
         if self._pushed or self._complete() or self._eof or self.network.stopping:
             return False
         return not (self._fill(0) and (self._complete() or self._eof))
+
+    def _readable(self) -> bool:
+        """Whether the pipe (or a stop, or a failure notice) can be read now: the spinner's probe."""
+        return bool(self._poll.poll(0))
 
     def _complete(self) -> bool:
         if self._ready:
@@ -410,11 +613,64 @@ class PipeReceiver:
         message: tuple[str, object] = value  # (label, payload)
         return message
 
+    def ready(self) -> bool:
+        """True when the ring holds bytes not yet read: cheap (two loads), for a spinning wait."""
+        return self.ring is not None and ring_ready(self.ring.memory)
+
+    def _take_ring(self, ring: Ring) -> bool:
+        """Copy what the ring holds (``_RING_READ`` at most, ``_READ_SIZE`` inside a larger frame) after the
+        unread bytes; True if any came."""
+        if self._ring_broken:
+            return False
+        if self._at > 4 * _RING_READ:  # drop what was consumed now and then, not on every frame
+            del self._buffer[:self._at]
+            self._at = 0
+        limit = _RING_READ
+        buffer, at = self._buffer, self._at
+        if len(buffer) - at >= 4 and HEADER.unpack_from(buffer, at)[0] > _RING_READ:
+            limit = _READ_SIZE  # the rest of a large frame: no objects to build, fewer wakes of its sender
+        try:
+            return ring_read(ring.memory, buffer, limit, ring.room_fd) > 0
+        except ValueError as error:  # the sender's indices are impossible: the stream is lost
+            self._ring_broken = True  # the pipe still says when the sender's process ends
+            self._pushed.append(Corrupt(f"the channel's ring from {self.sender}: {error}"))
+            return True
+
+    def _fill_ring(self, ring: Ring, timeout: float | None) -> bool:
+        """:meth:`_fill` with a ring: the frames come from it, the pipe only wakes us."""
+        if self._take_ring(ring):
+            return True
+        if timeout != 0:
+            spin = self.spin
+            if spin is not None and spin.wait(self.ready, timeout):
+                return self._take_ring(ring)
+            set_flag(ring.memory, SLEEPING, 1)  # then the tail again: see anodize._transport.ring
+            if self._take_ring(ring):
+                set_flag(ring.memory, SLEEPING, 0)
+                return True
+        ready = self._poll.poll(None if timeout is None else max(0, int(timeout * 1000)))
+        if timeout != 0:
+            set_flag(ring.memory, SLEEPING, 0)
+        if any(fd == self.notice_fd for fd, _ in ready):
+            with contextlib.suppress(BlockingIOError):
+                os.eventfd_read(self.notice_fd)  # the caller now sees the failure in network.failed
+        if any(fd == self.fd for fd, _ in ready):
+            try:
+                bells = os.read(self.fd, _READ_SIZE)  # doorbells: their number says nothing
+            except OSError:  # the descriptor was silenced (our role failed): nothing more comes
+                bells = b""
+            if not bells and not self._take_ring(ring):  # the sender's end is closed, all it wrote read
+                self._eof = True
+                return True
+        return self._take_ring(ring)
+
     def _fill(self, timeout: float | None) -> bool:
         """Read what the pipe holds, waiting up to ``timeout``; False if no data came.
 
         Also returns (False) when woken by a stop, so the caller looks again.
         """
+        if self.ring is not None:
+            return self._fill_ring(self.ring, timeout)
         ready = self._poll.poll(None if timeout is None else max(0, int(timeout * 1000)))
         if any(fd == self.notice_fd for fd, _ in ready):
             with contextlib.suppress(BlockingIOError):

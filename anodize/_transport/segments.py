@@ -28,13 +28,16 @@ import os
 import socket
 from typing import Any
 
-__all__ = ["PAGE", "SEALS", "create", "verify", "available_memory", "address_of", "protect", "Inbox",
-           "hand_over"]
+__all__ = ["PAGE", "SEALS", "SHARED_POPULATED", "create", "verify", "available_memory", "address_of", "protect",
+           "Inbox", "hand_over"]
 
 PAGE = mmap.PAGESIZE
 SEALS = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_SEAL
 _REQUIRED_SEALS = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW  # what makes a mapping safe from SIGBUS
 _NAME_MAX = 200  # bytes of a ring's name in a datagram (memfd names stop at 249)
+# A shared mapping whose page-table entries are filled when it is made: the first write or
+# read of a slot then takes no page fault (the pages exist already: ``posix_fallocate``).
+SHARED_POPULATED = mmap.MAP_SHARED | getattr(mmap, "MAP_POPULATE", 0)
 
 
 def create(name: str, size: int) -> tuple[int, mmap.mmap]:
@@ -48,7 +51,7 @@ def create(name: str, size: int) -> tuple[int, mmap.mmap]:
         os.ftruncate(fd, size)
         os.posix_fallocate(fd, 0, size)  # every page now: no memory is an error here, not a SIGBUS later
         fcntl.fcntl(fd, fcntl.F_ADD_SEALS, SEALS)
-        return fd, mmap.mmap(fd, size)
+        return fd, mmap.mmap(fd, size, flags=SHARED_POPULATED)
     except BaseException:
         os.close(fd)
         raise

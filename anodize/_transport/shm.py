@@ -18,11 +18,20 @@ memory and so under its own bound. Only an array too big for a frame waits for a
 slot, for a bounded time, and then fails with :class:`RingFullError`.
 
 An array made in a slot (:meth:`ArrayRing.claim_array`) is handed over when it is
-sent: from then on its pages are read-only for the sender (``mprotect``), so a write
-through any view of it faults in the sender, its own fault, instead of changing the
-receiver's data. A received array's ``base`` holds the slot's address and layout
-only: nothing reachable from it maps the ring's header, which only the reader
-writes.
+sent, without changing a page's protection: the array, and the one array every numpy
+view of it leads to through ``base``, become read-only (numpy then refuses a write
+through them, or through a view made later). A view made before the send that is
+still alive is counted (it holds that array), and then the slot's pages are made
+read-only for the sender too (``mprotect``, the strict hand-over), so a write through
+it faults in the sender, its own fault, instead of changing the receiver's data; a
+strict buffer (``strict=True``) is always handed over so. Each slot has a claim
+number: sending an array whose slot was reused since it was made raises
+:class:`StaleBufferError`. What no check sees, taken before the send: a raw pointer (a
+memoryview, ``ctypes``, C code), ``as_strided``, a view as a numpy subclass (it holds the
+buffer, not its base); ask for a strict buffer where one is. A received
+array's ``base`` holds the slot's address and layout only: nothing reachable from it
+maps the ring's header, which only the reader writes. Both sides map a ring with its
+pages present (``MAP_POPULATE``): no page fault the first time a slot is used.
 
 A ring whose slots are too small for an array is replaced by a bigger one (a
 new *generation*); old ones stay mapped while arrays view them. Segments are memfds:
@@ -41,6 +50,7 @@ import os
 import secrets
 import socket
 import struct
+import sys
 import tempfile
 import time
 import weakref
@@ -51,7 +61,7 @@ from ..errors import AnodizeError
 from . import segments
 from .segments import PAGE
 
-__all__ = ["ArrayRing", "RingReader", "RingFullError", "RingAllocationError", "DEFAULT_SLOTS",
+__all__ = ["ArrayRing", "RingReader", "RingFullError", "RingAllocationError", "StaleBufferError", "DEFAULT_SLOTS",
            "DEFAULT_INLINE_MAX", "remove_run_segments", "remove_stale_segments", "segment_dir"]
 
 FREE, BUSY = 0, 1
@@ -119,6 +129,27 @@ class RingAllocationError(AnodizeError):
                 f"({self.slots} slots of {_size(self.slot_size)}): {self.reason}")
 
 
+class StaleBufferError(AnodizeError, ValueError):
+    """Raised by a send given an array from ``ep.buffer()`` (or a view of one) that was
+    sent before and whose shared-memory slot has since been filled with a later frame:
+    what it shows is no longer what was written into it.
+
+    Attributes:
+        channel: ``sender->receiver``, the channel the buffer was made for.
+        slot: the slot it lives in.
+        claim: the slot's claim number when the buffer was made; ``current``: now.
+    """
+
+    def __init__(self, channel: str, slot: int, claim: int, current: int) -> None:
+        self.channel, self.slot, self.claim, self.current = channel, slot, claim, current
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        return (f"cannot send an array from ep.buffer() made for channel {self.channel}: it was sent already and "
+                f"its shared-memory slot {self.slot} has been filled again since (claim {self.claim}, now "
+                f"{self.current}); expected a fresh ep.buffer() for each frame, got a stale one")
+
+
 def segment_dir() -> str:
     """Where ring files lived before rings were memfds: ``/dev/shm`` (RAM) where it exists."""
     return "/dev/shm" if os.path.isdir("/dev/shm") and os.access("/dev/shm", os.W_OK) else tempfile.gettempdir()
@@ -169,12 +200,15 @@ class _Segment:
     __slots__ = (
         "__weakref__",
         "address",
+        "claims",
         "fd",
         "generation",
         "handed_over",
         "map",
         "name",
         "protected",
+        "protections",
+        "quarantine",
         "sent",
         "slot_size",
         "slots",
@@ -185,17 +219,31 @@ class _Segment:
         self.fd, self.map = segments.create(name, _HEADER + slots * slot_size)
         _GEOMETRY.pack_into(self.map, _HEADER - _GEOMETRY.size, slots, slot_size)
         self.address = segments.address_of(self.map)
-        self.protected = bytearray(slots)  # slots read-only here since they were sent in place
+        self.protected = bytearray(slots)  # slots read-only here since they were sent in place (strictly)
+        self.protections = 0  # mprotect calls: page-table changes, made only by a strict hand-over
+        # Slots handed over strictly: not filled again while the sender's old buffer memory (and so
+        # any view of it) lives, else making the slot writable again would let that view write
+        # into a later frame the receiver reads.
+        self.quarantine: dict[int, weakref.ref[Any]] = {}
+        self.claims = [0] * slots  # per slot: how often it was filled (a buffer made at an older count is stale)
         self.handed_over = False
         self.sent = 0  # arrays sent through this generation's slots
         _LOCAL[name] = self.fd
         weakref.finalize(self, _close_segment, name, self.fd)
 
     def take_free(self) -> int:
-        """Claim the lowest free slot (one freed a moment ago is still in the CPU's caches); -1: none."""
+        """Claim the lowest free slot (one freed a moment ago is still in the CPU's caches) that no
+        view from a strict hand-over still reaches; -1: none."""
         slot = self.map.find(b"\x00", 0, self.slots)
+        while slot >= 0 and self.quarantine:
+            held = self.quarantine.get(slot)
+            if held is None or held() is None:
+                self.quarantine.pop(slot, None)
+                break
+            slot = self.map.find(b"\x00", slot + 1, self.slots)
         if slot >= 0:
             self.map[slot] = BUSY
+            self.claims[slot] += 1
         return slot
 
     def offset(self, slot: int) -> int:
@@ -211,6 +259,7 @@ class _Segment:
             return
         segments.protect(self.address + self.offset(slot), self.slot_size, writable)
         self.protected[slot] = not writable
+        self.protections += 1
 
 
 def _close_segment(name: str, fd: int) -> None:
@@ -219,15 +268,72 @@ def _close_segment(name: str, fd: int) -> None:
     os.close(fd)
 
 
+class _Claim:
+    """Which filling of a slot a sender's buffer was made for (its claim number then)."""
+
+    __slots__ = ("channel", "claims", "number", "slot")
+
+    def __init__(self, channel: str, slot: int, claims: list[int]) -> None:
+        self.channel, self.slot, self.claims, self.number = channel, slot, claims, claims[slot]
+
+    def check(self) -> None:
+        """Raise :class:`StaleBufferError` if the slot was filled again since."""
+        current = self.claims[self.slot]
+        if current != self.number:
+            raise StaleBufferError(self.channel, self.slot, self.number, current)
+
+
 class _SlotMemory:
     """The ``base`` of an array in a slot: the slot's address and layout, nothing that maps
-    the ring, and no buffer (so numpy refuses to make a read-only array writable again)."""
+    the ring, and no buffer (so numpy refuses to make a read-only array writable again).
+    A sender's buffer also has its :class:`_Claim`; a received array has none."""
 
-    __slots__ = ("__array_interface__", "__weakref__")
+    __slots__ = ("__array_interface__", "__weakref__", "claim")
 
-    def __init__(self, address: int, shape: tuple[int, ...], typestr: str, readonly: bool) -> None:
-        self.__array_interface__ = {"data": (address, readonly), "shape": shape, "typestr": typestr,
-                                    "version": 3}
+    def __init__(self, address: int, shape: tuple[int, ...], typestr: str, readonly: bool,
+                 claim: _Claim | None = None) -> None:
+        self.__array_interface__: dict[str, Any] = {"data": (address, readonly), "shape": shape,
+                                                     "typestr": typestr, "version": 3}
+        self.claim = claim
+
+
+class _Claimed:
+    """A buffer handed out and not sent yet: weak references to the array the caller got
+    and to its base (the one array every numpy view of it holds), and how to hand it over."""
+
+    __slots__ = ("root", "strict", "token", "user")
+
+    def __init__(self, token: int, root: Any, user: Any, strict: bool) -> None:
+        self.token, self.strict = token, strict
+        self.root, self.user = weakref.ref(root), weakref.ref(user)
+
+
+_UNCOUNTED: list[int] = []  # references getrefcount sees besides the holders (calibrated once)
+
+
+def _holders(obj: object, calibrating: bool = False) -> int:
+    """How many objects hold ``obj``, not counting the caller's local variable: the references
+    ``sys.getrefcount`` sees, less those it sees, called the same way, for an object with
+    one known holder (so an interpreter that counts locals differently still agrees)."""
+    references = sys.getrefcount(obj)
+    if calibrating:
+        return references
+    if not _UNCOUNTED:
+        probe = [object()]
+        held = probe[0]
+        _UNCOUNTED.append(_holders(held, calibrating=True) - 1)
+    return references - _UNCOUNTED[0]
+
+
+def check_fresh(array: Any) -> None:
+    """Raise :class:`StaleBufferError` if ``array`` is (a view of) a sender's buffer whose slot
+    was filled again after it was sent. A view's ``base`` is the buffer's base array, whose
+    ``base`` is the slot's memory."""
+    memory = array.base
+    if memory is not None and type(memory) is not _SlotMemory:
+        memory = getattr(memory, "base", None)
+    if type(memory) is _SlotMemory and memory.claim is not None:
+        memory.claim.check()
 
 
 class ArrayRing:
@@ -242,12 +348,14 @@ class ArrayRing:
         channel: ``sender->receiver``, for error messages.
         inline_max: the largest array copied into a frame when no slot is free.
         patience: seconds a bigger array waits for a slot before :class:`RingFullError`.
+        strict: hand every buffer over by making its pages read-only here (``mprotect``),
+            as :meth:`claim_array` does for a strict buffer.
     """
 
     def __init__(self, prefix: str, slots: int = DEFAULT_SLOTS,
                  peer_gone: Callable[[], str | None] = lambda: None, inbox: str | None = None,
                  channel: str = "", inline_max: int = DEFAULT_INLINE_MAX,
-                 patience: float = DEFAULT_PATIENCE) -> None:
+                 patience: float = DEFAULT_PATIENCE, strict: bool = False) -> None:
         if not 0 < slots <= _MAX_SLOTS:
             raise ValueError(f"a ring has 1 to {_MAX_SLOTS} slots, not {slots}")
         self.prefix = prefix
@@ -257,9 +365,10 @@ class ArrayRing:
         self.channel = channel or prefix
         self.inline_max = inline_max
         self.patience = patience
+        self.strict = strict
         self._current: _Segment | None = None
         self._old: list[_Segment] = []  # earlier generations: their fds stay open for late readers
-        self._claimed: dict[tuple[int, int], int] = {}  # (generation, slot) -> token of the claim
+        self._claimed: dict[tuple[int, int], _Claimed] = {}  # (generation, slot) -> the claim
         self._socket: socket.socket | None = None
 
     @property
@@ -282,10 +391,13 @@ class ArrayRing:
             BrokenPipeError: the receiver is gone (``peer_gone`` said so).
             RingFullError: no slot came back in time for an array too big to go inline.
             RingAllocationError: no memory for a bigger ring.
+            StaleBufferError: ``array`` is a buffer sent before whose slot was filled again.
         """
         import numpy as np
 
         claim = self._claim_of(array)
+        if claim is None and array.base is not None:
+            check_fresh(array)
         nbytes = array.nbytes
         if claim is None and (self._current is None or nbytes > self._current.slot_size):
             self._grow(nbytes)
@@ -306,13 +418,17 @@ class ArrayRing:
         segment.sent += 1
         return segment.name, slot, offset
 
-    def claim_array(self, shape: tuple[int, ...], dtype: Any) -> Any:
+    def claim_array(self, shape: tuple[int, ...], dtype: Any, strict: bool = False) -> Any:
         """A writable array in a claimed slot: fill it, send it, and nothing is copied.
 
-        Sending it hands the slot over: the array becomes read-only here (its pages
-        too, so a write through an older view faults). An array never sent gives its
-        slot back when it is collected. With every slot held by the receiver, this is
-        an ordinary array, which is sent by copying.
+        Sending it hands the slot over: the array becomes read-only here, and so does
+        every numpy view of it made later. A view made before the send and still alive
+        makes the hand-over strict: the slot's pages become read-only here (so a write
+        through that view faults), until the slot is claimed again. ``strict``: always
+        so (for a buffer whose address was given to C code or ctypes, which no check
+        sees). Sending it again once its slot was reused raises :class:`StaleBufferError`.
+        An array never sent gives its slot back when it is collected. With every slot
+        held by the receiver, this is an ordinary array, which is sent by copying.
 
         Raises:
             RingAllocationError: no memory for a ring big enough.
@@ -330,13 +446,23 @@ class ArrayRing:
         slot = segment.take_free()
         if slot < 0:
             return np.empty(shape, dt)  # every slot is held: an ordinary array, sent by copying
-        segment.set_writable(slot, True)
-        memory = _SlotMemory(segment.address + segment.offset(slot), tuple(shape), dt.str, readonly=False)
-        array = np.asarray(memory)
+        segment.set_writable(slot, True)  # a strict hand-over left it read-only
+        memory = _SlotMemory(segment.address + segment.offset(slot), tuple(shape), dt.str, readonly=False,
+                             claim=_Claim(self.channel, slot, segment.claims))
+        root = np.asarray(memory)
+        # The caller gets a view of ``root``: every numpy view made of it then has ``root`` as its
+        # base, so the references to ``root`` count the views alive when it is sent.
+        array = root.view()
         token = next(_tokens)
-        self._claimed[(segment.generation, slot)] = token
+        self._claimed[(segment.generation, slot)] = _Claimed(token, root, array, strict or self.strict)
         weakref.finalize(memory, self._unclaim, segment, slot, token)  # keeps the segment mapped
         return array
+
+    @property
+    def page_protections(self) -> int:
+        """``mprotect`` calls made so far, over every generation (strict hand-overs only)."""
+        return sum(segment.protections for segment in self._old) + (
+            self._current.protections if self._current else 0)
 
     @property
     def arrays_sent(self) -> int:
@@ -344,8 +470,16 @@ class ArrayRing:
         return sum(segment.sent for segment in self._old) + (self._current.sent if self._current else 0)
 
     def owns(self, array: Any) -> bool:
-        """Whether ``array`` is a claimed, unsent slot of the current ring."""
-        return self._claim_of(array) is not None
+        """Whether ``array`` is a claimed, unsent slot of the current ring.
+
+        Raises:
+            StaleBufferError: ``array`` is a buffer sent before whose slot was filled again.
+        """
+        if self._claim_of(array) is not None:
+            return True
+        if array.base is not None:
+            check_fresh(array)
+        return False
 
     def in_use(self) -> int:
         """Slots of the current generation that are not free (held by the receiver or claimed)."""
@@ -431,26 +565,62 @@ class ArrayRing:
         return min(delay * 2, 0.002)
 
     def _claim_of(self, array: Any) -> tuple[int, int] | None:
-        """(slot, offset) if ``array`` starts a claimed, unsent slot of the current ring."""
+        """(slot, offset) if ``array`` is a claimed, unsent buffer of the current ring, or a
+        C-contiguous view of one that starts its slot (not an older buffer of the same slot)."""
         segment = self._current
-        if not self._claimed or segment is None or not array.flags.c_contiguous:
+        root = array.base
+        if not self._claimed or segment is None or root is None:
+            return None  # (an array owning its memory, as most sent by copying do, is no buffer)
+        memory = getattr(root, "base", None)
+        if type(memory) is not _SlotMemory:  # the buffer's root itself, or no buffer at all
+            root, memory = array, root
+            if type(memory) is not _SlotMemory:
+                return None
+        claim = memory.claim
+        if claim is None:
+            return None  # a received array
+        claimed = self._claimed.get((segment.generation, claim.slot))
+        if claimed is None or claimed.root() is not root or not array.flags.c_contiguous:
             return None
-        offset = array.__array_interface__["data"][0] - segment.address
-        slot, rest = divmod(offset - _HEADER, segment.slot_size)
-        if rest or not 0 <= slot < segment.slots or (segment.generation, slot) not in self._claimed:
-            return None
-        return slot, offset
+        if array is not claimed.user() and \
+                array.__array_interface__["data"][0] != memory.__array_interface__["data"][0]:
+            return None  # a view that does not start the slot: sent by copying
+        return claim.slot, segment.offset(claim.slot)
 
     def _hand_in_place(self, segment: _Segment, array: Any, claim: tuple[int, int]) -> tuple[str, int, int]:
         slot, offset = claim
-        del self._claimed[(segment.generation, slot)]
+        claimed = self._claimed.pop((segment.generation, slot))
         segment.sent += 1
-        segment.set_writable(slot, False)  # the receiver's now: a write through any view faults here
-        view = array
-        while view is not None and hasattr(view, "flags"):  # the array and the one it views
-            view.flags.writeable = False
-            view = view.base
+        if claimed.strict or self._views_unseen(array, claimed):
+            segment.set_writable(slot, False)  # the receiver's now: a write through any view faults here
+            root = claimed.root()
+            if root is not None:  # every numpy view of the buffer keeps its memory object alive
+                segment.quarantine[slot] = weakref.ref(root.base)
+        # Numpy refuses writes through these, and through views of them made from now on.
+        array.flags.writeable = False
+        user, root = claimed.user(), claimed.root()
+        if user is not None and user is not array:
+            user.flags.writeable = False
+        if root is not None:
+            root.flags.writeable = False
+            memory = root.base  # an array made from the slot's memory itself is read-only too
+            memory.__array_interface__["data"] = (memory.__array_interface__["data"][0], True)
         return segment.name, slot, offset
+
+    @staticmethod
+    def _views_unseen(array: Any, claimed: _Claimed) -> bool:
+        """Whether a view of the buffer made before the send is still alive (beyond ``array``
+        and the buffer itself): such a view keeps its writable flag, so only the page
+        protection can stop a write through it."""
+        root = claimed.root()
+        if root is None or array.base is not root:
+            return True  # not sent as the buffer or a view of it: cannot count, be strict
+        user = claimed.user()
+        known = 1 + (user is not None and user is not array and user.base is root)
+        # Every live view holds ``root``; the slot's memory holder is held by ``root`` alone,
+        # unless an array was made from it.
+        memory = root.base  # a local, as _holders counts on
+        return _holders(root) > known or _holders(memory) > 1
 
     def _sent_in_place(self, array: Any) -> tuple[str, int, int] | None:
         """Hand ``array`` over if it is a claimed slot of the current ring: its address, or None."""
@@ -461,7 +631,8 @@ class ArrayRing:
         return self._hand_in_place(segment, array, claim)
 
     def _unclaim(self, segment: _Segment, slot: int, token: int) -> None:
-        if self._claimed.get((segment.generation, slot)) == token:  # this claim, never sent
+        claimed = self._claimed.get((segment.generation, slot))
+        if claimed is not None and claimed.token == token:  # this claim, never sent
             del self._claimed[(segment.generation, slot)]
             segment.map[slot] = FREE
 
@@ -485,7 +656,8 @@ class _Mapped:
         self.name = name
         self.read = 0  # arrays taken out of it (the sender waits for a slot only while some are not)
         self.header = mmap.mmap(fd, _HEADER)
-        self.slots_map = mmap.mmap(fd, size - _HEADER, prot=mmap.PROT_READ, offset=_HEADER)
+        self.slots_map = mmap.mmap(fd, size - _HEADER, flags=segments.SHARED_POPULATED, prot=mmap.PROT_READ,
+                                   offset=_HEADER)
         self.address = segments.address_of(self.slots_map)
 
 

@@ -25,7 +25,7 @@ REPO = Path(__file__).resolve().parents[2]
 MARKER = re.compile(r"^<!--\s*generated:\s*(.*?)\s*-->[ \t]*$", re.MULTILINE)
 
 # The order of the performance page; result files not named here follow, by name.
-BENCH_ORDER = ["monitor_overhead", "peers", "transport", "dds", "ros_images", "check_scaling", "recording",
+BENCH_ORDER = ["monitor_overhead", "peers", "transport", "dds", "zenoh", "ros_images", "check_scaling", "recording",
                "tinman", "tinman_patrol", "render"]
 BENCH_KEYS = ("title", "how", "table", "load")
 

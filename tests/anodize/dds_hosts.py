@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import shutil
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import dds_roles
 
@@ -105,3 +108,75 @@ def finish(process: subprocess.Popen[str], seconds: float) -> str:
     return out
 
 
+def run_hosts(system: Path, directory: Path, env: dict[str, str] | None = None) -> dict[str, Any]:
+    """``anodize run --host A`` and ``--host B`` at once; their JSON reports (bounded waits)."""
+    hosts = {host: start_host(system, host, directory / f"{host}.json", env) for host in ("A", "B")}
+    outputs = {}
+    try:
+        for host, process in hosts.items():
+            outputs[host] = finish(process, 90)  # bounded: a host that hangs fails here
+    finally:
+        for process in hosts.values():
+            process.kill()
+            process.wait()
+    reports = {}
+    for host in hosts:
+        path = directory / f"{host}.json"
+        assert path.exists(), outputs[host]
+        reports[host] = json.loads(path.read_text())
+    return reports
+
+
+
+
+def sh(*argv: str) -> None:
+    subprocess.run(argv, check=True, capture_output=True, timeout=30)
+
+
+class Hosts:
+    """Namespaces ``a`` and ``b`` joined by a veth pair 10.79.x.1 <-> 10.79.x.2."""
+
+    def __init__(self) -> None:
+        tag = os.getpid() % 250
+        self.a, self.b = f"anz-a-{os.getpid()}", f"anz-b-{os.getpid()}"
+        self.veth_a, self.veth_b = f"anza{tag}", f"anzb{tag}"
+        self.subnet = f"10.79.{tag}"
+
+    def create(self) -> None:
+        sh("ip", "netns", "add", self.a)
+        sh("ip", "netns", "add", self.b)
+        sh("ip", "link", "add", self.veth_a, "netns", self.a, "type", "veth", "peer", "name", self.veth_b,
+           "netns", self.b)
+        for ns, dev, host in ((self.a, self.veth_a, 1), (self.b, self.veth_b, 2)):
+            sh("ip", "-n", ns, "addr", "add", f"{self.subnet}.{host}/30", "dev", dev)
+            sh("ip", "-n", ns, "link", "set", "lo", "up")
+            sh("ip", "-n", ns, "link", "set", dev, "up", "multicast", "on")  # Cyclone discovers by multicast
+
+    def drop(self, percent: int) -> None:
+        """Drop ``percent`` % of the packets leaving each namespace, at random."""
+        for ns, dev in ((self.a, self.veth_a), (self.b, self.veth_b)):
+            for command in ("add table inet lossy",
+                            "add chain inet lossy out { type filter hook output priority 0; }",
+                            f'add rule inet lossy out oifname "{dev}" numgen random mod 100 < {percent} counter drop'):
+                sh("ip", "netns", "exec", ns, "nft", command)
+
+    def dropped(self) -> int:
+        """Packets the loss rules dropped so far, in both namespaces."""
+        total = 0
+        for ns in (self.a, self.b):
+            listing = subprocess.run(["ip", "netns", "exec", ns, "nft", "list", "table", "inet", "lossy"],
+                                     capture_output=True, text=True, timeout=30).stdout
+            total += sum(int(n) for n in re.findall(r"counter packets (\d+)", listing))
+        return total
+
+    def cut(self) -> None:
+        """Take the link down: nothing crosses any more."""
+        sh("ip", "-n", self.a, "link", "set", self.veth_a, "down")
+
+    def restore(self) -> None:
+        """Bring the link up again (the partition heals)."""
+        sh("ip", "-n", self.a, "link", "set", self.veth_a, "up", "multicast", "on")
+
+    def delete(self) -> None:
+        for ns in (self.a, self.b):
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=30)

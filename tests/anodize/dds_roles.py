@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import os
+import threading
+import time
 import zlib
 
 import numpy as np
 
-from anodize import Endpoint
+from anodize import Endpoint, RoleStopped
 
 STREAM = ('type Image = "numpy:ndarray"\n'
           "global Stream(P, C) = mu t. P -> C : {data(int). t, frame(Image). t, stop}")
@@ -161,3 +163,54 @@ def slow_consumer(ep: Endpoint) -> None:
         ep.sleep(0.002)
     if expected != _count():
         raise AssertionError(f"{expected} messages arrived, {_count()} were sent")
+
+
+# A role whose own thread is receiving when the role fails (as TinMan's Move takes poses in a thread).
+HELD = "global Held(P, C, K) = P -> C : data(int). C -> K : done(int)"
+_OUTCOME_WITHIN = 30.0  # seconds P and K wait for the thread's outcome before going on anyway
+
+
+def _outcome_file() -> str:
+    return os.environ["DDS_TEST_OUTCOME"]
+
+
+def _wait_for_outcome() -> None:
+    deadline = time.monotonic() + _OUTCOME_WITHIN
+    while not os.path.exists(_outcome_file()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+
+def held_producer(ep: Endpoint) -> None:
+    """Send only once C's thread has said how its receive ended (so it was waiting, not reading)."""
+    _wait_for_outcome()
+    ep.send("C", "data", 1)
+
+
+def failing_with_a_receiving_thread(ep: Endpoint) -> None:
+    """Start a thread that receives from P, then fail while it waits; the thread writes what its
+    receive raised to DDS_TEST_OUTCOME."""
+    waiting = threading.Event()
+
+    def receive() -> None:
+        waiting.set()
+        try:
+            ep.recv("P")
+            outcome = "received"
+        except RoleStopped:
+            outcome = "RoleStopped"
+        except Exception as error:  # what the test must not see: the sender blamed
+            outcome = f"{type(error).__name__}: {error}"
+        with open(_outcome_file() + ".part", "w", encoding="utf-8") as out:
+            out.write(outcome)
+        os.replace(_outcome_file() + ".part", _outcome_file())
+
+    threading.Thread(target=receive, name="C-receiving", daemon=True).start()
+    waiting.wait(10)
+    time.sleep(0.3)  # in its receive's wait by now (a late start would only find the reader gone sooner)
+    raise RuntimeError("C fails on purpose")
+
+
+def keeping_the_group_alive(ep: Endpoint) -> None:
+    """Keep C's group running until C's thread has an outcome, then take C's part (which failed)."""
+    _wait_for_outcome()
+    ep.recv("C")

@@ -26,7 +26,9 @@ from anodize.errors import AnodizeError
 PROTOCOL = """
 type Record = "hostile_payloads:Record"
 type Checked = "hostile_payloads:Checked"
-global G(A, B) = mu t. A -> B : { num(int). t, n(nat). t, record(Record). t, chk(Checked). t, fin }
+type Probed = "hostile_payloads:Probed"
+global G(A, B) = mu t. A -> B : { num(int). t, n(nat). t, record(Record). t, chk(Checked). t,
+                                  probe(Probed{v > 0}). t, fin }
 """
 
 # [(where, attribute, replacement)]: where is "endpoint", "monitor" or "channels" (the outbox of
@@ -163,6 +165,16 @@ class LazyRecord(Record):
         return 1
 
 
+class Probed:
+    """The class of the sort ``Probed``, refined by ``{v > 0}``: the refinement reads ``v``, a
+    property, so code runs inside the check of a constrained step (in the compiled core too)."""
+
+    @property
+    def v(self) -> int:
+        fire("refinement reads a property")
+        return 1
+
+
 class NegativeInt(int):
     """An int below zero that says it is not (for ``nat``)."""
 
@@ -184,6 +196,7 @@ def _payloads() -> dict[str, tuple[str, Callable[[], object]]]:
         "__getattr__": ("record", lambda: object.__new__(LazyRecord)),
         "int subclass __ge__": ("n", lambda: NegativeInt(-5)),
         "field of a lying class": ("record", lambda: Record(ClaimsInt())),  # type: ignore[arg-type]
+        "refinement reads a property": ("probe", Probed),
     }
 
 

@@ -3,12 +3,15 @@
 ``T`` sends ``L`` a laser scan (360 ranges: an array ``anodize echo`` summarizes) then a
 tick, about 50 times a second, until the run is stopped (or, ``burst``, a stop); ``L`` tells ``M`` each tick
 (``L -> M`` is a channel inside a group). ``burst`` sends :data:`BURST` ticks as fast as
-it can once :data:`GO` is set (inproc only: the test sets it once its client watches).
+it can once :data:`GO` is set (inproc only: the test sets it once its client watches), calling
+:data:`PACE` every :data:`PACE_EVERY` scans (the test waits there until its group's tap has
+forwarded them, so what the client misses is dropped by its watcher, whatever the load).
 """
 
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 import numpy as np
 from rosbags.typesys.stores.ros2_jazzy import builtin_interfaces__msg__Time as Time
@@ -42,6 +45,8 @@ PERIOD = 0.02
 BURST = 20000
 GO = threading.Event()
 GO_WITHIN = 30.0  # seconds burst waits for the test's client before it sends anyway
+PACE_EVERY = 500  # scans: fewer than a tap's queue holds (anodize._live.tap.QUEUE)
+PACE: list[Callable[[], None]] = []  # what burst calls every PACE_EVERY scans (set by the test)
 
 
 def _scan(n: int) -> LaserScan:
@@ -80,5 +85,8 @@ def burst(ep: Endpoint) -> None:
     for n in range(BURST):
         ep.send("L", "scan", scan)
         ep.send("L", "tick", n)
+        if n % PACE_EVERY == PACE_EVERY - 1:
+            for pace in PACE:
+                pace()
     ep.send("L", "scan", scan)
     ep.send("L", "stop")

@@ -111,7 +111,7 @@ def injecting_client(ep: Endpoint) -> None:
 def garbling_client(ep: Endpoint) -> None:
     """Writes bytes that are no frame at all into the channel."""
     channel, _ = ep._out["B"]
-    os.write(channel.fd, b"\x05\x00\x00\x00Zjunk")
+    channel._write(b"\x05\x00\x00\x00Zjunk")  # into the channel's stream (its ring), as a frame would go
 
 
 def crashing_client(ep: Endpoint) -> None:
@@ -248,7 +248,7 @@ def stoppable_non_reader(ep: Endpoint) -> None:
 def huge_frame_client(ep: Endpoint) -> None:
     """Announces a 2 GiB frame: the receiver must not try to buffer it."""
     channel, _ = ep._out["B"]
-    os.write(channel.fd, (2**31).to_bytes(4, "little") + b"M" * 1000)
+    channel._write((2**31).to_bytes(4, "little") + b"M" * 1000)  # into the channel's ring
 
 
 def any_receiver(ep: Endpoint) -> None:

@@ -86,6 +86,18 @@ def test_a_run_without_bumps_says_its_mission_is_ok(tmp_path: Path) -> None:
                                          "1 safety stop")
 
 
+def test_a_patrol_is_cut_short_by_a_failed_run_and_ended_by_its_time_limit_when_only_stopped(tmp_path: Path) -> None:
+    settings = Settings(out=str(tmp_path), patrol=True, duration=150.0)
+    _write(settings.records, _gazebo(through_second=True))
+    stopped = build_report(_run_report(), settings)["mission"]  # the timeout stopped every role
+    assert stopped["ended_by"] == "time limit" and stopped["failed_at_s"] is None
+    failed = _run_report()
+    failed.roles["Move"] = RoleReport(name="Move", group="control", status=RoleStatus.FAILED)
+    mission = build_report(failed, settings)["mission"]
+    assert mission["ended_by"] == "run failed" and mission["failed_at_s"] == 20.0
+    assert mission["failures"][0].startswith("the patrol was cut short when the run failed at 20.0 s: ")
+
+
 def test_plurals_are_right_in_the_printed_report(tmp_path: Path) -> None:
     assert [counted(n, "bump") for n in (0, 1, 2)] == ["0 bumps", "1 bump", "2 bumps"]
     assert [counted(n, "recovery", "recoveries") for n in (1, 3)] == ["1 recovery", "3 recoveries"]

@@ -134,6 +134,20 @@ def test_a_patrol_stopped_by_its_time_limit_fails_and_says_what_was_reached() ->
     assert ": time limit (180 s): 3 of 5 waypoints reached (1 at 10.0 s, 2 at 20.0 s, 3 at 30.0 s)" in line
 
 
+def test_a_patrol_cut_short_by_a_failed_run_says_so_not_time_limit() -> None:
+    # Seen beside two CPU hogs: the run failed 47 s into a 150 s patrol, and the mission said
+    # "not completed in the time limit" as if the limit had come.
+    mission = mission_outcome({"Gazebo": _gazebo(waypoints=4, docked=False)}, dock=DOCK, time_limit=150.0,
+                              failed_at=47.39)
+    assert mission["outcome"] == "FAILED" and mission["ended_by"] == "run failed" and mission["failed_at_s"] == 47.39
+    assert mission["failures"] == [("the patrol was cut short when the run failed at 47.4 s: the robot reached "
+                                    "4 of 5 waypoints")]
+    assert ": run failed at 47.4 s: 4 of 5 waypoints reached (1 at 10.0 s, " in mission_line(mission)
+    completed = mission_outcome({"Gazebo": _gazebo(waypoints=5, docked=True), "Patrol": {"completed_stamp": 61.0}},
+                                dock=DOCK, time_limit=150.0, failed_at=70.0)
+    assert completed["outcome"] == "ok" and completed["ended_by"] == "patrol completed"  # done before it failed
+
+
 def test_every_waypoint_but_not_back_at_the_dock_is_not_a_completed_patrol() -> None:
     records = {"Gazebo": _gazebo(waypoints=5, docked=False, end=(2.0, 1.0))}
     mission = mission_outcome(records, dock=DOCK, time_limit=90.0)

@@ -1,7 +1,10 @@
 """The start barrier: a group starts only once every channel's other end has appeared on DDS.
 
 Until then nothing is written, so nothing goes only to a reader of an incarnation that is
-ending (a restart), and nothing is missed by the new one.
+ending (a restart), and nothing is missed by the new one. The wait counts from the moment the
+group's process started: ``--wait`` bounds a group's whole start (importing its roles, then
+the barrier), and the supervisor, which allows exactly that, hears the barrier's own report
+of what is missing before its start timeout would fire.
 """
 
 from __future__ import annotations
@@ -9,6 +12,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable, Mapping, Sequence
 
+from ..started import since_process_start
 from .receiver import DdsReceiver, InLane
 from .sender import DdsSender, OutLane
 from .settings import DdsSettings, StartBarrierError
@@ -22,7 +26,7 @@ def wait_for_peers(settings: DdsSettings, senders: Sequence[DdsSender], receiver
     Raises:
         StartBarrierError: naming the groups and hosts that never appeared.
     """
-    deadline = time.monotonic() + settings.wait
+    deadline = time.monotonic() + settings.wait - since_process_start()
     while True:
         missing = _missing(settings, senders, receivers)
         if not missing:
@@ -51,3 +55,4 @@ def _missing(settings: DdsSettings, senders: Sequence[DdsSender], receivers: Seq
 def _on_topics(lanes: Iterable[OutLane | InLane] | Mapping[str, OutLane]) -> str:
     topics = [lane.topic for lane in (lanes.values() if isinstance(lanes, Mapping) else lanes)]
     return f" on ROS topic{'s' if len(topics) > 1 else ''} {', '.join(topics)}" if topics else ""
+

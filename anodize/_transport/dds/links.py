@@ -60,6 +60,7 @@ class DdsLinks:
         """Our receiver failed: delete its readers, so its writer sees them unmatched and stops."""
         for receiver in self.receivers:
             if (receiver.sender, receiver.receiver) == pair:
+                receiver.silenced = True  # first: a take the deletion fails is then no one's fault
                 for lane in receiver.lanes:
                     with contextlib.suppress(DDSException):
                         delete(lane.reader)

@@ -9,7 +9,7 @@ from typing import Any
 from .binding import userdata_of
 from .identity import instance_handle, parse_identity
 from .qos import Endpoints
-from .settings import StartBarrierError
+from .settings import SplitBrainError
 
 __all__ = ["find_peer", "describe"]
 
@@ -20,7 +20,7 @@ def find_peer(endpoints: Endpoints, role: str, channel: str, handles: Iterable[i
     our run and incarnation, or (None, "") while there is none.
 
     Raises:
-        StartBarrierError: several claim it (never guess which one is genuine).
+        SplitBrainError: several claim it (never guess which one is genuine).
     """
     settings = endpoints.settings
     expected = settings.group_of[role]
@@ -35,7 +35,7 @@ def find_peer(endpoints: Endpoints, role: str, channel: str, handles: Iterable[i
         if identity is not None and identity[:3] == (settings.claim_run, expected, endpoints.incarnation):
             claims.append((instance_handle(handle), str(data.key), identity))
     if len(claims) > 1:
-        raise StartBarrierError(
+        raise SplitBrainError(
             f"{len(claims)} DDS endpoints on {channel} claim to be {settings.where(role)}: "
             + ", ".join(f"{guid} (pid {identity[4]} on {identity[3]})" for _, guid, identity in claims)
             + "; is the same run started twice, or is someone forging it?")

@@ -73,6 +73,7 @@ class DdsReceiver:
         self.endpoints = endpoints
         self.sender = sender
         self.receiver = receiver
+        self.silenced = False  # our role failed and its readers are deleted: a receive now is a stop
         settings = endpoints.settings
         self.external = settings.is_external(sender)  # a ROS node: only ROS topics, no credits
         self.waitset = WaitSet(endpoints.participant)
@@ -154,6 +155,8 @@ class DdsReceiver:
         while True:
             if self._pushed:
                 return self._pushed.popleft()
+            if self.silenced:  # a thread of our failed role still receiving: its readers are gone
+                return STOP
             lane = self._lane()
             if lane.samples or self._take(lane):
                 return self._hand_on(lane)
@@ -182,7 +185,7 @@ class DdsReceiver:
 
     def empty(self) -> bool:
         """True when nothing (no message, no failure, no stop) is waiting."""
-        if self._pushed or self.network.stopping or self.sender in self.network.failed:
+        if self._pushed or self.silenced or self.network.stopping or self.sender in self.network.failed:
             return False
         lane = self._lane()
         if lane.samples or self._take(lane):
@@ -204,6 +207,8 @@ class DdsReceiver:
         """Move what a lane's reader holds from accepted writers into its queue; False if none."""
         taken = take(lane.ref, ANY_SAMPLE, TAKE)
         if type(taken) is int:
+            if self.silenced:  # deleted under us (the flag is set first): not the sender's doing
+                return False
             raise AnodizeError(f"DDS take on {self.sender}->{self.receiver} failed: {DDSException(taken)}")
         for data, info in taken:
             if not info.valid_data:

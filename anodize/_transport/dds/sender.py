@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 from ..._session.channel import PeerFailure
 from ...errors import AnodizeError, PeerFailedError, RoleStopped
 from ..codec import Codec, EncodeError
-from ..links import LinkNetwork, PayloadError
+from ..links import LinkNetwork, PayloadError, WritingEnd
 from .binding import (
     ANY_SAMPLE,
     RETCODE_TIMEOUT,
@@ -62,7 +62,7 @@ class OutLane:
         self.accepted: int | None = None  # the subscription handle of the receiver's reader (None: any, external)
 
 
-class DdsSender:
+class DdsSender(WritingEnd):
     """The writing end of a channel to a role in another group, or to an external role (over DDS)."""
 
     def __init__(self, endpoints: Endpoints, codec: Codec, network: LinkNetwork, sender: str, receiver: str) -> None:
@@ -303,27 +303,11 @@ class DdsSender:
             finally:
                 self._lock.release()
 
-    def buffer(self, shape: tuple[int, ...], dtype: object) -> object:
-        """A numpy array to fill and send (DDS copies it into the sample anyway)."""
+    def buffer(self, shape: tuple[int, ...], dtype: object, strict: bool = False) -> object:
+        """A numpy array to fill and send (DDS copies it into the sample anyway; ``strict`` changes nothing)."""
         import numpy as np
 
         return np.empty(shape, dtype)  # type: ignore[call-overload]
-
-    def get(self, *, timeout: float | None = None) -> object:
-        """Never used: this is the writing end.
-
-        Raises:
-            AnodizeError: always.
-        """
-        raise AnodizeError(f"the channel {self.sender}->{self.receiver} is read in {self.receiver}'s group")
-
-    def get_nowait(self) -> object:
-        """Never used: as :meth:`get`."""
-        return self.get()
-
-    def empty(self) -> bool:
-        """True: nothing arrives at the writing end."""
-        return True
 
     def _peer_gone(self, why: str = "") -> BaseException:
         cause = self.network.failed.get(self.receiver)

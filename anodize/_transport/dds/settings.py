@@ -7,20 +7,18 @@ import re
 import secrets
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import ClassVar
 
-from ...errors import AnodizeError, ConfigurationError
+from ...errors import ConfigurationError
+from ..links import SplitBrainError, StartBarrierError
 from ..ros_lanes import RosSettings
 
-__all__ = ["DdsSettings", "DOMAIN_ENV", "TOKEN_ENV", "StartBarrierError", "topic_name", "participant_config",
-           "run_token"]
+__all__ = ["DdsSettings", "DOMAIN_ENV", "TOKEN_ENV", "StartBarrierError", "SplitBrainError", "topic_name",
+           "participant_config", "run_token"]
 
 DOMAIN_ENV = "ANODIZE_DDS_DOMAIN"  # overrides the system file's domain
 TOKEN_ENV = "ANODIZE_DDS_TOKEN"  # a run's secret token, the same on every host of the run
 _TOKEN = re.compile(r"[A-Za-z0-9_.-]{8,128}")
-
-
-class StartBarrierError(AnodizeError):
-    """Peers of a group did not appear on the DDS domain in time."""
 
 
 @dataclass(frozen=True)
@@ -52,6 +50,7 @@ class DdsSettings:
     extra_config: str = field(default="")
     ros: RosSettings | None = None
     token: str = field(default="", repr=False)
+    LINKS: ClassVar[str] = "anodize._transport.dds.links:DdsLinks"  # its links (the group spec's seam)
 
     @property
     def claim_run(self) -> str:

@@ -112,6 +112,11 @@ def test_a_foxglove_client_gets_the_roles_records_as_foxglove_log(
     client = LogClient(port)
     try:
         code = main(["run", str(system), "--foxglove", str(port), "--quiet", "--timeout", "30"])
+        # The view sent its records before the run returned; on a busy machine the client's thread
+        # may not have read them all yet: it gets a bounded while to, before it is told to stop.
+        deadline = time.monotonic() + 10.0
+        while sum(log["name"] == "P" for log in list(client.logs)) < 5 and time.monotonic() < deadline:
+            time.sleep(0.01)
     finally:
         client.done.set()
         client.thread.join(timeout=10.0)

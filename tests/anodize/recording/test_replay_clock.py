@@ -157,6 +157,158 @@ def test_a_role_that_reads_its_clock_otherwise_is_told_so(talked: Path) -> None:
             "reads its clock otherwise than in the run; from there on it reads message time") in report.text()
 
 
+def test_a_send_made_past_the_recorded_readings_ends_the_replay_without_a_divergence(
+        talked: Path, tmp_path: Path) -> None:
+    """A recorder loses the readings it could not write before its group ended: the seller's last
+    reading is not in this copy of the recording, so its last quote is made of a time the replay
+    does not know. That is not a divergence: the replay ends there and says what it left."""
+    from mcap_rewrite import rewrite
+
+    def drop_last_reading(messages: list[list[Any]]) -> None:
+        last = max(i for i, message in enumerate(messages) if message[0][0] == "/anodize/clock/S")
+        del messages[last]
+
+    cut = tmp_path / "cut.mcap"
+    rewrite(talked, cut, drop_last_reading)
+    report = _replay(cut, TALK, "S", _clocked_seller)
+    assert report.divergence is None and report.ok, report.text()
+    assert report.outcome == "recording ends" and "past the readings the recording holds" in report.detail
+    assert report.compared == {"S->B": (ROUNDS - 1, ROUNDS)}
+    assert any(note.startswith("the last 1 recorded message(s) S sent are not compared") for note in report.notes)
+
+
+FUSED = load_global("""
+global Fused(G, C, V, M) =
+  ( mu x. G -> V : { odo(int). x, done } || mu y. C -> V : { frame(int). V -> M : pose(int). y, done. V -> M : done } )
+""", "Fused")
+EARLY_ODOS = 3  # odometry readings V takes before its first pose; two more come long after its last
+
+
+def _odometer(ep: Endpoint) -> None:
+    for n in range(EARLY_ODOS):
+        ep.send("V", "odo", n)
+    ep.sleep(0.6)  # the last two come after V's last pose (a run stopped then would never have had V take them)
+    for n in range(EARLY_ODOS, EARLY_ODOS + 2):
+        ep.send("V", "odo", n)
+    ep.send("V", "done")
+
+
+def _camera(ep: Endpoint) -> None:
+    for n in range(2):
+        ep.sleep(0.05)
+        ep.send("V", "frame", n)
+    ep.send("V", "done")
+
+
+def _fuser(ep: Endpoint) -> None:
+    """TinMan's VisOdom in small: one thread takes odometry (reading its clock as it does), the
+    other sends, for each frame, the count of odometry readings taken by then."""
+    branches = ep.fork()
+    wheels = next(branch for branch in branches if "G" in branch.received)
+    frames = next(branch for branch in branches if "C" in branch.received)
+    taken = [0]
+
+    def take_odometry() -> None:
+        while wheels.recv("G").label == "odo":
+            wheels.now()
+            taken[0] += 1
+
+    thread = threading.Thread(target=take_odometry, name="V-wheels")
+    thread.start()
+    while frames.recv("C").label == "frame":
+        frames.now()
+        time.sleep(0.1)  # the frame's work: meanwhile the odometry thread goes on, as far as it did in the run
+        frames.send("M", "pose", taken[0])
+    frames.send("M", "done")
+    thread.join()
+
+
+def _pose_receiver(ep: Endpoint) -> None:
+    while ep.recv("V").label != "done":
+        pass
+
+
+@pytest.fixture(scope="module")
+def fused(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    system = System(FUSED)
+    system.group("g").role("G", _odometer)
+    system.group("c").role("C", _camera)
+    system.group("v").role("V", _fuser)
+    system.group("m").role("M", _pose_receiver)
+    path = tmp_path_factory.mktemp("fused") / "run.mcap"
+    assert system.run(timeout=20.0, taps=[Recording(path)]).ok
+    return path
+
+
+def test_readings_the_recording_lacks_come_after_every_recorded_event_of_the_role(fused: Path, tmp_path: Path) -> None:
+    """A group's recorder writes its roles' sends and clock readings in the order they happened,
+    so a reading the recording lacks (the run stopped before it, or the group ended) came after
+    every recorded one. Here the run stopped after V's last pose, before V's odometry thread read
+    its clock for the last two readings: the replay delivers them (they were sent), and the thread
+    that takes them waits until V's recorded poses have gone out, as in the run. (It ran ahead
+    before, and the last poses, counting odometry V had not taken in the run, ended the replay.)"""
+    from mcap_rewrite import rewrite
+
+    dropped: list[int] = []
+
+    def stop_after_the_last_pose(messages: list[list[Any]]) -> None:
+        last_pose = max(log_time for key, log_time, *_ in messages if key[0] == "/anodize/V/M/done")
+        dropped.extend(i for i, (key, log_time, *_) in enumerate(messages)
+                       if key[0] == "/anodize/clock/V" and log_time > last_pose)
+        for i in reversed(dropped):
+            del messages[i]
+
+    cut = tmp_path / "stopped.mcap"
+    rewrite(fused, cut, stop_after_the_last_pose)
+    assert len(dropped) == 2  # the odometry thread's last two readings
+    report = _replay(cut, FUSED, "V", _fuser)
+    assert report.divergence is None and report.ok, report.text()
+    assert report.compared == {"V->M": (3, 3)}, report.text()
+    assert (report.outcome, report.clock) == ("finished", (2 + EARLY_ODOS, 2 + EARLY_ODOS, 2)), report.text()
+    assert not any(note.startswith(("threads:", "clock:")) for note in report.notes), report.notes
+
+
+def test_an_input_the_recorder_lost_ends_the_replay_after_what_the_role_did_before_it_was_sent(
+        fused: Path, tmp_path: Path) -> None:
+    """A recorder that fell behind loses messages, and says so with a gap record; when the last
+    messages of a channel are lost, none follows to show the break. The thread that waits for
+    a lost input cannot go on, and V's threads wait for its recorded readings after it: the
+    replay lets the other threads do what they did before the input was sent (V's poses), then
+    ends ("recording ends"), at once (it waited ten seconds for a turn before, and let the threads
+    interleave as they would)."""
+    import json
+
+    from mcap_rewrite import rewrite
+
+    from anodize._recording.encoding import codec_for_sort
+    from anodize._recording.plan import GAP_KEY, GAP_TOPIC
+
+    def lose_the_late_odometry(messages: list[list[Any]]) -> None:
+        late = [i for i, (key, _, sequence, _) in enumerate(messages)
+                if key[0].startswith("/anodize/G/V/") and sequence > EARLY_ODOS]
+        clock = next(key for key, *_ in messages if key[0] == "/anodize/clock/V")
+        codec = codec_for_sort(None)
+        gap = codec.ros.serialize(codec.ros.cls(data=json.dumps(
+            {"channel": "G->V", "first": EARLY_ODOS + 1, "count": len(late)})))
+        first = messages[late[0]][1]
+        for i in reversed(late):
+            del messages[i]
+        messages.append([(GAP_TOPIC, clock[1], ((GAP_KEY, "1"),)), first, 0, gap])
+        messages.sort(key=lambda message: message[1])
+
+    cut = tmp_path / "lost.mcap"
+    rewrite(fused, cut, lose_the_late_odometry)
+    report = _replay(cut, FUSED, "V", _fuser)
+    assert report.divergence is None and report.ok, report.text()
+    assert report.compared == {"V->M": (3, 3)}, report.text()
+    assert report.received["G->V"] == (EARLY_ODOS, EARLY_ODOS)
+    assert report.outcome == "recording ends", report.text()
+    assert "waits for message 3 on G->V, where the recording cuts the channel short" in report.detail
+    assert (f"G->V: replayed up to message {EARLY_ODOS - 1}; the recording lost 3 message(s) from number "
+            f"{EARLY_ODOS + 1} on (its recorder fell behind)") in report.notes
+    assert not any(note.startswith("threads:") for note in report.notes), report.notes
+
+
 def _two_threads(ep: Endpoint) -> None:
     """One thread counts, the other sends the count now and then: what the second sends depends
     on how the two interleaved, each reading its own branch's clock."""

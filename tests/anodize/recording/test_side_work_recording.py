@@ -23,6 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from role_drivers import load_global, machines_of
 
 from anodize import Recording, System
+from anodize._isolation.sched import SIDE_WORK_BELOW
 from anodize._recording import tap as recording_tap
 from anodize._recording.merge import merge_parts
 from anodize._recording.plan import record_plan
@@ -83,7 +84,8 @@ def test_a_recorder_on_a_slow_disk_never_blocks_its_sender_and_marks_the_gap(tmp
     recorder.close(within=1.0)
     lost = recorder.lost[PAIR]
     assert 0 < lost <= sent + 1
-    assert recorder.priority == "nice 19"  # this process is not real time: the weakest nice value
+    base = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())  # this thread's: the writer's creator
+    assert recorder.priority == f"nice {min(19, base + SIDE_WORK_BELOW)}"  # not real time: just below its group
 
     result = merge_parts(tmp_path / "parts", tmp_path / "r.mcap", {"global": "Texts"})
     assert any("a gap on /anodize/recording/gaps" in note and note.startswith(f"Talker->Listener: {lost} ")
@@ -139,36 +141,54 @@ def test_a_run_recording_to_a_slow_disk_ends_and_its_report_counts_the_gap(
     assert report.ok, report.summary()
     lost = [n for n in report.notes if "Talker->Listener: " in n and "a gap on /anodize/recording/gaps" in n]
     assert lost, report.notes
-    assert "recording: the groups' writers ran at nice 19 (listen-0, talk-0)" in report.notes  # reported
+    below = min(19, os.getpriority(os.PRIO_PROCESS, 0) + SIDE_WORK_BELOW)  # the groups have this process's nice
+    assert f"recording: the groups' writers ran at nice {below} (listen-0, talk-0)" in report.notes  # reported
     with open_recording(tmp_path / "r.mcap") as recording:
         result = verify(recording, global_type)
     assert result.conforms, result.text()
     assert result.gaps and result.channels["Talker->Listener"].messages + sum(g.count for g in result.gaps) == sent + 1
 
 
-def test_side_work_runs_below_every_group_yet_above_what_is_not_real_time() -> None:
-    from anodize._isolation.sched import apply_thread_scheduling, side_work_priority
+def test_side_work_runs_just_below_its_group_and_side_work_it_starts_no_lower() -> None:
+    from anodize._isolation.sched import apply_thread_scheduling, side_work_priority, start_side_work_thread
 
     seen: dict[str, tuple[str, str, int, int, int]] = {}
 
-    def helper(name: str, group_priority: int | None) -> None:
-        group = apply_thread_scheduling(group_priority)  # as a group's process does
+    def observe(name: str) -> None:
         described = side_work_priority()
-        tid = threading.get_native_id()
-        seen[name] = (group, described, os.sched_getscheduler(0), os.sched_getparam(0).sched_priority,
-                      os.getpriority(os.PRIO_PROCESS, tid))
+        assert side_work_priority() == described  # a second call changes nothing
+        seen[name] = ("", described, os.sched_getscheduler(0), os.sched_getparam(0).sched_priority,
+                      os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
 
-    for name, priority in (("plain", None), ("real-time", 80)):
-        thread = threading.Thread(target=helper, args=(name, priority))
+    def helper(name: str, group_priority: int | None, nice: int | None = None) -> None:
+        group = apply_thread_scheduling(group_priority, nice=nice)  # as a group's process does
+        observe(name)
+        seen[name] = (group, *seen[name][1:])
+        started = start_side_work_thread(observe, "side work's", (f"{name}, started by its side work",))
+        started.join(10)  # it inherits the side work's scheduling, and keeps it
+
+    base = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    cases: list[tuple[str, int | None, int | None]] = [("plain", None, None), ("real-time", 80, None),
+                                                        ("nice 17", None, 17)]
+    if base > -10 and os.geteuid() == 0:  # a nice below 0 needs the privilege to raise priorities
+        cases.append(("nice -10", None, -10))
+    for name, priority, nice in cases:
+        thread = threading.Thread(target=helper, args=(name, priority, nice))
         thread.start()
         thread.join(10)
-    _, described, policy, _, nice = seen["plain"]
-    assert (described, policy, nice) == ("nice 19", os.SCHED_OTHER, 19)
+    for name, group_nice in (("plain", base), ("nice 17", 17), ("nice -10", -10)):
+        if name not in seen:
+            continue
+        below = min(19, group_nice + SIDE_WORK_BELOW)  # 5 steps below its group, at most the weakest
+        for who in (name, f"{name}, started by its side work"):
+            _, described, policy, _, nice = seen[who]
+            assert (described, policy, nice) == (f"nice {below}", os.SCHED_OTHER, below), who
     group, described, policy, rt, nice = seen["real-time"]
     if group == "SCHED_FIFO 80":  # permitted here: the lowest real-time priority, below the group
         assert (described, policy, rt) == ("SCHED_FIFO 1", os.SCHED_FIFO, 1)
-    else:  # the group got a nice value instead: so does its side work, the weakest one
-        assert (described, policy, nice) == ("nice 19", os.SCHED_OTHER, 19)
+        assert seen["real-time, started by its side work"][1:4] == ("SCHED_FIFO 1", os.SCHED_FIFO, 1)
+    else:  # the group got a nice value instead: its side work goes just below that
+        assert policy == os.SCHED_OTHER and described == f"nice {nice}", seen["real-time"]
 
 
 def test_clock_readings_the_writer_could_not_take_are_said_in_the_runs_notes(tmp_path: Path) -> None:

@@ -399,3 +399,34 @@ def test_names_of_a_str_subclass_take_the_python_path_with_the_same_result() -> 
         return [*results, (sender.state, receiver.state)]
 
     assert run(PythonEndpoint) == run(Endpoint)
+
+
+CYCLE = _protocol("global G(A, B) = mu t. A -> B : { x(int). A -> B : y(int). B -> A : z(int). t, stop }")
+
+
+@needs_compiled
+def test_a_loop_of_several_states_is_stepped_without_a_table_look_up_per_message() -> None:
+    """Each state remembers the step it took last each way (and the peer it last let a receive
+    wait for): a loop through three states looks its tables up once per state, not once per
+    message. Counted by the core (``_lookups``), the same answers as the Python core."""
+    rounds = 200
+    sender, to_b = _setup(Endpoint, CYCLE, "A", True)
+    receiver, _ = _setup(Endpoint, CYCLE, "B", True)
+    receiver._in["A"] = to_b.queues[("A", "B")]
+    sender._in["B"] = receiver._out["A"][0]
+    for number in range(rounds):
+        sender.send("B", "x", number)
+        sender.send("B", "y", number)
+        assert receiver.recv("A") == ("x", number) and receiver.recv("A") == ("y", number)
+        receiver.send("A", "z", number)
+        assert sender.recv("B") == ("z", number)
+    # A: a send step in each of two states, a receive check and a step in the third; B alike.
+    assert sender._lookups <= 4 and receiver._lookups <= 6, (sender._lookups, receiver._lookups)
+    assert sender.state.startswith("0 (") and receiver.state.startswith("0 (")  # at the head of the loop again
+    python_sender, _ = _setup(PythonEndpoint, CYCLE, "A", True)
+    for number in range(3):
+        python_sender.send("B", "x", number)
+        python_sender.send("B", "y", number)
+        python_sender._in["B"].put(("z", number))
+        python_sender.recv("B")
+    assert _outcome(python_sender.send, "B", "z", 1) == _outcome(sender.send, "B", "z", 1)

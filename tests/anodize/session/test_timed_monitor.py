@@ -32,6 +32,7 @@ import sessiontypes
 from anodize import TIMEOUT, DeadlineMissedError, ProtocolViolationError
 from anodize._session.endpoint import Endpoint
 from anodize._session.monitor import Monitor
+from anodize._session.timed import to_nanos
 from anodize._transport.inproc import InprocNetwork
 from anodize.errors import error_from_data, error_to_data
 from sessiontypes.constraints import Binary, Call, Compare, Expr, Number, Path, Text, Timing, Truth, Unary
@@ -652,3 +653,107 @@ def test_a_recorded_run_whose_waits_expired_replays_them_where_they_expired(tmp_
         replayed = replay(recording, gt, "M", timed_roles.counting_monitor, timeout=20.0)
     assert replayed.divergence is None and replayed.ok, replayed.text()
     assert "sent on M->S: 3 compared of 3 recorded" in replayed.text(), replayed.text()
+
+
+# ---- the compiled core checks constrained steps itself ----------------------------------------
+
+TIMED_STREAM = "global G(A, B) = mu t. A -> B : { num(x: float). t, fin. end }"
+
+
+def test_the_compiled_core_checks_a_timed_refined_stream_itself_with_the_python_cores_outcomes(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A deadline and a refinement on a record payload: the compiled core reads the clock once
+    per action, checks the deadline, the record and the predicate, and calls the monitor only
+    for what it does not pass at once (a late send, a false refinement), which then raises
+    exactly as on the Python core; the counters and the clock's readings are the same."""
+    constraints = {("A", "num"): (Timing(within=10 * MS), cmp("<=", Call("abs", (at("x"),)), Number(1.5)))}
+    script: list[tuple[int, object]] = [(1 * MS, {"x": 0.5}), (2 * MS, {"x": 1}), (3 * MS, {"x": -1.5}),
+                                        (1 * MS, {"x": 2.0}), (1 * MS, {"x": True}), (1 * MS, {"x": 0.25, "y": 1}),
+                                        (1 * MS, {"x": 1.0}), (11 * MS, {"x": 0.5})]
+
+    def run(core: type[Endpoint]) -> tuple[list[object], list[object], tuple[int, int | None], int, int]:
+        clock = FakeClock()
+        sender, network = setup(core, TIMED_STREAM, constraints, "A", clock)
+        receiver, _ = setup(core, TIMED_STREAM, constraints, "B", clock)
+        receiver._in["A"] = network.queues[("A", "B")]
+        sent, got = [], []
+        for gap, payload in script:
+            clock.advance(gap)
+            try:
+                sender.send("B", "num", payload)
+                sent.append("sent")
+                got.append(receiver.recv("A"))
+            except ProtocolViolationError as error:
+                sent.append((type(error).__name__, str(error)))
+        check = sender.statistics().constraints
+        (only,) = check.values()
+        return sent, got, (only.checked, only.closest_ns), clock.readings, sender._monitor.state  # type: ignore[union-attr]
+
+    python = run(PythonEndpoint)
+    calls: list[str] = []
+
+    def counted(name: str) -> Callable[..., None]:
+        original = getattr(Monitor, name)
+
+        def call(self: Monitor, *args: Any) -> None:
+            calls.append(name)
+            original(self, *args)
+        return call
+
+    for name in ("send", "recv"):
+        monkeypatch.setattr(Monitor, name, counted(name))
+    compiled = run(Endpoint)
+    assert compiled == python
+    assert python[0][:3] == ["sent"] * 3 and python[0][6] == "sent" and "deadline missed" in str(python[0][7])
+    assert "abs(x) <= 1.5" in str(python[0][3]) and len(python[1]) == 4
+    if Endpoint.send is not PythonEndpoint.send:  # the compiled core: the monitor saw the refused sends only
+        # (a receive under a deadline on a clock other than the machine's is the Python core's, which waits)
+        assert calls.count("send") == sum(outcome != "sent" for outcome in python[0]), calls
+
+
+def run_endpoint(core: type[Endpoint], constraints: dict[str, tuple[Timing | None, Refinement | None]],
+                 trace: list[tuple[int, str, dict[str, int] | None]]) -> tuple[tuple[int, str] | None, int, object]:
+    """``run_monitor`` through an endpoint of role A on ``core``, its clock set to each action's
+    time: the first violation as ``reference`` gives it, the clock's readings, the statistics. A
+    receive due before the message's time finds nothing there: its wait ends at once, expired."""
+    clock = FakeClock()
+    start = clock.t
+    gt_constraints = {(("B" if label == "c" else "A"), label): (timing, r.expr if r else None)
+                      for label, (timing, r) in constraints.items()}
+    endpoint, network = setup(core, LOOP, gt_constraints, "A", clock, roles=["A"])
+    monitor = endpoint._monitor
+    assert monitor is not None
+    found: tuple[int, str] | None = None
+    for index, (when, label, payload) in enumerate(trace):
+        clock.t = start + when / 1e9
+        try:
+            if label == "c":
+                due = monitor.deadline("B")
+                if due is None or due[0] >= to_nanos(clock.t) or "B" not in monitor.receives_from[monitor.state]:
+                    network.queues[("B", "A")].put((label, payload))
+                endpoint.recv("B", timeout=0 if due is None else None)
+            else:
+                endpoint.send("B", label, payload)
+        except DeadlineMissedError as error:
+            found = index, error.kind
+            break
+        except ProtocolViolationError as error:
+            found = index, "refinement" if error.reason.startswith("refinement") else "protocol"
+            break
+        if monitor.finished:
+            break
+    return found, clock.readings, endpoint.statistics().constraints
+
+
+@settings(max_examples=examples(300), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(timed_cases())
+def test_both_cores_accept_exactly_the_traces_the_reference_semantics_accepts(
+        case: tuple[dict[str, tuple[Timing | None, Refinement | None]], list[tuple[int, str, dict[str, int] | None]]],
+) -> None:
+    """The endpoint's compiled core checks most constrained steps itself (the clock read once,
+    the deadline, the refinement): on random timed traces it agrees with the reference semantics
+    and with the Python core, down to the clock's readings and the statistics."""
+    constraints, trace = case
+    compiled = run_endpoint(Endpoint, constraints, trace)
+    assert compiled[0] == reference(constraints, trace)
+    assert compiled == run_endpoint(PythonEndpoint, constraints, trace)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import dds_roles
 import pytest
-from dds_hosts import HERE, domain, finish, start_host
+from dds_hosts import HERE, domain, finish, run_hosts, start_host
 
 from anodize._supervision.report import RoleStatus
 
@@ -32,24 +32,6 @@ def write(directory: Path, protocol: str, name: str, run_id: str, groups: str) -
     path = directory / "system.toml"
     path.write_text(HEADER.format(name=name, domain=domain(), run_id=run_id, here=HERE) + groups)
     return path
-
-
-def run_hosts(system: Path, directory: Path, env: dict[str, str] | None = None) -> dict[str, dict]:
-    hosts = {host: start_host(system, host, directory / f"{host}.json", env) for host in ("A", "B")}
-    outputs = {}
-    try:
-        for host, process in hosts.items():
-            outputs[host] = finish(process, 90)  # bounded: a host that hangs fails here
-    finally:
-        for process in hosts.values():
-            process.kill()
-            process.wait()
-    reports = {}
-    for host in hosts:
-        path = directory / f"{host}.json"
-        assert path.exists(), outputs[host]
-        reports[host] = json.loads(path.read_text())
-    return reports
 
 
 def test_stop_system_on_one_host_stops_the_groups_of_the_other(tmp_path: Path) -> None:
@@ -103,3 +85,76 @@ roles = { C = "dds_roles:consumer" }
     assert a["roles"]["P"]["status"] == RoleStatus.DONE, a["roles"]
     assert b["roles"]["C"]["status"] == RoleStatus.DONE, b["roles"]
     assert any("the first incarnation fails" in failure for failure in a["groups"]["producing"]["failures"]), a
+
+
+def test_the_same_host_started_twice_stops_the_run_naming_both_claimants(tmp_path: Path) -> None:
+    # Split brain: `anodize run --host A` on two machines (here, twice on one). Both supervisors
+    # and B's stop, every report saying so; neither A keeps streaming (without the hellos, both
+    # passed their barriers and ran on until B's consumer failed at its own).
+    system = write(tmp_path, dds_roles.STREAM, "Stream", "twice", """
+[groups.producing]
+host = "A"
+roles = { P = "dds_roles:slow_producer" }
+
+[groups.consuming]
+host = "B"
+roles = { C = "dds_roles:consumer" }
+""")
+    runs = {name: start_host(system, name[0], tmp_path / f"{name}.json")
+            for name in ("B", "A1", "A2")}
+    try:
+        outputs = {name: finish(process, 90) for name, process in runs.items()}
+    finally:
+        for process in runs.values():
+            process.kill()
+            process.wait()
+    reports = {name: json.loads((tmp_path / f"{name}.json").read_text()) for name in runs}
+    for name, report in reports.items():
+        assert any("split brain" in note for note in report["notes"]), (name, report["notes"], outputs[name])
+    # Each A names both claimants: itself and the other (by the pid of its supervisor, `anodize run`).
+    a1, a2 = reports["A1"], reports["A2"]
+    named = [note for note in a1["notes"] + a2["notes"] if "claimed by two supervisors" in note]
+    assert any(f"pid {runs['A1'].pid}" in note and f"pid {runs['A2'].pid}" in note for note in named), named
+    assert {a1["groups"]["producing"]["status"], a2["groups"]["producing"]["status"]} <= {"failed", "stopped"}
+
+
+def test_stop_on_one_host_fails_the_peer_on_the_other_and_the_rest_runs_on(tmp_path: Path) -> None:
+    system = write(tmp_path, dds_roles.STREAM_AND_TICKS, "Both", "stop", """
+[groups.producing]
+host = "A"
+roles = { P = "dds_roles:failing_producer" }
+
+[groups.consuming]
+host = "B"
+roles = { C = "dds_roles:consumer" }
+
+[groups.ticking]
+host = "B"
+roles = { Q = "rejoin_roles:few_ticks", R = "dds_roles:tick_counter" }
+""")
+    a, b = run_hosts(system, tmp_path).values()
+    assert a["roles"]["P"]["status"] == RoleStatus.FAILED
+    assert b["roles"]["C"]["error"]["type"] == "PeerFailedError", b["roles"]
+    assert b["groups"]["ticking"]["status"] == "done", b["groups"]  # nothing to do with P: it ran to its end
+    assert not any("stopping every group" in note for note in a["notes"] + b["notes"])
+
+
+def test_a_restart_used_up_on_one_host_is_a_stop_there_and_its_peer_elsewhere_fails(tmp_path: Path) -> None:
+    system = write(tmp_path, dds_roles.STREAM, "Stream", "usedup", """
+[groups.producing]
+host = "A"
+on_failure = "restart"
+max_restarts = 1
+roles = { P = "dds_roles:failing_producer" }
+
+[groups.consuming]
+host = "B"
+on_failure = "restart"
+max_restarts = 1
+roles = { C = "dds_roles:consumer" }
+""")
+    a, b = run_hosts(system, tmp_path).values()
+    producing = a["groups"]["producing"]
+    assert (producing["restarts"], len(producing["failures"]), producing["status"]) == (1, 2, "failed"), producing
+    assert b["groups"]["consuming"]["restarts"] == 1, b["groups"]
+    assert b["roles"]["C"]["error"]["type"] == "PeerFailedError", b["roles"]

@@ -70,9 +70,10 @@ def test_a_value_refuses_a_bad_field_naming_what_it_expected(make: object, messa
 
 
 def test_a_system_refuses_what_is_not_a_transport_and_external_roles_off_dds() -> None:
-    with pytest.raises(ConfigurationError, match=r"transport: expected Inproc\(\), Processes\(...\) or Dds"):
+    with pytest.raises(ConfigurationError,
+                       match=r"transport: expected Inproc\(\), Processes\(...\), Dds\(...\) or Zenoh"):
         anodize.System(STREAM, transport=object())  # type: ignore[arg-type]
-    with pytest.raises(ConfigurationError, match=r"need transport Dds\(...\), not Processes"):
+    with pytest.raises(ConfigurationError, match=r"need transport Dds\(...\) or Zenoh\(...\), not Processes"):
         anodize.System(STREAM, transport=Processes(), ros=RosBridge(external={"C"}))
     with pytest.raises(ConfigurationError, match="are the fields of Dds"):
         anodize.System(STREAM, transport=Dds(), domain=3)

@@ -121,6 +121,16 @@ def test_an_including_file_wins_key_by_key_and_paths_stay_relative_to_their_file
     assert given_to_p(system)["count"] == 5
 
 
+def test_an_included_protocol_is_found_when_the_file_is_named_from_another_directory(
+        system: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # 'anodize run examples/fleet/robot1.toml' from the checkout's root: the included file's
+    # protocol was anchored to the relative examples/fleet, then the including file's folder again.
+    (system.parent / "robot.toml").write_text('include = ["system.toml"]\n', encoding="utf-8")
+    monkeypatch.chdir(system.parent.parent)
+    config = load_config(Path(system.parent.name) / "robot.toml")
+    assert config.protocol.resolve() == system.parent / "stream.proto"
+
+
 def test_an_error_in_an_included_value_names_the_included_file(system: Path) -> None:
     system.write_text(system.read_text().replace("count = 2", "count = [1, true]"), encoding="utf-8")
     top = system.parent / "top.toml"

@@ -108,7 +108,7 @@ BAD = {
     "unknown_top_key": (
         MINIMAL + "protocl = 1\n" + GROUP,
         ("protocl: unknown key; expected one of channels, domain, global, groups, include, monitors, params, "
-         "protocol, pythonpath, record, ros, run_id, timeout, transport")),
+         "protocol, pythonpath, record, ros, run_id, timeout, transport, zenoh")),
     "params_not_tables": (
         MINIMAL + "params = 3\n" + GROUP,
         "params: expected tables such as [params.Planner], got 3"),
@@ -164,7 +164,23 @@ BAD = {
     "unknown_group_key": (
         MINIMAL + GROUP + "prio = 3\n",
         ("groups.g.prio: unknown key; expected one of cpus, host, max_restarts, memory, namespace, nice, "
-         "on_failure, priority, priority_inheritance, roles")),
+         "on_failure, priority, priority_inheritance, roles, spin")),
+    "spin_not_a_duration": (
+        MINIMAL + GROUP + 'spin = "fast"\n',
+        ('groups.g.spin: expected a duration such as "50us" or "0.2ms" (at most "1ms"), or an int of '
+        'microseconds, got "fast"')),
+    "spin_too_long": (
+        MINIMAL + GROUP + 'spin = "5ms"\n',
+        ('groups.g.spin: expected a duration such as "50us" or "0.2ms" (at most "1ms"), or an int of '
+        'microseconds, got "5ms"')),
+    "spin_negative": (
+        MINIMAL + GROUP + "spin = -3\n",
+        ('groups.g.spin: expected a duration such as "50us" or "0.2ms" (at most "1ms"), or an int of '
+        "microseconds, got -3")),
+    "spin_a_float": (
+        MINIMAL + GROUP + "spin = 2.5\n",
+        ('groups.g.spin: expected a duration such as "50us" or "0.2ms" (at most "1ms"), or an int of '
+        "microseconds, got 2.5")),
     "priority_inheritance_not_a_bool": (
         MINIMAL + GROUP + "priority_inheritance = 0\n",
         "groups.g.priority_inheritance: expected true or false, got 0"),
@@ -194,12 +210,13 @@ BAD = {
     "empty_global": ('protocol = "p.proto"\nglobal = ""\n' + GROUP,
                      'global: expected a non-empty string, got ""'),
     "transport": (MINIMAL + 'transport = "tcp"\n' + GROUP,
-                  ('transport: expected "inproc" or "process" or "dds", or a table [transport] with kind = ..., '
-                   'got "tcp"')),
+                  ('transport: expected "inproc" or "process" or "dds" or "zenoh", or a table [transport] with '
+                   'kind = ..., got "tcp"')),
     "transport_kind": (MINIMAL + '[transport]\nkind = "tcp"\n' + GROUP,
-                       'transport.kind: expected "inproc" or "process" or "dds", got "tcp"'),
+                       'transport.kind: expected "inproc" or "process" or "dds" or "zenoh", got "tcp"'),
     "transport_no_kind": (MINIMAL + '[transport]\nliveness = 3\n' + GROUP,
-                          'transport.kind: expected "inproc" or "process" or "dds", got nothing (it is required)'),
+                          ('transport.kind: expected "inproc" or "process" or "dds" or "zenoh", got nothing '
+                          '(it is required)')),
     "transport_key_of_another_kind": (
         MINIMAL + '[transport]\nkind = "process"\ndomain = 3\n' + GROUP,
         'transport.domain: unknown key for kind = "process"; expected one of kind, liveness'),
@@ -310,6 +327,14 @@ def test_a_group_s_nice_value_reaches_the_system(system_dir: Path) -> None:
     config = build(system_dir, TWO_GROUPS.replace("[groups.b]\n", "[groups.b]\nnice = -10\n"))
     assert [g.nice for g in config.groups.values()] == [None, -10]
     assert [g.nice for g in build_system(config).groups.values()] == [None, -10]
+
+
+def test_a_group_s_spin_reaches_the_system_in_nanoseconds(system_dir: Path) -> None:
+    config = build(system_dir, TWO_GROUPS.replace("[groups.a]\n", '[groups.a]\nspin = "50us"\n')
+                                         .replace("[groups.b]\n", "[groups.b]\nspin = 20\n"))
+    assert [g.spin for g in config.groups.values()] == [50_000, 20_000]
+    assert [g.spin for g in build_system(config).groups.values()] == [50_000, 20_000]
+    assert [g.spin for g in build_system(build(system_dir, TWO_GROUPS)).groups.values()] == [0, 0]
 
 
 def test_build_system_runs_an_inproc_system(system_dir: Path) -> None:
@@ -464,7 +489,7 @@ def test_another_transport_keeps_the_fields_it_has(tmp_path: Path, kind: str, ex
 
 def test_another_transport_must_be_one(tmp_path: Path) -> None:
     config = load_config(write(tmp_path, MINIMAL + GROUP))
-    with pytest.raises(ConfigError, match='transport: expected one of "inproc", "process", "dds", got "tcp"'):
+    with pytest.raises(ConfigError, match='transport: expected one of "inproc", "process", "dds", "zenoh", got "tcp"'):
         config.on_transport("tcp")
 
 

@@ -130,7 +130,9 @@ def test_lint_names_the_key_and_what_it_expected(tmp_path: Path, capsys: pytest.
 
 @pytest.mark.parametrize(("key", "value"), [("timeout", "inf"), ("timeout", "nan"),
                                             ("transport", '{ kind = "dds", wait = inf }'),
-                                            ("transport", '{ kind = "process", liveness = inf }')])
+                                            ("transport", '{ kind = "process", liveness = inf }'),
+                                            ("transport", '{ kind = "zenoh", lease = inf }'),
+                                            ("transport", '{ kind = "zenoh", wait = nan }')])
 def test_seconds_must_be_finite(tmp_path: Path, key: str, value: str) -> None:
     file = tmp_path / "s.toml"
     file.write_text(f'protocol = "p.proto"\nglobal = "G"\n{key} = {value}\n[groups.g]\nroles = {{ A = "m:f" }}\n')

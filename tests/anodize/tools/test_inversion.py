@@ -533,13 +533,15 @@ def test_lint_tinman_by_name_prints_its_inversions(
     assert [[part.split()[0] for part in c[len("  chain: "):].split(" -> ")] for c in chains] == [
         r for _, _, r in TINMAN_INVERSIONS]
     assert "  preempted by: perception (priority 50, CPUs any) over Planner" in analysis
-    # The simulated world (nice -10, no boosts) is where every unbounded chain ends.
+    # Every group a control role waits on takes no boosts (decision 0065 for planning): no chain is
+    # bounded by inheritance, and each says which group turned it off.
     unbounded = [line for line in blocks if line.startswith("unbounded inversion:")]
-    assert len(unbounded) == 5 and all("can wait on Gazebo" in line or "can wait on Camera" in line
-                                       or "can wait on VisOdom" in line for line in unbounded)
+    assert len(unbounded) == 6
+    assert ("  priority inheritance: cannot cover it: Move waits on group planning, which turns it off "
+            "(priority_inheritance = false)") in analysis
     assert "Gazebo (group simulation, no priority (normal scheduling, nice -10), CPUs any)" in analysis
     assert "  chain: Move ?Gazebo(LaserScan) [state 0.2.0] -> Gazebo" in analysis  # never state 0.1.x: control
-    assert analysis.endswith("6 priority inversions (5 unbounded) among 14 waits; "
+    assert analysis.endswith("6 priority inversions (6 unbounded) among 14 waits; "
                              "priority inheritance is turned off in some groups\n")
 
 

@@ -135,6 +135,27 @@ def test_a_killed_host_is_reported_to_the_other_as_a_peer_failure(tmp_path: Path
     print(f"the kill was noticed after {noticed_after:.2f} s (lease 1 s)")
 
 
+def test_a_thread_still_receiving_for_a_failed_role_is_stopped_and_its_sender_not_blamed(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The group deletes a failed role's readers (so their writers see them gone); a thread of the
+    # role still in a receive then found its reader deleted, and the sender was blamed for a
+    # sample "that could not be decoded" (TinMan's Move-estimates, beside two CPU hogs).
+    outcome = tmp_path / "outcome"
+    monkeypatch.setenv("DDS_TEST_OUTCOME", str(outcome))
+    held = sessiontypes.loads(dds_roles.HELD, "held.proto").globals["Held"]
+    system = anodize.System(held, transport=anodize.Dds(domain=domain(), run_id="held", wait=20))
+    system.group("producing").role("P", dds_roles.held_producer)
+    system.group("consuming").role("C", dds_roles.failing_with_a_receiving_thread).role(
+        "K", dds_roles.keeping_the_group_alive)
+    report = system.run(timeout=60)
+    assert outcome.read_text() == "RoleStopped", report.summary()
+    error = report.roles["C"].error
+    assert error is not None and "RuntimeError: C fails on purpose" in str(error), report.summary()  # its own
+    for role in ("P", "K"):  # each told that C failed; nobody blames P
+        assert isinstance(report.roles[role].error, PeerFailedError), report.summary()
+    assert "protocol violation" not in report.summary(), report.summary()
+
+
 FORGER = textwrap.dedent("""
     import sys, time
     from cyclonedds.domain import DomainParticipant

@@ -6,16 +6,22 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import re
 import shutil
 import signal
-import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from dds_hosts import finish, namespaces_unavailable, start_host, wait_for_group, wait_until_flowing, write_system
+from dds_hosts import (
+    Hosts,
+    finish,
+    namespaces_unavailable,
+    start_host,
+    wait_for_group,
+    wait_until_flowing,
+    write_system,
+)
 
 from anodize import PeerFailedError
 from anodize._supervision.report import RoleStatus
@@ -26,55 +32,6 @@ pytestmark = pytest.mark.slow
 
 REASON = namespaces_unavailable()
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(REASON is not None, reason=REASON or "")]
-
-
-def sh(*argv: str) -> None:
-    subprocess.run(argv, check=True, capture_output=True, timeout=30)
-
-
-class Hosts:
-    """Namespaces ``a`` and ``b`` joined by a veth pair 10.79.x.1 <-> 10.79.x.2."""
-
-    def __init__(self) -> None:
-        tag = os.getpid() % 250
-        self.a, self.b = f"anz-a-{os.getpid()}", f"anz-b-{os.getpid()}"
-        self.veth_a, self.veth_b = f"anza{tag}", f"anzb{tag}"
-        self.subnet = f"10.79.{tag}"
-
-    def create(self) -> None:
-        sh("ip", "netns", "add", self.a)
-        sh("ip", "netns", "add", self.b)
-        sh("ip", "link", "add", self.veth_a, "netns", self.a, "type", "veth", "peer", "name", self.veth_b,
-           "netns", self.b)
-        for ns, dev, host in ((self.a, self.veth_a, 1), (self.b, self.veth_b, 2)):
-            sh("ip", "-n", ns, "addr", "add", f"{self.subnet}.{host}/30", "dev", dev)
-            sh("ip", "-n", ns, "link", "set", "lo", "up")
-            sh("ip", "-n", ns, "link", "set", dev, "up", "multicast", "on")  # Cyclone discovers by multicast
-
-    def drop(self, percent: int) -> None:
-        """Drop ``percent`` % of the packets leaving each namespace, at random."""
-        for ns, dev in ((self.a, self.veth_a), (self.b, self.veth_b)):
-            for command in ("add table inet lossy",
-                            "add chain inet lossy out { type filter hook output priority 0; }",
-                            f'add rule inet lossy out oifname "{dev}" numgen random mod 100 < {percent} counter drop'):
-                sh("ip", "netns", "exec", ns, "nft", command)
-
-    def dropped(self) -> int:
-        """Packets the loss rules dropped so far, in both namespaces."""
-        total = 0
-        for ns in (self.a, self.b):
-            listing = subprocess.run(["ip", "netns", "exec", ns, "nft", "list", "table", "inet", "lossy"],
-                                     capture_output=True, text=True, timeout=30).stdout
-            total += sum(int(n) for n in re.findall(r"counter packets (\d+)", listing))
-        return total
-
-    def cut(self) -> None:
-        """Take the link down: nothing crosses any more."""
-        sh("ip", "-n", self.a, "link", "set", self.veth_a, "down")
-
-    def delete(self) -> None:
-        for ns in (self.a, self.b):
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=30)
 
 
 @pytest.fixture

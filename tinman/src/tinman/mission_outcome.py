@@ -104,7 +104,8 @@ def mission_marks(records: Mapping[str, Mapping[str, Any]],
 
 def mission_outcome(records: Mapping[str, Mapping[str, Any]],
                     waypoints: Sequence[Point] = DEFAULT_WORLD.waypoints, *,
-                    dock: Point | None = None, time_limit: float | None = None) -> dict[str, Any]:
+                    dock: Point | None = None, time_limit: float | None = None,
+                    failed_at: float | None = None) -> dict[str, Any]:
     """``report.json``'s ``mission``: ``outcome`` (``"ok"`` or ``"FAILED"``) and ``failures`` (why),
     ``waypoints_reached`` (each with its number, lap, time and place), ``patrol_completed``,
     ``bumps``, ``contacts``, ``safety_stops`` and ``recoveries`` (None where no role counted them).
@@ -113,7 +114,8 @@ def mission_outcome(records: Mapping[str, Mapping[str, Any]],
     (``dock``, with ``--patrol``): ``mode`` is ``"patrol"``, ``patrol_completed`` means every
     waypoint in order and then the dock on the true path, ``completed_in_s`` when it got back,
     ``ended_by`` is ``"patrol completed"`` (the Planner's ``Patrol`` record: back at the dock by
-    its pose) or ``"time limit"``, and a patrol not completed fails the mission."""
+    its pose), ``"run failed"`` (the system failed at ``failed_at`` seconds, before the time limit)
+    or ``"time limit"``, and a patrol not completed fails the mission."""
     marks = mission_marks(records, waypoints, dock=dock)
     gazebo = records.get("Gazebo", {})
     bumps = gazebo.get("bumps")
@@ -124,14 +126,16 @@ def mission_outcome(records: Mapping[str, Mapping[str, Any]],
     every = len(marks.waypoints) >= len(waypoints)
     patrol: dict[str, Any] = {"mode": "loop", "ended_by": "duration", "time_limit_s": time_limit}
     if dock is not None:
-        ended_by = "patrol completed" if "Patrol" in records else "time limit"
+        ended_by = ("patrol completed" if "Patrol" in records
+                    else "run failed" if failed_at is not None else "time limit")
         completed = every and marks.dock is not None
-        patrol = {"mode": "patrol", "ended_by": ended_by, "time_limit_s": time_limit,
+        patrol = {"mode": "patrol", "ended_by": ended_by, "time_limit_s": time_limit, "failed_at_s": failed_at,
                   "dock": {"x": dock[0], "y": dock[1], "t_s": marks.dock.t if marks.dock else None,
                            "final_distance_m": _final_distance(gazebo, dock)},
                   "completed_in_s": marks.dock.t if completed and marks.dock else None}
         if not completed:
-            failures.append(_not_completed(ended_by, marks, len(waypoints), patrol["dock"]["final_distance_m"]))
+            failures.append(_not_completed(ended_by, marks, len(waypoints), patrol["dock"]["final_distance_m"],
+                                           failed_at))
     return {
         "outcome": "FAILED" if failures else "ok",
         "failures": failures,
@@ -147,13 +151,16 @@ def mission_outcome(records: Mapping[str, Mapping[str, Any]],
     }
 
 
-def _not_completed(ended_by: str, marks: MissionMarks, waypoints: int, distance: float | None) -> str:
+def _not_completed(ended_by: str, marks: MissionMarks, waypoints: int, distance: float | None,
+                   failed_at: float | None) -> str:
     """Why a patrol done once is not completed, on the true path."""
     where = f" ({distance:.2f} m from it at the end)" if distance is not None else ""
     missed = (f"reached {len(marks.waypoints)} of {counted(waypoints, 'waypoint')}"
               if len(marks.waypoints) < waypoints else f"did not get back to the dock{where}")
     if ended_by == "patrol completed":
         return f"the Planner, by its pose, was back at the dock, but the robot truly {missed}"
+    if ended_by == "run failed":
+        return f"the patrol was cut short when the run failed at {failed_at:.1f} s: the robot {missed}"
     return f"the patrol was not completed in the time limit: the robot {missed}"
 
 
@@ -181,6 +188,8 @@ def mission_line(mission: Mapping[str, Any]) -> str:
     head = ""
     if whole and mission.get("completed_in_s") is not None:
         head = f"patrol completed in {mission['completed_in_s']:.1f} s: "
+    elif whole and mission.get("ended_by") == "run failed":
+        head = f"run failed at {mission['failed_at_s']:.1f} s: "
     elif whole and mission.get("ended_by") == "time limit":
         limit = mission.get("time_limit_s")
         head = "time limit" + (f" ({limit:g} s)" if limit is not None else "") + ": "

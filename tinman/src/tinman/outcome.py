@@ -46,7 +46,8 @@ def build_report(report: RunReport, settings: Settings) -> dict[str, Any]:
     fused = _ate(settings, FUSED_ESTIMATE)  # the one pose the robot steers by
     violations = violations_in(report)
     run = report.to_dict()
-    mission = mission_outcome(records, dock=DOCK if settings.patrol else None, time_limit=settings.duration)
+    mission = mission_outcome(records, dock=DOCK if settings.patrol else None, time_limit=settings.duration,
+                              failed_at=report.duration if report.failed else None)
     return {
         "system": "tinman",
         "global": report.protocol,

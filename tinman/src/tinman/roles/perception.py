@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -142,6 +143,10 @@ def visodom(ep: Endpoint) -> None:
                 if failed:
                     lost.append(captured)
                 recoveries.frame(captured, failed)
+                # A clock reading right before the shared estimator, as the wheels' thread takes one
+                # before each of its updates: a replay takes the threads through the estimator in the
+                # run's order by them (the reading before the tracking is too far from it to).
+                ep.now()
                 fused = fusion.fuse(captured, None if failed else pose)
                 if fusion.reanchor is not None:
                     odometry.reanchor(fusion.reanchor)
@@ -246,10 +251,12 @@ class Fusion:
             if self.filter is not None:
                 self.filter.odometry(seconds(message.header.stamp), odometry_planar(message))
 
-    def scan(self, message: LaserScan) -> None:
+    def scan(self, message: LaserScan, before_update: Callable[[], object] | None = None) -> None:
         """A range scan: every ``match_every``-th is matched on the map near the estimate, and the
         pose found is a measurement of it. The matching runs outside the lock (about a millisecond):
-        the tracking thread may update the estimate meanwhile, which the late measurement allows."""
+        the tracking thread may update the estimate meanwhile, which the late measurement allows.
+        ``before_update`` is called once the matching is done, before the measurement goes in (the
+        wheels' thread reads its clock there: a replay orders the update among the other thread's by it)."""
         with self._lock:
             self.scans += 1
             if self.filter is None or self.filter.stamp is None or self.scans % self._match_every:
@@ -261,6 +268,8 @@ class Fusion:
         began = time.perf_counter()
         found = match_scan(self._world, prior, ranges, angles)
         spent = (time.perf_counter() - began) * 1000.0
+        if before_update is not None:
+            before_update()
         with self._lock:
             self.match_ms.append(spent)
             if found is None:
@@ -379,7 +388,7 @@ def _take_wheels(ep: Endpoint, fusion: Fusion) -> None:
             scan = ep.recv("Gazebo").payload  # taken with the reading, at its instant
             ep.now()  # a clock reading before the shared estimator: a replay orders the threads' turns by them
             fusion.odometry(reading)
-            fusion.scan(scan)
+            fusion.scan(scan, before_update=ep.now)  # and one before a matched scan's measurement goes in
     except (PeerFailedError, RoleStopped):  # the simulator is gone, or the run stops: the camera goes on alone
         pass
     except Exception as error:  # a bug, or a reading no estimator takes: the role fails, not this thread alone
