@@ -29,6 +29,8 @@ HEAD_LIMIT = 16 * 1024  # bytes of request head read before a connection is refu
 HEAD_TIMEOUT = 5.0  # seconds a client may take to send its request head
 CHUNK = 256 * 1024  # bytes relayed per read
 DRAIN = 1.0  # seconds a closing gate lets its relays copy what the server sent last
+QUIET = 0.2  # seconds the server must have sent its clients nothing before it is stopped (see settle)
+SETTLE_LIMIT = 2.0  # seconds settle waits at most, however busy the server stays
 
 
 @dataclass(frozen=True)
@@ -104,7 +106,27 @@ class SubprotocolGate:
         self._drained = threading.Condition(self._lock)
         self._open: set[socket.socket] = set()
         self._closed = False
+        self._last_out = 0.0  # time.monotonic() when a relay last copied the server's bytes to a client
         threading.Thread(target=self._accept_loop, name="anodize-live-gate", daemon=True).start()
+
+    def settle(self, quiet: float = QUIET, limit: float = SETTLE_LIMIT) -> None:
+        """Wait until the server behind has sent its clients nothing for ``quiet`` seconds since this
+        call (at most ``limit``); no wait without a client.
+
+        The SDK's server drops what it has queued for a client and not yet written when it is
+        stopped, and its writer is side work that a busy machine may not have run yet: the
+        view settles the gate after handing over its last messages and before it stops the server.
+        """
+        with self._lock:
+            relaying = bool(self._open)
+        if not relaying:
+            return
+        start = time.monotonic()
+        while (now := time.monotonic()) - start < limit:
+            idle = now - max(start, self._last_out)
+            if idle >= quiet:
+                return
+            time.sleep(min(quiet - idle, limit - (now - start)))
 
     def close(self, drain: float = DRAIN) -> None:
         """Stop listening, let the relays copy what is in flight (up to ``drain`` seconds: the
@@ -166,7 +188,7 @@ class SubprotocolGate:
             client.settimeout(None)
             if not self._keep(server):
                 return
-            start_side_work_thread(self._relay, "anodize-live-gate-relay", (server, client, b""))
+            start_side_work_thread(self._relay, "anodize-live-gate-relay", (server, client, b"", True))
             relaying = True
         except OSError:  # the client went away, or the SDK's server is gone (the view is closing)
             return
@@ -177,7 +199,7 @@ class SubprotocolGate:
                 self._drop(client)
         self._relay(client, server, head)
 
-    def _relay(self, source: socket.socket, sink: socket.socket, first: bytes) -> None:
+    def _relay(self, source: socket.socket, sink: socket.socket, first: bytes, to_client: bool = False) -> None:
         """Copy ``source`` to ``sink`` until either ends; then end both (the other relay stops too)."""
         self._lower()
         try:
@@ -185,6 +207,8 @@ class SubprotocolGate:
                 sink.sendall(first)
             while data := source.recv(CHUNK):
                 sink.sendall(data)
+                if to_client:
+                    self._last_out = time.monotonic()
         except OSError:
             pass
         finally:

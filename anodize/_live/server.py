@@ -56,6 +56,7 @@ DEFAULT_PORT = 8765  # Foxglove's default for a WebSocket connection
 # when a client is slower, the SDK drops that client's oldest, not the other clients'.
 CLIENT_BACKLOG = 32
 _PUBLISH_EVERY = 0.1  # seconds: how often the publisher looks for a new status when nothing came
+_PUBLISHED_WITHIN = 5.0  # seconds end() waits for the publisher (side work: a busy machine runs it late)
 _log = logging.getLogger("anodize.live")
 
 _STATUS_SCHEMA = {
@@ -322,7 +323,7 @@ class LiveView:
             self._reading.wait_for(lambda: self._readers == 0, timeout=wait)
         self.outbox.close()
         if self._publisher is not None:
-            self._publisher.join(wait)
+            self._publisher.join(_PUBLISHED_WITHIN)
         stats = list(self._stats.values())
         thinned = sum(int(s.get("thinned", 0)) for s in stats)
         dropped = sum(int(s.get("dropped", 0)) for s in stats) + sum(self.outbox.dropped.values())
@@ -372,6 +373,8 @@ class LiveView:
                 with contextlib.suppress(OSError):
                     sock.shutdown(socket.SHUT_RDWR)
         if self.server is not None:  # first: what it sent reaches the clients through the gate
+            if self.gate is not None:
+                self.gate.settle()  # the SDK drops, when stopped, what it has not yet written
             self.server.stop()
         if self.gate is not None:
             self.gate.close()

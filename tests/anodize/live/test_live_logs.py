@@ -33,8 +33,9 @@ def _free_port() -> int:
 class LogClient:
     """Subscribes to /rosout and keeps what arrives, in a thread of its own."""
 
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int, seen: Path, role: str, count: int) -> None:
         self.port = port
+        self.seen, self.role, self.count = seen, role, count  # seen is made once role's count records came
         self.advertised: dict[str, dict[str, Any]] = {}
         self.logs: list[dict[str, Any]] = []
         self.done = threading.Event()
@@ -80,6 +81,8 @@ class LogClient:
         subscription, _ = struct.unpack_from("<IQ", message, 1)
         assert subscription == 1
         self.logs.append(json.loads(message[13:]))
+        if sum(log["name"] == self.role for log in self.logs) >= self.count:
+            self.seen.touch()
 
 
 def test_a_foxglove_client_gets_the_roles_records_as_foxglove_log(
@@ -103,20 +106,19 @@ def test_a_foxglove_client_gets_the_roles_records_as_foxglove_log(
         return view
 
     monkeypatch.setattr(live, "open_live_view", open_view)
+    # P logs, then waits for the client to have its records (the run is live when they are sent);
+    # C logs as the run ends.
+    seen = tmp_path / "seen"
+    monkeypatch.setenv("LOGGING_TEST_SEEN", str(seen))
     system = tmp_path / "system.toml"
     system.write_text(f'protocol = "{REPO / "protocols" / "stream.proto"}"\nglobal = "Stream"\n'
                       f'transport = "process"\npythonpath = ["{REPO / "tests" / "anodize"}"]\n'
-                      '[groups.a]\nroles = { P = "logging_roles:producer" }\n'
+                      '[groups.a]\nroles = { P = "logging_roles:held_producer" }\n'
                       '[groups.b]\nroles = { C = "logging_roles:consumer" }\n', encoding="utf-8")
     port = _free_port()
-    client = LogClient(port)
+    client = LogClient(port, seen, "P", 5)
     try:
-        code = main(["run", str(system), "--foxglove", str(port), "--quiet", "--timeout", "30"])
-        # The view sent its records before the run returned; on a busy machine the client's thread
-        # may not have read them all yet: it gets a bounded while to, before it is told to stop.
-        deadline = time.monotonic() + 10.0
-        while sum(log["name"] == "P" for log in list(client.logs)) < 5 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        code = main(["run", str(system), "--foxglove", str(port), "--quiet", "--timeout", "60"])
     finally:
         client.done.set()
         client.thread.join(timeout=10.0)
@@ -129,7 +131,7 @@ def test_a_foxglove_client_gets_the_roles_records_as_foxglove_log(
         ("foxglove.Log", "json", "jsonschema")
     own = [(log["level"], log["name"], log["message"]) for log in client.logs if log["name"] == "P"]
     assert own == [(1, "P", "debug from P"), (2, "P", "planning 2 items"), (3, "P", "battery low"),
-                   (4, "P", "lidar lost"), (5, "P", "safety stop")]
+                   (4, "P", "lidar lost"), (5, "P", "safety stop")], out
     assert all(log["timestamp"]["sec"] > 1_700_000_000 and log["file"].endswith("logging_roles.py")
                for log in client.logs)
     assert "foxglove: 6 log records on /rosout (foxglove.Log)" in out
