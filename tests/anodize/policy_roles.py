@@ -9,7 +9,7 @@ from pathlib import Path
 from anodize import Endpoint
 
 TICKS = 20
-TICK_PERIOD = 0.05  # seconds: the independent pair runs about 2 s
+TICK_PERIOD = 0.05  # seconds: the independent pair runs about 1 s
 
 
 def client(ep: Endpoint) -> None:
@@ -56,6 +56,15 @@ def ticker(ep: Endpoint) -> None:
         ep.send("D", "tick", i)
         ep.sleep(TICK_PERIOD)
     ep.send("D", "fin")
+
+
+def endless_ticker(ep: Endpoint) -> None:
+    """Ticks until stopped: a group that is still running whenever a stop comes, however late."""
+    i = 0
+    while True:
+        ep.send("D", "tick", i)
+        i += 1
+        ep.sleep(TICK_PERIOD)
 
 
 def tick_sink(ep: Endpoint) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 
 import numpy as np
 from rosbags.typesys.stores.ros2_jazzy import builtin_interfaces__msg__Time as Time
@@ -55,10 +56,13 @@ def sensor(ep: Endpoint) -> None:
 def scans(ep: Endpoint) -> None:
     """Take scans until stopped: each newer than the last (gaps allowed and counted); write the tally."""
     last, received, gaps = -1, 0, 0
+    first_at = last_at = 0.0  # time.monotonic() of the first and the last scan taken
     dwell = float(os.environ.get("QOS_TEST_SLOW", "0"))
     try:
         while True:
             number = ep.recv("S").payload.header.stamp.sec
+            last_at = time.monotonic()
+            first_at = first_at or last_at
             if number <= last:
                 raise AssertionError(f"scan {number} after scan {last}: duplicated or reordered")
             gaps += number - last - 1
@@ -66,7 +70,7 @@ def scans(ep: Endpoint) -> None:
             if dwell:
                 ep.sleep(dwell)
     except RoleStopped:
-        _write("scans", {"received": received, "gaps": gaps, "last": last})
+        _write("scans", {"received": received, "gaps": gaps, "last": last, "taking_s": last_at - first_at})
         raise
 
 

@@ -42,7 +42,7 @@ def stalling_sensor(ep: anodize.Endpoint) -> None:
     for c in range(3):
         ep.send("M", "r", {"c": c})
         ep.recv("M")
-        ep.sleep(0.12 * c)  # 0, then at least two of M's 50 ms, then at least four
+        ep.sleep(0.3 * c)  # 0, then at least two of M's 50 ms, then at least four (room for late wakes)
     ep.send("M", "stop")
 
 

@@ -187,7 +187,7 @@ EARLY_ODOS = 3  # odometry readings V takes before its first pose; two more come
 def _odometer(ep: Endpoint) -> None:
     for n in range(EARLY_ODOS):
         ep.send("V", "odo", n)
-    ep.sleep(0.6)  # the last two come after V's last pose (a run stopped then would never have had V take them)
+    _POSES_DONE.wait(10.0)  # the last two come after V's last pose (a run stopped then never had V take them)
     for n in range(EARLY_ODOS, EARLY_ODOS + 2):
         ep.send("V", "odo", n)
     ep.send("V", "done")
@@ -226,10 +226,15 @@ def _fuser(ep: Endpoint) -> None:
 def _pose_receiver(ep: Endpoint) -> None:
     while ep.recv("V").label != "done":
         pass
+    _POSES_DONE.set()
+
+
+_POSES_DONE = threading.Event()  # M has V's last pose and its done: the odometer sends its last two (inproc)
 
 
 @pytest.fixture(scope="module")
 def fused(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    _POSES_DONE.clear()
     system = System(FUSED)
     system.group("g").role("G", _odometer)
     system.group("c").role("C", _camera)
@@ -420,7 +425,7 @@ def test_record_inside_needs_record(capsys: pytest.CaptureFixture[str], tmp_path
 def test_a_thread_s_patience_counts_from_when_it_starts_to_wait(monkeypatch: pytest.MonkeyPatch) -> None:
     """A role that computes for longer than the patience before its first wait (or between two
     turns) has not lost its order: the wait starts counting when it starts."""
-    monkeypatch.setattr(turnstile, "PATIENCE", 0.5)
+    monkeypatch.setattr(turnstile, "PATIENCE", 5.0)  # far below the minute since the last turn
     gate = turnstile.Turnstile({"first": [1], "second": [2]}, active=True)
     gate._last_event -= 60.0  # the last turn was a minute ago: the role computed meanwhile
     taken: list[bool] = []  # whether the first's turn had come when the second took its own

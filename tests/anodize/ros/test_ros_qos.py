@@ -20,6 +20,7 @@ from cyclonedds.topic import Topic
 from dds_hosts import domain
 
 from anodize._ros import ros_type
+from anodize._transport.dds.flow import WINDOW as CREDIT_WINDOW
 
 pytestmark = pytest.mark.slow
 HERE = Path(qos_roles.__file__).resolve().parent
@@ -118,8 +119,10 @@ def test_a_keep_last_reader_that_falls_behind_loses_the_oldest_and_holds_back_no
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["outcome"] == "stopped, no failures", out
     scans = json.loads((tmp_path / "scans.json").read_text())
-    assert scans["received"] <= 5 / 0.02 + 1, (scans, out)  # R took at most one scan per dwell
-    # More were lost than the sender's whole credit window (224): counted, S never waited for them.
-    assert report["lost"]["S->R"] > 500, out
+    # R took at most one scan per dwell (it dwells after each: their spread is at least the dwells).
+    assert scans["received"] - 1 <= scans["taking_s"] / 0.02 + 1e-6, (scans, out)
+    # More were lost than the sender's whole credit window: counted, S never waited for them; and
+    # C, on the reliable topic, got more than R took and that window together (S went on at its pace).
+    assert report["lost"]["S->R"] > CREDIT_WINDOW, out
     assert report["lost"]["S->R"] == report["messages"]["S->R"] - report["received"]["S->R"] >= scans["gaps"]
-    assert report["received"]["S->C"] > 1000, out
+    assert report["received"]["S->C"] > report["received"]["S->R"] + CREDIT_WINDOW, out

@@ -54,7 +54,7 @@ def test_timeouts_taken_are_counted_apart_from_misses() -> None:
 
     def sensor(ep: anodize.Endpoint) -> None:
         ep.send("M", "r", {"c": 1.0})
-        ep.sleep(0.3)  # at least five of the monitor's 50 ms pass with nothing
+        ep.sleep(0.6)  # at least five of the monitor's 50 ms pass with nothing, however late it wakes
         ep.send("M", "stop")
 
     def monitor(ep: anodize.Endpoint) -> None:

@@ -51,11 +51,11 @@ def transport(request: pytest.FixtureRequest) -> Transport:
 
 
 def run(transport: Transport, client: object, *, a: str = "stop", b: str = "stop",
-        max_restarts: int = 3) -> anodize.RunReport:
+        max_restarts: int = 3, ticker: object = roles.ticker) -> anodize.RunReport:
     system = anodize.System(POLICIES, transport=transport)
     system.group("a", on_failure=a, max_restarts=max_restarts).role("A", client)
     system.group("b", on_failure=b, max_restarts=max_restarts).role("B", roles.server)
-    system.group("c").role("C", roles.ticker).role("D", roles.tick_sink)
+    system.group("c").role("C", ticker).role("D", roles.tick_sink)
     return system.run(timeout=60, grace=1.0)
 
 
@@ -68,7 +68,7 @@ def test_stop_fails_the_peers_and_the_rest_runs_on(transport: Transport) -> None
 
 
 def test_stop_system_stops_every_group(transport: Transport) -> None:
-    report = run(transport, roles.failing_client, a="stop-system")
+    report = run(transport, roles.failing_client, a="stop-system", ticker=roles.endless_ticker)
     assert report.roles["A"].status is RoleStatus.FAILED
     assert report.groups["c"].status is GroupState.STOPPED, report.summary()
     assert "stopping every group: group a failed and its policy is stop-system" in report.notes

@@ -151,8 +151,10 @@ def test_a_thread_still_receiving_for_a_failed_role_is_stopped_and_its_sender_no
     assert outcome.read_text() == "RoleStopped", report.summary()
     error = report.roles["C"].error
     assert error is not None and "RuntimeError: C fails on purpose" in str(error), report.summary()  # its own
-    for role in ("P", "K"):  # each told that C failed; nobody blames P
-        assert isinstance(report.roles[role].error, PeerFailedError), report.summary()
+    # K is told that C failed. P's one send may go out before its group hears of the failure (then
+    # P ends done) or after (then it is told): either way nobody blames P.
+    assert isinstance(report.roles["K"].error, PeerFailedError), report.summary()
+    assert report.roles["P"].error is None or isinstance(report.roles["P"].error, PeerFailedError), report.summary()
     assert "protocol violation" not in report.summary(), report.summary()
 
 

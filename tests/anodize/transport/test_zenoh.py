@@ -184,15 +184,27 @@ def test_a_router_that_restarts_is_ridden_through(monkeypatch: pytest.MonkeyPatc
 @pytest.mark.slow  # a router that stays away
 def test_a_router_that_stays_away_fails_the_run_within_its_outage(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DDS_TEST_COUNT", "100000")
+    monkeypatch.setenv("ANODIZE_ZENOH_TOKEN", "known_to_the_test")
+    run = run_id()
+    credits = ZenohSettings(mode="client", run_id=run, host="", group_of={}, host_of={},
+                            token="known_to_the_test").credit_key("P", "C")
     endpoint = free_endpoint()
     router = open_router(endpoint)
-    system = stream_system(endpoint, dds_roles.slow_producer_of_count, dds_roles.consumer, outage=1.0)
-    timer = threading.Timer(3.0, router.close)  # the run is under way (or at its barrier) by then
-    timer.start()
+    flowing = threading.Event()  # the router sees the consumer's first credits: the run is under way
+    router.declare_subscriber(credits, lambda sample: flowing.set())
+    system = stream_system(endpoint, dds_roles.slow_producer_of_count, dds_roles.consumer, run_id=run, outage=1.0)
+
+    def go_away() -> None:  # mid-run, however long the groups took to start, and for good
+        if flowing.wait(60):
+            router.close()
+
+    thread = threading.Thread(target=go_away, daemon=True)
+    thread.start()
     try:
-        report = system.run(timeout=60)  # bounded: a hang fails here
+        report = system.run(timeout=120)  # bounded: a hang fails here
     finally:
-        timer.cancel()
+        flowing.set()
+        thread.join(10)
         router.close()
     assert not report.ok
     errors = " ".join(str(role.error) for role in report.roles.values())

@@ -165,7 +165,7 @@ def test_samples_wait_in_the_ring_until_the_flow_thread_pulls_and_acknowledges_t
     frames = [Codec().message_frame("data", i) for i in range(3)]
     for number, frame in enumerate(frames):
         writer.put(frame, attachment=HEADER.pack(number, WRITER))
-    deadline = time.monotonic() + 5
+    deadline = time.monotonic() + 30  # generous: a busy machine
     while receiver.received < 3 and time.monotonic() < deadline:
         receiver.tick()
         time.sleep(0.01)
@@ -190,12 +190,12 @@ def test_a_reader_waiting_in_the_ring_is_woken_when_the_run_stops(receiver: Zeno
     got: list[object] = []
     reader = threading.Thread(target=lambda: got.append(receiver.get()), daemon=True)
     reader.start()
-    deadline = time.monotonic() + 5
+    deadline = time.monotonic() + 30  # generous: a busy machine
     while not receiver._waiting and time.monotonic() < deadline:
         time.sleep(0.001)
     receiver.network.stopping = True  # type: ignore[attr-defined]
     receiver.wake()
-    reader.join(5)
+    reader.join(30)
     assert got == [STOP]
 
 
@@ -228,11 +228,11 @@ def test_closing_a_channel_whose_reader_waits_in_the_ring_wakes_it_first(receive
     got: list[object] = []
     reader = threading.Thread(target=lambda: got.append(receiver.get()), daemon=True)
     reader.start()
-    deadline = time.monotonic() + 5
+    deadline = time.monotonic() + 30  # generous: a busy machine
     while not receiver._waiting and time.monotonic() < deadline:
         time.sleep(0.001)
     receiver.close()  # raises nothing
     assert not receiver._waiting
     receiver.network.stopping = True  # type: ignore[attr-defined]
-    reader.join(5)
+    reader.join(30)
     assert got == [STOP]
