@@ -8,9 +8,11 @@ from the call: what the view handed over last is written out first.
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import threading
 import time
+from collections.abc import Iterator
 
 from anodize._live.gate import SUBPROTOCOL, SubprotocolGate
 
@@ -45,46 +47,39 @@ class TrickleServer:
         self.listener.close()
 
 
-def _gate(backend: tuple[str, int]) -> SubprotocolGate:
-    return SubprotocolGate("127.0.0.1", 0, backend, lambda *_: None, lambda: None)
+@contextlib.contextmanager
+def _gate(client: bool) -> Iterator[tuple[TrickleServer, SubprotocolGate]]:
+    """A gate before a trickling server; with ``client``, one connected whose first bytes came."""
+    server = TrickleServer(every=0.02)
+    gate = SubprotocolGate("127.0.0.1", 0, server.address, lambda *_: None, lambda: None)
+    try:
+        if not client:
+            yield server, gate
+            return
+        with socket.create_connection(("127.0.0.1", gate.port), timeout=10.0) as connection:
+            connection.sendall(HEAD)
+            assert connection.recv(100)  # the server has begun; it sends for about 0.2 s more
+            yield server, gate
+    finally:
+        gate.close(drain=0.0)
+        server.close()
 
 
 def test_settle_waits_until_the_server_has_sent_its_clients_everything() -> None:
-    server = TrickleServer(every=0.02)
-    gate = _gate(server.address)
-    try:
-        with socket.create_connection(("127.0.0.1", gate.port), timeout=10.0) as client:
-            client.sendall(HEAD)
-            assert client.recv(100)  # the server has begun; it sends for about 0.2 s more
-            gate.settle(quiet=2.0, limit=30.0)  # 2 s: a busy machine may run the server's thread late
-            assert server.sent == CHUNKS  # settle returned only once the server had stopped sending
-    finally:
-        gate.close(drain=0.0)
-        server.close()
+    with _gate(client=True) as (server, gate):
+        gate.settle(quiet=2.0, limit=30.0)  # 2 s: a busy machine may run the server's thread late
+        assert server.sent == CHUNKS  # settle returned only once the server had stopped sending
 
 
-def test_settle_is_bounded_while_the_server_keeps_sending() -> None:
-    server = TrickleServer(every=0.02)
-    gate = _gate(server.address)
-    try:
-        with socket.create_connection(("127.0.0.1", gate.port), timeout=10.0) as client:
-            client.sendall(HEAD)
-            assert client.recv(100)
-            began = time.monotonic()
-            gate.settle(quiet=60.0, limit=0.5)  # never 60 s quiet: the limit ends the wait
-            assert time.monotonic() - began < 30.0
-    finally:
-        gate.close(drain=0.0)
-        server.close()
+def test_settle_is_bounded_by_its_limit() -> None:
+    with _gate(client=True) as (_, gate):
+        began = time.monotonic()
+        gate.settle(quiet=60.0, limit=0.5)  # never 60 s quiet after the call: the limit ends the wait
+        assert time.monotonic() - began < 30.0
 
 
 def test_settle_does_not_wait_without_a_client() -> None:
-    server = TrickleServer(every=0.02)
-    gate = _gate(server.address)
-    try:
+    with _gate(client=False) as (_, gate):
         began = time.monotonic()
         gate.settle(quiet=30.0, limit=60.0)
         assert time.monotonic() - began < 30.0  # nobody to write to: it returns at once
-    finally:
-        gate.close(drain=0.0)
-        server.close()
