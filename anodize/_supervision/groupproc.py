@@ -84,6 +84,11 @@ __all__ = ["GroupSpec", "group_main", "EXIT_MEMORY", "HEARTBEAT"]
 
 EXIT_MEMORY = 87  # the exit status of a group stopped for exceeding its memory bound
 HEARTBEAT = 0.25  # seconds
+# How long a thread of a real-time group may keep the GIL while another waits for it (Python's
+# default is 5 ms): the group's roles are all at its priority, and a role due to send waits for
+# whichever holds the GIL. TinMan's joystick may slip 10 ms; with 5 ms per holder it waited up to
+# ~11 ms behind its group's other threads (decision 0067).
+REAL_TIME_SWITCH_INTERVAL = 0.001  # seconds
 TAPS_CLOSE_WITHIN = 10.0  # seconds the group waits for its taps to close (each bounds its own close)
 _PR_SET_PDEATHSIG = 1  # prctl option (linux/prctl.h)
 _RESERVE = 4 * 2**20  # freed on MemoryError so that reporting it can allocate
@@ -168,6 +173,8 @@ class _GroupProcess:
     def run(self) -> None:
         spec = self.spec
         scheduling = apply_thread_scheduling(spec.priority, spec.cpus, spec.nice)  # inherited by our threads
+        if scheduling.startswith("SCHED_FIFO"):
+            sys.setswitchinterval(REAL_TIME_SWITCH_INTERVAL)
         if spec.spin_note:
             scheduling += f"; {spec.spin_note}"
         functions = {role: resolve_function(ref) for role, ref in spec.roles.items()}
@@ -187,8 +194,8 @@ class _GroupProcess:
                    for role in spec.roles]
         # What the start made (modules, classes, endpoints) lives as long as the process: no
         # collection need look at it again. Unfrozen, a full collection, which runs in whichever
-        # role's thread allocates at that moment and holds the GIL throughout, took 11-18 ms for
-        # TinMan's control group's heap: longer than its joystick's period may slip.
+        # role's thread allocates at that moment and holds the GIL throughout, took 11-18 ms with
+        # TinMan's role modules imported: longer than its joystick's period may slip (decision 0066).
         gc.freeze()
         for thread in threads:
             thread.start()

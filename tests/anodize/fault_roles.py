@@ -45,6 +45,7 @@ def freezing_client(ep: Endpoint) -> None:
 
 def _control_connection() -> Connection:
     """The group's control connection (a duplex one: the channel pipes are one-way)."""
+    gc.unfreeze()  # the group froze what its start made (the connection too): the collector lists it again
     return next(o for o in gc.get_objects()
                 if isinstance(o, Connection) and o.readable and o.writable and not o.closed)
 
