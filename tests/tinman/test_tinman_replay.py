@@ -122,7 +122,7 @@ def test_the_recorded_run_s_contract_held_and_verify_lists_its_constraints(
     assert lines[0].startswith(f"{recorded / BAG} conforms to TinManParallel"), lines
     assert not any(line.startswith(("not recorded", "missing", "gap")) for line in lines), lines
     held = [line for line in lines if line.startswith("constraint: ") and ": held on " in line]
-    for start in ("Joy->Control Joy every 20ms +- 10ms", "Control->Move Twist within 100ms",
+    for start in ("Joy->Control Joy every 20ms +- 15ms", "Control->Move Twist within 100ms",
                   "Move->Gazebo Twist within 500ms", "Move->Gazebo Twist {abs(linear.x) <= 0.5",
                   "Control->Move Twist {abs(linear.x) <= 0.5"):
         assert any(line.startswith(f"constraint: {start}") for line in held), (start, lines)

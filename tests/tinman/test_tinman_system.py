@@ -66,7 +66,7 @@ def assert_the_contract_held(report: dict) -> None:
     for (pair, side), entry in contract.items():
         assert entry["checked"] > 0 and entry["held"] and entry["violations"] == [], (pair, side, entry)
     joy = contract["Joy -> Control", "sends"]
-    assert joy["constraints"] == "every 20ms +- 10ms" and 0 < joy["closest_ms"] <= 10
+    assert joy["constraints"] == "every 20ms +- 15ms" and 0 < joy["closest_ms"] <= 15
     assert "abs(linear.x) <= 0.5" in contract["Move -> Gazebo", "sends"]["constraints"]
 
 

@@ -69,8 +69,8 @@ def joy(ep: Endpoint) -> None:
             late = sent - (start + tick * period)
             if late > period:  # fell behind (e.g. the machine was busy): do not burst to catch up
                 tick += int(late / period)
-            # The protocol's period allows half a period either way: after a late send, the next
-            # waits at least half a period rather than follow at once.
+            # The protocol's period allows 15 ms either way: after a late send, the next waits at
+            # least half a period (10 ms) rather than follow at once.
             ep.sleep(max(start + tick * period, sent + period / 2) - ep.now())
     finally:
         if keyboard is not None:
