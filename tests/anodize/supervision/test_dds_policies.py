@@ -11,6 +11,7 @@ from pathlib import Path
 import dds_roles
 import pytest
 from dds_hosts import HERE, domain, finish, run_hosts, start_host
+from policy_checks import STOP_GROUPS, check_restarted_as_one, check_stop, check_used_up, restart_env, restart_groups
 
 from anodize._supervision.report import RoleStatus
 
@@ -62,28 +63,9 @@ roles = { Q = "dds_roles:ticker", R = "dds_roles:tick_counter" }
 
 
 def test_a_restart_set_spanning_hosts_restarts_as_one_incarnation(tmp_path: Path) -> None:
-    system = write(tmp_path, dds_roles.STREAM, "Stream", "restart", """
-[groups.producing]
-host = "A"
-on_failure = "restart"
-max_restarts = 1
-roles = { P = "dds_roles:failing_once_producer" }
-
-[groups.consuming]
-host = "B"
-on_failure = "restart"
-max_restarts = 1
-roles = { C = "dds_roles:consumer" }
-""")
-    reports = run_hosts(system, tmp_path, {"DDS_TEST_MARKER": str(tmp_path / "failed-once"),
-                                           "DDS_TEST_COUNT": "300"})
-    a, b = reports["A"], reports["B"]
-    # The second incarnations ran the whole session: the consumer saw 0..299 in order from
-    # the new producer (the old one's numbers 0..4 went to the old consumer only).
-    assert a["groups"]["producing"]["restarts"] == 1, a
-    assert b["groups"]["consuming"]["restarts"] == 1, b
-    assert a["roles"]["P"]["status"] == RoleStatus.DONE, a["roles"]
-    assert b["roles"]["C"]["status"] == RoleStatus.DONE, b["roles"]
+    system = write(tmp_path, dds_roles.STREAM, "Stream", "restart", restart_groups("failing_once_producer"))
+    a, b = run_hosts(system, tmp_path, restart_env(tmp_path)).values()
+    check_restarted_as_one(a, b)
     assert any("the first incarnation fails" in failure for failure in a["groups"]["producing"]["failures"]), a
 
 
@@ -119,42 +101,10 @@ roles = { C = "dds_roles:consumer" }
 
 
 def test_stop_on_one_host_fails_the_peer_on_the_other_and_the_rest_runs_on(tmp_path: Path) -> None:
-    system = write(tmp_path, dds_roles.STREAM_AND_TICKS, "Both", "stop", """
-[groups.producing]
-host = "A"
-roles = { P = "dds_roles:failing_producer" }
-
-[groups.consuming]
-host = "B"
-roles = { C = "dds_roles:consumer" }
-
-[groups.ticking]
-host = "B"
-roles = { Q = "rejoin_roles:few_ticks", R = "dds_roles:tick_counter" }
-""")
-    a, b = run_hosts(system, tmp_path).values()
-    assert a["roles"]["P"]["status"] == RoleStatus.FAILED
-    assert b["roles"]["C"]["error"]["type"] == "PeerFailedError", b["roles"]
-    assert b["groups"]["ticking"]["status"] == "done", b["groups"]  # nothing to do with P: it ran to its end
-    assert not any("stopping every group" in note for note in a["notes"] + b["notes"])
+    system = write(tmp_path, dds_roles.STREAM_AND_TICKS, "Both", "stop", STOP_GROUPS)
+    check_stop(*run_hosts(system, tmp_path).values())
 
 
 def test_a_restart_used_up_on_one_host_is_a_stop_there_and_its_peer_elsewhere_fails(tmp_path: Path) -> None:
-    system = write(tmp_path, dds_roles.STREAM, "Stream", "usedup", """
-[groups.producing]
-host = "A"
-on_failure = "restart"
-max_restarts = 1
-roles = { P = "dds_roles:failing_producer" }
-
-[groups.consuming]
-host = "B"
-on_failure = "restart"
-max_restarts = 1
-roles = { C = "dds_roles:consumer" }
-""")
-    a, b = run_hosts(system, tmp_path).values()
-    producing = a["groups"]["producing"]
-    assert (producing["restarts"], len(producing["failures"]), producing["status"]) == (1, 2, "failed"), producing
-    assert b["groups"]["consuming"]["restarts"] == 1, b["groups"]
-    assert b["roles"]["C"]["error"]["type"] == "PeerFailedError", b["roles"]
+    system = write(tmp_path, dds_roles.STREAM, "Stream", "usedup", restart_groups("failing_producer"))
+    check_used_up(*run_hosts(system, tmp_path).values())

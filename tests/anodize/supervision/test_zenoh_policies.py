@@ -13,9 +13,8 @@ from typing import Any
 import dds_roles
 import pytest
 from dds_hosts import run_hosts
+from policy_checks import STOP_GROUPS, check_restarted_as_one, check_stop, check_used_up, restart_env, restart_groups
 from zenoh_hosts import free_endpoint, open_router, write_policy_system
-
-from anodize._supervision.report import RoleStatus
 
 pytest.importorskip("zenoh", reason="the zenoh extra is not installed")
 pytestmark = pytest.mark.slow  # Zenoh hosts in processes for seconds
@@ -39,61 +38,14 @@ def run(router: str, tmp_path: Path, protocol: str, name: str, groups: str,
 
 
 def test_stop_on_one_host_fails_the_peer_on_the_other_and_the_rest_runs_on(router: str, tmp_path: Path) -> None:
-    a, b = run(router, tmp_path, dds_roles.STREAM_AND_TICKS, "Both", """
-[groups.producing]
-host = "A"
-roles = { P = "dds_roles:failing_producer" }
-
-[groups.consuming]
-host = "B"
-roles = { C = "dds_roles:consumer" }
-
-[groups.ticking]
-host = "B"
-roles = { Q = "rejoin_roles:few_ticks", R = "dds_roles:tick_counter" }
-""")
-    assert a["roles"]["P"]["status"] == RoleStatus.FAILED
-    assert b["roles"]["C"]["error"]["type"] == "PeerFailedError", b["roles"]
-    assert b["groups"]["ticking"]["status"] == "done", b["groups"]
-    assert not any("stopping every group" in note for note in a["notes"] + b["notes"])
+    check_stop(*run(router, tmp_path, dds_roles.STREAM_AND_TICKS, "Both", STOP_GROUPS))
 
 
 def test_a_restart_set_spanning_hosts_restarts_as_one_incarnation(router: str, tmp_path: Path) -> None:
-    a, b = run(router, tmp_path, dds_roles.STREAM, "Stream", """
-[groups.producing]
-host = "A"
-on_failure = "restart"
-max_restarts = 1
-roles = { P = "dds_roles:failing_once_producer" }
-
-[groups.consuming]
-host = "B"
-on_failure = "restart"
-max_restarts = 1
-roles = { C = "dds_roles:consumer" }
-""", {"DDS_TEST_MARKER": str(tmp_path / "failed-once"), "DDS_TEST_COUNT": "300"})
-    assert a["groups"]["producing"]["restarts"] == 1, a
-    assert b["groups"]["consuming"]["restarts"] == 1, b
-    assert a["roles"]["P"]["status"] == RoleStatus.DONE, a["roles"]
-    assert b["roles"]["C"]["status"] == RoleStatus.DONE, b["roles"]  # 0..299 in order, from the new producer
+    check_restarted_as_one(*run(router, tmp_path, dds_roles.STREAM, "Stream", restart_groups("failing_once_producer"),
+                                restart_env(tmp_path)))
 
 
 def test_a_restart_used_up_on_one_host_is_a_stop_there_and_its_peer_elsewhere_fails(
         router: str, tmp_path: Path) -> None:
-    a, b = run(router, tmp_path, dds_roles.STREAM, "Stream", """
-[groups.producing]
-host = "A"
-on_failure = "restart"
-max_restarts = 1
-roles = { P = "dds_roles:failing_producer" }
-
-[groups.consuming]
-host = "B"
-on_failure = "restart"
-max_restarts = 1
-roles = { C = "dds_roles:consumer" }
-""")
-    producing = a["groups"]["producing"]
-    assert (producing["restarts"], len(producing["failures"]), producing["status"]) == (1, 2, "failed"), producing
-    assert b["groups"]["consuming"]["restarts"] == 1, b["groups"]
-    assert b["roles"]["C"]["error"]["type"] == "PeerFailedError", b["roles"]
+    check_used_up(*run(router, tmp_path, dds_roles.STREAM, "Stream", restart_groups("failing_producer")))
