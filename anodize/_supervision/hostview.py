@@ -11,6 +11,11 @@ supervisor knows:
   without it, and keeps the incarnations that host's groups had then. When the same
   supervisor is heard again, its host is back; it stays in :attr:`HostView.gone` for another
   ``lost_after`` seconds, so that the returning host hears (in our hellos) that we moved on.
+- **who was cut off from us lately.** A gap in a supervisor's hello numbers means hellos were
+  lost on the way: the carrier lost its session (a cut), whether or not the silence lasted
+  ``lost_after`` here. Time alone cannot tell that: a supervisor held up on a busy machine
+  takes a second's hellos at once but missed none, and a link that comes back may first
+  deliver a hello said before the cut (Zenoh does), then the ones said after it.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ class _Peer:
     hello: HelloWord
     heard_at: float
     lost_at: float | None = None
+    missed_at: float | None = None  # when a gap in its hello numbers was last seen
 
 
 class HostView:
@@ -56,6 +62,8 @@ class HostView:
         if peer is None:
             self.peers[hello.supervisor] = _Peer(hello, now)
             return None
+        if hello.number > peer.hello.number + 1:
+            peer.missed_at = now
         peer.hello, peer.heard_at = hello, now
         if peer.lost_at is None:
             return None
@@ -64,6 +72,11 @@ class HostView:
         peer.lost_at = None
         self.back[hello.host] = now
         return line
+
+    def missed_lately(self, supervisor: str, now: float) -> bool:
+        """Whether hellos of ``supervisor`` were lost on the way (a cut) within ``lost_after`` seconds."""
+        peer = self.peers.get(supervisor)
+        return peer is not None and peer.missed_at is not None and now - peer.missed_at <= self.lost_after
 
     def look(self, now: float) -> list[HelloWord]:
         """The supervisors lost since the last look (their last hellos); their hosts are gone."""

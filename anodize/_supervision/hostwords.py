@@ -46,7 +46,8 @@ def parse(body: bytes, host: str, supervisor: str = "") -> Word | None:
                 state=_text(fields["state"]), why=_text(fields["why"]),
                 restarts=tuple(Decision(_int(d["incarnation"]), _names(d["groups"]), _text(d["why"]), _text(d["host"]))
                                for d in fields["restarts"]),
-                gone={_text(h): _incarnations(groups) for h, groups in dict(fields["gone"]).items()})
+                gone={_text(h): _incarnations(groups) for h, groups in dict(fields["gone"]).items()},
+                number=_int(fields["number"]))
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError):  # JSON nested past the stack
         return None
     return None

@@ -320,6 +320,7 @@ class Supervisor:
         self.view = (HostView(elsewhere.link.host, os.getpid(), elsewhere.link.supervisor, elsewhere.lost_after)
                      if elsewhere is not None else None)
         self.next_hello = 0.0
+        self.hellos_said = 0  # they are numbered (HelloWord.number): a gap where they are heard is a cut
 
     # ---- the run ---------------------------------------------------------------------------
     def run(self) -> RunReport:
@@ -683,10 +684,11 @@ class Supervisor:
     def _hello_word(self) -> HelloWord:
         assert self.elsewhere is not None and self.view is not None
         state = {RunState.STOPPING: "stopping", RunState.ENDED: "ended"}.get(self.state, "running")
+        self.hellos_said += 1
         return HelloWord(self.elsewhere.link.host, os.getpid(), {n: r.incarnation for n, r in self.records.items()},
                          state, self.stop_why, tuple(self.decisions),
                          {host: dict(groups) for host, groups in self.view.gone.items()},
-                         supervisor=self.elsewhere.link.supervisor)
+                         number=self.hellos_said - 1, supervisor=self.elsewhere.link.supervisor)
 
     def _look_around(self) -> None:
         """Say hello when it is time; notice the supervisors lost since the last look."""
@@ -703,8 +705,9 @@ class Supervisor:
         """What another supervisor's hello tells: a second claimant of a group (split brain),
         restarts and a stop it missed while it was cut off, or that it moved on without us."""
         assert self.elsewhere is not None and self.view is not None
+        now = time.monotonic()
         first = hello.supervisor not in self.view.peers  # never heard before: it could not be lost here
-        back = self.view.hear(hello, time.monotonic())
+        back = self.view.hear(hello, now)
         if back is not None:
             self.notes.append(back)
         split = self.view.split(hello, {name: r.incarnation for name, r in self.records.items()})
@@ -721,9 +724,11 @@ class Supervisor:
         if hello.why and hello.state != "running":
             self._stop_all(f"{hello.why} (on host {hello.host})", tell=False)
         ours = hello.gone.get(self.elsewhere.link.host)
-        # A cut: we lost it too (not just a supervisor slow to speak), or we had never heard it at all
-        # (cut off before its first hello reached us: nothing here to lose, yet it lost us).
-        if ours and (first or hello.host in self.view.gone):
+        # A cut (not just a supervisor slow to speak): we lost it too, or hellos of it were lost on
+        # the way lately, or we had never heard it at all (cut off before its first hello reached
+        # us: nothing here to lose, yet it lost us; a hello said before the cut and delivered after
+        # it, as Zenoh may, leaves a gap in the numbers before this one).
+        if ours and (first or hello.host in self.view.gone or self.view.missed_lately(hello.supervisor, now)):
             self._moved_on(hello, ours)
 
     def _moved_on(self, hello: HelloWord, ours: dict[str, int]) -> None:

@@ -57,6 +57,10 @@ class HelloWord:
         restarts: every restart it decided or heard of.
         gone: the hosts it lost sight of, with the incarnations their groups had then (it moved
             on without them: their sessions with it are over).
+        number: its hellos are numbered from 0 in the order it says them. Both carriers deliver
+            a writer's words reliably and in order while its session lasts, so a gap in the
+            numbers heard means the session was lost and the words meanwhile with it: a cut
+            (a supervisor that was only slow to speak or to listen leaves no gap).
     """
 
     host: str
@@ -66,6 +70,7 @@ class HelloWord:
     why: str = ""
     restarts: tuple[Decision, ...] = ()
     gone: dict[str, dict[str, int]] = field(default_factory=dict)
+    number: int = 0
     supervisor: str = ""
 
 

@@ -8,6 +8,9 @@ import time
 from collections import deque
 from collections.abc import Sequence
 
+from hypothesis import given
+from hypothesis import strategies as st
+
 from anodize._supervision.group import FailurePolicy, Group
 from anodize._supervision.hostview import HELLO_EVERY, HostView
 from anodize._supervision.report import GroupState, RoleReport, RoleStatus
@@ -202,6 +205,7 @@ def test_hellos_say_who_this_supervisor_is_and_what_it_runs() -> None:
     assert (first.host, first.supervisor, first.pid, first.groups, first.state) == (
         HERE, "b0b0", os.getpid(), {"consuming": 0}, "running")
     assert script.hellos[-1].state == "ended"  # its farewell: it leaves, it is not lost
+    assert [h.number for h in script.hellos] == list(range(len(script.hellos)))  # a gap would mean a cut
 
 
 def test_a_second_supervisor_claiming_our_group_stops_the_run_naming_both() -> None:
@@ -303,6 +307,43 @@ def test_a_host_that_only_we_lost_is_not_obeyed_when_it_says_it_moved_on() -> No
     report = supervise(script, {"consuming": CONSUMING}, {"producing": PRODUCING}, CHANNELS).run()
     assert script.stopped == []
     assert report.groups["consuming"].status is GroupState.DONE
+
+
+def test_a_hello_said_before_the_cut_and_delivered_after_it_does_not_hide_the_cut() -> None:
+    # Seen over Zenoh: cut off before any hello reached us, then, once back, a hello said before
+    # the cut (it does not say it lost us) and at once the ones said after it (it does); the numbers
+    # skipped between them are the cut.
+    before = hello({"producing": 0}, number=1)
+    moved_on = hello({"producing": 0}, gone={HERE: {"consuming": 0}}, number=13)
+    script = Script([[], [before, moved_on], [], [], done("consuming", "C", 0)])
+    report = supervise(script, {"consuming": CONSUMING}, {"producing": PRODUCING}, CHANNELS).run()
+    assert script.stopped == ["consuming"]
+    assert ("host A lost sight of this host (cut off?) and moved on without it: stopping consuming, whose "
+            "sessions with groups there are over") in report.notes
+
+
+def test_a_supervisor_held_up_that_missed_no_hello_does_not_obey_one_that_lost_it() -> None:
+    # Held up from its start (a busy machine), it takes its first hellos of A at once, every one
+    # of them: A lost it (it was slow to speak), but nothing was lost on the way: no cut.
+    hellos = [hello({"producing": 0}, number=n) for n in range(8)]
+    hellos.append(hello({"producing": 0}, gone={HERE: {"consuming": 0}}, number=8))
+    script = Script([[], hellos, [], [], done("consuming", "C", 0)])
+    report = supervise(script, {"consuming": CONSUMING}, {"producing": PRODUCING}, CHANNELS).run()
+    assert script.stopped == []
+    assert report.groups["consuming"].status is GroupState.DONE
+
+
+@given(st.lists(st.integers(min_value=1, max_value=4), min_size=1, max_size=30))
+def test_hellos_were_missed_lately_exactly_when_their_numbers_skip(steps: list[int]) -> None:
+    view = HostView("B", os.getpid(), "b0b0", lost_after=60.0)
+    number, now = 0, time.monotonic()
+    view.hear(hello({"producing": 0}, number=number), now)
+    for step in steps:
+        number += step
+        view.hear(hello({"producing": 0}, number=number), now)
+    assert view.missed_lately("a1", now) == any(step > 1 for step in steps)
+    assert not view.missed_lately("a1", now + 61.0)  # lately: within lost_after
+    assert not view.missed_lately("someone else", now)
 
 
 def test_a_silent_host_is_lost_then_back() -> None:
