@@ -20,7 +20,7 @@ from .._transport.links import NetworkSettings
 from .hostview import LOST_AFTER
 from .plan import RunPlan
 from .processes import ProcessRunner
-from .supervisor import Elsewhere, Link, Scope
+from .runner import Elsewhere, Link, Scope
 
 __all__ = ["NetworkRunner"]
 

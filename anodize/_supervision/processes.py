@@ -40,13 +40,14 @@ from .._transport.shm import remove_run_segments, remove_stale_segments, segment
 from .._transport.spin import describe_spin, spin_refusal
 from ..errors import MemoryBoundError, RoleError, error_from_data
 from . import control
+from .events import Counts, Event, GroupExited, GroupFailed, Logged, Note, Ready, RoleEnded
 from .group import Group, reference_of
 from .groupproc import EXIT_MEMORY, GroupSpec, group_main
 from .liveness import Frozen, HoldingGil
 from .logcarry import from_message
 from .plan import RunPlan
 from .report import RoleReport, RoleStatus
-from .supervisor import Counts, Event, GroupExited, GroupFailed, Logged, Note, Ready, RoleEnded, Scope
+from .runner import Scope
 from .watching import LivenessWatch
 
 if TYPE_CHECKING:

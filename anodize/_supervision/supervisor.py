@@ -2,7 +2,7 @@
 
 A *runner* (threads for ``inproc``, processes for ``process``) starts groups,
 carries the supervisor's word to them and turns what happens into
-:class:`Event` values; :class:`Supervisor` decides everything else, the same way
+:class:`~.events.Event` values; :class:`Supervisor` decides everything else, the same way
 for every transport:
 
 - a role that fails has every other group told at once (its peers get
@@ -27,26 +27,24 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Protocol
 
 from .._session.logs import LogEntry
 from ..errors import RoleError
+from .events import Counts, Event, GroupExited, GroupFailed, Logged, Note, Ready, RoleEnded
 from .group import FailurePolicy, Group
-from .hostview import HELLO_EVERY, LOST_AFTER, HostView
+from .hostview import HELLO_EVERY, HostView
 from .logsummary import LogSummary
 from .report import GroupReport, GroupState, GroupStatus, RoleReport, RoleStatus, RunReport
 from .roles import describe_error
+from .runner import Elsewhere, Runner
 from .words import Decision, HelloWord, RestartWord, StopWord, Word
 
-__all__ = ["Supervisor", "Runner", "RunState", "Event", "Ready", "Counts", "RoleEnded", "GroupFailed",
-           "GroupExited", "Note", "Logged", "window_rates", "Link", "Elsewhere", "Scope", "StopWord", "RestartWord",
-           "HelloWord", "Word", "LINGER"]
+__all__ = ["Supervisor", "RunState", "window_rates"]
 
 TICK = 0.1           # seconds between two looks at the clock when nothing happens
 STATUS_EVERY = 0.5   # seconds between two on_status calls
 RATE_WINDOW = 1.0    # seconds per window of the reported message rates
 KILL_BOUND = 5.0     # seconds an ended group has to be gone before the supervisor stops waiting for it
-LINGER = 15.0        # seconds a supervisor that stopped the run waits for a host cut off meanwhile to hear it
 
 
 class RunState(StrEnum):
@@ -58,121 +56,6 @@ class RunState(StrEnum):
     ENDED = "ended"
 
 
-# ---- what runners report ---------------------------------------------------------------------
-@dataclass(frozen=True, kw_only=True)
-class Ready:
-    """A group's incarnation is built and waits for "go"."""
-
-    group: str
-    incarnation: int
-    scheduling: str = ""
-    memory_note: str = ""
-    pid: int | None = None
-
-
-@dataclass(frozen=True, kw_only=True)
-class Counts:
-    """A group incarnation's counters so far (per channel ``"A->B"``), memory in bytes."""
-
-    group: str
-    incarnation: int
-    at: float  # time.monotonic() when the counts were taken
-    sent: dict[str, int] | None = None  # None: this event only measures memory
-    received: dict[str, int] | None = None
-    waiting: dict[str, int] | None = None  # per channel, the most messages waiting so far
-    memory: int | None = None
-    peak: int | None = None
-    checked: dict[str, int] | None = None  # per constrained interaction, its checks so far
-    closest: dict[str, float] | None = None  # and its closest margin to a time bound, in seconds
-    timeouts: dict[str, int] | None = None  # and the ``else timeout`` it took
-
-
-@dataclass(frozen=True, kw_only=True)
-class RoleEnded:
-    """A role ended (its report says how)."""
-
-    group: str
-    incarnation: int
-    report: RoleReport
-
-
-@dataclass(frozen=True, kw_only=True)
-class GroupFailed:
-    """The group failed as a whole (memory bound, crash, garbled report, death)."""
-
-    group: str
-    incarnation: int
-    error: BaseException
-
-
-@dataclass(frozen=True, kw_only=True)
-class GroupExited:
-    """The incarnation is over: its process exited, or every role thread ended (or was abandoned).
-
-    ``unreported`` says what happened to roles that never reported (e.g. "its thread did
-    not stop within the grace period and was abandoned").
-    """
-
-    group: str
-    incarnation: int
-    unreported: str = ""
-    details: dict[str, str] = field(default_factory=dict)  # per role, where it says more than ``unreported``
-
-
-@dataclass(frozen=True, kw_only=True)
-class Note:
-    """A fact for the group's report (e.g. the watchdog demoted it)."""
-
-    group: str
-    text: str
-
-
-@dataclass(frozen=True, kw_only=True)
-class Logged:
-    """Records the roles logged (every group's, in time order within a group), and those dropped
-    on the way, per severity (:mod:`anodize._session.logs`)."""
-
-    entries: tuple[LogEntry, ...]
-    dropped: dict[str, int] = field(default_factory=dict)
-
-
-Event = Ready | Counts | RoleEnded | GroupFailed | GroupExited | Note | Logged
-
-
-# ---- the supervisors on other hosts (Dds, anodize run --host): words in .words -------------
-class Link(Protocol):
-    """This host's line to the supervisors of the same run on other hosts."""
-
-    host: str
-    supervisor: str  # this supervisor's id, drawn at random (a second one claiming our groups has another)
-
-    def say(self, word: Word) -> None:
-        """Tell every other host."""
-
-    def words(self) -> list[Word]:
-        """What the others said since the last call."""
-
-
-@dataclass(frozen=True)
-class Elsewhere:
-    """The whole system, when some of its groups run on other hosts under their own supervisors.
-
-    Attributes:
-        link: to those supervisors.
-        groups: every group of the system (their policies decide restart sets).
-        channels: every channel of the system.
-        lost_after: seconds without a word from a supervisor before its host counts as lost.
-        linger: seconds a supervisor that stopped the run while a host was lost waits for it to
-            come back and hear so.
-    """
-
-    link: Link
-    groups: dict[str, Group]
-    channels: tuple[tuple[str, str], ...]
-    lost_after: float = LOST_AFTER
-    linger: float = LINGER
-
-
 @dataclass
 class _Remote:
     """What this host knows of a group that runs on another."""
@@ -180,60 +63,6 @@ class _Remote:
     group: Group
     incarnation: int = 0
     restarts: int = 0
-
-
-@dataclass(frozen=True)
-class Scope:
-    """The part of a system one runner runs: every group, but on DDS only this host's.
-
-    Attributes:
-        groups: the groups this runner starts, by name.
-        roles: their roles, in the global type's order.
-        channels: the channels between those roles.
-        elsewhere: the whole system, when some of its groups run on other hosts.
-    """
-
-    groups: dict[str, Group]
-    roles: tuple[str, ...]
-    channels: tuple[tuple[str, str], ...]
-    elsewhere: Elsewhere | None = None
-
-
-class Runner(Protocol):
-    """What a transport does for the supervisor (a transport value builds it from a run's plan)."""
-
-    transport: str
-    scope: Scope
-
-    def start(self, groups: Sequence[str], incarnation: int) -> None:
-        """Start ``groups`` together on fresh channels among them; roles of any other group
-        are gone to them. Each reports :class:`Ready`, then waits for :meth:`go`."""
-
-    def go(self, group: str) -> None:
-        """Let a ready group's roles run."""
-
-    def events(self, timeout: float) -> list[Event]:
-        """What happened, waiting up to ``timeout`` seconds for the first event."""
-
-    def tell_failed(self, group: str, role: str, cause: str) -> None:
-        """Tell ``group`` that ``role`` (of another group) failed."""
-
-    def stop(self, group: str) -> None:
-        """Ask ``group``'s roles to stop (they get ``RoleStopped``)."""
-
-    def kill(self, group: str) -> None:
-        """End ``group`` now; it still reports :class:`GroupExited`."""
-
-    def notes(self) -> list[str]:
-        """System-wide facts for the report."""
-
-    def bound(self, seconds: float) -> None:
-        """The run will end within ``seconds`` from now (its timeout and grace): a runner whose
-        roles share the supervisor's process arms a last resort for a role that never lets the
-        supervisor run again; others need nothing."""
-
-    def close(self) -> None:
-        """Release everything (processes, cgroups, rings); called once, at the end."""
 
 
 # ---- the core --------------------------------------------------------------------------------

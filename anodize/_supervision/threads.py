@@ -37,11 +37,12 @@ from .._session.logs import LogCapture
 from .._transport.inproc import InprocNetwork
 from .._transport.spin import describe_spin
 from ..taps import GroupTap
+from .events import Counts, Event, GroupExited, Logged, Note, Ready, RoleEnded
 from .group import Group, resolve_function
 from .plan import RunPlan
 from .report import RoleReport, RoleStatus, constraint_counts
 from .roles import describe_error, run_role
-from .supervisor import Counts, Event, GroupExited, Logged, Note, Ready, RoleEnded, Scope
+from .runner import Scope
 
 __all__ = ["ThreadRunner"]
 

@@ -2,7 +2,7 @@
 
 ``System(g, transport=Processes(liveness=5.0))``. Each value is frozen, checks its
 fields when it is made (a :class:`~anodize.ConfigurationError` naming what was
-expected and what it got), and builds its :class:`~.supervisor.Runner` from a
+expected and what it got), and builds its :class:`~.runner.Runner` from a
 run's :class:`~.plan.RunPlan`; the supervision core is the same for all of them.
 """
 
@@ -18,7 +18,7 @@ from typing import ClassVar
 from .._extras import import_extra
 from ..errors import ConfigurationError
 from .plan import RunPlan
-from .supervisor import Runner
+from .runner import Runner
 
 __all__ = ["Inproc", "Processes", "Dds", "Zenoh", "Transport", "KINDS"]
 

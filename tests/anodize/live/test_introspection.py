@@ -34,7 +34,7 @@ from anodize._live.introspection import Introspection
 from anodize._live.plan import live_plan
 from anodize._live.runs import RUN_DIR_ENV, running
 from anodize._live.tap import WANT_MESSAGES, WANT_TIMES, GroupLiveView, LiveTap
-from anodize._supervision.supervisor import Counts, Ready
+from anodize._supervision.events import Counts, Ready
 from anodize._tools.cli import main
 from anodize.errors import AnodizeError
 

@@ -9,9 +9,10 @@ from collections.abc import Sequence
 import pytest
 
 from anodize._supervision import supervisor
+from anodize._supervision.events import Event, Ready
 from anodize._supervision.group import Group
 from anodize._supervision.report import RoleStatus
-from anodize._supervision.supervisor import Event, Ready, Supervisor
+from anodize._supervision.supervisor import Supervisor
 
 LOOKS = 2000  # at 10 ms a look: the bound of this test's own wait
 

@@ -11,22 +11,13 @@ from collections.abc import Sequence
 from hypothesis import given
 from hypothesis import strategies as st
 
+from anodize._supervision.events import Event, GroupExited, Ready, RoleEnded
 from anodize._supervision.group import FailurePolicy, Group
 from anodize._supervision.hostview import HELLO_EVERY, HostView
 from anodize._supervision.report import GroupState, RoleReport, RoleStatus
-from anodize._supervision.supervisor import (
-    Elsewhere,
-    Event,
-    GroupExited,
-    HelloWord,
-    Ready,
-    RestartWord,
-    RoleEnded,
-    StopWord,
-    Supervisor,
-    Word,
-)
-from anodize._supervision.words import Decision
+from anodize._supervision.runner import Elsewhere
+from anodize._supervision.supervisor import Supervisor
+from anodize._supervision.words import Decision, HelloWord, RestartWord, StopWord, Word
 from anodize.errors import PeerFailedError, RoleError
 
 HERE = "B"
