@@ -46,6 +46,7 @@ from ._transport.codec import DecodeError, EncodeError
 from ._transport.links import PayloadError, SplitBrainError, StartBarrierError
 from ._transport.qos_profiles import QosError
 from ._transport.shm import RingAllocationError, RingFullError, StaleBufferError
+from ._transport.zenoh.settings import ZenohTls
 from .errors import (
     Action,
     AnodizeError,
@@ -69,7 +70,7 @@ __all__ = [
     "LinearityError", "RoleStopped", "Action", "State", "GroupStatus",
     # Time constraints: a missed deadline or period, and the label of an `else timeout`.
     "DeadlineMissedError", "TIMEOUT",
-    "Inproc", "Processes", "Dds", "Zenoh", "RosBridge", "ChannelTap", "Transport",
+    "Inproc", "Processes", "Dds", "Zenoh", "ZenohTls", "RosBridge", "ChannelTap", "Transport",
     # The taps a program can hand to System.run itself: a recording, the live view in Foxglove.
     "Recording", "open_live_view", "LiveView",
     "EndpointStatistics",

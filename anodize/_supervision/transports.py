@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from .._extras import import_extra
+from .._transport.zenoh.settings import ZenohTls
 from ..errors import ConfigurationError
 from .plan import RunPlan
 from .runner import Runner
@@ -193,6 +194,8 @@ class Zenoh:
             the endpoints are given, so that runs cannot meet by accident).
         hosts: per host, ``{"mode": ..., "connect": [...], "listen": [...]}`` for the groups of that
             host (a run may place groups behind different routers).
+        tls: TLS on every link (:class:`ZenohTls`); every endpoint must then be ``tls/...``, and a
+            peer must name its listen endpoints (Zenoh's default would listen on plain TCP).
     """
 
     mode: str = "peer"
@@ -206,6 +209,7 @@ class Zenoh:
     outage: float = 0.0
     scouting: bool = True
     hosts: tuple[tuple[str, str, tuple[str, ...], tuple[str, ...]], ...] = ()
+    tls: ZenohTls | None = None
     kind: ClassVar[str] = "zenoh"
 
     def __post_init__(self) -> None:
@@ -236,6 +240,27 @@ class Zenoh:
                 raise ConfigurationError(f"Zenoh hosts {host}: mode: expected \"peer\" or \"client\", got {mode!r}")
             _endpoints(f"Zenoh hosts {host}", "connect", connect)
             _endpoints(f"Zenoh hosts {host}", "listen", listen)
+        if self.tls is not None:
+            self._check_tls(self.tls)
+
+    def _check_tls(self, tls: object) -> None:
+        """With TLS, nothing of the run may travel in the clear: every endpoint is ``tls/``, and
+        every peer listens only where it is told."""
+        if not isinstance(tls, ZenohTls):
+            raise ConfigurationError(f"Zenoh tls: expected anodize.ZenohTls(...), got {tls!r}")
+        places = [("", self.mode, self.connect, self.listen)] + [
+            (f" hosts {host}", mode, connect, listen) for host, mode, connect, listen in self.hosts]
+        for where, mode, connect, listen in places:
+            clear = [e for e in (*connect, *listen) if not e.startswith("tls/")]
+            if clear:
+                raise ConfigurationError(f"Zenoh{where}: with tls, every endpoint must be tls/ADDRESS:PORT, got "
+                                         f"{clear[0]!r} (it would not be encrypted)")
+            if mode == "peer" and not listen:
+                raise ConfigurationError(f"Zenoh{where} mode \"peer\" with tls: expected listen endpoints such as "
+                                         "\"tls/0.0.0.0:7448\" (without them Zenoh listens on plain TCP)")
+            if mode == "peer" and not tls.certificate:
+                raise ConfigurationError(f"Zenoh{where} mode \"peer\" with tls: a peer listens, so it needs "
+                                         "certificate and private_key")
 
     def runner(self, plan: RunPlan) -> Runner:
         """This host's groups as processes, joined to the rest of the run by Zenoh.
@@ -247,6 +272,10 @@ class Zenoh:
         from .._transport.zenoh import ZenohSettings
         from .zenohrunner import ZenohRunner
 
+        problem = self.tls.missing() if self.tls is not None else None
+        if problem is not None:
+            raise ConfigurationError(problem)
+
         here, host_of, elsewhere = _placement(plan, self.host)
         ros = None
         if plan.ros is not None and (plan.ros.topics or plan.ros.external):
@@ -254,7 +283,7 @@ class Zenoh:
         settings = ZenohSettings(mode=self.mode, run_id=_run_id(plan, self.run_id), host=here,
                                  group_of=dict(plan.group_of), host_of=host_of, connect=self.connect,
                                  listen=self.listen, lease=self.lease, outage=self.outage, wait=self.wait,
-                                 scouting=self.scouting, ros=ros)
+                                 scouting=self.scouting, ros=ros, tls=self.tls)
         hosts = {host: (mode, connect, listen) for host, mode, connect, listen in self.hosts}
         return ZenohRunner(plan, settings, elsewhere, hosts, self.liveness)
 

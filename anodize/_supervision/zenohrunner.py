@@ -95,6 +95,10 @@ class ZenohRunner(NetworkRunner):
                      f"{', '.join(s.listen) or 'default'}; scouting {'on' if s.scouting else 'off'}), run "
                      f"{s.run_id}, host {s.host}; lease {s.lease:g} s, outage ridden through up to "
                      f"{s.outage:g} s more; start barrier waits {s.wait:g} s")
+        if s.tls is not None:
+            notes.append(f"Zenoh TLS on every link: root CA {s.tls.root_ca or 'none (this host only listens)'}, "
+                         f"certificate {s.tls.certificate or 'none (this host only connects)'}, mutual "
+                         f"{'yes' if s.tls.mutual else 'no'}")
         if self.meeting:
             notes.append(f"Zenoh peers of this host meet on {self.meeting}, where its supervisor listens")
         for host, (mode, connect, listen) in sorted(self.hosts.items()):

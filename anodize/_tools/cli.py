@@ -230,6 +230,14 @@ def _parser() -> argparse.ArgumentParser:
                         help="listen on ENDPOINT, e.g. tcp/10.0.0.1:7447 (repeatable; default tcp/[::]:7447)")
     router.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                         help="connect to the router at ENDPOINT too, retrying until it answers (repeatable)")
+    router.add_argument("--tls-certificate", metavar="PEM",
+                        help="TLS: the router's certificate, naming the address hosts reach it at (for tls/ endpoints)")
+    router.add_argument("--tls-private-key", metavar="PEM", help="TLS: the key of --tls-certificate")
+    router.add_argument("--tls-root-ca", metavar="PEM",
+                        help="TLS: the authority that signs the certificates of the routers it connects to (and, "
+                             "with --tls-mutual, of whoever connects)")
+    router.add_argument("--tls-mutual", action="store_true",
+                        help="TLS: whoever connects must show a certificate --tls-root-ca signed (mutual TLS)")
     router.set_defaults(run=_router)
     add_introspection_commands(commands, run=_introspect)
     return parser
@@ -639,6 +647,8 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _router(args: argparse.Namespace) -> int:
+    from .._transport.zenoh.settings import ZenohTls
+    from ..errors import ConfigurationError
     from .router import DEFAULT_LISTEN, check_endpoint, open_router
 
     for option, endpoints in (("--listen", args.listen or ()), ("--connect", args.connect)):
@@ -646,7 +656,17 @@ def _router(args: argparse.Namespace) -> int:
             problem = check_endpoint(endpoint)
             if problem is not None:
                 raise UsageError(f"{option} {endpoint}: {problem}")
-    router = open_router(args.listen or DEFAULT_LISTEN, args.connect)
+    tls = None
+    if args.tls_certificate or args.tls_private_key or args.tls_root_ca or args.tls_mutual:
+        try:
+            tls = ZenohTls(root_ca=args.tls_root_ca or "", certificate=args.tls_certificate or "",
+                           private_key=args.tls_private_key or "", mutual=args.tls_mutual)
+        except ConfigurationError as error:
+            raise UsageError(f"the --tls-* options: {error}") from None
+    try:
+        router = open_router(args.listen or DEFAULT_LISTEN, args.connect, tls)
+    except ConfigurationError as error:  # the options do not go together, or a file is not there
+        raise UsageError(str(error)) from None
     try:
         print(f"router {router.zid}: listening on {', '.join(router.locators)}", flush=True)
         if args.connect:

@@ -291,7 +291,7 @@ class _Reader:
         monitors = data.get("monitors", True)
         if not isinstance(monitors, bool):
             raise self.error("monitors", f"expected true or false, got {_show(monitors)}")
-        zenoh = read_zenoh_table(data.get("zenoh"), self.error)
+        zenoh = read_zenoh_table(data.get("zenoh"), self.error, self.directory)
         return SystemConfig(
             path=Path(self.shown), protocol=Path(os.path.normpath(self.directory / protocol)),
             global_name=global_name, transport=self.transport(data, zenoh), zenoh=zenoh,
@@ -358,8 +358,9 @@ class _Reader:
                                                   "got none")
             try:
                 return Zenoh(**checked, **zenoh)
-            except ConfigurationError as error:
-                raise self.error(prefix or "transport", str(error)) from None
+            except ConfigurationError as error:  # one about TLS points at [zenoh.tls]
+                key = "zenoh.tls" if "with tls" in str(error) else prefix or "transport"
+                raise self.error(key, str(error)) from None
         if kind != "dds":
             return KINDS[kind](**{k: v for k, v in checked.items() if k not in _OLD_DDS_KEYS})
         try:

@@ -28,6 +28,7 @@ from types import ModuleType
 from typing import Any
 
 from .._extras import import_extra
+from .._transport.zenoh.settings import ZenohTls, tls_config
 from ..errors import AnodizeError, ConfigurationError
 
 __all__ = ["DEFAULT_LISTEN", "ROUTER_PORT", "Router", "check_endpoint", "open_router"]
@@ -133,9 +134,11 @@ class Router:
         self._session.close()
 
 
-def open_router(listen: Sequence[str] = DEFAULT_LISTEN, connect: Sequence[str] = ()) -> Router:
+def open_router(listen: Sequence[str] = DEFAULT_LISTEN, connect: Sequence[str] = (),
+                tls: ZenohTls | None = None) -> Router:
     """Open a Zenoh router listening on ``listen`` and connecting to the routers at ``connect``
-    (each retried until it answers, as Zenoh's routers do).
+    (each retried until it answers, as Zenoh's routers do), with TLS on its ``tls/`` endpoints
+    when ``tls`` is given.
 
     Raises:
         MissingExtraError: the ``zenoh`` extra is not installed.
@@ -148,12 +151,24 @@ def open_router(listen: Sequence[str] = DEFAULT_LISTEN, connect: Sequence[str] =
             problem = check_endpoint(endpoint)
             if problem is not None:
                 raise ConfigurationError(f"{option} {endpoint}: {problem}")
+    secure = [e for e in (*listen, *connect) if e.startswith("tls/")]
+    if secure and tls is None:
+        raise ConfigurationError(f"{secure[0]}: a tls/ endpoint needs the router's TLS files (--tls-certificate and "
+                                 "--tls-private-key to listen, --tls-root-ca to connect)")
+    if tls is not None:
+        problem = tls.missing()
+        if problem is not None:
+            raise ConfigurationError(problem)
     zenoh = import_extra("zenoh", "zenoh", FEATURE)
+    settings: list[tuple[str, object]] = [
+        ("mode", "router"), ("listen/endpoints", list(listen)), ("connect/endpoints", list(connect)),
+        ("scouting/multicast/enabled", False),
+        ("adminspace", {"enabled": True, "permissions": {"read": True, "write": False}})]
+    if tls is not None:
+        settings.append(("transport/link/tls", tls_config(tls)))
     try:  # Zenoh reads the endpoints' ?metadata and #configuration, at either step
         config = zenoh.Config()
-        for key, value in (("mode", "router"), ("listen/endpoints", list(listen)),
-                           ("connect/endpoints", list(connect)), ("scouting/multicast/enabled", False),
-                           ("adminspace", {"enabled": True, "permissions": {"read": True, "write": False}})):
+        for key, value in settings:
             config.insert_json5(key, json.dumps(value))
         session = zenoh.open(config)
     except zenoh.ZError as error:

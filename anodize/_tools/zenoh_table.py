@@ -15,31 +15,45 @@
     [zenoh.hosts.robot]                      # the groups of host "robot" (group(..., host="robot"))
     connect = ["tcp/192.168.1.1:7447"]       # behind another router; unset keys are [zenoh]'s
 
+    [zenoh.tls]                              # TLS on every link (every endpoint is then tls/...)
+    root_ca = "certs/ca.pem"                 # paths relative to the system file, each host its own files
+    certificate = "certs/host.pem"           # with private_key: to listen, and (mutual) to connect
+    private_key = "certs/host.key"
+    mutual = false                           # true: whoever connects shows a certificate root_ca signed
+
 The table is read even when ``[transport]`` names another kind, so that
 ``anodize run FILE --transport zenoh`` finds it.
 """
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
+from .._transport.zenoh.settings import ZenohTls
+from ..errors import ConfigurationError
 from .config_error import ConfigError
 
 __all__ = ["ZENOH_KEYS", "read_zenoh_table"]
 
-ZENOH_KEYS = ("mode", "connect", "listen", "scouting", "hosts")  # the fields of Zenoh that [zenoh] gives
+ZENOH_KEYS = ("mode", "connect", "listen", "scouting", "hosts", "tls")  # the fields of Zenoh that [zenoh] gives
 _HOST_KEYS = ("mode", "connect", "listen")
+_TLS_KEYS = ("root_ca", "certificate", "private_key", "mutual")
 _ENDPOINT = re.compile(r"[a-z0-9]+/[^\s#?]+(#\S*)?")
 
 
-def read_zenoh_table(table: Any, error: Callable[[str, str], ConfigError]) -> dict[str, Any]:
-    """The :class:`~anodize.Zenoh` fields ``[zenoh]`` gives (empty without the table).
+def read_zenoh_table(table: Any, error: Callable[[str, str], ConfigError],
+                     directory: Path = Path(".")) -> dict[str, Any]:
+    """The :class:`~anodize.Zenoh` fields ``[zenoh]`` gives (empty without the table); the paths of
+    ``[zenoh.tls]`` are taken relative to ``directory`` (the system file's).
 
     Raises:
         ConfigError: (made by ``error(key, problem)``) an unknown key, a mode other than peer or
-            client, endpoints that are not an array of ``"proto/address"`` strings.
+            client, endpoints that are not an array of ``"proto/address"`` strings, a ``[zenoh.tls]``
+            that is not one.
     """
     if table is None:
         return {}
@@ -77,7 +91,27 @@ def read_zenoh_table(table: Any, error: Callable[[str, str], ConfigError]) -> di
         entries.append((host, mode, connect, listen))
     if entries:
         found["hosts"] = tuple(entries)
+    if "tls" in table:
+        found["tls"] = _tls(table["tls"], error, directory)
     return found
+
+
+def _tls(table: Any, error: Callable[[str, str], ConfigError], directory: Path) -> ZenohTls:
+    if not isinstance(table, dict):
+        raise error("zenoh.tls", f"expected a table [zenoh.tls] such as {{ root_ca = \"certs/ca.pem\" }}, "
+                                 f"got {table!r}")
+    _known(table, _TLS_KEYS, "zenoh.tls", error)
+    paths = {}
+    for key in ("root_ca", "certificate", "private_key"):
+        if key in table:
+            if not isinstance(table[key], str) or not table[key]:
+                raise error(f"zenoh.tls.{key}", f"expected the path of a PEM file, got {table[key]!r}")
+            paths[key] = os.path.normpath(directory / table[key])
+    try:
+        return ZenohTls(**paths, mutual=table.get("mutual", False))
+    except ConfigurationError as problem:
+        key = next((f"zenoh.tls.{k}" for k in _TLS_KEYS if f"tls {k}:" in str(problem)), "zenoh.tls")
+        raise error(key, str(problem).split(": ", 1)[1]) from None
 
 
 def _known(table: dict[str, Any], allowed: tuple[str, ...], prefix: str,

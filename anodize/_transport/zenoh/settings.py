@@ -16,11 +16,71 @@ from ...errors import ConfigurationError
 from ..links import SplitBrainError, StartBarrierError
 from ..ros_lanes import RosSettings
 
-__all__ = ["ZenohSettings", "TOKEN_ENV", "StartBarrierError", "SplitBrainError", "MODES", "session_config", "key_chunk",
-           "run_token", "supervisor_settings", "loopback_endpoint"]
+__all__ = ["ZenohSettings", "ZenohTls", "TOKEN_ENV", "StartBarrierError", "SplitBrainError", "MODES",
+           "session_config", "tls_config", "key_chunk", "run_token", "supervisor_settings", "loopback_endpoint"]
 
 TOKEN_ENV = "ANODIZE_ZENOH_TOKEN"  # a run's secret token, the same on every host of the run
 MODES = ("peer", "client")
+
+
+@dataclass(frozen=True)
+class ZenohTls:
+    """TLS on a Zenoh run's links: what crosses a site network or a cellular link is encrypted,
+    and a host talks only to routers and peers whose certificate a known authority signed. Every
+    endpoint is then ``tls/ADDRESS:PORT``. Each host reads its own files (PEM) at these paths.
+
+    Args:
+        root_ca: the certificate of the authority that signs the certificates of the routers and
+            peers this host connects to (and, with ``mutual``, of those that connect to it).
+        certificate: this host's certificate; with ``private_key``, needed to listen on a
+            ``tls/`` endpoint (a peer, a router) and, with ``mutual``, to connect. It must name
+            the address others reach it at (``tls/robot.site:7447``: robot.site; an IP address
+            as an IP entry), as Zenoh checks the name on connecting.
+        private_key: the key of ``certificate``.
+        mutual: the listening side asks whoever connects for a certificate ``root_ca`` signed,
+            so that only holders of one can join the run's network (mutual TLS).
+
+    Raises:
+        ConfigurationError: a path that is not a non-empty string, a certificate without its key
+            (or the other way round), or ``mutual`` without all three files.
+    """
+
+    root_ca: str = ""
+    certificate: str = ""
+    private_key: str = ""
+    mutual: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("root_ca", "certificate", "private_key"):
+            value = getattr(self, name)
+            if not isinstance(value, str) or "\0" in value:
+                raise ConfigurationError(f"Zenoh tls {name}: expected the path of a PEM file, got {value!r}")
+        if not isinstance(self.mutual, bool):
+            raise ConfigurationError(f"Zenoh tls mutual: expected true or false, got {self.mutual!r}")
+        if bool(self.certificate) != bool(self.private_key):
+            given, missing = ("certificate", "private_key") if self.certificate else ("private_key", "certificate")
+            raise ConfigurationError(f"Zenoh tls: {given} is given but not {missing}: a certificate goes with its key")
+        if self.mutual and not (self.root_ca and self.certificate):
+            raise ConfigurationError("Zenoh tls mutual: expected root_ca, certificate and private_key (each side "
+                                     "shows its certificate and checks the other's against root_ca)")
+        if not (self.root_ca or self.certificate):
+            raise ConfigurationError("Zenoh tls: expected root_ca (to connect), or certificate and private_key "
+                                     "(to listen), or all three")
+
+    def files(self) -> dict[str, str]:
+        """The files given, by the name of their setting."""
+        return {name: path for name, path in (("root_ca", self.root_ca), ("certificate", self.certificate),
+                                              ("private_key", self.private_key)) if path}
+
+    def missing(self) -> str | None:
+        """What is wrong with the files on this host (one not there, or not readable), or None."""
+        for name, path in self.files().items():
+            try:
+                with open(path, "rb") as file:
+                    file.read(1)
+            except OSError as error:
+                return f"Zenoh tls {name}: cannot read {path}: {error.strerror or error}"
+        return None
 
 
 @dataclass(frozen=True)
@@ -44,6 +104,7 @@ class ZenohSettings:
         scouting: whether a peer looks for the others by multicast scouting on its LAN (off
             where the endpoints are given, as in tests, so that runs do not meet by accident).
         token: a secret of this run (see :attr:`prefix`).
+        tls: TLS on the links (every endpoint is then ``tls/...``), or None.
         ros: the run's ROS topics (``[ros.topics]``), published as rmw_zenoh does (:mod:`.ros_topics`).
     """
 
@@ -60,6 +121,7 @@ class ZenohSettings:
     scouting: bool = True
     token: str = field(default="", repr=False)
     ros: RosSettings | None = None
+    tls: ZenohTls | None = None
     LINKS: ClassVar[str] = "anodize._transport.zenoh.links:ZenohLinks"  # its links (the group spec's seam)
 
     @property
@@ -123,21 +185,39 @@ def session_config(settings: ZenohSettings) -> dict[str, Any]:
     lease), so a peer that dies is dropped, and its liveliness tokens vanish, within about
     one lease. Connections are retried (every 0.2 s at first, at most every second), so a
     client finds its router again after the router restarts; a client waits up to ``wait``
-    for its router at the start.
+    for its router at the start. With TLS, :func:`tls_config`.
     """
     retry = {"period_init_ms": 200, "period_max_ms": 1000, "period_increase_factor": 2.0}
     client = settings.mode == "client"
+    link: dict[str, Any] = {"tx": {"lease": max(100, int(settings.lease * 1000)), "keep_alive": 4}}
+    if settings.tls is not None:
+        link["tls"] = tls_config(settings.tls)
     return {
         "mode": settings.mode,
         "connect": {"endpoints": list(settings.connect), "retry": retry,
                     "timeout_ms": int(settings.wait * 1000) if client else -1,
                     "exit_on_failure": client},
-        # No listen endpoints given: Zenoh's default (a peer listens on a free TCP port, a client on none).
-        **({"listen": {"endpoints": list(settings.listen)}} if settings.listen else {}),
+        # No listen endpoints given: Zenoh's default (a peer listens on a free TCP port, a client on none);
+        # but with TLS, nothing listens in the clear (a supervisor's peer session listens nowhere).
+        **({"listen": {"endpoints": list(settings.listen)}} if settings.listen or settings.tls else {}),
         "scouting": {"multicast": {"enabled": settings.scouting and not client},
                      "gossip": {"enabled": True}},
-        "transport": {"link": {"tx": {"lease": max(100, int(settings.lease * 1000)), "keep_alive": 4}}},
+        "transport": {"link": link},
     }
+
+
+def tls_config(tls: ZenohTls) -> dict[str, Any]:
+    """Zenoh's ``transport/link/tls`` for ``tls``: the one certificate and key serve both for
+    listening and, with mutual TLS, for connecting; Zenoh checks the name the certificate of
+    whatever it connects to gives against the endpoint's address (its default, kept)."""
+    config: dict[str, Any] = {"enable_mtls": tls.mutual}
+    if tls.root_ca:
+        config["root_ca_certificate"] = tls.root_ca
+    if tls.certificate:
+        config |= {"listen_certificate": tls.certificate, "listen_private_key": tls.private_key}
+        if tls.mutual:
+            config |= {"connect_certificate": tls.certificate, "connect_private_key": tls.private_key}
+    return config
 
 
 _TOKEN = re.compile(r"[A-Za-z0-9_.-]{8,128}")
