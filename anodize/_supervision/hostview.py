@@ -13,9 +13,11 @@ supervisor knows:
   ``lost_after`` seconds, so that the returning host hears (in our hellos) that we moved on.
 - **who was cut off from us lately.** A gap in a supervisor's hello numbers means hellos were
   lost on the way: the carrier lost its session (a cut), whether or not the silence lasted
-  ``lost_after`` here. Time alone cannot tell that: a supervisor held up on a busy machine
-  takes a second's hellos at once but missed none, and a link that comes back may first
-  deliver a hello said before the cut (Zenoh does), then the ones said after it.
+  ``lost_after`` here. Time alone cannot tell that: a supervisor whose loop is held up on a
+  busy machine takes a second's hellos at once but missed none, and a link that comes back
+  may first deliver a hello said before the cut (Zenoh does), then the ones said after it.
+  A hello numbered no higher than the last one taken is stale (a repeat or a replay) and is
+  not taken at all.
 """
 
 from __future__ import annotations
@@ -62,6 +64,8 @@ class HostView:
         if peer is None:
             self.peers[hello.supervisor] = _Peer(hello, now)
             return None
+        if self.stale(hello):
+            return None
         if hello.number > peer.hello.number + 1:
             peer.missed_at = now
         peer.hello, peer.heard_at = hello, now
@@ -72,6 +76,12 @@ class HostView:
         peer.lost_at = None
         self.back[hello.host] = now
         return line
+
+    def stale(self, hello: HelloWord) -> bool:
+        """Whether ``hello`` is older than one already heard from its supervisor (a repeat or a
+        replay: the carriers deliver in order): it tells nothing new, and is not taken."""
+        peer = self.peers.get(hello.supervisor)
+        return peer is not None and hello.number <= peer.hello.number
 
     def missed_lately(self, supervisor: str, now: float) -> bool:
         """Whether hellos of ``supervisor`` were lost on the way (a cut) within ``lost_after`` seconds."""

@@ -535,6 +535,8 @@ class Supervisor:
         restarts and a stop it missed while it was cut off, or that it moved on without us."""
         assert self.elsewhere is not None and self.view is not None
         now = time.monotonic()
+        if self.view.stale(hello):  # a repeat or a replay of one heard already
+            return
         first = hello.supervisor not in self.view.peers  # never heard before: it could not be lost here
         back = self.view.hear(hello, now)
         if back is not None:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from .._extras import import_extra
-from .._transport.zenoh.settings import ZenohTls
+from .._transport.zenoh.settings import SECURE_PROTOCOLS, ZenohTls
 from ..errors import ConfigurationError
 from .plan import RunPlan
 from .runner import Runner
@@ -194,8 +194,8 @@ class Zenoh:
             the endpoints are given, so that runs cannot meet by accident).
         hosts: per host, ``{"mode": ..., "connect": [...], "listen": [...]}`` for the groups of that
             host (a run may place groups behind different routers).
-        tls: TLS on every link (:class:`ZenohTls`); every endpoint must then be ``tls/...``, and a
-            peer must name its listen endpoints (Zenoh's default would listen on plain TCP).
+        tls: TLS on every link (:class:`ZenohTls`); every endpoint must then be ``tls/...``, and
+            a session listens only on the endpoints given (none: nowhere).
     """
 
     mode: str = "peer"
@@ -244,23 +244,24 @@ class Zenoh:
             self._check_tls(self.tls)
 
     def _check_tls(self, tls: object) -> None:
-        """With TLS, nothing of the run may travel in the clear: every endpoint is ``tls/``, and
-        every peer listens only where it is told."""
+        """With TLS, nothing of the run travels in the clear: every endpoint is ``tls/`` (or
+        ``quic/``, which is TLS too); a host that listens has a certificate, and a peer (which
+        also connects to the peers it hears of) the authority to check theirs."""
         if not isinstance(tls, ZenohTls):
             raise ConfigurationError(f"Zenoh tls: expected anodize.ZenohTls(...), got {tls!r}")
         places = [("", self.mode, self.connect, self.listen)] + [
             (f" hosts {host}", mode, connect, listen) for host, mode, connect, listen in self.hosts]
         for where, mode, connect, listen in places:
-            clear = [e for e in (*connect, *listen) if not e.startswith("tls/")]
+            clear = [e for e in (*connect, *listen) if not e.startswith(SECURE_PROTOCOLS)]
             if clear:
-                raise ConfigurationError(f"Zenoh{where}: with tls, every endpoint must be tls/ADDRESS:PORT, got "
-                                         f"{clear[0]!r} (it would not be encrypted)")
-            if mode == "peer" and not listen:
-                raise ConfigurationError(f"Zenoh{where} mode \"peer\" with tls: expected listen endpoints such as "
-                                         "\"tls/0.0.0.0:7448\" (without them Zenoh listens on plain TCP)")
-            if mode == "peer" and not tls.certificate:
-                raise ConfigurationError(f"Zenoh{where} mode \"peer\" with tls: a peer listens, so it needs "
-                                         "certificate and private_key")
+                raise ConfigurationError(f"Zenoh{where}: with tls, every endpoint must be tls/ADDRESS:PORT (or "
+                                         f"quic/), got {clear[0]!r} (it would not be encrypted)")
+            if listen and not tls.certificate:
+                raise ConfigurationError(f"Zenoh{where} tls: it listens ({listen[0]}), so it needs certificate "
+                                         "and private_key")
+            if mode == "peer" and not tls.root_ca:
+                raise ConfigurationError(f"Zenoh{where} tls: a peer connects to the peers it hears of, so it "
+                                         "needs root_ca, the authority that signs their certificates")
 
     def runner(self, plan: RunPlan) -> Runner:
         """This host's groups as processes, joined to the rest of the run by Zenoh.

@@ -16,7 +16,7 @@ from dataclasses import replace
 
 from .._transport.zenoh import ZenohSettings, session_config
 from .._transport.zenoh.binding import Session, ZError, close, open_session, reason
-from .._transport.zenoh.settings import loopback_endpoint, run_token, supervisor_settings
+from .._transport.zenoh.settings import loopback_endpoint, run_token, supervisor_settings, tls_hint
 from ..errors import AnodizeError
 from .hostview import LOST_AFTER
 from .netrunner import NetworkRunner
@@ -73,7 +73,8 @@ class ZenohRunner(NetworkRunner):
         except ZError as error:
             raise AnodizeError(f"the supervisor of host {settings.host} cannot open a Zenoh session in "
                                f"{settings.mode} mode (connect {', '.join(settings.connect) or 'none'}; listen "
-                               f"{', '.join(settings.listen) or 'none'}): {reason(error)}") from None
+                               f"{', '.join(settings.listen) or 'none'}): {reason(error)}{tls_hint(settings)}"
+                               ) from None
 
     def _for_host(self, host: str) -> ZenohSettings:
         settings = replace(self.settings, host=host)
@@ -96,9 +97,8 @@ class ZenohRunner(NetworkRunner):
                      f"{s.run_id}, host {s.host}; lease {s.lease:g} s, outage ridden through up to "
                      f"{s.outage:g} s more; start barrier waits {s.wait:g} s")
         if s.tls is not None:
-            notes.append(f"Zenoh TLS on every link: root CA {s.tls.root_ca or 'none (this host only listens)'}, "
-                         f"certificate {s.tls.certificate or 'none (this host only connects)'}, mutual "
-                         f"{'yes' if s.tls.mutual else 'no'}")
+            notes.append(f"Zenoh TLS on every link: root CA {s.tls.root_ca or 'none given'}, certificate "
+                         f"{s.tls.certificate or 'none given'}, mutual {'yes' if s.tls.mutual else 'no'}")
         if self.meeting:
             notes.append(f"Zenoh peers of this host meet on {self.meeting}, where its supervisor listens")
         for host, (mode, connect, listen) in sorted(self.hosts.items()):

@@ -231,7 +231,8 @@ def _parser() -> argparse.ArgumentParser:
     router.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                         help="connect to the router at ENDPOINT too, retrying until it answers (repeatable)")
     router.add_argument("--tls-certificate", metavar="PEM",
-                        help="TLS: the router's certificate, naming the address hosts reach it at (for tls/ endpoints)")
+                        help="TLS: the router's certificate, naming the address hosts reach it at; with any "
+                             "--tls-* option every endpoint is tls/ (default listen tls/[::]:7447)")
     router.add_argument("--tls-private-key", metavar="PEM", help="TLS: the key of --tls-certificate")
     router.add_argument("--tls-root-ca", metavar="PEM",
                         help="TLS: the authority that signs the certificates of the routers it connects to (and, "

@@ -358,8 +358,9 @@ class _Reader:
                                                   "got none")
             try:
                 return Zenoh(**checked, **zenoh)
-            except ConfigurationError as error:  # one about TLS points at [zenoh.tls]
-                key = "zenoh.tls" if "with tls" in str(error) else prefix or "transport"
+            except ConfigurationError as error:  # one about TLS points at [zenoh.tls] or [zenoh]
+                key = ("zenoh.tls" if " tls: " in str(error) else "zenoh" if "with tls" in str(error)
+                       else prefix or "transport")
                 raise self.error(key, str(error)) from None
         if kind != "dds":
             return KINDS[kind](**{k: v for k, v in checked.items() if k not in _OLD_DDS_KEYS})

@@ -28,13 +28,14 @@ from types import ModuleType
 from typing import Any
 
 from .._extras import import_extra
-from .._transport.zenoh.settings import ZenohTls, tls_config
+from .._transport.zenoh.settings import SECURE_PROTOCOLS, ZenohTls, tls_config
 from ..errors import AnodizeError, ConfigurationError
 
-__all__ = ["DEFAULT_LISTEN", "ROUTER_PORT", "Router", "check_endpoint", "open_router"]
+__all__ = ["DEFAULT_LISTEN", "TLS_LISTEN", "ROUTER_PORT", "Router", "check_endpoint", "open_router", "tls_endpoints"]
 
 ROUTER_PORT = 7447  # Zenoh's port for routers (zenohd's default)
 DEFAULT_LISTEN = (f"tcp/[::]:{ROUTER_PORT}",)
+TLS_LISTEN = f"tls/[::]:{ROUTER_PORT}"  # the default with TLS
 FEATURE = "anodize router (a Zenoh router)"
 _IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")  # PROTOCOL/ADDRESS:PORT
 _OTHER_PROTOCOLS = ("unixsock-stream", "unixpipe", "serial", "vsock")  # PROTOCOL/something of their own
@@ -134,11 +135,39 @@ class Router:
         self._session.close()
 
 
+def tls_endpoints(listen: Sequence[str], connect: Sequence[str], tls: ZenohTls | None) -> list[str]:
+    """Where a router with ``tls`` (or without) listens: ``listen``, but with TLS the default
+    becomes :data:`TLS_LISTEN`.
+
+    Raises:
+        ConfigurationError: a ``tls/`` endpoint without TLS, an endpoint in the clear with it (whoever
+            has no certificate could join there), or a side of TLS without its files.
+    """
+    secure = [e for e in (*listen, *connect) if e.startswith(SECURE_PROTOCOLS)]
+    if tls is None:
+        if secure:
+            raise ConfigurationError(f"{secure[0]}: a tls/ endpoint needs the router's TLS files (--tls-certificate "
+                                     "and --tls-private-key to listen, --tls-root-ca to connect)")
+        return list(listen)
+    listen = [TLS_LISTEN] if list(listen) == list(DEFAULT_LISTEN) else list(listen)
+    clear = [e for e in (*listen, *connect) if not e.startswith(SECURE_PROTOCOLS)]
+    if clear:
+        raise ConfigurationError(f"{clear[0]}: with TLS, every endpoint of the router is tls/ (else whoever has no "
+                                 "certificate could join in the clear)")
+    if listen and not tls.certificate:
+        raise ConfigurationError("to listen on a tls/ endpoint, the router needs --tls-certificate and "
+                                 "--tls-private-key")
+    if connect and not tls.root_ca:
+        raise ConfigurationError("to connect to a tls/ endpoint, the router needs --tls-root-ca (the authority that "
+                                 "signs the other router's certificate)")
+    return listen
+
+
 def open_router(listen: Sequence[str] = DEFAULT_LISTEN, connect: Sequence[str] = (),
                 tls: ZenohTls | None = None) -> Router:
     """Open a Zenoh router listening on ``listen`` and connecting to the routers at ``connect``
-    (each retried until it answers, as Zenoh's routers do), with TLS on its ``tls/`` endpoints
-    when ``tls`` is given.
+    (each retried until it answers, as Zenoh's routers do). With ``tls``, every endpoint is
+    ``tls/`` (the default listen endpoint becomes :data:`TLS_LISTEN`).
 
     Raises:
         MissingExtraError: the ``zenoh`` extra is not installed.
@@ -151,14 +180,10 @@ def open_router(listen: Sequence[str] = DEFAULT_LISTEN, connect: Sequence[str] =
             problem = check_endpoint(endpoint)
             if problem is not None:
                 raise ConfigurationError(f"{option} {endpoint}: {problem}")
-    secure = [e for e in (*listen, *connect) if e.startswith("tls/")]
-    if secure and tls is None:
-        raise ConfigurationError(f"{secure[0]}: a tls/ endpoint needs the router's TLS files (--tls-certificate and "
-                                 "--tls-private-key to listen, --tls-root-ca to connect)")
-    if tls is not None:
-        problem = tls.missing()
-        if problem is not None:
-            raise ConfigurationError(problem)
+    listen = tls_endpoints(listen, connect, tls)
+    problem = tls.missing() if tls is not None else None
+    if problem is not None:
+        raise ConfigurationError(problem)
     zenoh = import_extra("zenoh", "zenoh", FEATURE)
     settings: list[tuple[str, object]] = [
         ("mode", "router"), ("listen/endpoints", list(listen)), ("connect/endpoints", list(connect)),

@@ -106,7 +106,7 @@ def _tls(table: Any, error: Callable[[str, str], ConfigError], directory: Path) 
         if key in table:
             if not isinstance(table[key], str) or not table[key]:
                 raise error(f"zenoh.tls.{key}", f"expected the path of a PEM file, got {table[key]!r}")
-            paths[key] = os.path.normpath(directory / table[key])
+            paths[key] = os.path.abspath(directory / table[key])
     try:
         return ZenohTls(**paths, mutual=table.get("mutual", False))
     except ConfigurationError as problem:

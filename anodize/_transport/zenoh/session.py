@@ -9,7 +9,7 @@ from ..links import StartBarrierError
 from ..started import since_process_start
 from .binding import LivelinessToken, Session, ZError, close, open_session, reason, token
 from .peers import Peers
-from .settings import ZenohSettings, session_config
+from .settings import ZenohSettings, session_config, tls_hint
 
 __all__ = ["GroupSession"]
 
@@ -46,16 +46,10 @@ class GroupSession:
             where = ", ".join(settings.connect) or "peers found by scouting"
             answer = (f"no router answered within the wait ({settings.wait:g} s from the group's start)"
                       if settings.mode == "client" else reason(error))
-            tls = settings.tls
-            trust = ("" if tls is None else
-                     f"; over TLS, does its certificate name the address connected to, signed by "
-                     f"{tls.root_ca or 'an authority this host trusts (no root_ca given)'}"
-                     + (", and does it accept this host's certificate (mutual TLS)?" if tls.certificate else
-                        "? (A router that asks for mutual TLS turns away a host without a certificate.)"))
+            listening = ", ".join(settings.listen) or ("none" if settings.tls is not None else "default")
             raise StartBarrierError(f"group {name}: cannot open a Zenoh session in {settings.mode} mode "
-                                    f"(connect {where}; listen {', '.join(settings.listen) or 'default'}): "
-                                    f"{answer}: is the router running, and reachable from host {settings.host}"
-                                    f"{trust or '?'}") from None
+                                    f"(connect {where}; listen {listening}): {answer}: is the router running, "
+                                    f"and reachable from host {settings.host}{tls_hint(settings) or '?'}") from None
         self.peers = Peers(self.session, settings)
         self._tokens: list[LivelinessToken] = [token(self.session, settings.alive_key(name, incarnation,
                                                                                       settings.host))]

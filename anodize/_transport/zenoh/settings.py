@@ -16,11 +16,13 @@ from ...errors import ConfigurationError
 from ..links import SplitBrainError, StartBarrierError
 from ..ros_lanes import RosSettings
 
-__all__ = ["ZenohSettings", "ZenohTls", "TOKEN_ENV", "StartBarrierError", "SplitBrainError", "MODES",
-           "session_config", "tls_config", "key_chunk", "run_token", "supervisor_settings", "loopback_endpoint"]
+__all__ = ["ZenohSettings", "ZenohTls", "SECURE_PROTOCOLS", "tls_hint", "TOKEN_ENV", "StartBarrierError",
+           "SplitBrainError", "MODES", "session_config", "tls_config", "key_chunk", "run_token", "supervisor_settings",
+           "loopback_endpoint"]
 
 TOKEN_ENV = "ANODIZE_ZENOH_TOKEN"  # a run's secret token, the same on every host of the run
 MODES = ("peer", "client")
+SECURE_PROTOCOLS = ("tls/", "quic/")  # Zenoh's links that take their keys from transport/link/tls
 
 
 @dataclass(frozen=True)
@@ -204,6 +206,18 @@ def session_config(settings: ZenohSettings) -> dict[str, Any]:
                      "gossip": {"enabled": True}},
         "transport": {"link": link},
     }
+
+
+def tls_hint(settings: ZenohSettings) -> str:
+    """What to ask about TLS when a session of ``settings`` could not open or reach anyone ("" without TLS)."""
+    tls = settings.tls
+    if tls is None:
+        return ""
+    hint = (f"; over TLS, does the certificate of what it connects to name the address connected to, signed "
+            f"by {tls.root_ca or 'an authority this host trusts (no root_ca given)'}")
+    if tls.mutual:
+        return hint + ", and does it accept this host's certificate (mutual TLS)?"
+    return hint + "? (A router that asks for mutual TLS turns away a host that shows no certificate.)"
 
 
 def tls_config(tls: ZenohTls) -> dict[str, Any]:

@@ -8,6 +8,7 @@ import time
 from collections import deque
 from collections.abc import Sequence
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -182,7 +183,19 @@ def test_stop_system_here_is_said_and_a_stop_heard_stops_every_group_here() -> N
 
 
 # ---- hellos: split brain, words missed while cut off, a host lost and back -------------------
+SAID: dict[str, int] = {}  # per supervisor, the hellos made so far in this test (numbered as a supervisor does)
+
+
+@pytest.fixture(autouse=True)
+def _numbering_afresh() -> None:
+    SAID.clear()
+
+
 def hello(groups: dict[str, int], supervisor: str = "a1", host: str = "A", **fields: object) -> HelloWord:
+    """A hello of ``supervisor``, numbered after its last one unless ``number`` is given."""
+    if "number" not in fields:
+        fields["number"] = SAID.get(supervisor, -1) + 1
+    SAID[supervisor] = max(SAID.get(supervisor, -1), int(fields["number"]))  # type: ignore[call-overload]
     return HelloWord(host, 4242, groups, supervisor=supervisor, **fields)  # type: ignore[arg-type]
 
 
@@ -268,8 +281,9 @@ SILENCE: list[list[Event] | list[Word]] = [[]] * 300  # about 0.6 s without a wo
 
 
 def test_a_host_back_from_a_cut_that_moved_on_without_us_stops_our_groups_that_met_its_own() -> None:
+    before = hello({"producing": 0})
     moved_on = hello({"producing": 0}, gone={HERE: {"consuming": 0, "ticking": 0}})
-    script = Script([[], [hello({"producing": 0})], *SILENCE, [moved_on], [], [], done("ticking", "Q", 0)])
+    script = Script([[], [before], *SILENCE, [moved_on], [], [], done("ticking", "Q", 0)])
     report = supervise(script, {"consuming": CONSUMING, "ticking": group("ticking", "Q", FailurePolicy.STOP)},
                        {"producing": PRODUCING}, CHANNELS, lost_after=0.3).run()
     assert script.stopped == ["consuming"]  # ticking has no channel to host A's groups: it runs on
@@ -293,8 +307,9 @@ def test_a_host_first_heard_saying_it_moved_on_without_us_is_obeyed() -> None:
 def test_a_host_that_only_we_lost_is_not_obeyed_when_it_says_it_moved_on() -> None:
     # Its supervisor lost sight of us, we did not lose it: it was slow to speak (held up starting
     # a process, on a busy machine), not cut off; what it wrote off is still ours to run.
-    moved_on = hello({"producing": 0}, gone={HERE: {"consuming": 0}})
-    script = Script([[], [hello({"producing": 0})], [moved_on], [], [], done("consuming", "C", 0)])
+    before = hello({"producing": 0})
+    moved_on = hello({"producing": 0}, gone={HERE: {"consuming": 0}})  # the very next: nothing missed
+    script = Script([[], [before], [moved_on], [], [], done("consuming", "C", 0)])
     report = supervise(script, {"consuming": CONSUMING}, {"producing": PRODUCING}, CHANNELS).run()
     assert script.stopped == []
     assert report.groups["consuming"].status is GroupState.DONE
@@ -324,17 +339,33 @@ def test_a_supervisor_held_up_that_missed_no_hello_does_not_obey_one_that_lost_i
     assert report.groups["consuming"].status is GroupState.DONE
 
 
-@given(st.lists(st.integers(min_value=1, max_value=4), min_size=1, max_size=30))
-def test_hellos_were_missed_lately_exactly_when_their_numbers_skip(steps: list[int]) -> None:
+@given(st.lists(st.integers(min_value=0, max_value=40), min_size=1, max_size=30))
+def test_hellos_were_missed_lately_exactly_when_their_numbers_skip(numbers: list[int]) -> None:
+    # A repeat or a replay of an older hello (a number not above the last taken) is stale: taken for nothing.
     view = HostView("B", os.getpid(), "b0b0", lost_after=60.0)
-    number, now = 0, time.monotonic()
-    view.hear(hello({"producing": 0}, number=number), now)
-    for step in steps:
-        number += step
+    now = time.monotonic()
+    view.hear(hello({"producing": 0}, number=numbers[0]), now)
+    last, skipped = numbers[0], False
+    for number in numbers[1:]:
+        assert view.stale(hello({"producing": 0}, number=number)) == (number <= last)
         view.hear(hello({"producing": 0}, number=number), now)
-    assert view.missed_lately("a1", now) == any(step > 1 for step in steps)
+        if number > last:
+            skipped |= number > last + 1
+            last = number
+    assert view.missed_lately("a1", now) == skipped
     assert not view.missed_lately("a1", now + 61.0)  # lately: within lost_after
     assert not view.missed_lately("someone else", now)
+
+
+def test_a_replayed_hello_that_says_it_moved_on_is_not_taken() -> None:
+    # Hellos 0..9 heard, then a copy of an old one (number 3) that someone made say "moved on":
+    # stale, so it neither stops our groups nor makes the next genuine hello look like a gap.
+    hellos = [hello({"producing": 0}, number=n) for n in range(10)]
+    replayed = hello({"producing": 0}, gone={HERE: {"consuming": 0}}, number=3)
+    script = Script([[], hellos, [replayed], [hello({"producing": 0}, number=10)], [], done("consuming", "C", 0)])
+    report = supervise(script, {"consuming": CONSUMING}, {"producing": PRODUCING}, CHANNELS).run()
+    assert script.stopped == []
+    assert report.groups["consuming"].status is GroupState.DONE
 
 
 def test_a_silent_host_is_lost_then_back() -> None:

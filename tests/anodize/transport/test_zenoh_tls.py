@@ -6,6 +6,7 @@ setting lets a part of a TLS run travel in the clear. Certificates are made per 
 
 from __future__ import annotations
 
+import re
 import socket
 import subprocess
 import sys
@@ -20,7 +21,7 @@ import tls_certs
 import anodize
 import sessiontypes
 from anodize._tools.config import ConfigError, load_config
-from anodize._tools.router import Router, open_router
+from anodize._tools.router import DEFAULT_LISTEN, TLS_LISTEN, Router, open_router, tls_endpoints
 from anodize._transport.zenoh.settings import ZenohSettings, session_config, supervisor_settings
 
 pytest.importorskip("zenoh", reason="the zenoh extra is not installed")
@@ -88,9 +89,9 @@ def test_a_host_that_does_not_trust_the_routers_certificate_never_joins(
         router.close()
     assert not report.ok
     error = str(report.groups["producing"].error)
-    assert f"cannot open a Zenoh session in client mode (connect {endpoint}; listen default)" in error, error
-    assert (f"over TLS, does its certificate name the address connected to, signed by {certs['other_ca']}?"
-            in error), error
+    assert f"cannot open a Zenoh session in client mode (connect {endpoint}; listen none)" in error, error
+    assert (f"over TLS, does the certificate of what it connects to name the address connected to, signed by "
+            f"{certs['other_ca']}?" in error), error
 
 
 @pytest.mark.slow  # Zenoh groups in processes for seconds
@@ -152,19 +153,53 @@ def test_the_session_configuration_carries_the_files_to_zenoh(certs: dict[str, P
     assert session_config(supervisor)["connect"]["endpoints"] == ["tls/127.0.0.1:7448"]
 
 
-@pytest.mark.parametrize(("fields", "expected"), [
-    ({"mode": "client", "connect": ("tcp/10.0.0.1:7447",)},
-     "with tls, every endpoint must be tls/ADDRESS:PORT, got 'tcp/10.0.0.1:7447' (it would not be encrypted)"),
-    ({"mode": "peer", "connect": ("tls/10.0.0.1:7447",)},
-     'mode "peer" with tls: expected listen endpoints such as "tls/0.0.0.0:7448"'),
-    ({"mode": "client", "connect": ("tls/10.0.0.1:7447",),
-      "hosts": (("base", "peer", (), ("tcp/0.0.0.0:7448",)),)},
-     "Zenoh hosts base: with tls, every endpoint must be tls/ADDRESS:PORT, got 'tcp/0.0.0.0:7448'"),
+CONNECTING = anodize.ZenohTls(root_ca="ca.pem")
+LISTENING = anodize.ZenohTls(certificate="host.pem", private_key="host.key")
+
+
+@pytest.mark.parametrize(("tls", "fields", "expected"), [
+    (CONNECTING, {"mode": "client", "connect": ("tcp/10.0.0.1:7447",)},
+     ("with tls, every endpoint must be tls/ADDRESS:PORT (or quic/), got 'tcp/10.0.0.1:7447' (it would not be "
+      "encrypted)")),
+    (CONNECTING, {"mode": "client", "connect": ("tls/10.0.0.1:7447",),
+                  "hosts": (("base", "peer", (), ("tcp/0.0.0.0:7448",)),)},
+     "Zenoh hosts base: with tls, every endpoint must be tls/ADDRESS:PORT (or quic/), got 'tcp/0.0.0.0:7448'"),
+    (CONNECTING, {"mode": "peer", "listen": ("tls/0.0.0.0:7448",)},
+     "Zenoh tls: it listens (tls/0.0.0.0:7448), so it needs certificate and private_key"),
+    (LISTENING, {"mode": "peer", "listen": ("tls/0.0.0.0:7448",)},
+     "Zenoh tls: a peer connects to the peers it hears of, so it needs root_ca"),
 ])
-def test_no_setting_lets_a_part_of_a_tls_run_travel_in_the_clear(fields: dict[str, object], expected: str) -> None:
+def test_no_setting_lets_a_part_of_a_tls_run_travel_in_the_clear(
+        tls: anodize.ZenohTls, fields: dict[str, object], expected: str) -> None:
     with pytest.raises(anodize.ConfigurationError) as raised:
-        anodize.Zenoh(tls=anodize.ZenohTls(root_ca="ca.pem"), scouting=False, **fields)  # type: ignore[arg-type]
+        anodize.Zenoh(tls=tls, scouting=False, **fields)  # type: ignore[arg-type]
     assert expected in str(raised.value)
+
+
+def test_quic_is_tls_too_and_a_peer_need_not_listen() -> None:
+    anodize.Zenoh(mode="client", connect=("quic/10.0.0.1:7447",), tls=CONNECTING, scouting=False)
+    # A peer that only connects out listens nowhere (its session's listen endpoints are an empty list).
+    anodize.Zenoh(mode="peer", connect=("tls/10.0.0.1:7448",), tls=CONNECTING, scouting=False)
+
+
+@pytest.mark.parametrize(("listen", "connect", "tls", "expected"), [
+    (DEFAULT_LISTEN, (), LISTENING, [TLS_LISTEN]),  # with TLS, the default is encrypted
+    (("tls/10.0.0.1:7447",), (), LISTENING, ["tls/10.0.0.1:7447"]),
+    (DEFAULT_LISTEN, (), None, list(DEFAULT_LISTEN)),
+    (("tls/10.0.0.1:7447", "tcp/10.0.0.1:7448"), (), LISTENING, "every endpoint of the router is tls/"),
+    (("tls/10.0.0.1:7447",), ("tcp/10.0.0.2:7447",), LISTENING, "every endpoint of the router is tls/"),
+    (("tls/10.0.0.1:7447",), (), None, "a tls/ endpoint needs the router's TLS files"),
+    (("tls/10.0.0.1:7447",), (), CONNECTING, "to listen on a tls/ endpoint, the router needs --tls-certificate"),
+    ((), ("tls/10.0.0.2:7447",), LISTENING, "to connect to a tls/ endpoint, the router needs --tls-root-ca"),
+])
+def test_a_router_with_tls_listens_and_connects_only_over_tls(
+        listen: tuple[str, ...], connect: tuple[str, ...], tls: anodize.ZenohTls | None,
+        expected: list[str] | str) -> None:
+    if isinstance(expected, list):
+        assert tls_endpoints(listen, connect, tls) == expected
+    else:
+        with pytest.raises(anodize.ConfigurationError, match=re.escape(expected)):
+            tls_endpoints(listen, connect, tls)
 
 
 @pytest.mark.parametrize(("fields", "expected"), [
