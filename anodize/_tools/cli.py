@@ -650,7 +650,7 @@ def _replay(args: argparse.Namespace) -> int:
 def _router(args: argparse.Namespace) -> int:
     from .._transport.zenoh.settings import ZenohTls
     from ..errors import ConfigurationError
-    from .router import DEFAULT_LISTEN, check_endpoint, open_router
+    from .router import check_endpoint, open_router
 
     for option, endpoints in (("--listen", args.listen or ()), ("--connect", args.connect)):
         for endpoint in endpoints:
@@ -665,7 +665,7 @@ def _router(args: argparse.Namespace) -> int:
         except ConfigurationError as error:
             raise UsageError(f"the --tls-* options: {error}") from None
     try:
-        router = open_router(args.listen or DEFAULT_LISTEN, args.connect, tls)
+        router = open_router(args.listen, args.connect, tls)
     except ConfigurationError as error:  # the options do not go together, or a file is not there
         raise UsageError(str(error)) from None
     try:

@@ -135,21 +135,22 @@ class Router:
         self._session.close()
 
 
-def tls_endpoints(listen: Sequence[str], connect: Sequence[str], tls: ZenohTls | None) -> list[str]:
-    """Where a router with ``tls`` (or without) listens: ``listen``, but with TLS the default
-    becomes :data:`TLS_LISTEN`.
+def tls_endpoints(listen: Sequence[str] | None, connect: Sequence[str], tls: ZenohTls | None) -> list[str]:
+    """Where a router with ``tls`` (or without) listens: ``listen``, or by default
+    :data:`DEFAULT_LISTEN` (with TLS, :data:`TLS_LISTEN`).
 
     Raises:
         ConfigurationError: a ``tls/`` endpoint without TLS, an endpoint in the clear with it (whoever
             has no certificate could join there), or a side of TLS without its files.
     """
+    if listen is None:
+        listen = DEFAULT_LISTEN if tls is None else (TLS_LISTEN,)
     secure = [e for e in (*listen, *connect) if e.startswith(SECURE_PROTOCOLS)]
     if tls is None:
         if secure:
             raise ConfigurationError(f"{secure[0]}: a tls/ endpoint needs the router's TLS files (--tls-certificate "
                                      "and --tls-private-key to listen, --tls-root-ca to connect)")
         return list(listen)
-    listen = [TLS_LISTEN] if list(listen) == list(DEFAULT_LISTEN) else list(listen)
     clear = [e for e in (*listen, *connect) if not e.startswith(SECURE_PROTOCOLS)]
     if clear:
         raise ConfigurationError(f"{clear[0]}: with TLS, every endpoint of the router is tls/ (else whoever has no "
@@ -160,14 +161,14 @@ def tls_endpoints(listen: Sequence[str], connect: Sequence[str], tls: ZenohTls |
     if connect and not tls.root_ca:
         raise ConfigurationError("to connect to a tls/ endpoint, the router needs --tls-root-ca (the authority that "
                                  "signs the other router's certificate)")
-    return listen
+    return list(listen)
 
 
-def open_router(listen: Sequence[str] = DEFAULT_LISTEN, connect: Sequence[str] = (),
+def open_router(listen: Sequence[str] | None = None, connect: Sequence[str] = (),
                 tls: ZenohTls | None = None) -> Router:
     """Open a Zenoh router listening on ``listen`` and connecting to the routers at ``connect``
-    (each retried until it answers, as Zenoh's routers do). With ``tls``, every endpoint is
-    ``tls/`` (the default listen endpoint becomes :data:`TLS_LISTEN`).
+    (each retried until it answers, as Zenoh's routers do); by default it listens on
+    :data:`DEFAULT_LISTEN`. With ``tls``, every endpoint is ``tls/``, the default :data:`TLS_LISTEN`.
 
     Raises:
         MissingExtraError: the ``zenoh`` extra is not installed.
@@ -175,7 +176,7 @@ def open_router(listen: Sequence[str] = DEFAULT_LISTEN, connect: Sequence[str] =
             them first, as a usage error).
         AnodizeError: Zenoh could not open the router (e.g. an address this host does not have).
     """
-    for option, endpoints in (("--listen", listen), ("--connect", connect)):
+    for option, endpoints in (("--listen", listen or ()), ("--connect", connect)):
         for endpoint in endpoints:
             problem = check_endpoint(endpoint)
             if problem is not None:

@@ -43,8 +43,8 @@ class ZenohTls:
             so that only holders of one can join the run's network (mutual TLS).
 
     Raises:
-        ConfigurationError: a path that is not a non-empty string, a certificate without its key
-            (or the other way round), or ``mutual`` without all three files.
+        ConfigurationError: a path that is not a string ("": not given), a certificate without its
+            key (or the other way round), ``mutual`` without all three files, or no file at all.
     """
 
     root_ca: str = ""

@@ -183,9 +183,10 @@ def test_quic_is_tls_too_and_a_peer_need_not_listen() -> None:
 
 
 @pytest.mark.parametrize(("listen", "connect", "tls", "expected"), [
-    (DEFAULT_LISTEN, (), LISTENING, [TLS_LISTEN]),  # with TLS, the default is encrypted
+    (None, (), LISTENING, [TLS_LISTEN]),  # with TLS, the default is encrypted
     (("tls/10.0.0.1:7447",), (), LISTENING, ["tls/10.0.0.1:7447"]),
-    (DEFAULT_LISTEN, (), None, list(DEFAULT_LISTEN)),
+    (None, (), None, list(DEFAULT_LISTEN)),
+    (DEFAULT_LISTEN, (), LISTENING, "every endpoint of the router is tls/"),  # asked for in the clear: refused
     (("tls/10.0.0.1:7447", "tcp/10.0.0.1:7448"), (), LISTENING, "every endpoint of the router is tls/"),
     (("tls/10.0.0.1:7447",), ("tcp/10.0.0.2:7447",), LISTENING, "every endpoint of the router is tls/"),
     (("tls/10.0.0.1:7447",), (), None, "a tls/ endpoint needs the router's TLS files"),
@@ -193,7 +194,7 @@ def test_quic_is_tls_too_and_a_peer_need_not_listen() -> None:
     ((), ("tls/10.0.0.2:7447",), LISTENING, "to connect to a tls/ endpoint, the router needs --tls-root-ca"),
 ])
 def test_a_router_with_tls_listens_and_connects_only_over_tls(
-        listen: tuple[str, ...], connect: tuple[str, ...], tls: anodize.ZenohTls | None,
+        listen: tuple[str, ...] | None, connect: tuple[str, ...], tls: anodize.ZenohTls | None,
         expected: list[str] | str) -> None:
     if isinstance(expected, list):
         assert tls_endpoints(listen, connect, tls) == expected
