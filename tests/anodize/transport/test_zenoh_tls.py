@@ -64,15 +64,21 @@ def stream_over(endpoint: str, tls: anodize.ZenohTls, wait: float = 20.0) -> ano
     return system
 
 
+def through_a_router(certs: dict[str, Path], tls: anodize.ZenohTls,
+                     wait: float = 20.0) -> tuple[anodize.RunReport, str]:
+    """The stream run through a TLS router of the site; its report, and the router's endpoint."""
+    router, endpoint = tls_router(certs)
+    try:
+        return stream_over(endpoint, tls, wait).run(timeout=60), endpoint
+    finally:
+        router.close()
+
+
 @pytest.mark.slow  # Zenoh groups in processes for seconds
 def test_a_run_through_a_tls_router_delivers_everything_in_order(
         certs: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DDS_TEST_COUNT", "2000")
-    router, endpoint = tls_router(certs)
-    try:
-        report = stream_over(endpoint, anodize.ZenohTls(root_ca=str(certs["ca"]))).run(timeout=60)
-    finally:
-        router.close()
+    report, _ = through_a_router(certs, anodize.ZenohTls(root_ca=str(certs["ca"])))
     assert report.ok, report.summary()
     assert report.groups["consuming"].received == 2001  # the consumer checks 0..1999 in order, then done
     assert any(note.startswith("Zenoh TLS on every link: ") for note in report.notes), report.notes
@@ -82,11 +88,7 @@ def test_a_run_through_a_tls_router_delivers_everything_in_order(
 def test_a_host_that_does_not_trust_the_routers_certificate_never_joins(
         certs: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DDS_TEST_COUNT", "10")
-    router, endpoint = tls_router(certs)
-    try:
-        report = stream_over(endpoint, anodize.ZenohTls(root_ca=str(certs["other_ca"])), wait=2.0).run(timeout=60)
-    finally:
-        router.close()
+    report, endpoint = through_a_router(certs, anodize.ZenohTls(root_ca=str(certs["other_ca"])), wait=2.0)
     assert not report.ok
     error = str(report.groups["producing"].error)
     assert f"cannot open a Zenoh session in client mode (connect {endpoint}; listen none)" in error, error
