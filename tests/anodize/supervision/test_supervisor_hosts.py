@@ -357,12 +357,14 @@ def test_hellos_were_missed_lately_exactly_when_their_numbers_skip(numbers: list
     assert not view.missed_lately("someone else", now)
 
 
-def test_a_replayed_hello_that_says_it_moved_on_is_not_taken() -> None:
-    # Hellos 0..9 heard, then a copy of an old one (number 3) that someone made say "moved on":
-    # stale, so it neither stops our groups nor makes the next genuine hello look like a gap.
+def test_a_replayed_hello_is_not_taken_and_fakes_no_gap() -> None:
+    # Hellos 0..9 heard, then a copy of an old one (number 3), then hello 10, which says A lost us
+    # (we were slow to speak). Had the copy been taken, 3 -> 10 would look like hellos lost on the
+    # way, a cut, and A's word would stop our group; nothing was lost: it runs on.
     hellos = [hello({"producing": 0}, number=n) for n in range(10)]
-    replayed = hello({"producing": 0}, gone={HERE: {"consuming": 0}}, number=3)
-    script = Script([[], hellos, [replayed], [hello({"producing": 0}, number=10)], [], done("consuming", "C", 0)])
+    replayed = hello({"producing": 0}, number=3)
+    moved_on = hello({"producing": 0}, gone={HERE: {"consuming": 0}}, number=10)
+    script = Script([[], hellos, [replayed], [moved_on], [], done("consuming", "C", 0)])
     report = supervise(script, {"consuming": CONSUMING}, {"producing": PRODUCING}, CHANNELS).run()
     assert script.stopped == []
     assert report.groups["consuming"].status is GroupState.DONE
