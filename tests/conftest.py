@@ -24,10 +24,11 @@ import os
 import tempfile
 import time
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import pytest
 from hypothesis import HealthCheck, settings
+from machine_stalls import once_more_if_the_machine_stalled
 
 pytest_plugins = ["bytecode_cache"]  # tests/bytecode_cache.py: one compile of the sources per session
 
@@ -83,11 +84,17 @@ def tinman_recorded(tmp_path_factory: pytest.TempPathFactory) -> RecordedTinMan:
     key.write_bytes(os.urandom(32))
     key.chmod(0o600)
     printed = io.StringIO()
-    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(printed):
-        patch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the run: the run exports its own
-        status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", "--sign-key", str(key),
-                           "--out", str(out)])
-    report = json.loads((out / "report.json").read_text())
+
+    def run() -> tuple[int, dict[str, Any]]:
+        printed.seek(0)
+        printed.truncate()
+        with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(printed):
+            patch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the run: the run exports its own
+            status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", "--sign-key", str(key),
+                               "--out", str(out)])
+        return status, json.loads((out / "report.json").read_text())
+
+    status, report = once_more_if_the_machine_stalled(run)
     assert status == (0 if report["ok"] else 1), printed.getvalue()
     return RecordedTinMan(out, status, printed.getvalue(), key)
 
