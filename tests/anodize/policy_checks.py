@@ -24,6 +24,25 @@ roles = { Q = "rejoin_roles:few_ticks", R = "dds_roles:tick_counter" }
 """
 
 
+def stop_system_groups(failing: str = "A", other: str = "B") -> str:
+    """P fails on host ``failing`` and its policy is stop-system: the consumer and the ticking pair
+    on ``other`` stop too, the pair although it has nothing to do with P."""
+    return f"""
+[groups.producing]
+host = "{failing}"
+on_failure = "stop-system"
+roles = {{ P = "dds_roles:failing_producer" }}
+
+[groups.consuming]
+host = "{other}"
+roles = {{ C = "dds_roles:consumer" }}
+
+[groups.ticking]
+host = "{other}"
+roles = {{ Q = "dds_roles:ticker", R = "dds_roles:tick_counter" }}
+"""
+
+
 def restart_groups(producer: str) -> str:
     """A producer on host A and its consumer on B, each restarted once at most; ``producer`` is a
     ``dds_roles`` function."""

@@ -11,7 +11,15 @@ from pathlib import Path
 import dds_roles
 import pytest
 from dds_hosts import HERE, domain, finish, run_hosts, start_host
-from policy_checks import STOP_GROUPS, check_restarted_as_one, check_stop, check_used_up, restart_env, restart_groups
+from policy_checks import (
+    STOP_GROUPS,
+    check_restarted_as_one,
+    check_stop,
+    check_used_up,
+    restart_env,
+    restart_groups,
+    stop_system_groups,
+)
 
 from anodize._supervision.report import RoleStatus
 
@@ -36,20 +44,7 @@ def write(directory: Path, protocol: str, name: str, run_id: str, groups: str) -
 
 
 def test_stop_system_on_one_host_stops_the_groups_of_the_other(tmp_path: Path) -> None:
-    system = write(tmp_path, dds_roles.STREAM_AND_TICKS, "Both", "stopsys", """
-[groups.producing]
-host = "A"
-on_failure = "stop-system"
-roles = { P = "dds_roles:failing_producer" }
-
-[groups.consuming]
-host = "B"
-roles = { C = "dds_roles:consumer" }
-
-[groups.ticking]
-host = "B"
-roles = { Q = "dds_roles:ticker", R = "dds_roles:tick_counter" }
-""")
+    system = write(tmp_path, dds_roles.STREAM_AND_TICKS, "Both", "stopsys", stop_system_groups())
     reports = run_hosts(system, tmp_path)
     a, b = reports["A"], reports["B"]
     assert a["roles"]["P"]["status"] == RoleStatus.FAILED

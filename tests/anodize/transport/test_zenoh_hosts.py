@@ -15,6 +15,7 @@ from pathlib import Path
 import dds_roles
 import pytest
 from dds_hosts import finish, run_hosts, start_host, wait_for_group, wait_until_flowing
+from policy_checks import stop_system_groups
 from zenoh_hosts import free_endpoint, open_router, write_policy_system, write_system
 
 import anodize
@@ -138,20 +139,8 @@ def test_stop_system_on_one_host_stops_the_groups_of_the_other_over_zenoh(tmp_pa
     endpoint = free_endpoint()
     router = open_router(endpoint)
     run_id = "s" + uuid.uuid4().hex[:12]
-    system = write_policy_system(tmp_path, endpoint, dds_roles.STREAM_AND_TICKS, "Both", run_id, """
-[groups.producing]
-host = "A"
-on_failure = "stop-system"
-roles = { P = "dds_roles:failing_producer" }
-
-[groups.consuming]
-host = "B"
-roles = { C = "dds_roles:consumer" }
-
-[groups.ticking]
-host = "B"
-roles = { Q = "dds_roles:ticker", R = "dds_roles:tick_counter" }
-""")
+    system = write_policy_system(tmp_path, endpoint, dds_roles.STREAM_AND_TICKS, "Both", run_id,
+                                 stop_system_groups())
     try:
         reports = run_hosts(system, tmp_path, {"ANODIZE_ZENOH_TOKEN": "shared_by_both_hosts"})
     finally:

@@ -33,6 +33,7 @@ from typing import Any
 import dds_roles
 import pytest
 import routed
+from policy_checks import stop_system_groups
 from routed import Routed, finish, kill_tree, wait_for
 
 from anodize import PeerFailedError
@@ -321,21 +322,8 @@ roles = { C = "routed_stream_roles:counting_consumer" }
 
 
 def test_stop_system_on_the_robot_stops_the_groups_of_the_base(net: Routed, tmp_path: Path) -> None:
-    groups = """
-[groups.producing]
-host = "robot"
-on_failure = "stop-system"
-roles = { P = "dds_roles:failing_producer" }
-
-[groups.consuming]
-host = "base"
-roles = { C = "dds_roles:consumer" }
-
-[groups.ticking]
-host = "base"
-roles = { Q = "dds_roles:ticker", R = "dds_roles:tick_counter" }
-"""
-    system = write_system(net, tmp_path, "stop-system", groups, dds_roles.STREAM_AND_TICKS, "Both")
+    system = write_system(net, tmp_path, "stop-system", stop_system_groups("robot", "base"),
+                          dds_roles.STREAM_AND_TICKS, "Both")
     robot, base, out = run_hosts(net, system, 90)
     assert robot["roles"]["P"]["status"] == RoleStatus.FAILED, out
     assert "the producer gives up" in robot["roles"]["P"]["error"]["message"], out
