@@ -43,18 +43,18 @@ roles = {{ Q = "dds_roles:ticker", R = "dds_roles:tick_counter" }}
 """
 
 
-def restart_groups(producer: str) -> str:
-    """A producer on host A and its consumer on B, each restarted once at most; ``producer`` is a
-    ``dds_roles`` function."""
+def restart_groups(producer: str, producing: str = "A", consuming: str = "B") -> str:
+    """A producer on host ``producing`` and its consumer on ``consuming``, each restarted once at
+    most; ``producer`` is its role function, ``module:function``."""
     return f"""
 [groups.producing]
-host = "A"
+host = "{producing}"
 on_failure = "restart"
 max_restarts = 1
-roles = {{ P = "dds_roles:{producer}" }}
+roles = {{ P = "{producer}" }}
 
 [groups.consuming]
-host = "B"
+host = "{consuming}"
 on_failure = "restart"
 max_restarts = 1
 roles = {{ C = "dds_roles:consumer" }}

@@ -58,7 +58,7 @@ def test_stop_system_on_one_host_stops_the_groups_of_the_other(tmp_path: Path) -
 
 
 def test_a_restart_set_spanning_hosts_restarts_as_one_incarnation(tmp_path: Path) -> None:
-    system = write(tmp_path, dds_roles.STREAM, "Stream", "restart", restart_groups("failing_once_producer"))
+    system = write(tmp_path, dds_roles.STREAM, "Stream", "restart", restart_groups("dds_roles:failing_once_producer"))
     a, b = run_hosts(system, tmp_path, restart_env(tmp_path)).values()
     check_restarted_as_one(a, b)
     assert any("the first incarnation fails" in failure for failure in a["groups"]["producing"]["failures"]), a
@@ -101,5 +101,5 @@ def test_stop_on_one_host_fails_the_peer_on_the_other_and_the_rest_runs_on(tmp_p
 
 
 def test_a_restart_used_up_on_one_host_is_a_stop_there_and_its_peer_elsewhere_fails(tmp_path: Path) -> None:
-    system = write(tmp_path, dds_roles.STREAM, "Stream", "usedup", restart_groups("failing_producer"))
+    system = write(tmp_path, dds_roles.STREAM, "Stream", "usedup", restart_groups("dds_roles:failing_producer"))
     check_used_up(*run_hosts(system, tmp_path).values())

@@ -13,9 +13,10 @@ from pathlib import Path
 import dds_roles
 import pytest
 from dds_hosts import HERE, Hosts, domain, finish, namespaces_unavailable, start_host, wait_until_flowing
+from policy_checks import restart_groups
 from rejoin_checks import (
     BOTH,
-    RESTARTING,
+    PAUSING,
     heard_the_stop_it_missed,
     restarted_as_decided_without_it,
     told_the_run_moved_on,
@@ -99,5 +100,5 @@ def test_stop_system_a_host_back_from_a_cut_hears_the_stop_it_missed(hosts: Host
 
 def test_restart_a_host_back_from_a_cut_restarts_as_the_incarnation_decided_without_it(
         hosts: Hosts, tmp_path: Path) -> None:
-    a, b, out = run_with_a_cut(hosts, tmp_path, dds_roles.STREAM, "Stream", RESTARTING.format(cut="A", mover="B"))
+    a, b, out = run_with_a_cut(hosts, tmp_path, dds_roles.STREAM, "Stream", restart_groups(PAUSING, "A", "B"))
     restarted_as_decided_without_it(a, b, "B", out)

@@ -42,10 +42,10 @@ def test_stop_on_one_host_fails_the_peer_on_the_other_and_the_rest_runs_on(route
 
 
 def test_a_restart_set_spanning_hosts_restarts_as_one_incarnation(router: str, tmp_path: Path) -> None:
-    check_restarted_as_one(*run(router, tmp_path, dds_roles.STREAM, "Stream", restart_groups("failing_once_producer"),
-                                restart_env(tmp_path)))
+    groups = restart_groups("dds_roles:failing_once_producer")
+    check_restarted_as_one(*run(router, tmp_path, dds_roles.STREAM, "Stream", groups, restart_env(tmp_path)))
 
 
 def test_a_restart_used_up_on_one_host_is_a_stop_there_and_its_peer_elsewhere_fails(
         router: str, tmp_path: Path) -> None:
-    check_used_up(*run(router, tmp_path, dds_roles.STREAM, "Stream", restart_groups("failing_producer")))
+    check_used_up(*run(router, tmp_path, dds_roles.STREAM, "Stream", restart_groups("dds_roles:failing_producer")))

@@ -21,9 +21,10 @@ from typing import Any
 import dds_roles
 import pytest
 import routed
+from policy_checks import restart_groups
 from rejoin_checks import (
     BOTH,
-    RESTARTING,
+    PAUSING,
     heard_the_stop_it_missed,
     restarted_as_decided_without_it,
     told_the_run_moved_on,
@@ -138,5 +139,5 @@ def test_stop_system_a_host_back_from_a_cut_hears_the_stop_it_missed_over_zenoh(
 def test_restart_a_host_back_from_a_cut_restarts_as_the_incarnation_decided_without_it_over_zenoh(
         net: Routed, tmp_path: Path) -> None:
     robot, base, out = run_with_a_cut(net, tmp_path, dds_roles.STREAM, "Stream",
-                                      RESTARTING.format(cut="robot", mover="base"))
+                                      restart_groups(PAUSING, "robot", "base"))
     restarted_as_decided_without_it(robot, base, "base", out)
