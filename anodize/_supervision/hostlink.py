@@ -41,6 +41,7 @@ from .._transport.dds.binding import (
     Topic,
     delete,
     duration,
+    matched_publications,
     ref_of,
     take,
     userdata_of,
@@ -115,7 +116,7 @@ class HostLink:
         """The host and supervisor a writer of the supervisors topic speaks for, or None (and a note)."""
         if instance_handle(handle) in self._known:
             return self._known[instance_handle(handle)]
-        for matched in self.reader.get_matched_publications():
+        for matched in matched_publications(self.reader):
             if instance_handle(matched) != instance_handle(handle):
                 continue
             data = self.reader.get_matched_publication_data(matched)

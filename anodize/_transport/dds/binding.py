@@ -14,6 +14,11 @@ functions here, so that a new binding release that moves them breaks this module
 - :func:`wait_for_acks` waits for a writer's acknowledgements (the binding's own method
   raises AttributeError when they do not all come in time: it looks for
   ``Exception.DDS_RETCODE_TIMEOUT``).
+- :func:`matched_publications` and :func:`matched_subscriptions` list what an
+  endpoint has matched (the binding's own methods ask Cyclone for the count, then for
+  that many handles into an array of that size; an endpoint that matches between the
+  two calls makes Cyclone's second answer larger than the array, and the binding
+  raises ``IndexError: invalid index``).
 
 ``cyclonedds`` is imported when this module is, through :func:`anodize._extras.import_extra`:
 only a DDS run, the ROS wire or a supervisor of several hosts imports it, and
@@ -24,6 +29,8 @@ any other module under ``anodize/`` names the binding's private API.
 
 from __future__ import annotations
 
+import ctypes
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from ..._extras import import_extra
@@ -57,9 +64,11 @@ else:
     duration = import_extra("cyclonedds.util", "dds", _FEATURE).duration
 
 __all__ = ["write", "take", "ref_of", "delete", "wait_for_acks", "userdata_of", "ANY_SAMPLE", "RETCODE_TIMEOUT",
-           "XCDR1", "DDSException", "Policy", "Qos", "ReadCondition", "WaitSet", "DomainParticipant", "IdlStruct",
+           "XCDR1", "matched_publications", "matched_subscriptions",
+           "DDSException", "Policy", "Qos", "ReadCondition", "WaitSet", "DomainParticipant", "IdlStruct",
            "idl_types", "DataWriter", "DataReader", "Topic", "duration"]
 
+_HANDLE = ctypes.c_int64  # dds_instance_handle_t, as the binding declares it in its C calls
 RETCODE_TIMEOUT = -10  # DDS_RETCODE_TIMEOUT, from write: no room within the writer's blocking time
 ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any  # what take() takes: every sample
 # ROS 2 publishes plain CDR (XCDR1): its readers do not accept a writer that offers only XCDR2.
@@ -102,3 +111,36 @@ def userdata_of(qos: Qos | None) -> bytes:
         return b""
     data = getattr(policy, "data", b"")
     return data if isinstance(data, bytes) else b""
+
+
+def matched_publications(reader: DataReader[Any]) -> list[int]:
+    """The instance handles of the writers ``reader`` has matched now.
+
+    Raises:
+        DDSException: the reader is gone or the call failed.
+    """
+    return _matched(reader._get_matched_publications, reader._ref, f"the writers matched by {reader!r}")
+
+
+def matched_subscriptions(writer: DataWriter[Any]) -> list[int]:
+    """The instance handles of the readers ``writer`` has matched now.
+
+    Raises:
+        DDSException: the writer is gone or the call failed.
+    """
+    return _matched(writer._get_matched_subscriptions, writer._ref, f"the readers matched by {writer!r}")
+
+
+def _matched(call: Callable[[int, Any, int], int], ref: int, what: str) -> list[int]:
+    """Ask Cyclone for the matched handles with room for as many as it says there are: it
+    returns how many there are, which is more than the room when some matched since it
+    was last asked; then ask again with room for them all."""
+    room = 8
+    while True:
+        handles = (_HANDLE * room)()
+        count = call(ref, ctypes.cast(handles, ctypes.POINTER(_HANDLE)), room)
+        if count < 0:
+            raise DDSException(count, f"asking for {what}")
+        if count <= room:
+            return list(handles[:count])
+        room = count

@@ -28,6 +28,7 @@ from .binding import (
     ReadCondition,
     WaitSet,
     duration,
+    matched_publications,
     ref_of,
     take,
     userdata_of,
@@ -128,7 +129,7 @@ class DdsReceiver:
         barrier); from an external role, some ROS node publishing each topic."""
         found = True
         for lane in self.lanes:
-            matched = lane.reader.get_matched_publications()
+            matched = matched_publications(lane.reader)
             if self.external:
                 found = found and bool(matched)
             elif not lane.accepted:
@@ -245,7 +246,7 @@ class DdsReceiver:
         return False
 
     def _publication(self, lane: InLane, handle: int) -> Any:
-        matched = [h for h in lane.reader.get_matched_publications() if instance_handle(h) == handle]
+        matched = [h for h in matched_publications(lane.reader) if instance_handle(h) == handle]
         return lane.reader.get_matched_publication_data(matched[0]) if matched else None
 
     def _hand_on(self, lane: InLane) -> object:
@@ -317,7 +318,7 @@ class DdsReceiver:
         if self._lost is not None or now < self._next_check:
             return self._lost
         self._next_check = now + POLL
-        matched = {instance_handle(h) for h in lane.reader.get_matched_publications()}
+        matched = {instance_handle(h) for h in matched_publications(lane.reader)}
         where = self.endpoints.settings.where(self.sender)
         if self.external:
             if not matched:

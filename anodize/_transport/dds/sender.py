@@ -33,6 +33,8 @@ from .binding import (
     ReadCondition,
     WaitSet,
     duration,
+    matched_publications,
+    matched_subscriptions,
     ref_of,
     take,
     wait_for_acks,
@@ -189,7 +191,7 @@ class DdsSender(WritingEnd):
         """Raise if the receiver's reader of any lane is gone (an external role: if no ROS node
         subscribes a topic any more)."""
         for lane in self.lanes:
-            matched = lane.writer.get_matched_subscriptions()
+            matched = matched_subscriptions(lane.writer)
             if lane.accepted is None:
                 if self.external and not matched:
                     raise self._peer_gone(f"no ROS 2 node subscribes {lane.topic} any more")
@@ -228,7 +230,7 @@ class DdsSender(WritingEnd):
         where = f" ({lane.topic})" if lane.kind is not None else ""
         receiver = self.endpoints.settings.where(self.receiver)
         owner = "" if lane.accepted is None else f" besides the reader of {receiver}"
-        for handle in lane.writer.get_matched_subscriptions():
+        for handle in matched_subscriptions(lane.writer):
             if instance_handle(handle) in self._named or instance_handle(handle) == lane.accepted:
                 continue
             self._named.add(instance_handle(handle))
@@ -280,7 +282,7 @@ class DdsSender(WritingEnd):
         found = True
         for lane in self.lanes:
             channel = f"{self.sender}->{self.receiver}" + (f" ({lane.topic})" if lane.kind is not None else "")
-            matched = lane.writer.get_matched_subscriptions()
+            matched = matched_subscriptions(lane.writer)
             if self.external:
                 found = found and bool(matched)
             elif lane.accepted is None:
@@ -289,7 +291,7 @@ class DdsSender(WritingEnd):
                 found = found and lane.accepted is not None
         if self.credits is not None and self.credit_writer is None:
             self.credit_writer = find_peer(self.endpoints, self.receiver, f"{self.sender}->{self.receiver} (credits)",
-                                           self.credits.get_matched_publications(),
+                                           matched_publications(self.credits),
                                            self.credits.get_matched_publication_data)[0]
         return found and (self.credits is None or self.credit_writer is not None)
 

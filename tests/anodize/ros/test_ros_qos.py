@@ -20,6 +20,7 @@ from cyclonedds.topic import Topic
 from dds_hosts import domain
 
 from anodize._ros import ros_type
+from anodize._transport.dds.binding import matched_publications
 from anodize._transport.dds.flow import WINDOW as CREDIT_WINDOW
 
 pytestmark = pytest.mark.slow
@@ -76,7 +77,7 @@ def test_a_ros_node_sees_the_qos_offered_and_the_recording_keeps_it(tmp_path: Pa
     try:
         deadline = time.monotonic() + 60
         while seen is None and time.monotonic() < deadline and run.poll() is None:
-            for handle in reader.get_matched_publications():
+            for handle in matched_publications(reader):
                 seen = reader.get_matched_publication_data(handle)
             time.sleep(0.02)
         out = run.communicate(timeout=120)[0]

@@ -26,6 +26,7 @@ import sessiontypes
 from anodize import ProtocolViolationError
 from anodize._ros import ros_type
 from anodize._transport.dds import ANY_SAMPLE, userdata_fields, userdata_of
+from anodize._transport.dds.binding import matched_publications
 
 pytestmark = pytest.mark.slow
 CAMERA = sessiontypes.loads(roles.CAMERA, "camera.proto").globals["Camera"]
@@ -64,7 +65,7 @@ class RosNode:
     def _watch(self, reader: DataReader[object], topic: str) -> None:
         """Keep what the writers on ``topic`` say they are (gone once they are)."""
         while self._watching:
-            for handle in reader.get_matched_publications():
+            for handle in matched_publications(reader):
                 data = reader.get_matched_publication_data(handle)
                 if data is not None:
                     self.userdata[topic] = userdata_of(data.qos)

@@ -33,6 +33,7 @@ from dds_hosts import domain
 from ros_peer import finish_peer, ros_peer_binary, start_peer
 
 from anodize._transport.dds import userdata_of
+from anodize._transport.dds.binding import matched_publications, matched_subscriptions
 
 ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 XCDR1_LE = b"\x00\x01\x00\x00"  # the encapsulation header of plain little-endian CDR
@@ -139,7 +140,7 @@ def test_listen_twist_prints_what_a_cyclone_writer_wrote(participant: DomainPart
     peer = start_peer("listen-twist", topic="rt/cmd_vel", domain=domain(), count=3, timeout=20)
     writer = DataWriter(participant, Topic(participant, "rt/cmd_vel", Twist), qos=ros_qos())
     try:
-        assert wait_until(writer.get_matched_subscriptions, 15), "ros_peer's reader never matched"
+        assert wait_until(lambda: matched_subscriptions(writer), 15), "ros_peer's reader never matched"
         time.sleep(0.3)  # the peer may learn of this writer a little after we learnt of its reader
         sent = [Twist(Vector3(0.5 * i, -1.25, 3.0), Vector3(0.0, 1e-9 * i, -2.5)) for i in range(3)]
         for twist in sent:
@@ -163,7 +164,7 @@ def test_fast_dds_does_not_match_a_writer_offering_only_xcdr2(participant: Domai
     peer = start_peer("listen-twist", topic="rt/cmd_vel", domain=domain(), count=1, timeout=4)
     qos = ros_qos(Policy.DataRepresentation(use_xcdrv2_representation=True))
     writer = DataWriter(participant, Topic(participant, "rt/cmd_vel", Twist), qos=qos)
-    matched = wait_until(writer.get_matched_subscriptions, 3)
+    matched = wait_until(lambda: matched_subscriptions(writer), 3)
     writer.write(Twist())
     code, out, err = finish_peer(peer, 20)
     assert not matched
@@ -176,8 +177,8 @@ def test_publish_joy_delivers_ros_joy_with_its_type_hash(participant: DomainPart
     peer = start_peer("publish-joy", topic="rt/joy", domain=domain(), count=5, period_ms=50, wait_match=15,
                       typehash=JOY_HASH)
     try:
-        assert wait_until(reader.get_matched_publications, 15), "ros_peer's writer never matched"
-        publication = reader.get_matched_publication_data(reader.get_matched_publications()[0])
+        assert wait_until(lambda: matched_publications(reader), 15), "ros_peer's writer never matched"
+        publication = reader.get_matched_publication_data(matched_publications(reader)[0])
         samples = take_raw(reader, 5, 15)
     finally:
         code, out, err = finish_peer(peer, 30)
@@ -205,8 +206,8 @@ def test_a_joy_of_another_layout_is_matched_by_name_but_never_delivered(
     other = DataReader(participant, Topic(participant, "rt/joy", OtherJoy), qos=ros_qos())
     peer = start_peer("publish-bad-joy", topic="rt/joy", domain=domain(), count=3, period_ms=50, wait_match=15)
     try:
-        assert wait_until(reader.get_matched_publications, 15), "ros_peer's writer never matched the Joy reader"
-        publication = reader.get_matched_publication_data(reader.get_matched_publications()[0])
+        assert wait_until(lambda: matched_publications(reader), 15), "ros_peer's writer never matched the Joy reader"
+        publication = reader.get_matched_publication_data(matched_publications(reader)[0])
         raw = take_raw(other, 3, 15)
         delivered = take_raw(reader, 1, 0.5)
     finally:
@@ -239,7 +240,7 @@ def test_listen_image_receives_vga_rgb_images(participant: DomainParticipant) ->
     cdr = image.serialize()
     assert cdr[:4] == XCDR1_LE
     try:
-        assert wait_until(writer.get_matched_subscriptions, 15), "ros_peer's reader never matched"
+        assert wait_until(lambda: matched_subscriptions(writer), 15), "ros_peer's reader never matched"
         time.sleep(0.3)
         for _ in range(count):
             assert ddspy_write(writer._ref, cdr + b"\0" * (-len(cdr) % 4)) == 0
