@@ -119,7 +119,7 @@ def matched_publications(reader: DataReader[Any]) -> list[int]:
     Raises:
         DDSException: the reader is gone or the call failed.
     """
-    return _matched(reader._get_matched_publications, reader._ref, f"the writers matched by {reader!r}")
+    return _matched(reader._get_matched_publications, reader, "writers")
 
 
 def matched_subscriptions(writer: DataWriter[Any]) -> list[int]:
@@ -128,19 +128,20 @@ def matched_subscriptions(writer: DataWriter[Any]) -> list[int]:
     Raises:
         DDSException: the writer is gone or the call failed.
     """
-    return _matched(writer._get_matched_subscriptions, writer._ref, f"the readers matched by {writer!r}")
+    return _matched(writer._get_matched_subscriptions, writer, "readers")
 
 
-def _matched(call: Callable[[int, Any, int], int], ref: int, what: str) -> list[int]:
+def _matched(call: Callable[[int, Any, int], int], entity: DataReader[Any] | DataWriter[Any],
+             what: str) -> list[int]:
     """Ask Cyclone for the matched handles with room for as many as it says there are: it
     returns how many there are, which is more than the room when some matched since it
     was last asked; then ask again with room for them all."""
     room = 8
     while True:
         handles = (_HANDLE * room)()
-        count = call(ref, ctypes.cast(handles, ctypes.POINTER(_HANDLE)), room)
+        count = call(ref_of(entity), ctypes.cast(handles, ctypes.POINTER(_HANDLE)), room)
         if count < 0:
-            raise DDSException(count, f"asking for {what}")
+            raise DDSException(count, f"asking for the {what} matched by {entity!r}")
         if count <= room:
             return list(handles[:count])
         room = count

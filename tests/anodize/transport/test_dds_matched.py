@@ -17,8 +17,10 @@ from dds_hosts import domain
 from anodize._transport.dds.binding import (
     DataReader,
     DataWriter,
+    DDSException,
     DomainParticipant,
     Topic,
+    delete,
     matched_publications,
     matched_subscriptions,
 )
@@ -76,3 +78,10 @@ def test_the_bindings_own_listing_fails_that_way_which_is_why_the_seam_has_its_o
                            lambda: [DataWriter(participant, topic) for _ in range(3)])
     with pytest.raises(IndexError, match="invalid index"):
         reader.get_matched_publications()
+
+
+def test_listing_a_deleted_readers_writers_raises_a_dds_error_naming_it() -> None:
+    _, _, _, (reader,) = _entities(1, 1)
+    delete(reader)
+    with pytest.raises(DDSException, match="asking for the writers matched by"):
+        matched_publications(reader)
