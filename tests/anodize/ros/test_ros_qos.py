@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import time
+import uuid
 from pathlib import Path
 
 import pytest
@@ -20,8 +21,11 @@ from cyclonedds.topic import Topic
 from dds_hosts import domain
 
 from anodize._ros import ros_type
+from anodize._transport.dds import userdata_of
 from anodize._transport.dds.binding import matched_publications
 from anodize._transport.dds.flow import WINDOW as CREDIT_WINDOW
+from anodize._transport.dds.identity import parse_identity
+from anodize._transport.dds.settings import TOKEN_ENV
 
 pytestmark = pytest.mark.slow
 HERE = Path(qos_roles.__file__).resolve().parent
@@ -70,15 +74,23 @@ def test_a_ros_node_sees_the_qos_offered_and_the_recording_keeps_it(tmp_path: Pa
     reader: DataReader[object] = DataReader(participant, Topic(participant, "rt/scan", kind.idl_class()),
                                             qos=Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile,
                                                     Policy.DataRepresentation(use_cdrv0_representation=True)))
+    # The writer looked at must be this run's: one of an earlier run in this test process's domain
+    # (the other parameter's) can still be matched until its lease runs out. A token of its own
+    # makes this run's identity known to the test.
+    token = uuid.uuid4().hex
     run = subprocess.Popen([sys.executable, "-m", "anodize._tools.cli", "run", "--quiet", str(system),
                             "--record", str(tmp_path / "run.mcap")], stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True, env={**os.environ, "QOS_TEST_OUT": str(tmp_path)})
+                           stderr=subprocess.STDOUT, text=True,
+                           env={**os.environ, "QOS_TEST_OUT": str(tmp_path), TOKEN_ENV: token})
     seen = None
     try:
         deadline = time.monotonic() + 60
         while seen is None and time.monotonic() < deadline and run.poll() is None:
             for handle in matched_publications(reader):
-                seen = reader.get_matched_publication_data(handle)
+                data = reader.get_matched_publication_data(handle)
+                identity = parse_identity(userdata_of(data.qos)) if data is not None else None
+                if identity is not None and identity[:2] == (f"offered/{token}", "sensing"):
+                    seen = data
             time.sleep(0.02)
         out = run.communicate(timeout=120)[0]
     finally:
