@@ -19,16 +19,15 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import io
-import json
 import os
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import pytest
 from hypothesis import HealthCheck, settings
-from machine_stalls import once_more_if_the_machine_stalled
+from machine_stalls import tinman_run
 
 pytest_plugins = ["bytecode_cache"]  # tests/bytecode_cache.py: one compile of the sources per session
 
@@ -76,25 +75,14 @@ def tinman_recorded(tmp_path_factory: pytest.TempPathFactory) -> RecordedTinMan:
     default world, no --patrol), once per session, in ``<tmp>/out/tinman`` (the folder the default
     settings name, seen from ``<tmp>``). The tests that read a whole TinMan run's recording, report
     or output share it (replay, verify, the live camera's odometry); they only read it."""
-    from anodize._tools import cli
-    from tinman.settings import ENVIRONMENT_VARIABLE
-
     out = tmp_path_factory.mktemp("recorded") / "out" / "tinman"
     key = out.parent.parent / "run.key"
     key.write_bytes(os.urandom(32))
     key.chmod(0o600)
     printed = io.StringIO()
-
-    def run() -> tuple[int, dict[str, Any]]:
-        printed.seek(0)
-        printed.truncate()
-        with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(printed):
-            patch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the run: the run exports its own
-            status = cli.main(["run", "tinman", "--quiet", "--duration", "6", "--record", "--sign-key", str(key),
-                               "--out", str(out)])
-        return status, json.loads((out / "report.json").read_text())
-
-    status, report = once_more_if_the_machine_stalled(run)
+    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(printed):  # both restored after
+        status, report = tinman_run(patch, out, "--duration", "6", "--record", "--sign-key", str(key),
+                                    before=lambda: (printed.seek(0), printed.truncate()))
     assert status == (0 if report["ok"] else 1), printed.getvalue()
     return RecordedTinMan(out, status, printed.getvalue(), key)
 

@@ -12,12 +12,16 @@ second run must pass; any other failure fails at once."""
 
 from __future__ import annotations
 
+import json
 import re
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-__all__ = ["machine_stalled", "once_more_if_the_machine_stalled"]
+import pytest
+
+__all__ = ["machine_stalled", "once_more_if_the_machine_stalled", "tinman_run"]
 
 _LATE = re.compile(r"(\d+(?:\.\d+)?) ms too late")
 _HELD = re.compile(r"the supervisor itself was held up \d+ times \(longest (\d+(?:\.\d+)?) s\)")
@@ -49,3 +53,20 @@ def once_more_if_the_machine_stalled(run: Callable[[], tuple[int, dict[str, Any]
         print(f"TinMan run inconclusive, run once more: {why}", file=sys.stderr)
         status, report = run()
     return status, report
+
+
+def tinman_run(monkeypatch: pytest.MonkeyPatch, out: Path, *options: str,
+               before: Callable[[], object] = lambda: None) -> tuple[int, dict[str, Any]]:
+    """``anodize run tinman --quiet OPTIONS --out OUT`` in this process: its exit status and
+    report, once more if the first run was the machine's stall. ``before()`` is called before
+    each run (to drop what an inconclusive first run printed)."""
+    from anodize._tools import cli  # at first use: the suite's bytecode cache is in place by then
+    from tinman.settings import ENVIRONMENT_VARIABLE
+
+    def run() -> tuple[int, dict[str, Any]]:
+        monkeypatch.setenv(ENVIRONMENT_VARIABLE, "")  # the run exports its own: each starts without
+        before()
+        status = cli.main(["run", "tinman", "--quiet", *options, "--out", str(out)])
+        return status, json.loads((out / "report.json").read_text())
+
+    return once_more_if_the_machine_stalled(run)

@@ -9,25 +9,17 @@ import threading
 from pathlib import Path
 
 import pytest
-from machine_stalls import once_more_if_the_machine_stalled
+from machine_stalls import tinman_run
 
-from anodize._tools import cli
 from tinman.app import PATROL_HINT
-from tinman.settings import ENVIRONMENT_VARIABLE
 
 pytestmark = pytest.mark.slow  # each runs the whole system in processes for seconds
 
 
 def _run(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], out: Path,
          *options: str) -> tuple[int, dict, str]:
-    monkeypatch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the test: the run exports its own
-
-    def run() -> tuple[int, dict]:
-        capsys.readouterr()  # what an inconclusive first run printed is not this run's
-        status = cli.main(["run", "tinman", "--quiet", "--world", "easy", "--out", str(out), *options])
-        return status, json.loads((out / "report.json").read_text())
-
-    status, report = once_more_if_the_machine_stalled(run)
+    # What an inconclusive first run printed is not this run's.
+    status, report = tinman_run(monkeypatch, out, "--world", "easy", *options, before=capsys.readouterr)
     return status, report, capsys.readouterr().out
 
 
@@ -87,14 +79,8 @@ def test_blinded_for_two_seconds_mid_patrol_the_whole_patrol_still_completes_wit
     seconds on the way to the first waypoint. The fused pose goes on with the wheels and the map
     (the robot drives on, slower), visual odometry relocalises, and the patrol ends truly at the
     dock. The time limit bounds the run; nothing here asserts a duration."""
-    monkeypatch.setenv(ENVIRONMENT_VARIABLE, "")
-
-    def run() -> tuple[int, dict]:
-        status = cli.main(["run", "tinman", "--quiet", "--out", str(tmp_path), "--patrol", "--duration", "150",
-                           "--inject", "blind-camera=simulation"])
-        return status, json.loads((tmp_path / "report.json").read_text())
-
-    status, report = once_more_if_the_machine_stalled(run)
+    status, report = tinman_run(monkeypatch, tmp_path, "--patrol", "--duration", "150",
+                                "--inject", "blind-camera=simulation")
     mission = report["mission"]
     assert mission["patrol_completed"], mission
     assert [w["number"] for w in mission["waypoints_reached"]][:5] == [1, 2, 3, 4, 5]

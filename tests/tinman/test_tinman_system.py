@@ -7,11 +7,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from machine_stalls import once_more_if_the_machine_stalled
+from machine_stalls import tinman_run
 
-from anodize._tools import cli
 from tinman.app import PATROL_HINT
-from tinman.settings import ENVIRONMENT_VARIABLE
 
 pytestmark = pytest.mark.slow  # each runs the whole system in processes for seconds
 
@@ -25,14 +23,8 @@ def sequence(tinman_sequence: Path) -> Path:
 
 def run_tinman(monkeypatch: pytest.MonkeyPatch, out: Path, sequence: Path | None, *options: str) -> dict:
     """Run TinMan; with a ``sequence`` its camera plays that recording back, else it renders live."""
-    monkeypatch.setenv(ENVIRONMENT_VARIABLE, "")  # restored after the test: the run exports its own
     played = ["--dataset", str(sequence)] if sequence is not None else []
-
-    def run() -> tuple[int, dict]:
-        status = cli.main(["run", "tinman", "--quiet", *played, "--out", str(out), *options])
-        return status, json.loads((out / "report.json").read_text())
-
-    status, report = once_more_if_the_machine_stalled(run)
+    status, report = tinman_run(monkeypatch, out, *played, *options)
     assert (out / "trajectory.png").stat().st_size > 10_000
     assert status == (0 if report["ok"] else 1)
     return report
