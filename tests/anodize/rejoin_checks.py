@@ -7,7 +7,14 @@ from __future__ import annotations
 
 from typing import Any
 
+from anodize._supervision.hostview import HELLO_EVERY
 from anodize._supervision.report import RoleStatus
+
+# How long to wait, once the data flows, before the cut: the supervisors must have heard each
+# other first (a hello every HELLO_EVERY s), since a host never heard cannot be lost, and then
+# nobody tells it that the run moved on without it. A quiet CI run cut before the base heard the
+# robot's supervisor at all. Four hellos' time; the producer's pause (40 s) leaves room for it.
+MEET = 4 * HELLO_EVERY
 
 # The cut-off host's producer: it pauses during the cut, touching no channel. Where both groups
 # restart (policy_checks.restart_groups with it), the set is decided on the other host meanwhile.

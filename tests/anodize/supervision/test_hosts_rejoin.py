@@ -16,6 +16,7 @@ from dds_hosts import HERE, Hosts, domain, finish, namespaces_unavailable, start
 from policy_checks import restart_groups
 from rejoin_checks import (
     BOTH,
+    MEET,
     PAUSING,
     heard_the_stop_it_missed,
     restarted_as_decided_without_it,
@@ -62,6 +63,7 @@ def run_with_a_cut(hosts: Hosts, tmp_path: Path, protocol: str, name: str, group
     a = start_host(system, "A", tmp_path / "a.json", env, namespace=hosts.a)
     try:
         wait_until_flowing(tmp_path / "flowing", a)
+        time.sleep(MEET)  # the supervisors meet: nothing to poll (no word says so outside them)
         hosts.cut()
         time.sleep(CUT_FOR)  # the partition: nothing to poll, the test waits it out
         hosts.restore()

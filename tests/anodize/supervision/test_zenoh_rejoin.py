@@ -24,6 +24,7 @@ import routed
 from policy_checks import restart_groups
 from rejoin_checks import (
     BOTH,
+    MEET,
     PAUSING,
     heard_the_stop_it_missed,
     restarted_as_decided_without_it,
@@ -101,6 +102,7 @@ def run_with_a_cut(net: Routed, tmp_path: Path, protocol: str, name: str, groups
     base = start_host(net, system, "base", env)
     robot = start_host(net, system, "robot", env)
     wait_for(tmp_path / "flowing", [base, robot])
+    time.sleep(MEET)  # the supervisors meet: nothing to poll (no word says so outside them)
     net.cut("robot")
     time.sleep(CUT_FOR)  # the partition: nothing to poll, the test waits it out
     net.mend("robot")
